@@ -1,0 +1,197 @@
+//! The one error type of the core.
+//!
+//! Every fallible function returns [`Error`]. It is `Copy`, a few bytes
+//! large, and says exactly what was wrong and, where it helps, at which byte
+//! offset of the frame (counted from the header byte, 0-based).
+
+use crate::frame::Header;
+
+/// What went wrong while framing, parsing or emitting.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum Error {
+    /// The first byte of a frame is not `!`, `#`, `&` or `%`.
+    InvalidHeader {
+        /// The byte found.
+        byte: u8,
+    },
+    /// A byte that must be a hex digit (`0-9`, `A-F`, `a-f`) is not.
+    InvalidHexDigit {
+        /// Offset of the byte in the frame.
+        offset: usize,
+        /// The byte found.
+        byte: u8,
+    },
+    /// A byte of a decimal field is not `0-9`.
+    InvalidDecimalDigit {
+        /// Offset of the byte in the frame.
+        offset: usize,
+        /// The byte found.
+        byte: u8,
+    },
+    /// The checksum SC does not match the bytes it covers.
+    ChecksumMismatch {
+        /// Low byte of the sum computed over header..body.
+        computed: u8,
+        /// The value carried in the frame.
+        received: u8,
+    },
+    /// The frame carries `@@` instead of a checksum and the receive policy
+    /// does not allow that for this kind of frame.
+    ChecksumBypassRejected,
+    /// CR was followed by something other than LF.
+    MissingLineFeed {
+        /// The byte found after CR.
+        byte: u8,
+    },
+    /// LF arrived without the CR that must precede it.
+    MissingCarriageReturn,
+    /// A new header byte arrived before the current frame's CR LF: the
+    /// frame was cut short (lost bytes) and is discarded.
+    Truncated {
+        /// Bytes of the cut frame that were discarded.
+        len: usize,
+    },
+    /// The frame does not fit the receive buffer / the profile's limit.
+    FrameTooLong {
+        /// The limit in bytes (header through LF).
+        limit: usize,
+    },
+    /// A frame ended before its 10-byte minimum (header, station, ID, SC, CR, LF).
+    FrameTooShort {
+        /// Length of the frame, header through LF.
+        len: usize,
+    },
+    /// The frame is a different kind (`!`, `#`, `&`) than the one expected.
+    UnexpectedHeader {
+        /// Kind expected by the caller.
+        expected: Header,
+        /// Kind found.
+        found: Header,
+    },
+    /// The frame carries another message ID than the one expected.
+    UnexpectedMessageId {
+        /// ID expected.
+        expected: u16,
+        /// ID found.
+        found: u16,
+    },
+    /// The frame's station is not the one addressed.
+    UnexpectedStation {
+        /// Station expected.
+        expected: u8,
+        /// Station found.
+        found: u8,
+    },
+    /// No message with this ID is known (in this direction, or to this profile).
+    UnknownMessageId {
+        /// The ID found.
+        id: u16,
+    },
+    /// The message body ended before all its fields were read.
+    BodyTooShort {
+        /// Offset (in the frame) where the next field should have started.
+        offset: usize,
+    },
+    /// Bytes are left in the body after the last field of the layout.
+    TrailingBytes {
+        /// Offset (in the frame) of the first unread byte.
+        offset: usize,
+    },
+    /// A value does not fit its field (width, sign or the type it is read into).
+    ValueOutOfRange {
+        /// Offset (in the frame) of the field, or 0 when emitting.
+        offset: usize,
+    },
+    /// A fixed (reserved) field does not hold its literal content.
+    InvalidFixedField {
+        /// Offset (in the frame) of the field.
+        offset: usize,
+    },
+    /// A repeat group's number of items disagrees with the field that counts
+    /// it (for example per-axis values versus the axis pattern).
+    CountMismatch {
+        /// Items the count field or axis pattern calls for.
+        expected: usize,
+        /// Items present.
+        found: usize,
+    },
+    /// A repeat count exceeds the maximum the catalogue allows.
+    CountTooLarge {
+        /// The count.
+        count: usize,
+        /// The maximum.
+        max: usize,
+    },
+    /// The output buffer is too small for the frame being emitted.
+    BufferTooSmall,
+    /// The message is not available on the selected controller profile.
+    NotSupportedByProfile {
+        /// The message ID.
+        id: u16,
+    },
+}
+
+impl core::fmt::Display for Error {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            Error::InvalidHeader { byte } => write!(f, "invalid header byte 0x{byte:02X}"),
+            Error::InvalidHexDigit { offset, byte } => {
+                write!(f, "byte 0x{byte:02X} at offset {offset} is not a hex digit")
+            }
+            Error::InvalidDecimalDigit { offset, byte } => {
+                write!(
+                    f,
+                    "byte 0x{byte:02X} at offset {offset} is not a decimal digit"
+                )
+            }
+            Error::ChecksumMismatch { computed, received } => {
+                write!(
+                    f,
+                    "checksum {received:02X} received, {computed:02X} computed"
+                )
+            }
+            Error::ChecksumBypassRejected => f.write_str("checksum bypass '@@' not accepted"),
+            Error::MissingLineFeed { byte } => write!(f, "CR followed by 0x{byte:02X}, not LF"),
+            Error::MissingCarriageReturn => f.write_str("LF without CR"),
+            Error::Truncated { len } => write!(f, "frame cut short after {len} bytes"),
+            Error::FrameTooLong { limit } => write!(f, "frame longer than {limit} bytes"),
+            Error::FrameTooShort { len } => write!(f, "frame of {len} bytes is too short"),
+            Error::UnexpectedHeader { expected, found } => {
+                write!(f, "expected a {expected:?} frame, found {found:?}")
+            }
+            Error::UnexpectedMessageId { expected, found } => {
+                write!(f, "expected message {expected:03X}H, found {found:03X}H")
+            }
+            Error::UnexpectedStation { expected, found } => {
+                write!(f, "expected station {expected:02X}, found {found:02X}")
+            }
+            Error::UnknownMessageId { id } => write!(f, "unknown message ID {id:03X}H"),
+            Error::BodyTooShort { offset } => write!(f, "body ends early at offset {offset}"),
+            Error::TrailingBytes { offset } => write!(f, "unexpected bytes from offset {offset}"),
+            Error::ValueOutOfRange { offset } => {
+                write!(f, "value out of range for its field at offset {offset}")
+            }
+            Error::InvalidFixedField { offset } => {
+                write!(f, "reserved field at offset {offset} has the wrong content")
+            }
+            Error::CountMismatch { expected, found } => {
+                write!(f, "{expected} items expected, {found} present")
+            }
+            Error::CountTooLarge { count, max } => write!(f, "count {count} exceeds maximum {max}"),
+            Error::BufferTooSmall => f.write_str("output buffer too small"),
+            Error::NotSupportedByProfile { id } => {
+                write!(
+                    f,
+                    "message {id:03X}H not supported by this controller profile"
+                )
+            }
+        }
+    }
+}
+
+impl core::error::Error for Error {}
+
+/// Result alias used throughout the crate.
+pub type Result<T, E = Error> = core::result::Result<T, E>;

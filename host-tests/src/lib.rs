@@ -1,0 +1,2 @@
+//! Host-side tools and test support for `iai-protocol-b`.
+pub mod qemu;
