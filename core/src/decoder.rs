@@ -108,6 +108,8 @@ pub struct FrameDecoder<const N: usize = DEFAULT_CAPACITY> {
     policy: BypassPolicy,
     /// Frame offsets [start, end) of the text field, once known.
     text: Option<(usize, usize)>,
+    /// Envelope of the frame last returned (valid while `state == Done`).
+    last: Option<Envelope>,
     stats: DecoderStats,
 }
 
@@ -131,6 +133,7 @@ impl<const N: usize> FrameDecoder<N> {
             state: State::Hunting,
             policy,
             text: None,
+            last: None,
             stats: DecoderStats {
                 frames: 0,
                 errors: 0,
@@ -165,6 +168,15 @@ impl<const N: usize> FrameDecoder<N> {
             State::Done | State::Hunting => 0,
             _ => self.len,
         }
+    }
+
+    /// The frame returned by the last call, until the next byte is pushed.
+    pub fn last_frame(&self) -> Option<Frame<'_>> {
+        if self.state != State::Done {
+            return None;
+        }
+        let bytes = self.buf.get(..self.len)?;
+        self.last.map(|env| Frame::from_parts(bytes, env))
     }
 
     /// Drops any partial frame (counted as discarded) and starts hunting.
@@ -293,6 +305,7 @@ impl<const N: usize> FrameDecoder<N> {
                     match frame::validate(bytes, self.policy) {
                         Ok(env) => {
                             self.state = State::Done;
+                            self.last = Some(env);
                             self.stats.frames = self.stats.frames.saturating_add(1);
                             Step::Frame(env)
                         }

@@ -39,7 +39,9 @@ pub mod decoder;
 pub mod error;
 pub mod field;
 pub mod frame;
+pub mod io;
 pub mod message;
 pub mod position;
+pub mod stream;
 
 pub use error::{Error, Result};

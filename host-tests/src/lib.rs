@@ -1,2 +1,3 @@
 //! Host-side tools and test support for `iai-protocol-b`.
 pub mod qemu;
+pub mod table;

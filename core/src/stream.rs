@@ -1,0 +1,680 @@
+//! Position tables of any size, streamed through fixed, small buffers.
+//!
+//! A 26DH command may carry 20,000 records of 8 axes, 1,640,014 bytes. The
+//! [`PositionStreamEncoder`] produces such a frame chunk by chunk from any
+//! record source, computing SC on the fly; the [`PositionStreamDecoder`]
+//! takes the bytes of one as they arrive and hands out records one by one,
+//! checking SC at the end. Neither depends on the record count for its RAM:
+//! each holds one staging buffer of [`STAGE_LEN`] bytes (the longest record,
+//! 84 bytes, rounded up) plus a few counters.
+//!
+//! Every message with a run of position records has a [`PositionStream`]
+//! descriptor: the writes 244H, 245H, 26DH, 290H, 291H (commands; their
+//! response repeats the same prefix with the number written) and the
+//! queries' responses 209H, 21FH, 22DH.
+//!
+//! ```
+//! use iai_protocol_b::stream::{PositionStream, PositionStreamEncoder};
+//! use iai_protocol_b::position::PositionRecord;
+//! use iai_protocol_b::frame::Station;
+//! let recs = [PositionRecord::new(1, 30, 30, 100, &[(1, 100_000), (2, -25_500)]).unwrap()];
+//! let mut enc = PositionStreamEncoder::new(
+//!     PositionStream::CHANGE_2, Station(0x99), 0, 1, recs.iter().cloned()).unwrap();
+//! let mut out = [0u8; 64];
+//! let mut n = 0;
+//! // Pull the frame 7 bytes at a time, as a UART TX FIFO would.
+//! loop {
+//!     let end = (n + 7).min(out.len());
+//!     let got = enc.read(&mut out[n..end]).unwrap();
+//!     if got == 0 { break }
+//!     n += got;
+//! }
+//! assert_eq!(&out[..n], &b"!9926D0001000103001E001E0064000186A0FFFF9C6438\r\n"[..]);
+//! ```
+
+use crate::checksum::{BypassPolicy, Checksum};
+use crate::error::{Error, Result};
+use crate::field::{hex_digit, hex_value, FieldSpec, Reader, Writer};
+use crate::frame::{emit_envelope, Frame, Header, Station, ENVELOPE_LEN};
+use crate::io::IoError;
+use crate::position::{PositionRecord, RecordLayout};
+
+/// Staging buffer size of the streaming encoder and decoder: the longest
+/// record (4 + 2 + 12 + 8 × 8 + 2 = 84 bytes) or the longest envelope and
+/// prefix (16 bytes), rounded up.
+pub const STAGE_LEN: usize = 88;
+
+/// The shape of a message whose body is a prefix and a run of position
+/// records: `[00] [start] count record…`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PositionStream {
+    /// Message ID.
+    pub id: u16,
+    /// Frame kind that carries the records (command for writes, response for queries).
+    pub header: Header,
+    /// Whether the body starts with the reserved `00`.
+    pub reserved: bool,
+    /// Width of the start-number field; 0 when records carry their own numbers.
+    pub start_width: u8,
+    /// Width of the record-count field.
+    pub count_width: u8,
+    /// Largest record count the format allows.
+    pub max_records: u16,
+    /// Layout of one record.
+    pub layout: RecordLayout,
+}
+
+impl PositionStream {
+    /// 26DH Change Position Data Continuous Write 2.
+    pub const CHANGE_2: Self = Self::write(0x26D, false, 0, 4, 20_000, RecordLayout::NUMBER_4);
+    /// 245H Change Position Data Continuous Write (3-digit numbers).
+    pub const CHANGE: Self = Self::write(0x245, false, 0, 3, 3_000, RecordLayout::NUMBER_3);
+    /// 244H Position Data Range-Specification Continuous Write.
+    pub const RANGE: Self = Self::write(0x244, false, 3, 3, 3_000, RecordLayout::RANGE);
+    /// 290H Position Data Range-Specification Continuous Write 3 (catalogue status: partial).
+    pub const RANGE_3: Self = Self::write(0x290, true, 4, 4, 20_000, RecordLayout::RANGE_EXTENDED);
+    /// 291H Change Position Data Continuous Write 3 (catalogue status: partial;
+    /// the field order is the catalogue's reading of an inconsistent table).
+    pub const CHANGE_3: Self =
+        Self::write(0x291, true, 0, 4, 20_000, RecordLayout::NUMBER_4_EXTENDED);
+    /// 209H Effective Position Data Query, response.
+    pub const QUERY_RESPONSE: Self = Self::query(0x209, false, 3, 3_000, RecordLayout::NUMBER_3);
+    /// 21FH Effective Position Data Query 2, response.
+    pub const QUERY_2_RESPONSE: Self = Self::query(0x21F, false, 4, 20_000, RecordLayout::NUMBER_4);
+    /// 22DH Effective Position Data Query 3, response.
+    pub const QUERY_3_RESPONSE: Self =
+        Self::query(0x22D, true, 4, 20_000, RecordLayout::NUMBER_4_EXTENDED);
+
+    /// Every known position stream.
+    pub const ALL: [Self; 8] = [
+        Self::CHANGE_2,
+        Self::CHANGE,
+        Self::RANGE,
+        Self::RANGE_3,
+        Self::CHANGE_3,
+        Self::QUERY_RESPONSE,
+        Self::QUERY_2_RESPONSE,
+        Self::QUERY_3_RESPONSE,
+    ];
+
+    const fn write(
+        id: u16,
+        reserved: bool,
+        start: u8,
+        count: u8,
+        max: u16,
+        layout: RecordLayout,
+    ) -> Self {
+        PositionStream {
+            id,
+            header: Header::Command,
+            reserved,
+            start_width: start,
+            count_width: count,
+            max_records: max,
+            layout,
+        }
+    }
+
+    const fn query(id: u16, reserved: bool, count: u8, max: u16, layout: RecordLayout) -> Self {
+        PositionStream {
+            id,
+            header: Header::Response,
+            reserved,
+            start_width: 0,
+            count_width: count,
+            max_records: max,
+            layout,
+        }
+    }
+
+    /// The stream carried by frames of this kind and ID, if any.
+    pub fn find(header: Header, id: u16) -> Option<Self> {
+        Self::ALL
+            .into_iter()
+            .find(|s| s.header == header && s.id == id)
+    }
+
+    /// Bytes of the body before the first record.
+    pub const fn prefix_len(&self) -> usize {
+        (if self.reserved { 2 } else { 0 }) + self.start_width as usize + self.count_width as usize
+    }
+
+    /// Bytes of a frame without records (envelope, prefix, SC, CR, LF).
+    pub const fn overhead(&self) -> usize {
+        ENVELOPE_LEN + self.prefix_len() + 4
+    }
+
+    /// Writes the prefix: `[00] [start] count`.
+    pub fn write_prefix(&self, w: &mut Writer<'_>, start: u16, count: u16) -> Result<()> {
+        if count > self.max_records {
+            return Err(Error::CountTooLarge {
+                count: usize::from(count),
+                max: usize::from(self.max_records),
+            });
+        }
+        if self.reserved {
+            w.put(b"00")?;
+        }
+        if self.start_width > 0 {
+            w.unsigned(FieldSpec::hex(self.start_width), u64::from(start))?;
+        }
+        w.unsigned(FieldSpec::hex(self.count_width), u64::from(count))
+    }
+
+    /// Reads the prefix; returns `(start, count)` (start 0 when absent).
+    pub fn read_prefix(&self, r: &mut Reader<'_>) -> Result<(u16, u16)> {
+        if self.reserved {
+            let at = r.offset();
+            if r.take(2)? != b"00" {
+                return Err(Error::InvalidFixedField { offset: at });
+            }
+        }
+        let start = if self.start_width > 0 {
+            r.unsigned(FieldSpec::hex(self.start_width))? as u16
+        } else {
+            0
+        };
+        let at = r.offset();
+        let count = r.unsigned(FieldSpec::hex(self.count_width))?;
+        let count = u16::try_from(count).map_err(|_| Error::ValueOutOfRange { offset: at })?;
+        if count > self.max_records {
+            return Err(Error::CountTooLarge {
+                count: usize::from(count),
+                max: usize::from(self.max_records),
+            });
+        }
+        Ok((start, count))
+    }
+
+    /// Parses the normal response to a position write: the same prefix,
+    /// carrying the number of records written. Returns `(start, count)`.
+    pub fn parse_reply(&self, frame: &Frame<'_>) -> Result<(u16, u16)> {
+        if frame.header() != Header::Response {
+            return Err(Error::UnexpectedHeader {
+                expected: Header::Response,
+                found: frame.header(),
+            });
+        }
+        if frame.code() != self.id {
+            return Err(Error::UnexpectedMessageId {
+                expected: self.id,
+                found: frame.code(),
+            });
+        }
+        let mut r = frame.reader();
+        let v = self.read_prefix(&mut r)?;
+        r.finish()?;
+        Ok(v)
+    }
+}
+
+/// A staging buffer and its read position.
+#[derive(Debug, Clone)]
+struct Stage {
+    buf: [u8; STAGE_LEN],
+    len: usize,
+    pos: usize,
+}
+
+impl Stage {
+    const fn new() -> Self {
+        Stage {
+            buf: [0; STAGE_LEN],
+            len: 0,
+            pos: 0,
+        }
+    }
+    fn pending(&self) -> &[u8] {
+        self.buf.get(self.pos..self.len).unwrap_or(&[])
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum EncPhase {
+    Records,
+    Trailer,
+    Done,
+    Failed,
+}
+
+/// Produces one position-stream frame, chunk by chunk, from a record source.
+///
+/// RAM: one [`STAGE_LEN`]-byte stage, a running checksum and counters,
+/// plus the source itself — independent of the record count. The count is
+/// needed up front (it precedes the records on the wire); a source that ends
+/// early or runs long is an error.
+///
+/// If a record is invalid (coordinates not matching its axis pattern, a
+/// value that does not fit), `read` fails and the frame stays unterminated:
+/// no SC, CR or LF is produced, so no receiver can accept it.
+#[derive(Debug, Clone)]
+pub struct PositionStreamEncoder<I> {
+    kind: PositionStream,
+    source: I,
+    count: u16,
+    emitted: u16,
+    sum: Checksum,
+    stage: Stage,
+    phase: EncPhase,
+}
+
+impl<I: Iterator<Item = PositionRecord>> PositionStreamEncoder<I> {
+    /// Starts a frame of `kind` from `station` with `count` records taken
+    /// from `source` (`start` is the start number where the message has one).
+    pub fn new(
+        kind: PositionStream,
+        station: Station,
+        start: u16,
+        count: u16,
+        source: I,
+    ) -> Result<Self> {
+        let mut stage = Stage::new();
+        let mut w = Writer::new(&mut stage.buf);
+        emit_envelope(&mut w, kind.header, station, kind.id)?;
+        kind.write_prefix(&mut w, start, count)?;
+        stage.len = w.len();
+        let mut sum = Checksum::new();
+        sum.update(stage.pending());
+        Ok(PositionStreamEncoder {
+            kind,
+            source,
+            count,
+            emitted: 0,
+            sum,
+            stage,
+            phase: EncPhase::Records,
+        })
+    }
+
+    /// Records emitted so far.
+    pub fn records_emitted(&self) -> u16 {
+        self.emitted
+    }
+
+    /// Fills `out` with the next bytes of the frame; `Ok(0)` once the whole
+    /// frame (through LF) was produced.
+    pub fn read(&mut self, out: &mut [u8]) -> Result<usize> {
+        let mut n = 0;
+        while n < out.len() {
+            if self.stage.pending().is_empty() && !self.refill()? {
+                break;
+            }
+            let src = self.stage.pending();
+            let dst = out.get_mut(n..).unwrap_or(&mut []);
+            let k = src.len().min(dst.len());
+            if let (Some(d), Some(s)) = (dst.get_mut(..k), src.get(..k)) {
+                d.copy_from_slice(s);
+            }
+            self.stage.pos += k;
+            n += k;
+        }
+        Ok(n)
+    }
+
+    /// Loads the next record or the trailer into the stage; `false` when done.
+    fn refill(&mut self) -> Result<bool> {
+        match self.phase {
+            EncPhase::Records if self.emitted < self.count => {
+                let Some(rec) = self.source.next() else {
+                    self.phase = EncPhase::Failed;
+                    return Err(Error::CountMismatch {
+                        expected: usize::from(self.count),
+                        found: usize::from(self.emitted),
+                    });
+                };
+                let mut w = Writer::new(&mut self.stage.buf);
+                if let Err(e) = self.kind.layout.write_record(&rec, &mut w) {
+                    self.phase = EncPhase::Failed;
+                    return Err(e);
+                }
+                let len = w.len();
+                self.stage.len = len;
+                self.stage.pos = 0;
+                self.sum.update(self.stage.pending());
+                self.emitted += 1;
+                Ok(true)
+            }
+            EncPhase::Records => {
+                if self.source.next().is_some() {
+                    self.phase = EncPhase::Failed;
+                    return Err(Error::CountMismatch {
+                        expected: usize::from(self.count),
+                        found: usize::from(self.count) + 1,
+                    });
+                }
+                let s = self.sum.value();
+                let trailer = [hex_digit(s >> 4), hex_digit(s), b'\r', b'\n'];
+                let mut w = Writer::new(&mut self.stage.buf);
+                w.put(&trailer)?;
+                self.stage.len = w.len();
+                self.stage.pos = 0;
+                self.phase = EncPhase::Trailer;
+                Ok(true)
+            }
+            EncPhase::Trailer => {
+                self.phase = EncPhase::Done;
+                Ok(false)
+            }
+            EncPhase::Done | EncPhase::Failed => Ok(false),
+        }
+    }
+
+    /// Writes the whole frame to `w` in stage-sized chunks; returns its length.
+    pub fn write_to<W: embedded_io::Write>(
+        &mut self,
+        w: &mut W,
+    ) -> core::result::Result<usize, IoError<W::Error>> {
+        let mut chunk = [0u8; STAGE_LEN];
+        let mut total = 0;
+        loop {
+            let n = self.read(&mut chunk)?;
+            if n == 0 {
+                return Ok(total);
+            }
+            w.write_all(chunk.get(..n).unwrap_or(&[]))
+                .map_err(IoError::Io)?;
+            total += n;
+        }
+    }
+}
+
+/// What the [`PositionStreamDecoder`] found.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StreamEvent {
+    /// More bytes are needed.
+    NeedMore,
+    /// The envelope and prefix were read.
+    Start {
+        /// The message's stream descriptor.
+        kind: PositionStream,
+        /// Station.
+        station: Station,
+        /// Start number (0 where the message has none).
+        start: u16,
+        /// Number of records announced.
+        count: u16,
+    },
+    /// One well-formed record (its checksum is only known at the end).
+    Record(PositionRecord),
+    /// The frame ended with a valid SC (or an accepted `@@`) and CR LF.
+    End {
+        /// Records delivered.
+        records: u16,
+    },
+    /// The frame is broken; `records_ok` records were well-formed before.
+    /// Feed no more bytes without [`PositionStreamDecoder::reset`].
+    Error {
+        /// What was wrong.
+        error: Error,
+        /// Well-formed records delivered before the error.
+        records_ok: u16,
+    },
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+enum DecPhase {
+    Envelope,
+    RecordHead,
+    RecordRest,
+    Trailer,
+    Finished,
+}
+
+/// Reads one position-stream frame record by record as bytes arrive.
+///
+/// Accepts any message of [`PositionStream::ALL`] (the envelope says
+/// which). RAM: one [`STAGE_LEN`]-byte stage and counters, whatever the
+/// record count. Records are handed out as soon as they are complete; SC
+/// covers the whole frame and is checked at the end, so a consumer that
+/// must not act on unverified data holds its effect until [`StreamEvent::End`]
+/// (a controller applies the write only after the checksum; the bridge
+/// forwards records but confirms upstream only after `End`).
+#[derive(Debug, Clone)]
+pub struct PositionStreamDecoder {
+    policy: BypassPolicy,
+    kind: Option<PositionStream>,
+    header: Header,
+    station: Station,
+    stage: Stage,
+    need: usize,
+    offset: usize,
+    sum: Checksum,
+    count: u16,
+    done: u16,
+    phase: DecPhase,
+}
+
+impl Default for PositionStreamDecoder {
+    fn default() -> Self {
+        Self::new(BypassPolicy::default())
+    }
+}
+
+impl PositionStreamDecoder {
+    /// A decoder expecting a new frame.
+    pub const fn new(policy: BypassPolicy) -> Self {
+        PositionStreamDecoder {
+            policy,
+            kind: None,
+            header: Header::Command,
+            station: Station(0),
+            stage: Stage::new(),
+            need: ENVELOPE_LEN,
+            offset: 0,
+            sum: Checksum::new(),
+            count: 0,
+            done: 0,
+            phase: DecPhase::Envelope,
+        }
+    }
+
+    /// Forgets the current frame; the next byte must be a header byte.
+    pub fn reset(&mut self) {
+        *self = Self::new(self.policy);
+    }
+
+    /// Records delivered so far in this frame.
+    pub fn records_done(&self) -> u16 {
+        self.done
+    }
+
+    /// Records announced by the frame's count field (0 before `Start`).
+    pub fn records_announced(&self) -> u16 {
+        self.count
+    }
+
+    /// Bytes of the frame consumed so far.
+    pub fn offset(&self) -> usize {
+        self.offset
+    }
+
+    /// Consumes bytes until an event; returns `(consumed, event)`.
+    pub fn decode(&mut self, input: &[u8]) -> (usize, StreamEvent) {
+        let mut used = 0;
+        for &b in input {
+            used += 1;
+            let ev = self.push(b);
+            if ev != StreamEvent::NeedMore {
+                return (used, ev);
+            }
+        }
+        (used, StreamEvent::NeedMore)
+    }
+
+    /// Pushes one byte.
+    pub fn push(&mut self, byte: u8) -> StreamEvent {
+        if self.phase == DecPhase::Finished {
+            return StreamEvent::NeedMore;
+        }
+        let Some(slot) = self.stage.buf.get_mut(self.stage.len) else {
+            return self.fail(Error::FrameTooLong { limit: STAGE_LEN });
+        };
+        *slot = byte;
+        self.stage.len += 1;
+        if self.stage.len < self.need {
+            return StreamEvent::NeedMore;
+        }
+        let (ev, keep) = self.unit_complete();
+        if !keep && !matches!(ev, StreamEvent::Error { .. }) {
+            self.offset += self.stage.len;
+            self.stage.len = 0;
+        }
+        ev
+    }
+
+    fn fail(&mut self, error: Error) -> StreamEvent {
+        self.phase = DecPhase::Finished;
+        StreamEvent::Error {
+            error,
+            records_ok: self.done,
+        }
+    }
+
+    /// Handles a complete unit of `need` bytes. Returns the event and
+    /// whether the stage keeps its bytes (the unit grows instead).
+    fn unit_complete(&mut self) -> (StreamEvent, bool) {
+        let ev = self.unit_event();
+        let keep = matches!(ev, StreamEvent::NeedMore);
+        (ev, keep)
+    }
+
+    fn unit_event(&mut self) -> StreamEvent {
+        let unit = self.stage.buf.get(..self.stage.len).unwrap_or(&[]);
+        let base = self.offset;
+        match self.phase {
+            DecPhase::Envelope if self.kind.is_none() => {
+                let first = unit.first().copied().unwrap_or(0);
+                let Some(header) = Header::from_byte(first) else {
+                    return self.fail(Error::InvalidHeader { byte: first });
+                };
+                let mut r = Reader::new(unit, 0);
+                let _ = r.take(1);
+                match r.unsigned(FieldSpec::hex(2)) {
+                    Ok(s) => self.station = Station(s as u8),
+                    Err(e) => return self.fail(e),
+                }
+                let id = match r.unsigned(FieldSpec::hex(3)) {
+                    Ok(s) => s as u16,
+                    Err(e) => return self.fail(e),
+                };
+                let Some(kind) = PositionStream::find(header, id) else {
+                    return self.fail(Error::UnknownMessageId { id });
+                };
+                self.kind = Some(kind);
+                self.header = header;
+                self.sum.update(unit);
+                // Keep the envelope in the stage; the prefix follows it.
+                self.need = ENVELOPE_LEN + kind.prefix_len();
+                if self.need == ENVELOPE_LEN {
+                    return self.fail(Error::BodyTooShort {
+                        offset: ENVELOPE_LEN,
+                    });
+                }
+                StreamEvent::NeedMore
+            }
+            DecPhase::Envelope => {
+                let Some(kind) = self.kind else {
+                    return self.fail(Error::BodyTooShort { offset: base });
+                };
+                let station = self.station;
+                let prefix = unit.get(ENVELOPE_LEN..).unwrap_or(&[]);
+                self.sum.update(prefix);
+                let mut r = Reader::new(prefix, ENVELOPE_LEN);
+                match kind.read_prefix(&mut r) {
+                    Ok((start, count)) => {
+                        self.count = count;
+                        self.enter_record_or_trailer(kind);
+                        StreamEvent::Start {
+                            kind,
+                            station,
+                            start,
+                            count,
+                        }
+                    }
+                    Err(e) => self.fail(e),
+                }
+            }
+            DecPhase::RecordHead => {
+                let Some(kind) = self.kind else {
+                    return self.fail(Error::BodyTooShort { offset: base });
+                };
+                let at = base + kind.layout.pattern_end() - 2;
+                let pat = unit.get(kind.layout.pattern_end() - 2..).unwrap_or(&[]);
+                match crate::field::decode_unsigned(FieldSpec::hex(2), pat, at) {
+                    Ok(bits) => {
+                        // Keep the head in the stage; the record is read whole.
+                        self.need = kind.layout.record_len((bits as u8).count_ones() as usize);
+                        self.phase = DecPhase::RecordRest;
+                        StreamEvent::NeedMore
+                    }
+                    Err(e) => self.fail(e),
+                }
+            }
+            DecPhase::RecordRest => {
+                let Some(kind) = self.kind else {
+                    return self.fail(Error::BodyTooShort { offset: base });
+                };
+                let mut r = Reader::new(unit, base);
+                match kind.layout.read_record(&mut r) {
+                    Ok(rec) => {
+                        self.sum.update(unit);
+                        self.done += 1;
+                        self.enter_record_or_trailer(kind);
+                        StreamEvent::Record(rec)
+                    }
+                    Err(e) => self.fail(e),
+                }
+            }
+            DecPhase::Trailer => {
+                let sc = unit.get(..2).unwrap_or(&[]);
+                let crlf = unit.get(2..4).unwrap_or(&[]);
+                if sc == b"@@" {
+                    if !self.policy.allows(self.header) {
+                        return self.fail(Error::ChecksumBypassRejected);
+                    }
+                } else {
+                    let mut received = 0u8;
+                    for (i, &b) in sc.iter().enumerate() {
+                        match hex_value(b) {
+                            Some(d) => received = (received << 4) | d,
+                            None => {
+                                return self.fail(Error::InvalidHexDigit {
+                                    offset: base + i,
+                                    byte: b,
+                                })
+                            }
+                        }
+                    }
+                    if received != self.sum.value() {
+                        return self.fail(Error::ChecksumMismatch {
+                            computed: self.sum.value(),
+                            received,
+                        });
+                    }
+                }
+                match crlf {
+                    [b'\r', b'\n'] => {}
+                    [b'\r', b] => return self.fail(Error::MissingLineFeed { byte: *b }),
+                    _ => return self.fail(Error::MissingCarriageReturn),
+                }
+                self.phase = DecPhase::Finished;
+                StreamEvent::End { records: self.done }
+            }
+            DecPhase::Finished => StreamEvent::NeedMore,
+        }
+    }
+
+    fn enter_record_or_trailer(&mut self, kind: PositionStream) {
+        if self.done < self.count {
+            self.phase = DecPhase::RecordHead;
+            self.need = kind.layout.pattern_end();
+        } else {
+            self.phase = DecPhase::Trailer;
+            self.need = 4;
+        }
+    }
+}
