@@ -360,6 +360,15 @@ impl<'b> Writer<'b> {
         }
         r
     }
+    /// Overwrites an unsigned field already written at `at`.
+    pub fn patch_unsigned(&mut self, at: usize, spec: FieldSpec, value: u64) -> Result<()> {
+        let end = at
+            .checked_add(spec.len())
+            .filter(|&e| e <= self.len)
+            .ok_or(Error::BufferTooSmall)?;
+        let out = self.buf.get_mut(at..end).ok_or(Error::BufferTooSmall)?;
+        encode_unsigned(spec, value, out)
+    }
     /// Drops everything after the first `len` bytes.
     pub fn truncate(&mut self, len: usize) {
         self.len = self.len.min(len);

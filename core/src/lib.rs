@@ -43,5 +43,6 @@ pub mod io;
 pub mod message;
 pub mod position;
 pub mod stream;
+pub mod transfer;
 
 pub use error::{Error, Result};

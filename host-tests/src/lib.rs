@@ -1,3 +1,6 @@
-//! Host-side tools and test support for `iai-protocol-b`.
+//! Host-side tools and test support for `iai-protocol-b`: the controller
+//! simulator, generated position tables, the QEMU runner.
+pub mod link;
 pub mod qemu;
+pub mod sim;
 pub mod table;

@@ -1,0 +1,137 @@
+//! End to end: full-size position tables written through the transfer
+//! engine into the simulated controller, with and without faults.
+
+use host_tests::link::run;
+use host_tests::sim::{Faults, Simulator};
+use host_tests::table::table;
+use iai_protocol_b::frame::Station;
+use iai_protocol_b::position::PositionRecord;
+use iai_protocol_b::stream::PositionStream;
+use iai_protocol_b::transfer::{Transfer, TransferConfig, TransferError};
+
+const ST: Station = Station(0x99);
+
+fn assert_table_equal(sim: &Simulator, source: impl Iterator<Item = PositionRecord>) {
+    let mut expected = std::collections::BTreeMap::new();
+    for r in source {
+        expected.insert(r.number, r);
+    }
+    assert_eq!(sim.table.len(), expected.len());
+    assert!(sim.table == expected, "simulator table differs from the source");
+}
+
+#[test]
+fn full_table_20000_records_8_axes_no_faults() {
+    let mut sim = Simulator::tta(ST);
+    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(20_000, 8, 11));
+    let run = run(&mut t, &mut sim, 0);
+    let stats = run.result.unwrap();
+    assert_eq!(stats.records_confirmed, 20_000);
+    assert_eq!(stats.retries, 0);
+    assert_table_equal(&sim, table(20_000, 8, 11));
+    // 24 records of 82 bytes fit a 2,051-byte frame (14 + 24 x 82 = 1,982);
+    // consecutive frames alternate 24 / 23 records so a stale reply never matches.
+    assert!(stats.frames_confirmed >= 20_000 / 24);
+    println!("20000x8 clean: {stats:?}, {} bytes up, {} down", run.bytes_to_controller, run.bytes_to_host);
+}
+
+#[test]
+fn full_table_20000_records_1_axis_no_faults() {
+    let mut sim = Simulator::tta(ST);
+    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(20_000, 1, 12));
+    let stats = run(&mut t, &mut sim, 0).result.unwrap();
+    assert_eq!(stats.records_confirmed, 20_000);
+    assert_table_equal(&sim, table(20_000, 1, 12));
+}
+
+/// The fault mix of issue 4: 1 byte in 10,000 corrupted each way, every
+/// 50th reply dropped, error replies on random chunks, noise, late replies.
+fn faulty() -> Faults {
+    Faults {
+        flip_bit_in: 1.0 / 10_000.0,
+        flip_bit_out: 1.0 / 10_000.0,
+        drop_every_nth_reply: Some(50),
+        error_reply: 0.01,
+        garbage_before_reply: 0.02,
+        late_every_nth_reply: Some((37, 3_500)),
+        ..Faults::default()
+    }
+}
+
+#[test]
+fn full_table_8_axes_with_faults() {
+    let mut sim = Simulator::tta(ST).with_faults(faulty(), 0xFA17);
+    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(20_000, 8, 13));
+    let run = run(&mut t, &mut sim, 10);
+    let stats = run.result.unwrap();
+    let s = sim.stats();
+    println!("20000x8 faults: {stats:?}\nsimulator: {s:?}\nvirtual time {} s", run.virtual_ms / 1000);
+    assert_eq!(stats.records_confirmed, 20_000);
+    assert!(stats.retries > 0 && stats.timeouts > 0 && stats.error_replies > 0);
+    assert!(s.broken_frames > 0, "bit flips must have hit some commands");
+    assert_table_equal(&sim, table(20_000, 8, 13));
+}
+
+#[test]
+fn full_table_1_axis_with_faults() {
+    let mut sim = Simulator::tta(ST).with_faults(faulty(), 0xBEEF);
+    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(20_000, 1, 14));
+    let stats = run(&mut t, &mut sim, 10).result.unwrap();
+    assert_eq!(stats.records_confirmed, 20_000);
+    assert!(stats.retries > 0);
+    assert_table_equal(&sim, table(20_000, 1, 14));
+}
+
+#[test]
+fn xsel_2003_limit_splits_at_1023_bytes_with_245h() {
+    let mut sim = Simulator::xsel_2003(ST);
+    let cfg = TransferConfig { stream: PositionStream::CHANGE, max_frame: 1023, ..TransferConfig::tta(ST) };
+    let mut t: Transfer<_, 1023> = Transfer::new(cfg, table(2_000, 8, 15).map(|mut r| {
+        r.number %= 0x1000;
+        r
+    }));
+    let stats = run(&mut t, &mut sim, 0).result.unwrap();
+    assert_eq!(stats.records_confirmed, 2_000);
+    assert_eq!(sim.stats().oversize_frames, 0);
+    assert!(stats.frames_confirmed >= 2_000 / 12);
+}
+
+#[test]
+fn a_dead_controller_fails_after_three_tries_and_resume_continues_exactly() {
+    let mut sim = Simulator::tta(ST).with_faults(Faults { drop_every_nth_reply: Some(1), ..Faults::default() }, 3);
+    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(100, 4, 16));
+    let first = run(&mut t, &mut sim, 0);
+    assert_eq!(first.result, Err(TransferError::Timeout));
+    assert_eq!(t.stats().frames_sent, 3);
+    assert_eq!(first.virtual_ms, 9_000, "three sends, 3 s each");
+    assert_eq!(t.progress(), (0, Some(100)));
+    // The controller comes back: resuming sends the same frame again.
+    sim.faults = Faults::default();
+    let second = run(&mut t, &mut sim, 1);
+    assert_eq!(second.result.unwrap().records_confirmed, 100);
+    assert_table_equal(&sim, table(100, 4, 16));
+}
+
+#[test]
+fn persistent_error_replies_fail_with_the_code() {
+    let mut sim = Simulator::tta(ST).with_faults(Faults { error_reply: 1.0, ..Faults::default() }, 4);
+    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(10, 2, 17));
+    let r = run(&mut t, &mut sim, 0);
+    assert_eq!(r.result, Err(TransferError::ErrorResponse { code: host_tests::sim::INJECTED_ERROR_CODE }));
+    assert_eq!(t.stats().error_replies, 3);
+}
+
+#[test]
+fn an_invalid_record_stops_before_anything_is_sent_for_it() {
+    let mut bad: Vec<_> = table(30, 2, 18).collect();
+    bad[27].positions.pop(); // 2 axes in the pattern, 1 coordinate
+    let mut sim = Simulator::tta(ST);
+    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), bad.clone().into_iter());
+    let r = run(&mut t, &mut sim, 0);
+    match r.result {
+        Err(TransferError::InvalidRecord { index: 27, .. }) => {}
+        other => panic!("{other:?}"),
+    }
+    // Records before the first frame that holds the bad one are confirmed.
+    assert_eq!(sim.table.len() as u32, t.stats().records_confirmed);
+}
