@@ -1,0 +1,496 @@
+//! Running the example firmware under QEMU (`qemu-system-arm`).
+//!
+//! [`build_firmware`] builds `firmware-example` for a [`Board`];
+//! [`QemuSession::start`] boots an ELF with both serial ports wired to TCP
+//! sockets on the loopback interface: [`QemuSession::upstream`] is the
+//! first serial port (the host side of the bridge), [`QemuSession::downstream`]
+//! the second (the controller side). The firmware ends the run through
+//! semihosting `exit`, which becomes QEMU's exit code (0 on success).
+//!
+//! The host side listens and QEMU connects as a client, so nothing the
+//! firmware sends is lost before the test is ready. The session only ever
+//! kills the QEMU process it spawned, through its own [`Child`] handle.
+//!
+//! Std only; needs `qemu-system-arm` on `PATH` and the board's rustup target.
+
+use std::fmt;
+use std::io::{self, Read, Write};
+use std::net::{Ipv4Addr, TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::{Arc, Condvar, Mutex, PoisonError};
+use std::thread;
+use std::time::{Duration, Instant};
+
+/// Name of the firmware package and binary.
+pub const FIRMWARE_PACKAGE: &str = "firmware-example";
+
+/// The QEMU program.
+pub const QEMU: &str = "qemu-system-arm";
+
+/// Upstream bytes that make the firmware end the run successfully
+/// (ESC 'Q' '!'), accepted after a short upstream silence.
+pub const QUIT_SEQUENCE: [u8; 3] = [0x1B, b'Q', b'!'];
+
+/// Silence kept on the upstream before [`QUIT_SEQUENCE`]; the firmware needs
+/// 20 ms, this leaves a margin.
+pub const QUIT_GUARD: Duration = Duration::from_millis(50);
+
+/// Text the firmware prints through semihosting once its serial ports are
+/// set up. [`QemuSession::start`] waits for it before returning, because
+/// bytes sent to a UART before the firmware configures it may be lost.
+pub const READY_MARKER: &str = "bridge up";
+
+/// How long to wait for QEMU's output pipes to close after it exited.
+const OUTPUT_GRACE: Duration = Duration::from_secs(2);
+
+/// A QEMU machine the firmware supports.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Board {
+    /// `lm3s6965evb`: Cortex-M3, PL011 UARTs with FIFOs. Fastest serial
+    /// throughput; use it for data tests.
+    Lm3s6965,
+    /// `mps2-an386`: Cortex-M4F, CMSDK UARTs. Use it for instruction counts.
+    Mps2An386,
+}
+
+impl Board {
+    /// Every supported board.
+    pub const ALL: [Board; 2] = [Board::Lm3s6965, Board::Mps2An386];
+
+    /// QEMU `-machine` name.
+    pub fn machine(self) -> &'static str {
+        match self {
+            Board::Lm3s6965 => "lm3s6965evb",
+            Board::Mps2An386 => "mps2-an386",
+        }
+    }
+
+    /// Rust target triple the firmware is built for.
+    pub fn target(self) -> &'static str {
+        match self {
+            Board::Lm3s6965 => "thumbv7m-none-eabi",
+            Board::Mps2An386 => "thumbv7em-none-eabihf",
+        }
+    }
+
+    /// Cargo feature of `firmware-example` that selects this board.
+    pub fn feature(self) -> &'static str {
+        match self {
+            Board::Lm3s6965 => "board-lm3s6965",
+            Board::Mps2An386 => "board-mps2-an386",
+        }
+    }
+
+    /// Cargo arguments that select this board's features.
+    pub fn cargo_feature_args(self) -> Vec<String> {
+        vec![
+            "--no-default-features".to_owned(),
+            "--features".to_owned(),
+            self.feature().to_owned(),
+        ]
+    }
+}
+
+impl fmt::Display for Board {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.machine())
+    }
+}
+
+/// The workspace root (the parent of this crate's folder).
+pub fn workspace_root() -> PathBuf {
+    let manifest_dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+    manifest_dir.parent().unwrap_or(manifest_dir).to_path_buf()
+}
+
+/// The workspace target directory: `$CARGO_TARGET_DIR` if set (relative to
+/// the workspace root), else `<root>/target`.
+pub fn target_dir() -> PathBuf {
+    let root = workspace_root();
+    match std::env::var_os("CARGO_TARGET_DIR") {
+        Some(dir) if !dir.is_empty() => root.join(dir),
+        _ => root.join("target"),
+    }
+}
+
+/// Build the firmware for `board` with the `release` profile and return the
+/// ELF path.
+pub fn build_firmware(board: Board) -> io::Result<PathBuf> {
+    build_firmware_with_profile(board, "release")
+}
+
+/// Build the firmware for `board` with a cargo profile (`release`,
+/// `firmware`, `dev`...) and return the ELF path.
+pub fn build_firmware_with_profile(board: Board, profile: &str) -> io::Result<PathBuf> {
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let output = Command::new(&cargo)
+        .current_dir(workspace_root())
+        .args(["build", "--quiet", "-p", FIRMWARE_PACKAGE])
+        .args(["--profile", profile])
+        .args(["--target", board.target()])
+        .args(board.cargo_feature_args())
+        .stdin(Stdio::null())
+        .output()
+        .map_err(|e| io::Error::new(e.kind(), format!("running {cargo:?}: {e}")))?;
+    if !output.status.success() {
+        return Err(io::Error::other(format!(
+            "building {FIRMWARE_PACKAGE} for {board} ({}) failed with {}:\n{}",
+            board.target(),
+            output.status,
+            String::from_utf8_lossy(&output.stderr)
+        )));
+    }
+    let profile_dir = match profile {
+        "dev" | "test" => "debug",
+        "bench" => "release",
+        other => other,
+    };
+    let elf = target_dir()
+        .join(board.target())
+        .join(profile_dir)
+        .join(FIRMWARE_PACKAGE);
+    if elf.is_file() {
+        Ok(elf)
+    } else {
+        Err(io::Error::new(
+            io::ErrorKind::NotFound,
+            format!("cargo succeeded but {} is missing", elf.display()),
+        ))
+    }
+}
+
+/// How a QEMU run ended.
+#[derive(Debug)]
+pub struct ExitOutcome {
+    /// QEMU's exit status.
+    pub status: ExitStatus,
+    /// QEMU's exit code (`None` if killed by a signal): the firmware's
+    /// semihosting exit status, 0 for success.
+    pub code: Option<i32>,
+    /// What QEMU wrote on stdout (semihosting output of the firmware).
+    pub stdout: String,
+    /// What QEMU wrote on stderr.
+    pub stderr: String,
+}
+
+impl ExitOutcome {
+    /// Whether the firmware exited with success.
+    pub fn success(&self) -> bool {
+        self.code == Some(0)
+    }
+}
+
+/// A running QEMU with both serial ports connected.
+pub struct QemuSession {
+    /// First serial port: the host side of the bridge.
+    pub upstream: TcpStream,
+    /// Second serial port: the controller side of the bridge.
+    pub downstream: TcpStream,
+    board: Board,
+    child: Child,
+    stdout: Capture,
+    stderr: Capture,
+}
+
+impl fmt::Debug for QemuSession {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("QemuSession")
+            .field("board", &self.board)
+            .field("pid", &self.child.id())
+            .finish_non_exhaustive()
+    }
+}
+
+/// Output of one QEMU pipe, collected by a background thread.
+#[derive(Clone, Default)]
+struct Capture(Arc<(Mutex<CaptureState>, Condvar)>);
+
+#[derive(Default)]
+struct CaptureState {
+    data: Vec<u8>,
+    closed: bool,
+}
+
+impl Capture {
+    /// Start collecting everything `pipe` produces until it closes.
+    fn spawn<R: Read + Send + 'static>(mut pipe: R) -> Self {
+        let capture = Capture::default();
+        let shared = capture.clone();
+        thread::spawn(move || {
+            let mut buf = [0; 4096];
+            loop {
+                let n = pipe.read(&mut buf).unwrap_or(0);
+                let (state, changed) = &*shared.0;
+                let mut state = state.lock().unwrap_or_else(PoisonError::into_inner);
+                if n == 0 {
+                    state.closed = true;
+                } else {
+                    state.data.extend_from_slice(&buf[..n]);
+                }
+                changed.notify_all();
+                if n == 0 {
+                    break;
+                }
+            }
+        });
+        capture
+    }
+
+    /// Everything collected so far, as (lossy) UTF-8.
+    fn text(&self) -> String {
+        let state = self.0 .0.lock().unwrap_or_else(PoisonError::into_inner);
+        String::from_utf8_lossy(&state.data).into_owned()
+    }
+
+    /// Wait until the output contains `needle` (`true`), or the pipe closes
+    /// or `deadline` passes (`false`).
+    fn wait_for(&self, needle: &str, deadline: Instant) -> bool {
+        let (state, changed) = &*self.0;
+        let mut state = state.lock().unwrap_or_else(PoisonError::into_inner);
+        loop {
+            if contains(&state.data, needle.as_bytes()) {
+                return true;
+            }
+            let now = Instant::now();
+            if state.closed || now >= deadline {
+                return false;
+            }
+            state = changed
+                .wait_timeout(state, deadline - now)
+                .unwrap_or_else(PoisonError::into_inner)
+                .0;
+        }
+    }
+
+    /// Wait (up to `limit`) for the pipe to close, then return the text.
+    fn finish(&self, limit: Duration) -> String {
+        let deadline = Instant::now() + limit;
+        let (state, changed) = &*self.0;
+        let mut guard = state.lock().unwrap_or_else(PoisonError::into_inner);
+        while !guard.closed {
+            let now = Instant::now();
+            if now >= deadline {
+                break;
+            }
+            guard = changed
+                .wait_timeout(guard, deadline - now)
+                .unwrap_or_else(PoisonError::into_inner)
+                .0;
+        }
+        String::from_utf8_lossy(&guard.data).into_owned()
+    }
+}
+
+fn contains(haystack: &[u8], needle: &[u8]) -> bool {
+    needle.is_empty() || haystack.windows(needle.len()).any(|w| w == needle)
+}
+
+impl QemuSession {
+    /// Boot `elf` on `board`, connect both serial ports and wait until the
+    /// firmware prints [`READY_MARKER`].
+    ///
+    /// `timeout` bounds the start-up and is also set as the read and write
+    /// timeout of both sockets (change it with `set_read_timeout` /
+    /// `set_write_timeout` on the streams).
+    pub fn start(board: Board, elf: &Path, timeout: Duration) -> io::Result<Self> {
+        Self::start_with_marker(board, elf, timeout, Some(READY_MARKER))
+    }
+
+    /// Like [`QemuSession::start`], waiting for `ready_marker` on QEMU's
+    /// stdout instead, or for nothing (`None`: only the connections) for
+    /// firmware that prints no marker.
+    pub fn start_with_marker(
+        board: Board,
+        elf: &Path,
+        timeout: Duration,
+        ready_marker: Option<&str>,
+    ) -> io::Result<Self> {
+        let upstream_listener = TcpListener::bind((Ipv4Addr::LOCALHOST, 0))?;
+        let downstream_listener = TcpListener::bind((Ipv4Addr::LOCALHOST, 0))?;
+        let p0 = upstream_listener.local_addr()?.port();
+        let p1 = downstream_listener.local_addr()?.port();
+
+        let mut command = Command::new(QEMU);
+        command
+            .args(["-machine", board.machine()])
+            .args(["-nographic", "-monitor", "none"])
+            .args(["-semihosting-config", "enable=on,target=native"])
+            .arg("-chardev")
+            .arg(format!("socket,id=u0,host=127.0.0.1,port={p0}"))
+            .args(["-serial", "chardev:u0"])
+            .arg("-chardev")
+            .arg(format!("socket,id=u1,host=127.0.0.1,port={p1}"))
+            .args(["-serial", "chardev:u1"])
+            .arg("-kernel")
+            .arg(elf)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped());
+        let mut child = command.spawn().map_err(|e| {
+            io::Error::new(
+                e.kind(),
+                format!("starting {QEMU} (is it installed? apt-get install qemu-system-arm): {e}"),
+            )
+        })?;
+        let stdout = child.stdout.take().map(Capture::spawn).unwrap_or_default();
+        let stderr = child.stderr.take().map(Capture::spawn).unwrap_or_default();
+
+        let deadline = Instant::now() + timeout;
+        let accepted = accept_until(&upstream_listener, &mut child, deadline)
+            .and_then(|up| {
+                let down = accept_until(&downstream_listener, &mut child, deadline)?;
+                Ok((up, down))
+            })
+            .and_then(|streams| match ready_marker {
+                Some(marker) if !stdout.wait_for(marker, deadline) => Err(io::Error::new(
+                    io::ErrorKind::TimedOut,
+                    format!("the firmware did not print {marker:?}"),
+                )),
+                _ => Ok(streams),
+            });
+        let (upstream, downstream) = match accepted {
+            Ok(streams) => streams,
+            Err(e) => {
+                if let Ok(None) = child.try_wait() {
+                    let _ = child.kill();
+                }
+                let _ = child.wait();
+                return Err(io::Error::new(
+                    e.kind(),
+                    format!(
+                        "{QEMU} -machine {} did not start: {e}\nstdout:\n{}\nstderr:\n{}",
+                        board.machine(),
+                        stdout.finish(OUTPUT_GRACE),
+                        stderr.finish(OUTPUT_GRACE)
+                    ),
+                ));
+            }
+        };
+        // From here on, dropping `session` on an error kills QEMU.
+        let session = Self {
+            upstream,
+            downstream,
+            board,
+            child,
+            stdout,
+            stderr,
+        };
+        for stream in [&session.upstream, &session.downstream] {
+            stream.set_nonblocking(false)?;
+            stream.set_nodelay(true)?;
+            stream.set_read_timeout(Some(timeout))?;
+            stream.set_write_timeout(Some(timeout))?;
+        }
+        Ok(session)
+    }
+
+    /// The board this session runs.
+    pub fn board(&self) -> Board {
+        self.board
+    }
+
+    /// QEMU's stdout so far (the firmware's semihosting output).
+    pub fn stdout_so_far(&self) -> String {
+        self.stdout.text()
+    }
+
+    /// QEMU's stderr so far.
+    pub fn stderr_so_far(&self) -> String {
+        self.stderr.text()
+    }
+
+    /// Process id of the QEMU this session spawned.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// Ask the firmware to end the run: keep the upstream silent for
+    /// [`QUIT_GUARD`], then send [`QUIT_SEQUENCE`].
+    pub fn quit(&mut self) -> io::Result<()> {
+        thread::sleep(QUIT_GUARD);
+        self.upstream.write_all(&QUIT_SEQUENCE)?;
+        self.upstream.flush()
+    }
+
+    /// Wait up to `timeout` for QEMU to exit and return its exit code and
+    /// output. On timeout QEMU is killed and a `TimedOut` error carrying
+    /// the output so far is returned.
+    pub fn wait(mut self, timeout: Duration) -> io::Result<ExitOutcome> {
+        let deadline = Instant::now() + timeout;
+        let status = loop {
+            if let Some(status) = self.child.try_wait()? {
+                break Some(status);
+            }
+            if Instant::now() >= deadline {
+                break None;
+            }
+            thread::sleep(Duration::from_millis(10));
+        };
+        let status = match status {
+            Some(status) => status,
+            None => {
+                self.kill_child();
+                let stdout = self.stdout.finish(OUTPUT_GRACE);
+                let stderr = self.stderr.finish(OUTPUT_GRACE);
+                return Err(io::Error::new(
+                    io::ErrorKind::TimedOut,
+                    format!(
+                        "{QEMU} -machine {} still running after {timeout:?}; killed it\nstdout:\n{stdout}\nstderr:\n{stderr}",
+                        self.board.machine()
+                    ),
+                ));
+            }
+        };
+        Ok(ExitOutcome {
+            status,
+            code: status.code(),
+            stdout: self.stdout.finish(OUTPUT_GRACE),
+            stderr: self.stderr.finish(OUTPUT_GRACE),
+        })
+    }
+
+    /// Kill our QEMU (by its own handle) if it is still running, and reap it.
+    fn kill_child(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+impl Drop for QemuSession {
+    fn drop(&mut self) {
+        // `try_wait` reports a child already reaped by `wait` without
+        // touching its (possibly reused) PID, so this never hits another
+        // process.
+        self.kill_child();
+    }
+}
+
+/// Accept one connection on `listener` before `deadline`, giving up early
+/// if `child` exits.
+fn accept_until(
+    listener: &TcpListener,
+    child: &mut Child,
+    deadline: Instant,
+) -> io::Result<TcpStream> {
+    listener.set_nonblocking(true)?;
+    loop {
+        match listener.accept() {
+            Ok((stream, _)) => return Ok(stream),
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
+            Err(e) => return Err(e),
+        }
+        if let Some(status) = child.try_wait()? {
+            return Err(io::Error::other(format!("QEMU exited early with {status}")));
+        }
+        if Instant::now() >= deadline {
+            return Err(io::Error::new(
+                io::ErrorKind::TimedOut,
+                "timed out waiting for QEMU to connect",
+            ));
+        }
+        thread::sleep(Duration::from_millis(5));
+    }
+}
