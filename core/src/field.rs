@@ -313,6 +313,12 @@ impl<'b> Writer<'b> {
     pub fn new(buf: &'b mut [u8]) -> Self {
         Writer { buf, len: 0 }
     }
+    /// A writer continuing after the first `len` bytes of `buf`
+    /// (clamped to its length).
+    pub fn resume(buf: &'b mut [u8], len: usize) -> Self {
+        let len = len.min(buf.len());
+        Writer { buf, len }
+    }
     /// Bytes written so far.
     pub const fn len(&self) -> usize {
         self.len

@@ -35,7 +35,7 @@
 
 use crate::checksum::{BypassPolicy, ChecksumMode};
 use crate::decoder::{Event, FrameDecoder};
-use crate::error::{Error, Result};
+use crate::error::Error;
 use crate::field::{FieldSpec, Writer};
 use crate::frame::{emit_envelope, emit_trailer, Frame, Header, Station};
 use crate::position::PositionRecord;
@@ -158,6 +158,8 @@ pub enum Step<'a> {
     /// Feed received bytes to [`Transfer::received`]; call `poll` again by
     /// this tick at the latest.
     WaitUntil(u32),
+    /// The source has no record ready: call `poll` again when it has.
+    NeedRecords,
     /// Every record was confirmed.
     Complete(TransferStats),
     /// The transfer stopped; [`Transfer::resume`] continues it.
@@ -203,6 +205,8 @@ pub struct Transfer<I, const N: usize = TTA_MAX_COMMAND> {
     held: heapless::Deque<PositionRecord, HELD>,
     /// Record counts of frames that timed out, and until when to avoid them.
     suspects: heapless::Vec<(u16, u32), SUSPECTS>,
+    /// Start offsets of the last records in the frame being built.
+    marks: heapless::Deque<usize, HELD>,
     source_done: bool,
     taken: u32,
     frame: [u8; N],
@@ -216,20 +220,16 @@ pub struct Transfer<I, const N: usize = TTA_MAX_COMMAND> {
     stats: TransferStats,
 }
 
-impl<I: Iterator<Item = PositionRecord>, const N: usize> Transfer<I, N> {
+impl<I: RecordSource, const N: usize> Transfer<I, N> {
     /// A transfer of the records of `source`.
     pub fn new(cfg: TransferConfig, source: I) -> Self {
-        let (lo, hi) = source.size_hint();
-        let total = if Some(lo) == hi {
-            u32::try_from(lo).ok()
-        } else {
-            None
-        };
+        let total = source.total();
         Transfer {
             cfg,
             source,
             held: heapless::Deque::new(),
             suspects: heapless::Vec::new(),
+            marks: heapless::Deque::new(),
             source_done: false,
             taken: 0,
             frame: [0; N],
@@ -266,6 +266,11 @@ impl<I: Iterator<Item = PositionRecord>, const N: usize> Transfer<I, N> {
         &self.cfg
     }
 
+    /// The record source (e.g. to push records into a [`RecordQueue`]).
+    pub fn source_mut(&mut self) -> &mut I {
+        &mut self.source
+    }
+
     /// Gives back the record source (e.g. to recover it after a failure).
     pub fn into_source(self) -> I {
         self.source
@@ -293,8 +298,9 @@ impl<I: Iterator<Item = PositionRecord>, const N: usize> Transfer<I, N> {
                         return Step::WaitUntil(not_before);
                     }
                     match self.build(now) {
-                        Ok(true) => self.state = State::Send { not_before: now },
-                        Ok(false) => self.state = State::Complete,
+                        Ok(Built::Ready) => self.state = State::Send { not_before: now },
+                        Ok(Built::Pending) => return Step::NeedRecords,
+                        Ok(Built::Exhausted) => self.state = State::Complete,
                         Err(e) => self.state = State::Failed(e),
                     }
                 }
@@ -389,67 +395,88 @@ impl<I: Iterator<Item = PositionRecord>, const N: usize> Transfer<I, N> {
         }
     }
 
-    /// Packs the next frame; `Ok(false)` when the source is exhausted.
-    fn build(&mut self, now: u32) -> core::result::Result<bool, TransferError> {
+    /// Takes the next record: a held-back one first, then the source.
+    fn pull(&mut self) -> Pull {
+        if let Some(r) = self.held.pop_front() {
+            return Pull::Record(r);
+        }
+        if self.source_done {
+            return Pull::End;
+        }
+        let p = self.source.pull();
+        match p {
+            Pull::Record(_) => self.taken += 1,
+            Pull::End => self.source_done = true,
+            Pull::Pending => {}
+        }
+        p
+    }
+
+    /// Packs records into the next frame until it is full or the source
+    /// ends; a source that is not ready leaves the frame half-built for the
+    /// next call.
+    fn build(&mut self, now: u32) -> core::result::Result<Built, TransferError> {
         let cfg = self.cfg;
         let limit = cfg.max_frame.min(N);
         let first_index = self.stats.records_confirmed;
-        let start = cfg.start.wrapping_add(first_index as u16);
-        let mut w = Writer::new(&mut self.frame);
-        let count_at = (|| -> Result<usize> {
-            emit_envelope(&mut w, Header::Command, cfg.station, cfg.stream.id)?;
-            cfg.stream.write_prefix(&mut w, start, 0)?;
-            Ok(w.len() - usize::from(cfg.stream.count_width))
-        })()
-        .map_err(TransferError::Config)?;
-        let mut n: u16 = 0;
-        // Start offsets of the records in the frame, for holding some back.
-        let mut marks: heapless::Deque<usize, HELD> = heapless::Deque::new();
-        loop {
-            let rec = match self.held.pop_front() {
-                Some(r) => r,
-                None if self.source_done => break,
-                None => match self.source.next() {
-                    Some(r) => {
-                        self.taken += 1;
-                        r
-                    }
-                    None => {
-                        self.source_done = true;
-                        break;
-                    }
-                },
+        if self.frame_len == 0 {
+            let start = cfg.start.wrapping_add(first_index as u16);
+            let mut w = Writer::new(&mut self.frame);
+            emit_envelope(&mut w, Header::Command, cfg.station, cfg.stream.id)
+                .and_then(|()| cfg.stream.write_prefix(&mut w, start, 0))
+                .map_err(TransferError::Config)?;
+            self.frame_len = w.len();
+            self.frame_records = 0;
+            self.marks.clear();
+        }
+        let full = loop {
+            let rec = match self.pull() {
+                Pull::Record(r) => r,
+                Pull::Pending => return Ok(Built::Pending),
+                Pull::End => break false,
             };
             let len = cfg.stream.layout.record_len(rec.axes.count());
-            if n >= cfg.stream.max_records || w.len() + len + 4 > limit {
+            let n = self.frame_records;
+            if n >= cfg.stream.max_records || self.frame_len + len + 4 > limit {
+                let _ = self.held.push_front(rec);
                 if n == 0 {
                     return Err(TransferError::Config(Error::BufferTooSmall));
                 }
-                let _ = self.held.push_front(rec);
-                break;
+                break true;
             }
-            let mark = w.len();
+            let mut w = Writer::resume(&mut self.frame, self.frame_len);
             if let Err(error) = cfg.stream.layout.write_record(&rec, &mut w) {
-                let index = first_index + u32::from(n);
                 let _ = self.held.push_front(rec);
-                return Err(TransferError::InvalidRecord { index, error });
+                self.frame_len = 0;
+                return Err(TransferError::InvalidRecord {
+                    index: first_index + u32::from(n),
+                    error,
+                });
             }
-            n += 1;
-            if marks.is_full() {
-                marks.pop_front();
+            if self.marks.is_full() {
+                self.marks.pop_front();
             }
-            let _ = marks.push_back(mark);
-        }
-        if n == 0 {
-            return Ok(false);
+            let _ = self.marks.push_back(self.frame_len);
+            self.frame_len = w.len();
+            self.frame_records += 1;
+        };
+        let _ = full;
+        if self.frame_records == 0 {
+            self.frame_len = 0;
+            return Ok(Built::Exhausted);
         }
         // Avoid the counts a late reply could carry (see module docs).
         self.suspects.retain(|&(_, until)| !reached(now, until));
         let prev = self.prev_records;
-        let avoid =
-            |n: u16, suspects: &[(u16, u32)]| n == prev || suspects.iter().any(|&(c, _)| c == n);
-        while n > 1 && avoid(n, &self.suspects) && !self.held.is_full() {
-            let Some(mark) = marks.pop_back() else { break };
+        let mut w = Writer::resume(&mut self.frame, self.frame_len);
+        let mut n = self.frame_records;
+        while n > 1
+            && (n == prev || self.suspects.iter().any(|&(c, _)| c == n))
+            && !self.held.is_full()
+        {
+            let Some(mark) = self.marks.pop_back() else {
+                break;
+            };
             let mut r = crate::field::Reader::new(w.written().get(mark..).unwrap_or(&[]), mark);
             let Ok(rec) = cfg.stream.layout.read_record(&mut r) else {
                 break;
@@ -460,13 +487,117 @@ impl<I: Iterator<Item = PositionRecord>, const N: usize> Transfer<I, N> {
             w.truncate(mark);
             n -= 1;
         }
-        let count_spec = FieldSpec::hex(cfg.stream.count_width);
-        w.patch_unsigned(count_at, count_spec, u64::from(n))
-            .and_then(|()| emit_trailer(&mut w, cfg.checksum))
-            .map_err(TransferError::Config)?;
+        let count_at = crate::frame::ENVELOPE_LEN + cfg.stream.prefix_len()
+            - usize::from(cfg.stream.count_width);
+        w.patch_unsigned(
+            count_at,
+            FieldSpec::hex(cfg.stream.count_width),
+            u64::from(n),
+        )
+        .and_then(|()| emit_trailer(&mut w, cfg.checksum))
+        .map_err(TransferError::Config)?;
         self.frame_len = w.len();
         self.frame_records = n;
-        Ok(true)
+        Ok(Built::Ready)
+    }
+}
+
+/// What [`Transfer::build`] achieved.
+enum Built {
+    Ready,
+    Pending,
+    Exhausted,
+}
+
+/// What a [`RecordSource`] has to offer.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Pull {
+    /// The next record.
+    Record(PositionRecord),
+    /// No record yet; ask again later.
+    Pending,
+    /// No more records.
+    End,
+}
+
+/// Where a transfer takes its records from. Every
+/// `Iterator<Item = PositionRecord>` is one (never pending); a
+/// [`RecordQueue`] is one that fills as records arrive.
+pub trait RecordSource {
+    /// The next record, if ready.
+    fn pull(&mut self) -> Pull;
+    /// Records in all, if known.
+    fn total(&self) -> Option<u32> {
+        None
+    }
+}
+
+impl<I: Iterator<Item = PositionRecord>> RecordSource for I {
+    fn pull(&mut self) -> Pull {
+        self.next().map_or(Pull::End, Pull::Record)
+    }
+    fn total(&self) -> Option<u32> {
+        let (lo, hi) = self.size_hint();
+        if Some(lo) == hi {
+            u32::try_from(lo).ok()
+        } else {
+            None
+        }
+    }
+}
+
+/// A bounded FIFO of records that a producer fills as they arrive (for
+/// example from a [`PositionStreamDecoder`](crate::stream::PositionStreamDecoder))
+/// and a [`Transfer`] drains. It is pending while empty, until
+/// [`RecordQueue::finish`].
+#[derive(Debug, Clone, Default)]
+pub struct RecordQueue<const Q: usize> {
+    items: heapless::Deque<PositionRecord, Q>,
+    finished: bool,
+}
+
+impl<const Q: usize> RecordQueue<Q> {
+    /// An empty queue.
+    pub const fn new() -> Self {
+        RecordQueue {
+            items: heapless::Deque::new(),
+            finished: false,
+        }
+    }
+    /// Appends a record; gives it back if the queue is full.
+    pub fn push(&mut self, rec: PositionRecord) -> core::result::Result<(), PositionRecord> {
+        self.items.push_back(rec)
+    }
+    /// No more records will come.
+    pub fn finish(&mut self) {
+        self.finished = true;
+    }
+    /// Whether [`RecordQueue::finish`] was called.
+    pub fn is_finished(&self) -> bool {
+        self.finished
+    }
+    /// Records waiting.
+    pub fn len(&self) -> usize {
+        self.items.len()
+    }
+    /// Whether no record is waiting.
+    pub fn is_empty(&self) -> bool {
+        self.items.is_empty()
+    }
+    /// Whether another record would not fit.
+    pub fn is_full(&self) -> bool {
+        self.items.is_full()
+    }
+}
+
+impl<const Q: usize> RecordSource for RecordQueue<Q> {
+    fn pull(&mut self) -> Pull {
+        match self.items.pop_front() {
+            Some(r) => Pull::Record(r),
+            None if self.finished => Pull::End,
+            None => Pull::Pending,
+        }
     }
 }
 
@@ -499,7 +630,7 @@ pub trait Clock {
     fn idle(&mut self) {}
 }
 
-impl<I: Iterator<Item = PositionRecord>, const N: usize> Transfer<I, N> {
+impl<I: RecordSource, const N: usize> Transfer<I, N> {
     /// Runs the transfer to the end over a UART, blocking.
     ///
     /// `uart` must report readiness ([`embedded_io::ReadReady`]) so that the
@@ -554,7 +685,7 @@ impl<I: Iterator<Item = PositionRecord>, const N: usize> Transfer<I, N> {
                 self.sent(now);
                 Err(nb::Error::WouldBlock)
             }
-            Step::WaitUntil(_) => Err(nb::Error::WouldBlock),
+            Step::WaitUntil(_) | Step::NeedRecords => Err(nb::Error::WouldBlock),
             Step::Complete(stats) => Ok(stats),
             Step::Failed(e) => Err(nb::Error::Other(TransferError::widen(e))),
         }

@@ -1,6 +1,7 @@
 //! Host-side tools and test support for `iai-protocol-b`: the controller
 //! simulator, generated position tables, the QEMU runner.
 pub mod link;
+pub mod naive;
 pub mod qemu;
 pub mod sim;
 pub mod table;

@@ -2,7 +2,7 @@
 //! clock: a 1.6 MB table with 3-second timeouts takes seconds of real time.
 
 use iai_protocol_b::position::PositionRecord;
-use iai_protocol_b::transfer::{Step, Transfer, TransferError, TransferStats};
+use iai_protocol_b::transfer::{RecordSource, Step, Transfer, TransferError, TransferStats};
 
 use crate::sim::Simulator;
 
@@ -21,14 +21,33 @@ pub struct LinkRun {
 
 /// Runs `t` against `sim` until it completes or fails (at most `max_resumes`
 /// resumptions after a failure, to show that resuming loses nothing).
-pub fn run<I, const N: usize>(t: &mut Transfer<I, N>, sim: &mut Simulator, max_resumes: u32) -> LinkRun
+pub fn run<I, const N: usize>(
+    t: &mut Transfer<I, N>,
+    sim: &mut Simulator,
+    max_resumes: u32,
+) -> LinkRun
 where
     I: Iterator<Item = PositionRecord>,
+{
+    run_fed(t, sim, max_resumes, |_| {})
+}
+
+/// Like [`run`], calling `feed` with the transfer's source at every step
+/// (e.g. to push records into a `RecordQueue` as they "arrive").
+pub fn run_fed<I, const N: usize>(
+    t: &mut Transfer<I, N>,
+    sim: &mut Simulator,
+    max_resumes: u32,
+    mut feed: impl FnMut(&mut I),
+) -> LinkRun
+where
+    I: RecordSource,
 {
     let mut now: u32 = 0;
     let mut resumes = 0;
     let (mut up, mut down) = (0u64, 0u64);
     loop {
+        feed(t.source_mut());
         let reply = sim.take_output(now);
         if !reply.is_empty() {
             down += reply.len() as u64;
@@ -46,12 +65,23 @@ where
                 let next = sim.next_output_at().map_or(deadline, |r| r.min(deadline));
                 now = next.max(now + 1);
             }
+            Step::NeedRecords => now += 1,
             Step::Complete(stats) => {
-                return LinkRun { result: Ok(stats), virtual_ms: now, bytes_to_controller: up, bytes_to_host: down }
+                return LinkRun {
+                    result: Ok(stats),
+                    virtual_ms: now,
+                    bytes_to_controller: up,
+                    bytes_to_host: down,
+                }
             }
             Step::Failed(e) => {
                 if resumes >= max_resumes {
-                    return LinkRun { result: Err(e), virtual_ms: now, bytes_to_controller: up, bytes_to_host: down };
+                    return LinkRun {
+                        result: Err(e),
+                        virtual_ms: now,
+                        bytes_to_controller: up,
+                        bytes_to_host: down,
+                    };
                 }
                 resumes += 1;
                 t.resume(now);

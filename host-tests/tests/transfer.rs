@@ -1,13 +1,13 @@
 //! End to end: full-size position tables written through the transfer
 //! engine into the simulated controller, with and without faults.
 
-use host_tests::link::run;
+use host_tests::link::{run, run_fed};
 use host_tests::sim::{Faults, Simulator};
 use host_tests::table::table;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::stream::PositionStream;
-use iai_protocol_b::transfer::{Transfer, TransferConfig, TransferError};
+use iai_protocol_b::transfer::{RecordQueue, Transfer, TransferConfig, TransferError};
 
 const ST: Station = Station(0x99);
 
@@ -17,7 +17,10 @@ fn assert_table_equal(sim: &Simulator, source: impl Iterator<Item = PositionReco
         expected.insert(r.number, r);
     }
     assert_eq!(sim.table.len(), expected.len());
-    assert!(sim.table == expected, "simulator table differs from the source");
+    assert!(
+        sim.table == expected,
+        "simulator table differs from the source"
+    );
 }
 
 #[test]
@@ -32,7 +35,10 @@ fn full_table_20000_records_8_axes_no_faults() {
     // 24 records of 82 bytes fit a 2,051-byte frame (14 + 24 x 82 = 1,982);
     // consecutive frames alternate 24 / 23 records so a stale reply never matches.
     assert!(stats.frames_confirmed >= 20_000 / 24);
-    println!("20000x8 clean: {stats:?}, {} bytes up, {} down", run.bytes_to_controller, run.bytes_to_host);
+    println!(
+        "20000x8 clean: {stats:?}, {} bytes up, {} down",
+        run.bytes_to_controller, run.bytes_to_host
+    );
 }
 
 #[test]
@@ -65,7 +71,10 @@ fn full_table_8_axes_with_faults() {
     let run = run(&mut t, &mut sim, 10);
     let stats = run.result.unwrap();
     let s = sim.stats();
-    println!("20000x8 faults: {stats:?}\nsimulator: {s:?}\nvirtual time {} s", run.virtual_ms / 1000);
+    println!(
+        "20000x8 faults: {stats:?}\nsimulator: {s:?}\nvirtual time {} s",
+        run.virtual_ms / 1000
+    );
     assert_eq!(stats.records_confirmed, 20_000);
     assert!(stats.retries > 0 && stats.timeouts > 0 && stats.error_replies > 0);
     assert!(s.broken_frames > 0, "bit flips must have hit some commands");
@@ -85,11 +94,18 @@ fn full_table_1_axis_with_faults() {
 #[test]
 fn xsel_2003_limit_splits_at_1023_bytes_with_245h() {
     let mut sim = Simulator::xsel_2003(ST);
-    let cfg = TransferConfig { stream: PositionStream::CHANGE, max_frame: 1023, ..TransferConfig::tta(ST) };
-    let mut t: Transfer<_, 1023> = Transfer::new(cfg, table(2_000, 8, 15).map(|mut r| {
-        r.number %= 0x1000;
-        r
-    }));
+    let cfg = TransferConfig {
+        stream: PositionStream::CHANGE,
+        max_frame: 1023,
+        ..TransferConfig::tta(ST)
+    };
+    let mut t: Transfer<_, 1023> = Transfer::new(
+        cfg,
+        table(2_000, 8, 15).map(|mut r| {
+            r.number %= 0x1000;
+            r
+        }),
+    );
     let stats = run(&mut t, &mut sim, 0).result.unwrap();
     assert_eq!(stats.records_confirmed, 2_000);
     assert_eq!(sim.stats().oversize_frames, 0);
@@ -98,7 +114,13 @@ fn xsel_2003_limit_splits_at_1023_bytes_with_245h() {
 
 #[test]
 fn a_dead_controller_fails_after_three_tries_and_resume_continues_exactly() {
-    let mut sim = Simulator::tta(ST).with_faults(Faults { drop_every_nth_reply: Some(1), ..Faults::default() }, 3);
+    let mut sim = Simulator::tta(ST).with_faults(
+        Faults {
+            drop_every_nth_reply: Some(1),
+            ..Faults::default()
+        },
+        3,
+    );
     let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(100, 4, 16));
     let first = run(&mut t, &mut sim, 0);
     assert_eq!(first.result, Err(TransferError::Timeout));
@@ -114,10 +136,21 @@ fn a_dead_controller_fails_after_three_tries_and_resume_continues_exactly() {
 
 #[test]
 fn persistent_error_replies_fail_with_the_code() {
-    let mut sim = Simulator::tta(ST).with_faults(Faults { error_reply: 1.0, ..Faults::default() }, 4);
+    let mut sim = Simulator::tta(ST).with_faults(
+        Faults {
+            error_reply: 1.0,
+            ..Faults::default()
+        },
+        4,
+    );
     let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(10, 2, 17));
     let r = run(&mut t, &mut sim, 0);
-    assert_eq!(r.result, Err(TransferError::ErrorResponse { code: host_tests::sim::INJECTED_ERROR_CODE }));
+    assert_eq!(
+        r.result,
+        Err(TransferError::ErrorResponse {
+            code: host_tests::sim::INJECTED_ERROR_CODE
+        })
+    );
     assert_eq!(t.stats().error_replies, 3);
 }
 
@@ -134,4 +167,27 @@ fn an_invalid_record_stops_before_anything_is_sent_for_it() {
     }
     // Records before the first frame that holds the bad one are confirmed.
     assert_eq!(sim.table.len() as u32, t.stats().records_confirmed);
+}
+
+#[test]
+fn records_arriving_a_few_at_a_time_through_a_queue_lose_nothing() {
+    // As in the bridge: records come from the upstream UART in bursts; the
+    // engine waits (NeedRecords) rather than sending short frames.
+    let mut sim = Simulator::tta(ST).with_faults(faulty(), 77);
+    let mut t: Transfer<RecordQueue<32>> =
+        Transfer::new(TransferConfig::tta(ST), RecordQueue::new()).with_total(3_000);
+    let mut src = table(3_000, 3, 21);
+    let r = run_fed(&mut t, &mut sim, 5, |q| {
+        for _ in 0..5 {
+            if q.is_full() || q.is_finished() {
+                break;
+            }
+            match src.next() {
+                Some(rec) => q.push(rec).unwrap(),
+                None => q.finish(),
+            }
+        }
+    });
+    assert_eq!(r.result.unwrap().records_confirmed, 3_000);
+    assert_table_equal(&sim, table(3_000, 3, 21));
 }

@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# All the checks, as CI runs them: set-up, formatting, lints, no_std builds
+# for three Cortex-M targets, the firmware for both boards, docs, doctests,
+# size figures, then every test (unit, recorded frames, end-to-end, QEMU).
+# Ends with the test runner's summary.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+./tools/setup.sh
+
+step() { printf '\n==> %s\n' "$*"; }
+
+step "formatting"
+cargo fmt --all --check
+
+step "clippy (core, host tests) -D warnings"
+cargo clippy -p iai-protocol-b -p host-tests --all-targets -- -D warnings
+cargo clippy -p iai-protocol-b --features defmt -- -D warnings
+
+step "core builds for thumbv6m / thumbv7m / thumbv7em (no std, no alloc)"
+for t in thumbv6m-none-eabi thumbv7m-none-eabi thumbv7em-none-eabihf; do
+  cargo build -q -p iai-protocol-b --target "$t"
+done
+cargo build -q -p iai-protocol-b --target thumbv7em-none-eabihf --features defmt
+
+step "firmware: both boards, clippy -D warnings"
+cargo clippy -q -p firmware-example --target thumbv7m-none-eabi -- -D warnings
+cargo clippy -q -p firmware-example --target thumbv7em-none-eabihf \
+  --no-default-features --features board-mps2-an386 -- -D warnings
+
+step "docs (no warnings) and doctests"
+RUSTDOCFLAGS="-D warnings" cargo doc -q -p iai-protocol-b --no-deps
+cargo test -q -p iai-protocol-b --doc
+
+step "size report"
+./tools/size-report.sh || echo "(size report failed)"
+
+step "tests"
+cargo nextest run -p iai-protocol-b -p host-tests --no-fail-fast
