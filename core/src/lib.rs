@@ -37,11 +37,14 @@ pub mod axis;
 pub mod checksum;
 pub mod decoder;
 pub mod error;
+mod exchange;
 pub mod field;
 pub mod frame;
 pub mod io;
 pub mod message;
 pub mod position;
+pub mod profile;
+pub mod readback;
 pub mod stream;
 pub mod transfer;
 

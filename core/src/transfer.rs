@@ -36,6 +36,7 @@
 use crate::checksum::{BypassPolicy, ChecksumMode};
 use crate::decoder::{Event, FrameDecoder};
 use crate::error::Error;
+use crate::exchange::{reached, Due, Exchange};
 use crate::field::{FieldSpec, Writer};
 use crate::frame::{emit_envelope, emit_trailer, Frame, Header, Station};
 use crate::position::PositionRecord;
@@ -168,20 +169,12 @@ pub enum Step<'a> {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum State {
-    /// No frame built yet, or the last one was confirmed.
+    /// Packing the next frame (from this tick on).
     Build {
         not_before: u32,
     },
-    /// A frame is built and waits to be sent.
-    Send {
-        not_before: u32,
-    },
-    /// The frame is with the caller for transmission.
-    Sending,
-    /// Waiting for the reply.
-    Await {
-        deadline: u32,
-    },
+    /// The frame is being sent and confirmed.
+    Exchange,
     Complete,
     Failed(TransferError),
 }
@@ -191,11 +184,6 @@ const SUSPECTS: usize = 4;
 /// Records that can be held back: one that did not fit, plus one for the
 /// previous count and one per suspect count.
 const HELD: usize = 2 + SUSPECTS;
-
-/// `a` is at or after `b` on a wrapping millisecond clock.
-fn reached(now: u32, at: u32) -> bool {
-    now.wrapping_sub(at) < 0x8000_0000
-}
 
 /// Writes a position table to a controller in confirmed chunks.
 pub struct Transfer<I, const N: usize = TTA_MAX_COMMAND> {
@@ -213,7 +201,7 @@ pub struct Transfer<I, const N: usize = TTA_MAX_COMMAND> {
     frame_len: usize,
     frame_records: u16,
     prev_records: u16,
-    tries: u8,
+    exchange: Exchange,
     total: Option<u32>,
     state: State,
     replies: FrameDecoder<32>,
@@ -236,7 +224,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             frame_len: 0,
             frame_records: 0,
             prev_records: 0,
-            tries: 0,
+            exchange: Exchange::new(),
             total,
             state: State::Build { not_before: 0 },
             replies: FrameDecoder::with_policy(BypassPolicy::Reject),
@@ -280,12 +268,14 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
     /// fresh count of tries. Nothing is lost or repeated out of order.
     pub fn resume(&mut self, now: u32) {
         if let State::Failed(e) = self.state {
-            self.tries = 0;
-            self.state = match e {
-                TransferError::InvalidRecord { .. } | TransferError::Config(_) => State::Failed(e),
-                _ if self.frame_len > 0 => State::Send { not_before: now },
-                _ => State::Build { not_before: now },
-            };
+            match e {
+                TransferError::InvalidRecord { .. } | TransferError::Config(_) => {}
+                _ if self.frame_records > 0 => {
+                    self.exchange.start(now);
+                    self.state = State::Exchange;
+                }
+                _ => self.state = State::Build { not_before: now },
+            }
         }
     }
 
@@ -298,38 +288,36 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                         return Step::WaitUntil(not_before);
                     }
                     match self.build(now) {
-                        Ok(Built::Ready) => self.state = State::Send { not_before: now },
+                        Ok(Built::Ready) => {
+                            self.exchange.start(now);
+                            self.state = State::Exchange;
+                        }
                         Ok(Built::Pending) => return Step::NeedRecords,
                         Ok(Built::Exhausted) => self.state = State::Complete,
                         Err(e) => self.state = State::Failed(e),
                     }
                 }
-                State::Send { not_before } => {
-                    if !reached(now, not_before) {
-                        return Step::WaitUntil(not_before);
+                State::Exchange => match self.exchange.poll(now) {
+                    Due::Transmit { fresh } => {
+                        if fresh {
+                            self.stats.frames_sent += 1;
+                            self.stats.bytes_sent += self.frame_len as u64;
+                            self.replies.reset();
+                        }
+                        return Step::Transmit(self.frame.get(..self.frame_len).unwrap_or(&[]));
                     }
-                    self.tries += 1;
-                    self.stats.frames_sent += 1;
-                    self.stats.bytes_sent += self.frame_len as u64;
-                    self.state = State::Sending;
-                    self.replies.reset();
-                    return Step::Transmit(self.frame.get(..self.frame_len).unwrap_or(&[]));
-                }
-                State::Sending => {
-                    return Step::Transmit(self.frame.get(..self.frame_len).unwrap_or(&[]));
-                }
-                State::Await { deadline } => {
-                    if !reached(now, deadline) {
-                        return Step::WaitUntil(deadline);
+                    Due::WaitUntil(t) => return Step::WaitUntil(t),
+                    Due::TimedOut => {
+                        self.stats.timeouts += 1;
+                        if self.suspects.is_full() {
+                            self.suspects.remove(0);
+                        }
+                        let until = now.wrapping_add(self.cfg.late_guard_ms);
+                        let _ = self.suspects.push((self.frame_records, until));
+                        self.retry_or_fail(now, TransferError::Timeout);
                     }
-                    self.stats.timeouts += 1;
-                    if self.suspects.is_full() {
-                        self.suspects.remove(0);
-                    }
-                    let until = now.wrapping_add(self.cfg.late_guard_ms);
-                    let _ = self.suspects.push((self.frame_records, until));
-                    self.retry_or_fail(now, TransferError::Timeout);
-                }
+                    Due::Idle => self.state = State::Failed(TransferError::Timeout),
+                },
                 State::Complete => return Step::Complete(self.stats),
                 State::Failed(e) => return Step::Failed(e),
             }
@@ -338,11 +326,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
 
     /// The caller finished transmitting the frame at tick `now`.
     pub fn sent(&mut self, now: u32) {
-        if self.state == State::Sending {
-            self.state = State::Await {
-                deadline: now.wrapping_add(self.cfg.timeout_ms),
-            };
-        }
+        self.exchange.sent(now, self.cfg.timeout_ms);
     }
 
     /// Bytes received from the controller at tick `now`.
@@ -358,7 +342,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 }
                 Event::Frame(f) => judge(&self.cfg, self.frame_records, &f),
             };
-            if !matches!(self.state, State::Await { .. }) {
+            if !(self.state == State::Exchange && self.exchange.awaiting()) {
                 self.stats.ignored_frames += 1;
                 continue;
             }
@@ -369,7 +353,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                     self.prev_records = self.frame_records;
                     self.frame_len = 0;
                     self.frame_records = 0;
-                    self.tries = 0;
+                    self.exchange.finish();
                     self.state = State::Build {
                         not_before: now.wrapping_add(self.cfg.turnaround_ms),
                     };
@@ -387,9 +371,8 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
     }
 
     fn retry_or_fail(&mut self, at: u32, why: TransferError) {
-        if self.tries < self.cfg.max_tries {
+        if self.exchange.retry(at, self.cfg.max_tries) {
             self.stats.retries += 1;
-            self.state = State::Send { not_before: at };
         } else {
             self.state = State::Failed(why);
         }

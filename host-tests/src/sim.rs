@@ -17,7 +17,10 @@ use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::field::{FieldSpec, Reader, Writer};
 use iai_protocol_b::frame::{emit_envelope, emit_trailer, Frame, Header, Station};
-use iai_protocol_b::message::{AxisStatus, AxisStatusQuery, AxisStatusResponse, ErrorDetailQuery, ErrorDetailResponse, Message, SystemStatusQuery, SystemStatusResponse};
+use iai_protocol_b::message::{
+    AxisStatus, AxisStatusQuery, AxisStatusResponse, ErrorDetailQuery, ErrorDetailResponse,
+    Message, SystemStatusQuery, SystemStatusResponse,
+};
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::stream::PositionStream;
 
@@ -139,7 +142,11 @@ impl Simulator {
 
     /// A 2003-generation X-SEL (1,023 / 1,024-byte buffers).
     pub fn xsel_2003(station: Station) -> Self {
-        Simulator { max_receive: 1023, max_transmit: 1024, ..Self::tta(station) }
+        Simulator {
+            max_receive: 1023,
+            max_transmit: 1024,
+            ..Self::tta(station)
+        }
     }
 
     /// With these faults and this random seed.
@@ -175,7 +182,11 @@ impl Simulator {
             if self.rng.chance(self.faults.drop_byte_in) {
                 continue;
             }
-            let b = if self.rng.chance(self.faults.flip_bit_in) { b ^ (1 << self.rng.below(8)) } else { b };
+            let b = if self.rng.chance(self.faults.flip_bit_in) {
+                b ^ (1 << self.rng.below(8))
+            } else {
+                b
+            };
             let reply = match self.decoder.push(b) {
                 Event::NeedMore => None,
                 Event::Error(e) => {
@@ -201,7 +212,8 @@ impl Simulator {
             };
             if let Some(cmd) = reply {
                 self.stats.commands += 1;
-                let frame = Frame::new_checked(&cmd, BypassPolicy::CommandsOnly).expect("decoder checked it");
+                let frame = Frame::new_checked(&cmd, BypassPolicy::CommandsOnly)
+                    .expect("decoder checked it");
                 let out = self.execute(&frame);
                 self.schedule(out, now);
             }
@@ -226,7 +238,9 @@ impl Simulator {
             }
         }
         if self.rng.chance(self.faults.garbage_before_reply) {
-            let noise: Vec<u8> = (0..1 + self.rng.below(12)).map(|_| b"xyz\r\n0123?"[self.rng.below(10) as usize]).collect();
+            let noise: Vec<u8> = (0..1 + self.rng.below(12))
+                .map(|_| b"xyz\r\n0123?"[self.rng.below(10) as usize])
+                .collect();
             reply.splice(0..0, noise);
         }
         let mut at = now + self.response_delay_ms;
@@ -250,7 +264,9 @@ impl Simulator {
 
     fn emit<'a, M: Message<'a>>(&self, msg: &M) -> Vec<u8> {
         let mut buf = vec![0u8; self.max_transmit];
-        let n = msg.emit(self.station, &mut buf).expect("reply fits the transmit buffer");
+        let n = msg
+            .emit(self.station, &mut buf)
+            .expect("reply fits the transmit buffer");
         buf.truncate(n);
         buf
     }
@@ -268,7 +284,12 @@ impl Simulator {
                 let q = AxisStatusQuery::parse(f).ok()?;
                 let mut axes = iai_protocol_b::axis::PerAxis::new();
                 for axis in q.query_axis_pattern.iter() {
-                    let pos = self.table.values().next().and_then(|r| r.position(axis)).unwrap_or(0);
+                    let pos = self
+                        .table
+                        .values()
+                        .next()
+                        .and_then(|r| r.position(axis))
+                        .unwrap_or(0);
                     let _ = axes.push(AxisStatus {
                         axis_status: 0x1C,
                         sensor_input_status: 0,
@@ -277,7 +298,10 @@ impl Simulator {
                         current_position: pos,
                     });
                 }
-                Some(self.emit(&AxisStatusResponse { axis_pattern: q.query_axis_pattern, axes }))
+                Some(self.emit(&AxisStatusResponse {
+                    axis_pattern: q.query_axis_pattern,
+                    axes,
+                }))
             }
             0x215 => {
                 SystemStatusQuery::parse(f).ok()?;
@@ -332,7 +356,9 @@ impl Simulator {
             r.finish()?;
             Ok::<_, iai_protocol_b::Error>((start, recs))
         })();
-        let Ok((start, recs)) = parsed else { return self.error_frame(UNSUPPORTED_ERROR_CODE) };
+        let Ok((start, recs)) = parsed else {
+            return self.error_frame(UNSUPPORTED_ERROR_CODE);
+        };
         let n = recs.len() as u16;
         for rec in recs {
             self.table.insert(rec.number, rec);
@@ -346,8 +372,8 @@ impl Simulator {
         w.written().to_vec()
     }
 
-    /// 209H / 21FH / 22DH: the defined records from the head number on, as
-    /// many as asked and as fit the transmit buffer.
+    /// 209H / 21FH / 22DH: the defined records in the window of position
+    /// numbers `head..head + asked`, as many as fit the transmit buffer.
     fn query_positions(&mut self, kind: PositionStream, f: &Frame<'_>) -> Vec<u8> {
         let body = f.body();
         let w_num = kind.count_width;
@@ -361,21 +387,30 @@ impl Simulator {
             r.finish()?;
             Ok::<_, iai_protocol_b::Error>((head, n))
         })();
-        let Ok((head, asked)) = q else { return self.error_frame(UNSUPPORTED_ERROR_CODE) };
+        let Ok((head, asked)) = q else {
+            return self.error_frame(UNSUPPORTED_ERROR_CODE);
+        };
         let mut buf = vec![0u8; self.max_transmit];
         let mut w = Writer::new(&mut buf);
         emit_envelope(&mut w, Header::Response, self.station, kind.id).unwrap();
         kind.write_prefix(&mut w, 0, 0).unwrap();
         let count_at = w.len() - usize::from(kind.count_width);
         let mut n = 0u16;
-        for rec in self.table.range(head..).map(|(_, r)| r).take(usize::from(asked)) {
+        // The window head..head+asked; only defined records are returned.
+        let end = u32::from(head) + u32::from(asked);
+        for rec in self
+            .table
+            .values()
+            .filter(|r| r.number >= head && u32::from(r.number) < end)
+        {
             if w.len() + kind.layout.record_len(rec.axes.count()) + 4 > self.max_transmit {
                 break;
             }
             kind.layout.write_record(rec, &mut w).unwrap();
             n += 1;
         }
-        w.patch_unsigned(count_at, FieldSpec::hex(kind.count_width), u64::from(n)).unwrap();
+        w.patch_unsigned(count_at, FieldSpec::hex(kind.count_width), u64::from(n))
+            .unwrap();
         emit_trailer(&mut w, Default::default()).unwrap();
         w.written().to_vec()
     }
@@ -394,7 +429,11 @@ pub fn serve_tcp(sim: &mut Simulator, mut stream: std::net::TcpStream) -> std::i
         match stream.read(&mut buf) {
             Ok(0) => return Ok(()),
             Ok(n) => sim.receive(&buf[..n], now()),
-            Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {}
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) => {}
             Err(e) => return Err(e),
         }
         let out = sim.take_output(now());
