@@ -1,0 +1,140 @@
+//! Proof that the core's paths allocate nothing: a counting global
+//! allocator, switched on only around calls into the core.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use host_tests::sim::Simulator;
+use host_tests::table::table;
+use iai_protocol_b::checksum::BypassPolicy;
+use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::frame::Station;
+use iai_protocol_b::stream::{PositionStream, PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
+use iai_protocol_b::transfer::{Step, Transfer, TransferConfig};
+
+struct Counting;
+static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+thread_local!(static COUNTING: Cell<bool> = const { Cell::new(false) });
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        if COUNTING.with(Cell::get) {
+            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        }
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// Runs `f` with allocation counting on; returns its result.
+fn core_call<T>(f: impl FnOnce() -> T) -> T {
+    COUNTING.with(|c| c.set(true));
+    let r = f();
+    COUNTING.with(|c| c.set(false));
+    r
+}
+
+fn allocations() -> u64 {
+    ALLOCATIONS.load(Ordering::Relaxed)
+}
+
+#[test]
+fn the_core_allocates_nothing() {
+    let before = allocations();
+
+    // Encode the full 1.64 MB table in 256-byte chunks into a preallocated buffer.
+    let mut wire = vec![0u8; 1_640_014];
+    let mut enc = core_call(|| {
+        PositionStreamEncoder::new(PositionStream::CHANGE_2, Station(0x99), 0, 20_000, table(20_000, 8, 3)).unwrap()
+    });
+    let mut at = 0;
+    loop {
+        let end = (at + 256).min(wire.len());
+        let n = core_call(|| enc.read(&mut wire[at..end]).unwrap());
+        if n == 0 {
+            break;
+        }
+        at += n;
+    }
+    assert_eq!(at, wire.len());
+
+    // Decode it record by record.
+    let mut dec = PositionStreamDecoder::new(BypassPolicy::Reject);
+    let mut records = 0u32;
+    let mut rest = &wire[..];
+    let end = core_call(|| loop {
+        let (used, ev) = dec.decode(rest);
+        rest = &rest[used..];
+        match ev {
+            StreamEvent::Record(_) => records += 1,
+            StreamEvent::NeedMore | StreamEvent::Start { .. } => {}
+            other => break other,
+        }
+    });
+    assert_eq!(end, StreamEvent::End { records: 20_000 });
+    assert_eq!(records, 20_000);
+
+    // Frame decoder over a noisy stream.
+    let mut fd: FrameDecoder = FrameDecoder::new();
+    let noisy = b"zz#992322C\r\n!9926D000102\r\n#99212021C00000000002715AF\r\n";
+    let frames = core_call(|| {
+        let mut n = 0;
+        let mut input = &noisy[..];
+        loop {
+            let d = fd.decode(input);
+            input = &input[d.consumed..];
+            match d.event {
+                Event::NeedMore => break n,
+                Event::Frame(_) => n += 1,
+                Event::Error(_) => {}
+            }
+        }
+    });
+    assert_eq!(frames, 2);
+
+    // The transfer engine against the simulator (only engine calls counted).
+    let mut sim = Simulator::tta(Station(0x99));
+    let mut t: Transfer<_> = core_call(|| Transfer::new(TransferConfig::tta(Station(0x99)), table(2_000, 8, 4)));
+    let mut now = 0u32;
+    let stats = loop {
+        let reply = sim.take_output(now);
+        core_call(|| t.received(&reply, now));
+        let mut out = Vec::new();
+        let step = core_call(|| match t.poll(now) {
+            Step::Transmit(b) => {
+                // Copying out is the caller's business: count only the engine.
+                COUNTING.with(|c| c.set(false));
+                out.extend_from_slice(b);
+                None
+            }
+            Step::WaitUntil(d) => Some(Err(d)),
+            Step::Complete(s) => Some(Ok(s)),
+            other => panic!("{other:?}"),
+        });
+        match step {
+            None => {
+                sim.receive(&out, now);
+                core_call(|| t.sent(now));
+            }
+            Some(Err(d)) => now = sim.next_output_at().map_or(d, |r| r.min(d)).max(now + 1),
+            Some(Ok(s)) => break s,
+        }
+    };
+    assert_eq!(stats.records_confirmed, 2_000);
+
+    assert_eq!(allocations() - before, 0, "the core allocated");
+    println!(
+        "RAM (size_of): FrameDecoder<2051> {} B, PositionStreamEncoder {} B (+ its source), \
+         PositionStreamDecoder {} B, Transfer<_, 2051> {} B (+ its source)",
+        std::mem::size_of::<FrameDecoder>(),
+        std::mem::size_of_val(&enc),
+        std::mem::size_of::<PositionStreamDecoder>(),
+        std::mem::size_of_val(&t),
+    );
+}
