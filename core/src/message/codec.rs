@@ -6,13 +6,19 @@
 //! | codec | Rust type | wire |
 //! |---|---|---|
 //! | [`FieldSpec`] | `u8`…`u64`, `i8`…`i64`, [`AxisPattern`], [`Reserved`]-free scalars | fixed-width hex/dec digits |
-//! | [`FieldSpec`] with [`Radix::Text`](crate::field::Radix::Text) | `[u8; N]` | N raw characters |
+//! | [`FieldSpec`] with `Radix::Text` | `[u8; N]` | N raw characters |
 //! | [`Fixed`] | [`Reserved`] | a literal (`"00"`) |
 //! | [`Nested`] | any [`Wire`] struct | its own fields |
 //! | [`Counted`] | [`Repeated`] | a count field, then that many items |
 //! | [`CountedText`] | `&[u8]` | a count field, then that many raw characters |
 //! | [`PerAxisCodec`] | [`PerAxis`] | one item per axis set in an axis pattern |
 //! | [`Array`] | `[T; N]` | exactly N items |
+//! | [`PerAxisUpTo`] | [`PerAxis`] | as [`PerAxisCodec`], at most `max` axes |
+//! | [`CountedPer`] | [`Repeated`] | a count of units (8 ports per item), then the items |
+//! | [`FieldSpec`] (16 hex digits) | [`RealWire`] | a real variable as sent (see [`WordOrder`]) |
+//!
+//! Every codec also implements [`Inspect`], which shows decoded values with
+//! their names, units and wire formats to a [`Visitor`].
 //!
 //! Repeat groups are lazy: parsing validates every item once and keeps a
 //! slice of the frame; iterating decodes items on demand. Emitting takes
@@ -268,21 +274,7 @@ fn write_count(spec: FieldSpec, max: usize, n: usize, w: &mut Writer<'_>) -> Res
 impl<'a, T, C: FieldCodec<'a, T> + Copy> FieldCodec<'a, Repeated<'a, T, C>> for Counted<C> {
     fn read(&self, r: &mut Reader<'a>) -> Result<Repeated<'a, T, C>> {
         let count = read_count(self.count, self.max, r)?;
-        let base = r.offset();
-        let mut probe = r.clone();
-        for _ in 0..count {
-            self.item.read(&mut probe)?;
-        }
-        let bytes = r.take(probe.offset() - base)?;
-        Ok(Repeated {
-            items: Items::Wire {
-                bytes,
-                base,
-                count,
-                codec: self.item,
-            },
-            _t: PhantomData,
-        })
+        read_items(count, self.item, r)
     }
     fn write(&self, value: &Repeated<'a, T, C>, w: &mut Writer<'_>) -> Result<()> {
         write_count(self.count, self.max, value.len(), w)?;
@@ -434,5 +426,522 @@ impl<'a, T: Clone, C: FieldCodec<'a, T>> Iterator for RepeatedIter<'a, T, C> {
             }
             IterInner::Slice(it) => it.next().cloned(),
         }
+    }
+}
+
+// ------------------------------------------------------------ inspection
+
+/// A decoded value as shown to a [`Visitor`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Value<'v> {
+    /// An unsigned numeric field (bit patterns, counts, numbers).
+    Unsigned(u64),
+    /// A signed (two's complement) numeric field.
+    Signed(i64),
+    /// Raw characters: a text field or the literal of a reserved field.
+    Text(&'v [u8]),
+}
+
+/// How one repeat group looks on the wire, for a [`Visitor`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct GroupInfo {
+    /// Items in this instance of the group.
+    pub count: usize,
+    /// Format of the count field that precedes the group, if it has one
+    /// (axis-pattern and fixed-size groups have none).
+    pub count_field: Option<FieldSpec>,
+    /// Units the count field counts per item (8 for port and flag bytes,
+    /// 1 elsewhere).
+    pub per_item: usize,
+    /// Largest item count the declaration accepts.
+    pub max: usize,
+}
+
+/// Receives the fields of a message in wire order (see [`Fields`]).
+pub trait Visitor {
+    /// One leaf field: its name, unit (`""` if none), wire format and value.
+    fn field(&mut self, name: &'static str, unit: &'static str, spec: FieldSpec, value: Value<'_>);
+    /// A repeat group starts; its items follow, then [`Visitor::leave_group`].
+    fn enter_group(&mut self, name: &'static str, group: GroupInfo) {
+        let _ = (name, group);
+    }
+    /// The repeat group opened last ends.
+    fn leave_group(&mut self) {}
+}
+
+/// Walks the fields of a value in wire order. Derived by `wire!`.
+pub trait Fields {
+    /// Calls `v` once per leaf field and around every repeat group.
+    fn fields(&self, v: &mut dyn Visitor);
+}
+
+/// A codec that can show values of type `T` to a [`Visitor`].
+pub trait Inspect<T: ?Sized> {
+    /// Reports `value` as field `name` with `unit`.
+    fn inspect(&self, value: &T, name: &'static str, unit: &'static str, v: &mut dyn Visitor);
+}
+
+impl<T: Scalar> Inspect<T> for FieldSpec {
+    fn inspect(&self, value: &T, name: &'static str, unit: &'static str, v: &mut dyn Visitor) {
+        let shown = if self.signed {
+            Value::Signed(value.to_signed().unwrap_or(0))
+        } else {
+            Value::Unsigned(value.to_unsigned().unwrap_or(0))
+        };
+        v.field(name, unit, *self, shown);
+    }
+}
+
+impl<const N: usize> Inspect<[u8; N]> for FieldSpec {
+    fn inspect(
+        &self,
+        value: &[u8; N],
+        name: &'static str,
+        unit: &'static str,
+        v: &mut dyn Visitor,
+    ) {
+        v.field(name, unit, *self, Value::Text(value));
+    }
+}
+
+impl Inspect<Reserved> for Fixed {
+    fn inspect(&self, _: &Reserved, name: &'static str, unit: &'static str, v: &mut dyn Visitor) {
+        let width = u8::try_from(self.0.len()).unwrap_or(u8::MAX);
+        let spec = if self.0.iter().all(|&b| crate::field::is_hex_digit(b)) {
+            FieldSpec::hex(width)
+        } else {
+            FieldSpec::text(width)
+        };
+        v.field(name, unit, spec, Value::Text(self.0));
+    }
+}
+
+impl<T: Fields> Inspect<T> for Nested {
+    fn inspect(&self, value: &T, _: &'static str, _: &'static str, v: &mut dyn Visitor) {
+        value.fields(v);
+    }
+}
+
+fn inspect_items<'i, T: 'i, C: Inspect<T>>(
+    codec: &C,
+    items: impl Iterator<Item = &'i T>,
+    name: &'static str,
+    unit: &'static str,
+    group: GroupInfo,
+    v: &mut dyn Visitor,
+) {
+    v.enter_group(name, group);
+    items.for_each(|item| codec.inspect(item, name, unit, v));
+    v.leave_group();
+}
+
+impl<T, C: Inspect<T>> Inspect<PerAxis<T>> for PerAxisCodec<C> {
+    fn inspect(
+        &self,
+        value: &PerAxis<T>,
+        name: &'static str,
+        unit: &'static str,
+        v: &mut dyn Visitor,
+    ) {
+        let group = GroupInfo {
+            count: value.len(),
+            count_field: None,
+            per_item: 1,
+            max: crate::axis::MAX_AXES,
+        };
+        inspect_items(&self.item, value.iter(), name, unit, group, v);
+    }
+}
+
+impl<T, C: Inspect<T>, const N: usize> Inspect<[T; N]> for Array<C> {
+    fn inspect(&self, value: &[T; N], name: &'static str, unit: &'static str, v: &mut dyn Visitor) {
+        let group = GroupInfo {
+            count: N,
+            count_field: None,
+            per_item: 1,
+            max: N,
+        };
+        inspect_items(&self.0, value.iter(), name, unit, group, v);
+    }
+}
+
+fn inspect_repeated<'a, T: Clone, C: FieldCodec<'a, T> + Inspect<T> + Copy>(
+    codec: &C,
+    value: &Repeated<'a, T, C>,
+    name: &'static str,
+    unit: &'static str,
+    group: GroupInfo,
+    v: &mut dyn Visitor,
+) {
+    v.enter_group(name, group);
+    value
+        .iter()
+        .for_each(|item| codec.inspect(&item, name, unit, v));
+    v.leave_group();
+}
+
+impl<'a, T: Clone, C: FieldCodec<'a, T> + Inspect<T> + Copy> Inspect<Repeated<'a, T, C>>
+    for Counted<C>
+{
+    fn inspect(
+        &self,
+        value: &Repeated<'a, T, C>,
+        name: &'static str,
+        unit: &'static str,
+        v: &mut dyn Visitor,
+    ) {
+        let group = GroupInfo {
+            count: value.len(),
+            count_field: Some(self.count),
+            per_item: 1,
+            max: self.max,
+        };
+        inspect_repeated(&self.item, value, name, unit, group, v);
+    }
+}
+
+impl<'a> Inspect<&'a [u8]> for CountedText {
+    fn inspect(
+        &self,
+        value: &&'a [u8],
+        name: &'static str,
+        unit: &'static str,
+        v: &mut dyn Visitor,
+    ) {
+        let group = GroupInfo {
+            count: value.len(),
+            count_field: Some(self.count),
+            per_item: 1,
+            max: self.max,
+        };
+        v.enter_group(name, group);
+        value
+            .chunks(1)
+            .for_each(|c| v.field(name, unit, FieldSpec::text(1), Value::Text(c)));
+        v.leave_group();
+    }
+}
+
+impl Inspect<crate::position::PositionRecord> for crate::position::RecordLayout {
+    fn inspect(
+        &self,
+        rec: &crate::position::PositionRecord,
+        _: &'static str,
+        _: &'static str,
+        v: &mut dyn Visitor,
+    ) {
+        let word = FieldSpec::hex(4);
+        if self.number_width > 0 {
+            let spec = FieldSpec::hex(self.number_width);
+            v.field(
+                "position_number",
+                "",
+                spec,
+                Value::Unsigned(rec.number.into()),
+            );
+        }
+        let pattern = Value::Unsigned(rec.axes.bits().into());
+        v.field("axis_pattern", "", FieldSpec::hex(2), pattern);
+        v.field(
+            "acceleration",
+            "0.01G",
+            word,
+            Value::Unsigned(rec.acceleration.into()),
+        );
+        v.field(
+            "deceleration",
+            "0.01G",
+            word,
+            Value::Unsigned(rec.deceleration.into()),
+        );
+        v.field("speed", "mm/s", word, Value::Unsigned(rec.speed.into()));
+        let group = GroupInfo {
+            count: rec.positions.len(),
+            count_field: None,
+            per_item: 1,
+            max: crate::axis::MAX_AXES,
+        };
+        let coord = FieldSpec::signed_hex(8);
+        inspect_items(
+            &coord,
+            rec.positions.iter(),
+            "position",
+            "0.001mm",
+            group,
+            v,
+        );
+        if self.extended {
+            v.field(
+                "extended_data",
+                "",
+                FieldSpec::hex(2),
+                Value::Unsigned(rec.extended.into()),
+            );
+        }
+    }
+}
+
+// ------------------------------------------------------------ additions for the full catalogue
+
+/// Codec of a per-axis group that allows at most `max` axes (2A2H's
+/// interference zones have at most 4 coordinate axes).
+#[derive(Debug, Clone, Copy)]
+pub struct PerAxisUpTo<C> {
+    /// Largest number of axes.
+    pub max: usize,
+    /// The unlimited codec.
+    pub inner: PerAxisCodec<C>,
+}
+
+/// Like [`per_axis`], refusing patterns with more than `max` axes.
+pub fn per_axis_up_to<C>(max: usize, pattern: impl AsPattern, item: C) -> PerAxisUpTo<C> {
+    PerAxisUpTo {
+        max,
+        inner: per_axis(pattern, item),
+    }
+}
+
+impl<C> PerAxisUpTo<C> {
+    fn check(&self) -> Result<()> {
+        let count = self.inner.pattern.count();
+        if count > self.max {
+            return Err(Error::CountTooLarge {
+                count,
+                max: self.max,
+            });
+        }
+        Ok(())
+    }
+}
+
+impl<'a, T, C: FieldCodec<'a, T>> FieldCodec<'a, PerAxis<T>> for PerAxisUpTo<C> {
+    fn read(&self, r: &mut Reader<'a>) -> Result<PerAxis<T>> {
+        self.check()?;
+        self.inner.read(r)
+    }
+    fn write(&self, value: &PerAxis<T>, w: &mut Writer<'_>) -> Result<()> {
+        self.check()?;
+        self.inner.write(value, w)
+    }
+}
+
+impl<T, C: Inspect<T>> Inspect<PerAxis<T>> for PerAxisUpTo<C> {
+    fn inspect(
+        &self,
+        value: &PerAxis<T>,
+        name: &'static str,
+        unit: &'static str,
+        v: &mut dyn Visitor,
+    ) {
+        let group = GroupInfo {
+            count: value.len(),
+            count_field: None,
+            per_item: 1,
+            max: self.max,
+        };
+        inspect_items(&self.inner.item, value.iter(), name, unit, group, v);
+    }
+}
+
+/// Codec of a count field that counts `per_item` units per item, followed
+/// by the items: the port and flag queries (20BH, 20CH, 20DH) give a number
+/// of ports or flags and send one 2-digit byte per 8 of them.
+///
+/// The catalogue does not say how a count that is not a multiple of
+/// `per_item` is rounded, so such a count is refused
+/// ([`Error::ValueOutOfRange`] at the count field) in both directions.
+#[derive(Debug, Clone, Copy)]
+pub struct CountedPer<C> {
+    /// Format of the count field.
+    pub count: FieldSpec,
+    /// Units per item (8 ports per byte).
+    pub per_item: usize,
+    /// Largest number of items.
+    pub max: usize,
+    /// Codec of one item.
+    pub item: C,
+}
+
+/// A count of `per_item` units per item (at most `max` items), then the items.
+pub const fn counted_per<C>(
+    count: FieldSpec,
+    per_item: usize,
+    max: usize,
+    item: C,
+) -> CountedPer<C> {
+    CountedPer {
+        count,
+        per_item,
+        max,
+        item,
+    }
+}
+
+fn read_items<'a, T, C: FieldCodec<'a, T> + Copy>(
+    count: usize,
+    item: C,
+    r: &mut Reader<'a>,
+) -> Result<Repeated<'a, T, C>> {
+    let base = r.offset();
+    let mut probe = r.clone();
+    for _ in 0..count {
+        item.read(&mut probe)?;
+    }
+    let bytes = r.take(probe.offset() - base)?;
+    Ok(Repeated {
+        items: Items::Wire {
+            bytes,
+            base,
+            count,
+            codec: item,
+        },
+        _t: PhantomData,
+    })
+}
+
+impl<'a, T, C: FieldCodec<'a, T> + Copy> FieldCodec<'a, Repeated<'a, T, C>> for CountedPer<C> {
+    fn read(&self, r: &mut Reader<'a>) -> Result<Repeated<'a, T, C>> {
+        let at = r.offset();
+        let units = r.unsigned(self.count)?;
+        let units = usize::try_from(units).map_err(|_| Error::ValueOutOfRange { offset: at })?;
+        let per = self.per_item.max(1);
+        if units % per != 0 {
+            return Err(Error::ValueOutOfRange { offset: at });
+        }
+        let n = units / per;
+        if n > self.max {
+            return Err(Error::CountTooLarge {
+                count: n,
+                max: self.max,
+            });
+        }
+        read_items(n, self.item, r)
+    }
+    fn write(&self, value: &Repeated<'a, T, C>, w: &mut Writer<'_>) -> Result<()> {
+        let n = value.len();
+        if n > self.max {
+            return Err(Error::CountTooLarge {
+                count: n,
+                max: self.max,
+            });
+        }
+        let units = n
+            .checked_mul(self.per_item.max(1))
+            .ok_or(Error::ValueOutOfRange { offset: w.len() })?;
+        w.unsigned(self.count, units as u64)?;
+        match value.items {
+            Items::Wire { bytes, .. } => w.put(bytes),
+            Items::Slice(items) => items.iter().try_for_each(|v| self.item.write(v, w)),
+        }
+    }
+}
+
+impl<'a, T: Clone, C: FieldCodec<'a, T> + Inspect<T> + Copy> Inspect<Repeated<'a, T, C>>
+    for CountedPer<C>
+{
+    fn inspect(
+        &self,
+        value: &Repeated<'a, T, C>,
+        name: &'static str,
+        unit: &'static str,
+        v: &mut dyn Visitor,
+    ) {
+        let group = GroupInfo {
+            count: value.len(),
+            count_field: Some(self.count),
+            per_item: self.per_item,
+            max: self.max,
+        };
+        inspect_repeated(&self.item, value, name, unit, group, v);
+    }
+}
+
+/// Order of the two 32-bit halves of a real variable on the wire (20FH, 24DH).
+///
+/// Which one a controller uses is a setting, not something the frames
+/// reveal: X-SEL J/K Cartesian main application V0.41 or earlier, or bits
+/// 0–3 of "Other parameter No. 46" equal to 0, select
+/// [`WordOrder::LowWordFirst`]; otherwise the plain order is used. The
+/// manuals show only the plain order for the write command 24DH; using the
+/// same setting for both directions is an assumption (**inferred**).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum WordOrder {
+    /// The 16 digits are the double's bits, most significant first
+    /// (`0x0123456789ABCDEF` → `0123456789ABCDEF`).
+    MostSignificantFirst,
+    /// The low 32-bit half is sent first (`0x0123456789ABCDEF` →
+    /// `89ABCDEF01234567`), the legacy order.
+    LowWordFirst,
+}
+
+/// The bit pattern of an IEEE-754 double (the core has no floats; convert
+/// with `f64::from_bits` on the host).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RealValue(pub u64);
+
+/// The 16 hex digits of a real variable exactly as sent, before the word
+/// order is applied. Messages carry this form, so parsing never has to
+/// guess the order; [`RealWire::value`] and [`RealValue::to_wire`] take it
+/// explicitly (usually from [`crate::profile::Profile::real_word_order`]).
+///
+/// ```
+/// use iai_protocol_b::message::{RealValue, RealWire, WordOrder};
+/// let v = RealValue(0x0123_4567_89AB_CDEF);
+/// assert_eq!(v.to_wire(WordOrder::LowWordFirst), RealWire(0x89AB_CDEF_0123_4567));
+/// assert_eq!(v.to_wire(WordOrder::MostSignificantFirst), RealWire(v.0));
+/// assert_eq!(RealWire(0x89AB_CDEF_0123_4567).value(WordOrder::LowWordFirst), v);
+/// ```
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RealWire(pub u64);
+
+const fn swap_words(bits: u64, order: WordOrder) -> u64 {
+    match order {
+        WordOrder::MostSignificantFirst => bits,
+        WordOrder::LowWordFirst => bits.rotate_left(32),
+    }
+}
+
+impl RealWire {
+    /// The double this wire word carries in `order`.
+    pub const fn value(self, order: WordOrder) -> RealValue {
+        RealValue(swap_words(self.0, order))
+    }
+}
+
+impl RealValue {
+    /// The wire word for this double in `order`.
+    pub const fn to_wire(self, order: WordOrder) -> RealWire {
+        RealWire(swap_words(self.0, order))
+    }
+}
+
+impl Scalar for RealWire {
+    fn from_unsigned(v: u64) -> Option<Self> {
+        Some(RealWire(v))
+    }
+    fn from_signed(v: i64) -> Option<Self> {
+        Some(RealWire(v as u64))
+    }
+    fn to_unsigned(self) -> Option<u64> {
+        Some(self.0)
+    }
+    fn to_signed(self) -> Option<i64> {
+        Some(self.0 as i64)
+    }
+}
+
+/// `stringify!` of a raw identifier keeps its `r#`; field names shown to a
+/// [`Visitor`] drop it (`r#type` → `type`).
+#[doc(hidden)]
+pub const fn strip_raw(name: &'static str) -> &'static str {
+    match name.as_bytes() {
+        [b'r', b'#', rest @ ..] => match core::str::from_utf8(rest) {
+            Ok(s) => s,
+            Err(_) => name,
+        },
+        _ => name,
     }
 }

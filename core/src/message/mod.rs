@@ -4,7 +4,12 @@
 //! a message is a struct declared with the crate's `wire!` macro, which lists
 //! its fields in wire order, each with its Rust type and its codec. The
 //! macro derives [`Wire`] (read/write of the body) and, for commands and
-//! responses, [`Message`] (parse from / emit to a whole frame).
+//! responses, [`Message`] (parse from / emit to a whole frame). A field may
+//! end in `=> "unit"`; the macro also derives [`Fields`], which walks the
+//! decoded values with their names, units and wire formats (for inspectors
+//! and for checking the declarations against the catalogue).
+//!
+//! [`decode_any`] turns any checked frame into the matching typed message.
 //!
 //! ```
 //! use iai_protocol_b::message::{Message, AxisStatusQuery};
@@ -16,9 +21,11 @@
 //! assert_eq!(&buf[..n], b"!99212078F\r\n");
 //! ```
 
+mod any;
 pub mod codec;
 mod declarations;
 
+pub use any::*;
 pub use codec::*;
 pub use declarations::*;
 
@@ -75,7 +82,7 @@ macro_rules! wire {
         $(#[$sm:meta])*
         $([$kind:ident $id:literal])?
         pub struct $name:ident <$lt:lifetime> {
-            $( $(#[$fm:meta])* $fvis:vis $field:ident : $fty:ty = $codec:expr ),* $(,)?
+            $( $(#[$fm:meta])* $fvis:vis $field:ident : $fty:ty = $codec:expr $(=> $unit:literal)? ),* $(,)?
         }
     ) => {
         $(#[$sm])*
@@ -85,13 +92,16 @@ macro_rules! wire {
         impl<$lt> $crate::message::Wire<$lt> for $name<$lt> {
             wire!(@body $lt; $( $field : $fty = $codec ),*);
         }
+        impl<$lt> $crate::message::Fields for $name<$lt> {
+            wire!(@fields $( $field = $codec $(=> $unit)? ),*);
+        }
         $( wire!(@message $kind $id; $name<$lt>; $lt); )?
     };
     (
         $(#[$sm:meta])*
         $([$kind:ident $id:literal])?
         pub struct $name:ident {
-            $( $(#[$fm:meta])* $fvis:vis $field:ident : $fty:ty = $codec:expr ),* $(,)?
+            $( $(#[$fm:meta])* $fvis:vis $field:ident : $fty:ty = $codec:expr $(=> $unit:literal)? ),* $(,)?
         }
     ) => {
         $(#[$sm])*
@@ -100,6 +110,9 @@ macro_rules! wire {
         pub struct $name { $( $(#[$fm])* $fvis $field: $fty ),* }
         impl<'r> $crate::message::Wire<'r> for $name {
             wire!(@body 'r; $( $field : $fty = $codec ),*);
+        }
+        impl $crate::message::Fields for $name {
+            wire!(@fields $( $field = $codec $(=> $unit)? ),*);
         }
         $( wire!(@message $kind $id; $name; 'r); )?
     };
@@ -116,6 +129,17 @@ macro_rules! wire {
             Ok(())
         }
     };
+    (@fields $( $field:ident = $codec:expr $(=> $unit:literal)? ),*) => {
+        #[allow(unused_variables)]
+        fn fields(&self, v: &mut dyn $crate::message::Visitor) {
+            let Self { $( $field ),* } = self;
+            $( $crate::message::Inspect::inspect(
+                &$codec, $field, $crate::message::strip_raw(stringify!($field)), wire!(@unit $($unit)?), v,
+            ); )*
+        }
+    };
+    (@unit) => { "" };
+    (@unit $unit:literal) => { $unit };
     (@message command $id:literal; $ty:ty; $lt:lifetime) => {
         impl<$lt> $crate::message::Message<$lt> for $ty {
             const ID: u16 = $id;
