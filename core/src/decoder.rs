@@ -242,6 +242,7 @@ impl<const N: usize> FrameDecoder<N> {
             // N == 0: nothing can ever be buffered.
             self.len = 0;
             self.state = State::Hunting;
+            self.discard(1);
         }
     }
 

@@ -73,6 +73,15 @@ impl FieldSpec {
             signed: false,
         }
     }
+    /// Whether the spec can be encoded: width 1..=16 for numbers (a
+    /// 64-bit value), any width for text.
+    pub const fn is_valid(self) -> bool {
+        match self.radix {
+            Radix::Text => true,
+            Radix::Hex => self.width >= 1 && self.width <= 16,
+            Radix::Dec => self.width >= 1 && self.width <= 19,
+        }
+    }
     /// Width in bytes on the wire.
     pub const fn len(self) -> usize {
         self.width as usize
@@ -104,7 +113,9 @@ impl FieldSpec {
     }
     /// Range of a signed hex field: −16^w/2 ..= 16^w/2 − 1.
     pub const fn signed_range(self) -> (i64, i64) {
-        if self.width >= 16 {
+        if self.width == 0 {
+            (0, 0)
+        } else if self.width >= 16 {
             (i64::MIN, i64::MAX)
         } else {
             let half = 1i64 << (4 * self.width as u32 - 1);
@@ -113,13 +124,30 @@ impl FieldSpec {
     }
 }
 
+/// Digit values of every byte: 0..=15 for hex digits of either case, 0xFF otherwise.
+// Indexing in a const initialiser is checked at compile time: it cannot panic at run time.
+#[allow(clippy::indexing_slicing)]
+const HEX_VALUES: [u8; 256] = {
+    let mut t = [0xFFu8; 256];
+    let mut i = 0;
+    while i < 10 {
+        t[b'0' as usize + i] = i as u8;
+        i += 1;
+    }
+    let mut i = 0;
+    while i < 6 {
+        t[b'A' as usize + i] = 10 + i as u8;
+        t[b'a' as usize + i] = 10 + i as u8;
+        i += 1;
+    }
+    t
+};
+
 /// Value of one hex digit (either case), or `None`.
 #[inline]
-pub const fn hex_value(byte: u8) -> Option<u8> {
-    match byte {
-        b'0'..=b'9' => Some(byte - b'0'),
-        b'A'..=b'F' => Some(byte - b'A' + 10),
-        b'a'..=b'f' => Some(byte - b'a' + 10),
+pub fn hex_value(byte: u8) -> Option<u8> {
+    match HEX_VALUES.get(usize::from(byte)) {
+        Some(&v) if v < 16 => Some(v),
         _ => None,
     }
 }
@@ -137,7 +165,7 @@ pub const fn hex_digit(n: u8) -> u8 {
 
 /// Whether `byte` is a hex digit of either case.
 #[inline]
-pub const fn is_hex_digit(byte: u8) -> bool {
+pub fn is_hex_digit(byte: u8) -> bool {
     hex_value(byte).is_some()
 }
 
@@ -154,7 +182,7 @@ fn put_hex(mut value: u64, out: &mut [u8]) -> bool {
 
 /// Writes an unsigned value into `out` (whose length must be the field width).
 pub fn encode_unsigned(spec: FieldSpec, value: u64, out: &mut [u8]) -> Result<()> {
-    if out.len() != spec.len() || value > spec.max_unsigned() {
+    if !spec.is_valid() || out.len() != spec.len() || value > spec.max_unsigned() {
         return Err(Error::ValueOutOfRange { offset: 0 });
     }
     match spec.radix {
@@ -182,7 +210,7 @@ pub fn encode_signed(spec: FieldSpec, value: i64, out: &mut [u8]) -> Result<()> 
         };
     }
     let (min, max) = spec.signed_range();
-    if out.len() != spec.len() || value < min || value > max {
+    if !spec.is_valid() || out.len() != spec.len() || value < min || value > max {
         return Err(Error::ValueOutOfRange { offset: 0 });
     }
     let bits = if spec.width >= 16 {
@@ -197,6 +225,9 @@ pub fn encode_signed(spec: FieldSpec, value: i64, out: &mut [u8]) -> Result<()> 
 /// Reads an unsigned value from the digits of one field. `offset` is the
 /// field's position in the frame, used in errors.
 pub fn decode_unsigned(spec: FieldSpec, digits: &[u8], offset: usize) -> Result<u64> {
+    if !spec.is_valid() {
+        return Err(Error::ValueOutOfRange { offset });
+    }
     if digits.len() != spec.len() {
         return Err(Error::BodyTooShort { offset });
     }
@@ -234,7 +265,7 @@ pub fn decode_signed(spec: FieldSpec, digits: &[u8], offset: usize) -> Result<i6
         return Ok(raw as i64);
     }
     let shift = 64 - 4 * u32::from(spec.width);
-    Ok(((raw << shift) as i64) >> shift)
+    Ok(raw.checked_shl(shift).map_or(0, |v| (v as i64) >> shift))
 }
 
 /// A cursor over the body of a received frame.
@@ -350,10 +381,7 @@ impl<'b> Writer<'b> {
         let r = self
             .reserve(spec.len())
             .and_then(|out| encode_unsigned(spec, value, out));
-        if r.is_err() {
-            self.len = mark;
-        }
-        r
+        self.undo_on_error(mark, r)
     }
     /// Appends a signed field (two's complement if the spec is signed).
     pub fn signed(&mut self, spec: FieldSpec, value: i64) -> Result<()> {
@@ -361,10 +389,17 @@ impl<'b> Writer<'b> {
         let r = self
             .reserve(spec.len())
             .and_then(|out| encode_signed(spec, value, out));
+        self.undo_on_error(mark, r)
+    }
+    /// On error, drops the partial field and reports it at its frame offset.
+    fn undo_on_error(&mut self, mark: usize, r: Result<()>) -> Result<()> {
         if r.is_err() {
             self.len = mark;
         }
-        r
+        r.map_err(|e| match e {
+            Error::ValueOutOfRange { .. } => Error::ValueOutOfRange { offset: mark },
+            other => other,
+        })
     }
     /// Overwrites an unsigned field already written at `at`.
     pub fn patch_unsigned(&mut self, at: usize, spec: FieldSpec, value: u64) -> Result<()> {

@@ -115,6 +115,10 @@ pub(crate) fn validate(bytes: &[u8], policy: BypassPolicy) -> Result<Envelope> {
     }
     let body = bytes.get(ENVELOPE_LEN..sc_at).unwrap_or(&[]);
     let text = crate::message::text_span(header, bytes);
+    // A text field must end before SC (the decoder would read on as text).
+    if text.is_some_and(|(_, e)| e > sc_at) {
+        return Err(Error::BodyTooShort { offset: sc_at });
+    }
     for (i, &b) in body.iter().enumerate() {
         let at = ENVELOPE_LEN + i;
         let in_text = text.is_some_and(|(s, e)| at >= s && at < e);

@@ -493,11 +493,38 @@ impl PositionStreamDecoder {
     }
 
     /// Consumes bytes until an event; returns `(consumed, event)`.
+    ///
+    /// Bytes are copied a whole field group at a time. After
+    /// [`StreamEvent::End`] or [`StreamEvent::Error`] nothing more is
+    /// consumed (`(0, NeedMore)`) until [`PositionStreamDecoder::reset`]:
+    /// the rest of the input belongs to whatever follows the frame.
     pub fn decode(&mut self, input: &[u8]) -> (usize, StreamEvent) {
         let mut used = 0;
-        for &b in input {
-            used += 1;
-            let ev = self.push(b);
+        while self.phase != DecPhase::Finished {
+            let rest = input.get(used..).unwrap_or(&[]);
+            if rest.is_empty() {
+                break;
+            }
+            let want = self.need.saturating_sub(self.stage.len);
+            let take = want.min(rest.len());
+            let end = self.stage.len + take;
+            match (
+                self.stage.buf.get_mut(self.stage.len..end),
+                rest.get(..take),
+            ) {
+                (Some(dst), Some(src)) if take > 0 => dst.copy_from_slice(src),
+                _ => return (used, self.fail(Error::FrameTooLong { limit: STAGE_LEN })),
+            }
+            self.stage.len = end;
+            used += take;
+            if self.stage.len < self.need {
+                break;
+            }
+            let (ev, keep) = self.unit_complete();
+            if !keep && !matches!(ev, StreamEvent::Error { .. }) {
+                self.offset += self.stage.len;
+                self.stage.len = 0;
+            }
             if ev != StreamEvent::NeedMore {
                 return (used, ev);
             }
@@ -505,25 +532,9 @@ impl PositionStreamDecoder {
         (used, StreamEvent::NeedMore)
     }
 
-    /// Pushes one byte.
+    /// Pushes one byte (ignored after the end of the frame, see [`Self::decode`]).
     pub fn push(&mut self, byte: u8) -> StreamEvent {
-        if self.phase == DecPhase::Finished {
-            return StreamEvent::NeedMore;
-        }
-        let Some(slot) = self.stage.buf.get_mut(self.stage.len) else {
-            return self.fail(Error::FrameTooLong { limit: STAGE_LEN });
-        };
-        *slot = byte;
-        self.stage.len += 1;
-        if self.stage.len < self.need {
-            return StreamEvent::NeedMore;
-        }
-        let (ev, keep) = self.unit_complete();
-        if !keep && !matches!(ev, StreamEvent::Error { .. }) {
-            self.offset += self.stage.len;
-            self.stage.len = 0;
-        }
-        ev
+        self.decode(&[byte]).1
     }
 
     fn fail(&mut self, error: Error) -> StreamEvent {

@@ -674,3 +674,62 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         }
     }
 }
+
+/// A millisecond clock that can sleep, for the async flavour.
+#[cfg(feature = "async")]
+pub trait AsyncClock {
+    /// The current tick, ms, wrapping.
+    fn now_ms(&mut self) -> u32;
+    /// Sleeps about `ms` milliseconds (or until woken earlier).
+    fn sleep_ms(&mut self, ms: u32) -> impl core::future::Future<Output = ()>;
+}
+
+#[cfg(feature = "async")]
+impl<I: RecordSource, const N: usize> Transfer<I, N> {
+    /// Runs the transfer to the end over an `embedded-io-async` UART.
+    ///
+    /// While waiting for a reply it polls [`embedded_io_async::ReadReady`]
+    /// and sleeps `poll_ms` between checks, so the deadline is always seen
+    /// even if no byte ever arrives. A [`RecordQueue`] source is filled
+    /// by whoever owns the transfer between calls; here a pending source
+    /// just sleeps.
+    pub async fn run_async<U, C>(
+        &mut self,
+        uart: &mut U,
+        clock: &mut C,
+        poll_ms: u32,
+    ) -> core::result::Result<TransferStats, TransferError<U::Error>>
+    where
+        U: embedded_io_async::Read + embedded_io_async::ReadReady + embedded_io_async::Write,
+        C: AsyncClock,
+    {
+        let mut buf = [0u8; 32];
+        loop {
+            while uart.read_ready().map_err(TransferError::Io)? {
+                let n = uart.read(&mut buf).await.map_err(TransferError::Io)?;
+                if n == 0 {
+                    break;
+                }
+                let now = clock.now_ms();
+                self.received(buf.get(..n).unwrap_or(&[]), now);
+            }
+            let now = clock.now_ms();
+            match self.poll(now) {
+                Step::Transmit(bytes) => {
+                    uart.write_all(bytes).await.map_err(TransferError::Io)?;
+                    uart.flush().await.map_err(TransferError::Io)?;
+                    let now = clock.now_ms();
+                    self.sent(now);
+                }
+                Step::WaitUntil(t) => {
+                    clock
+                        .sleep_ms(t.wrapping_sub(now).clamp(1, poll_ms.max(1)))
+                        .await
+                }
+                Step::NeedRecords => clock.sleep_ms(poll_ms.max(1)).await,
+                Step::Complete(stats) => return Ok(stats),
+                Step::Failed(e) => return Err(TransferError::widen(e)),
+            }
+        }
+    }
+}

@@ -10,7 +10,9 @@ use host_tests::table::table;
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::frame::Station;
-use iai_protocol_b::stream::{PositionStream, PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
+use iai_protocol_b::stream::{
+    PositionStream, PositionStreamDecoder, PositionStreamEncoder, StreamEvent,
+};
 use iai_protocol_b::transfer::{Step, Transfer, TransferConfig};
 
 struct Counting;
@@ -51,7 +53,14 @@ fn the_core_allocates_nothing() {
     // Encode the full 1.64 MB table in 256-byte chunks into a preallocated buffer.
     let mut wire = vec![0u8; 1_640_014];
     let mut enc = core_call(|| {
-        PositionStreamEncoder::new(PositionStream::CHANGE_2, Station(0x99), 0, 20_000, table(20_000, 8, 3)).unwrap()
+        PositionStreamEncoder::new(
+            PositionStream::CHANGE_2,
+            Station(0x99),
+            0,
+            20_000,
+            table(20_000, 8, 3),
+        )
+        .unwrap()
     });
     let mut at = 0;
     loop {
@@ -100,7 +109,8 @@ fn the_core_allocates_nothing() {
 
     // The transfer engine against the simulator (only engine calls counted).
     let mut sim = Simulator::tta(Station(0x99));
-    let mut t: Transfer<_> = core_call(|| Transfer::new(TransferConfig::tta(Station(0x99)), table(2_000, 8, 4)));
+    let mut t: Transfer<_> =
+        core_call(|| Transfer::new(TransferConfig::tta(Station(0x99)), table(2_000, 8, 4)));
     let mut now = 0u32;
     let stats = loop {
         let reply = sim.take_output(now);

@@ -1,0 +1,93 @@
+//! The async flavour of the transfer engine (feature `async`), over an
+//! in-memory `embedded-io-async` UART wired to the simulator on a virtual
+//! clock, driven by a minimal executor.
+
+use std::cell::Cell;
+use std::collections::VecDeque;
+use std::future::Future;
+use std::pin::pin;
+use std::rc::Rc;
+use std::task::{Context, Poll, Waker};
+
+use host_tests::sim::{Faults, Simulator};
+use host_tests::table::table;
+use iai_protocol_b::frame::Station;
+use iai_protocol_b::transfer::{AsyncClock, Transfer, TransferConfig};
+
+struct SimUart {
+    sim: Simulator,
+    now: Rc<Cell<u32>>,
+    inbox: VecDeque<u8>,
+}
+
+impl embedded_io_async::ErrorType for SimUart {
+    type Error = std::convert::Infallible;
+}
+impl embedded_io_async::ReadReady for SimUart {
+    fn read_ready(&mut self) -> Result<bool, Self::Error> {
+        self.inbox.extend(self.sim.take_output(self.now.get()));
+        Ok(!self.inbox.is_empty())
+    }
+}
+impl embedded_io_async::Read for SimUart {
+    async fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
+        let n = buf.len().min(self.inbox.len());
+        for (slot, b) in buf.iter_mut().zip(self.inbox.drain(..n)) {
+            *slot = b;
+        }
+        Ok(n)
+    }
+}
+impl embedded_io_async::Write for SimUart {
+    async fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+        self.sim.receive(buf, self.now.get());
+        Ok(buf.len())
+    }
+    async fn flush(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}
+
+struct VirtualClock(Rc<Cell<u32>>);
+impl AsyncClock for VirtualClock {
+    fn now_ms(&mut self) -> u32 {
+        self.0.get()
+    }
+    async fn sleep_ms(&mut self, ms: u32) {
+        self.0.set(self.0.get() + ms);
+    }
+}
+
+fn block_on<F: Future>(f: F) -> F::Output {
+    let mut f = pin!(f);
+    let mut cx = Context::from_waker(Waker::noop());
+    loop {
+        if let Poll::Ready(v) = f.as_mut().poll(&mut cx) {
+            return v;
+        }
+    }
+}
+
+#[test]
+fn async_transfer_with_faults_writes_the_whole_table() {
+    let now = Rc::new(Cell::new(0));
+    let faults = Faults {
+        flip_bit_in: 1e-4,
+        drop_every_nth_reply: Some(50),
+        error_reply: 0.01,
+        ..Faults::default()
+    };
+    let mut uart = SimUart {
+        sim: Simulator::tta(Station(0x99)).with_faults(faults, 5),
+        now: now.clone(),
+        inbox: VecDeque::new(),
+    };
+    let mut clock = VirtualClock(now);
+    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(Station(0x99)), table(5_000, 8, 8));
+    let stats = block_on(t.run_async(&mut uart, &mut clock, 10)).unwrap();
+    assert_eq!(stats.records_confirmed, 5_000);
+    assert!(stats.retries > 0);
+    let expected: std::collections::BTreeMap<_, _> =
+        table(5_000, 8, 8).map(|r| (r.number, r)).collect();
+    assert!(uart.sim.table == expected);
+}
