@@ -305,36 +305,18 @@ impl Simulator {
             }
             0x215 => {
                 SystemStatusQuery::parse(f).ok()?;
-                Some(self.emit(&SystemStatusResponse {
-                    system_mode: 0,
-                    critical_system_error: 0,
-                    latest_system_error: 0,
-                    status_byte_1: 0,
-                    status_byte_2: 0,
-                    status_byte_3: 0,
-                    status_byte_4: 0,
-                }))
+                Some(self.emit(&SystemStatusResponse::default()))
             }
             0x216 => {
                 let q = ErrorDetailQuery::parse(f).ok()?;
+                // Illustrative details, as in EXAMPLES.md 5.2.
                 Some(self.emit(&ErrorDetailResponse {
                     error_number: 0xC74,
                     detail_1: u32::from(q.type_2),
                     detail_2: 5,
                     detail_3: 2,
                     detail_4: -3,
-                    detail_5: 0,
-                    detail_6: 0,
-                    detail_7: 0,
-                    detail_8: 0,
-                    reserved_1: 0,
-                    reserved_2: 0,
-                    reserved_3: 0,
-                    reserved_4: 0,
-                    reserved_5: 0,
-                    reserved_6: 0,
-                    reserved_7: 0,
-                    message: b"",
+                    ..ErrorDetailResponse::default()
                 }))
             }
             _ => Some(self.error_frame(UNSUPPORTED_ERROR_CODE)),

@@ -333,6 +333,13 @@ pub struct Repeated<'a, T, C> {
     _t: PhantomData<T>,
 }
 
+/// An empty group.
+impl<T, C> Default for Repeated<'_, T, C> {
+    fn default() -> Self {
+        Repeated::from_slice(&[])
+    }
+}
+
 impl<'a, T, C> Repeated<'a, T, C> {
     /// A group of the items of `items`, for emitting.
     pub const fn from_slice(items: &'a [T]) -> Self {

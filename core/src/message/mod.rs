@@ -86,7 +86,7 @@ macro_rules! wire {
         }
     ) => {
         $(#[$sm])*
-        #[derive(Debug, Clone, PartialEq, Eq)]
+        #[derive(Debug, Clone, Default, PartialEq, Eq)]
         #[cfg_attr(feature = "defmt", derive(defmt::Format))]
         pub struct $name<$lt> { $( $(#[$fm])* $fvis $field: $fty ),* }
         impl<$lt> $crate::message::Wire<$lt> for $name<$lt> {
@@ -105,7 +105,7 @@ macro_rules! wire {
         }
     ) => {
         $(#[$sm])*
-        #[derive(Debug, Clone, PartialEq, Eq)]
+        #[derive(Debug, Clone, Default, PartialEq, Eq)]
         #[cfg_attr(feature = "defmt", derive(defmt::Format))]
         pub struct $name { $( $(#[$fm])* $fvis $field: $fty ),* }
         impl<'r> $crate::message::Wire<'r> for $name {
