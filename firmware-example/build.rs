@@ -6,7 +6,8 @@
 //! * cortex-m-rt's `device` feature makes `link.x` `INCLUDE device.x`. Each
 //!   board module defines its own `__INTERRUPTS` table in Rust, so the
 //!   generated `device.x` only carries a comment.
-//! * `-Tlink.x` selects cortex-m-rt's linker script.
+//! * `-Tlink.x` selects cortex-m-rt's linker script; `-Tdefmt.x` is added
+//!   with the `defmt` feature only.
 
 use std::env;
 use std::fs;
@@ -40,6 +41,10 @@ fn main() {
     println!("cargo:rustc-link-search={}", out_dir.display());
     println!("cargo:rustc-link-search={}", repo_root.display());
     println!("cargo:rustc-link-arg=-Tlink.x");
+    // defmt's linker script, only when the `defmt` feature is on.
+    if env::var_os("CARGO_FEATURE_DEFMT").is_some() {
+        println!("cargo:rustc-link-arg=-Tdefmt.x");
+    }
     println!("cargo:rerun-if-changed={}", memory_x.display());
     println!("cargo:rerun-if-changed=build.rs");
 }

@@ -123,13 +123,34 @@ pub fn build_firmware(board: Board) -> io::Result<PathBuf> {
 /// Build the firmware for `board` with a cargo profile (`release`,
 /// `firmware`, `dev`...) and return the ELF path.
 pub fn build_firmware_with_profile(board: Board, profile: &str) -> io::Result<PathBuf> {
+    build_firmware_with(board, profile, &[], None)
+}
+
+/// Build the firmware for `board` with a cargo profile, extra cargo
+/// features (e.g. `bench`) and, if given, its own target directory (so
+/// that a variant does not overwrite the ELF other tests use); return the
+/// ELF path.
+pub fn build_firmware_with(
+    board: Board,
+    profile: &str,
+    features: &[&str],
+    target_dir_override: Option<&Path>,
+) -> io::Result<PathBuf> {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let output = Command::new(&cargo)
+    let mut feature_list = vec![board.feature()];
+    feature_list.extend_from_slice(features);
+    let mut command = Command::new(&cargo);
+    command
         .current_dir(workspace_root())
         .args(["build", "--quiet", "-p", FIRMWARE_PACKAGE])
         .args(["--profile", profile])
         .args(["--target", board.target()])
-        .args(board.cargo_feature_args())
+        .args(["--no-default-features", "--features"])
+        .arg(feature_list.join(","));
+    if let Some(dir) = target_dir_override {
+        command.arg("--target-dir").arg(dir);
+    }
+    let output = command
         .stdin(Stdio::null())
         .output()
         .map_err(|e| io::Error::new(e.kind(), format!("running {cargo:?}: {e}")))?;
@@ -146,7 +167,8 @@ pub fn build_firmware_with_profile(board: Board, profile: &str) -> io::Result<Pa
         "bench" => "release",
         other => other,
     };
-    let elf = target_dir()
+    let elf = target_dir_override
+        .map_or_else(target_dir, Path::to_path_buf)
         .join(board.target())
         .join(profile_dir)
         .join(FIRMWARE_PACKAGE);
@@ -306,6 +328,18 @@ impl QemuSession {
         timeout: Duration,
         ready_marker: Option<&str>,
     ) -> io::Result<Self> {
+        Self::start_with_args(board, elf, timeout, ready_marker, &[])
+    }
+
+    /// Like [`QemuSession::start_with_marker`], with extra QEMU arguments
+    /// (e.g. `-icount shift=5,sleep=off`).
+    pub fn start_with_args(
+        board: Board,
+        elf: &Path,
+        timeout: Duration,
+        ready_marker: Option<&str>,
+        extra_args: &[&str],
+    ) -> io::Result<Self> {
         let upstream_listener = TcpListener::bind((Ipv4Addr::LOCALHOST, 0))?;
         let downstream_listener = TcpListener::bind((Ipv4Addr::LOCALHOST, 0))?;
         let p0 = upstream_listener.local_addr()?.port();
@@ -322,6 +356,7 @@ impl QemuSession {
             .arg("-chardev")
             .arg(format!("socket,id=u1,host=127.0.0.1,port={p1}"))
             .args(["-serial", "chardev:u1"])
+            .args(extra_args)
             .arg("-kernel")
             .arg(elf)
             .stdin(Stdio::null())
@@ -465,6 +500,56 @@ impl Drop for QemuSession {
         // touching its (possibly reused) PID, so this never hits another
         // process.
         self.kill_child();
+    }
+}
+
+/// Boot `elf` on `board` with no serial port connected (all to `null`) and
+/// extra QEMU arguments, and wait up to `timeout` for it to exit (killing
+/// our QEMU, and only it, on timeout). For firmware that only talks through
+/// semihosting, such as the `bench` build.
+pub fn run_to_exit(
+    board: Board,
+    elf: &Path,
+    extra_args: &[&str],
+    timeout: Duration,
+) -> io::Result<ExitOutcome> {
+    let mut child = Command::new(QEMU)
+        .args(["-machine", board.machine()])
+        .args(["-nographic", "-monitor", "none", "-serial", "null"])
+        .args(["-semihosting-config", "enable=on,target=native"])
+        .args(extra_args)
+        .arg("-kernel")
+        .arg(elf)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(|e| io::Error::new(e.kind(), format!("starting {QEMU}: {e}")))?;
+    let stdout = child.stdout.take().map(Capture::spawn).unwrap_or_default();
+    let stderr = child.stderr.take().map(Capture::spawn).unwrap_or_default();
+    let deadline = Instant::now() + timeout;
+    loop {
+        if let Some(status) = child.try_wait()? {
+            return Ok(ExitOutcome {
+                status,
+                code: status.code(),
+                stdout: stdout.finish(OUTPUT_GRACE),
+                stderr: stderr.finish(OUTPUT_GRACE),
+            });
+        }
+        if Instant::now() >= deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            return Err(io::Error::new(
+                io::ErrorKind::TimedOut,
+                format!(
+                    "{QEMU} -machine {} still running after {timeout:?}; killed it\nstdout:\n{}",
+                    board.machine(),
+                    stdout.finish(OUTPUT_GRACE)
+                ),
+            ));
+        }
+        thread::sleep(Duration::from_millis(10));
     }
 }
 
