@@ -22,10 +22,19 @@ for t in thumbv6m-none-eabi thumbv7m-none-eabi thumbv7em-none-eabihf; do
 done
 cargo build -q -p iai-protocol-b --target thumbv7em-none-eabihf --features defmt
 
-step "firmware: both boards, clippy -D warnings"
+step "firmware: both boards (and the defmt / bench features), clippy -D warnings"
 cargo clippy -q -p firmware-example --target thumbv7m-none-eabi -- -D warnings
 cargo clippy -q -p firmware-example --target thumbv7em-none-eabihf \
   --no-default-features --features board-mps2-an386 -- -D warnings
+cargo clippy -q -p firmware-example --target thumbv7m-none-eabi --features defmt -- -D warnings
+cargo clippy -q -p firmware-example --target thumbv7em-none-eabihf \
+  --no-default-features --features board-mps2-an386,bench -- -D warnings
+
+step "no-panic proof: the decode paths link without a panic handler symbol"
+for t in thumbv7m-none-eabi thumbv7em-none-eabihf; do
+  cargo build -q -p firmware-example --release --bin no_panic_proof --target "$t"
+done
+echo "ok: no panic path survives in the decoders (see firmware-example/src/bin/no_panic_proof.rs)"
 
 step "docs (no warnings) and doctests"
 RUSTDOCFLAGS="-D warnings" cargo doc -q -p iai-protocol-b --no-deps
