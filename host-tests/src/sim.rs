@@ -18,15 +18,16 @@ use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::field::{FieldSpec, Reader, Writer};
 use iai_protocol_b::frame::{emit_envelope, emit_trailer, Frame, Header, Station};
 use iai_protocol_b::message::{
-    AxisStatus, AxisStatusQuery, AxisStatusResponse, ErrorDetailQuery, ErrorDetailResponse,
-    Message, SystemStatusQuery, SystemStatusResponse,
+    AxisStatus, AxisStatusQuery, AxisStatusResponse, Command, ErrorDetailQuery,
+    ErrorDetailResponse, Message, Response, SystemStatusQuery, SystemStatusResponse,
 };
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::stream::PositionStream;
 
 /// Error code the simulator sends when it injects an error response.
 pub const INJECTED_ERROR_CODE: u16 = 0x0E1;
-/// Error code for a command the simulator does not implement.
+/// Error code for a command whose body does not fit its layout (or whose ID
+/// is not in the catalogue).
 pub const UNSUPPORTED_ERROR_CODE: u16 = 0x0E2;
 
 /// Faults to inject. Probabilities are per byte or per reply.
@@ -319,7 +320,20 @@ impl Simulator {
                     ..ErrorDetailResponse::default()
                 }))
             }
-            _ => Some(self.error_frame(UNSUPPORTED_ERROR_CODE)),
+            // Every other message of the catalogue: a well-formed command gets
+            // its response with default (zero) fields; 25BH gets none.
+            id => match Command::parse(f) {
+                Err(_) => Some(self.error_frame(UNSUPPORTED_ERROR_CODE)),
+                Ok(_) => {
+                    let r = Response::default_for(id)?;
+                    let mut buf = vec![0u8; self.max_transmit];
+                    let n = r
+                        .emit(self.station, &mut buf)
+                        .expect("default responses fit");
+                    buf.truncate(n);
+                    Some(buf)
+                }
+            },
         }
     }
 

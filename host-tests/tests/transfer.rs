@@ -191,3 +191,30 @@ fn records_arriving_a_few_at_a_time_through_a_queue_lose_nothing() {
     assert_eq!(r.result.unwrap().records_confirmed, 3_000);
     assert_table_equal(&sim, table(3_000, 3, 21));
 }
+
+#[test]
+fn the_simulator_answers_every_catalogue_command() {
+    use iai_protocol_b::checksum::BypassPolicy;
+    use iai_protocol_b::frame::Frame;
+    use iai_protocol_b::message::{
+        decode_any, has_normal_response, AnyMessage, Command, MESSAGE_IDS,
+    };
+    let mut sim = Simulator::tta(ST);
+    for (i, &id) in MESSAGE_IDS.iter().enumerate() {
+        let cmd = Command::default_for(id).unwrap();
+        let mut buf = [0u8; 64];
+        let n = cmd.emit(ST, &mut buf).unwrap();
+        let now = i as u32 * 100;
+        sim.receive(&buf[..n], now);
+        let reply = sim.take_output(now + 50);
+        if !has_normal_response(id) {
+            assert!(reply.is_empty(), "{id:03X}H has no normal response");
+            continue;
+        }
+        let frame = Frame::new_checked(&reply, BypassPolicy::Reject).unwrap();
+        match decode_any(&frame).unwrap().message {
+            AnyMessage::Response(r) => assert_eq!(r.id(), id),
+            other => panic!("{id:03X}H answered with {other:?}"),
+        }
+    }
+}

@@ -193,6 +193,29 @@ macro_rules! catalogue {
             }
         }
 
+        impl Command<'static> {
+            /// Command `id` with every field at its default (zeros, empty
+            /// groups). `None` for unknown IDs.
+            pub fn default_for(id: u16) -> Option<Self> {
+                match id {
+                    $( $id => Some(Command::$cmd(<$cmd>::default())), )*
+                    _ => None,
+                }
+            }
+        }
+
+        impl Response<'static> {
+            /// The response to command `id` with every field at its default
+            /// (zeros, empty groups): a valid frame, e.g. for a simulator.
+            /// `None` for 25BH (no normal response) and unknown IDs.
+            pub fn default_for(id: u16) -> Option<Self> {
+                match id {
+                    $( $( $id => Some(Response::$resp(<$resp>::default())), )? )*
+                    _ => None,
+                }
+            }
+        }
+
         impl Fields for Response<'_> {
             fn fields(&self, v: &mut dyn Visitor) {
                 match self { $( $( Response::$resp(m) => m.fields(v), )? )* }
