@@ -375,13 +375,10 @@ impl Bridge {
             Mode::SendCommand { station, id } => {
                 let done = {
                     let bytes = self.frames.last_frame().map_or(&[][..], |f| f.as_bytes());
-                    let rest = bytes.get(self.out_off..).unwrap_or(&[]);
-                    if !rest.is_empty() && down.write_ready().map_err(Error::Downstream)? {
-                        let n = down.write(rest).map_err(Error::Downstream)?;
-                        self.out_off += n;
-                        self.stats.downstream_out += n as u64;
-                        moved |= n > 0;
-                    }
+                    let out = &mut self.stats.downstream_out;
+                    let n = write_some(down, bytes, &mut self.out_off, out)
+                        .map_err(Error::Downstream)?;
+                    moved |= n > 0;
                     self.out_off >= bytes.len()
                 };
                 if done {
@@ -436,13 +433,10 @@ impl Bridge {
             Mode::RelayReply => {
                 let done = {
                     let bytes = self.frames.last_frame().map_or(&[][..], |f| f.as_bytes());
-                    let rest = bytes.get(self.out_off..).unwrap_or(&[]);
-                    if !rest.is_empty() && up.write_ready().map_err(Error::Upstream)? {
-                        let n = up.write(rest).map_err(Error::Upstream)?;
-                        self.out_off += n;
-                        self.stats.upstream_out += n as u64;
-                        moved |= n > 0;
-                    }
+                    let out = &mut self.stats.upstream_out;
+                    let n =
+                        write_some(up, bytes, &mut self.out_off, out).map_err(Error::Upstream)?;
+                    moved |= n > 0;
                     self.out_off >= bytes.len()
                 };
                 if done {
@@ -453,13 +447,10 @@ impl Bridge {
             }
             Mode::Stream { .. } => moved |= self.poll_stream(up, down, now)?,
             Mode::Respond => {
-                let rest = self.resp.get(self.out_off..self.resp_len).unwrap_or(&[]);
-                if !rest.is_empty() && up.write_ready().map_err(Error::Upstream)? {
-                    let n = up.write(rest).map_err(Error::Upstream)?;
-                    self.out_off += n;
-                    self.stats.upstream_out += n as u64;
-                    moved |= n > 0;
-                }
+                let resp = self.resp.get(..self.resp_len).unwrap_or(&[]);
+                let out = &mut self.stats.upstream_out;
+                let n = write_some(up, resp, &mut self.out_off, out).map_err(Error::Upstream)?;
+                moved |= n > 0;
                 if self.out_off >= self.resp_len {
                     self.go_idle();
                     moved = true;
@@ -675,13 +666,10 @@ impl Bridge {
                             answer = abort.map(Err);
                             break;
                         }
-                        let rest = bytes.get(self.out_off..).unwrap_or(&[]);
-                        if !rest.is_empty() && down.write_ready().map_err(Error::Downstream)? {
-                            let n = down.write(rest).map_err(Error::Downstream)?;
-                            self.out_off += n;
-                            self.stats.downstream_out += n as u64;
-                            moved |= n > 0;
-                        }
+                        let out = &mut self.stats.downstream_out;
+                        let n = write_some(down, bytes, &mut self.out_off, out)
+                            .map_err(Error::Downstream)?;
+                        moved |= n > 0;
                         if self.out_off < bytes.len() {
                             self.tx_blocked = true;
                             break;
@@ -772,6 +760,24 @@ impl Bridge {
 }
 
 /// Whether the transfer's record queue has no room.
+/// Writes what `port` takes right now of `bytes[*off..]`, never waiting;
+/// advances `*off` and `*counter` by the bytes written and returns them.
+fn write_some<W: Write + WriteReady>(
+    port: &mut W,
+    bytes: &[u8],
+    off: &mut usize,
+    counter: &mut u64,
+) -> Result<usize, W::Error> {
+    let rest = bytes.get(*off..).unwrap_or(&[]);
+    if rest.is_empty() || !port.write_ready()? {
+        return Ok(0);
+    }
+    let n = port.write(rest)?;
+    *off += n;
+    *counter += n as u64;
+    Ok(n)
+}
+
 fn queue_full(job: &mut Option<Job>) -> bool {
     job.as_mut().is_some_and(|j| j.source_mut().is_full())
 }
