@@ -141,10 +141,13 @@ fn the_core_allocates_nothing() {
     assert_eq!(allocations() - before, 0, "the core allocated");
     println!(
         "RAM (size_of): FrameDecoder<2051> {} B, PositionStreamEncoder {} B (+ its source), \
-         PositionStreamDecoder {} B, Transfer<_, 2051> {} B (+ its source)",
+         PositionStreamDecoder {} B, Transfer<_, 2051> {} B (+ its source), ReadBack<2048> {} B",
         std::mem::size_of::<FrameDecoder>(),
-        std::mem::size_of_val(&enc),
+        std::mem::size_of::<
+            PositionStreamEncoder<std::iter::Empty<iai_protocol_b::position::PositionRecord>>,
+        >(),
         std::mem::size_of::<PositionStreamDecoder>(),
-        std::mem::size_of_val(&t),
+        std::mem::size_of::<Transfer<std::iter::Empty<iai_protocol_b::position::PositionRecord>>>(),
+        std::mem::size_of::<iai_protocol_b::readback::ReadBack>(),
     );
 }
