@@ -22,6 +22,12 @@ for t in thumbv6m-none-eabi thumbv7m-none-eabi thumbv7em-none-eabihf; do
 done
 cargo build -q -p iai-protocol-b --target thumbv7em-none-eabihf --features defmt
 
+step "minimum supported Rust version of the core (1.87, declared in core/Cargo.toml)"
+rustup toolchain install 1.87 --profile minimal --target thumbv7em-none-eabihf
+cargo +1.87 build -q -p iai-protocol-b --all-features
+cargo +1.87 build -q -p iai-protocol-b --target thumbv7em-none-eabihf
+echo "ok: core builds with Rust 1.87"
+
 step "firmware: both boards (and the defmt / bench features), clippy -D warnings"
 cargo clippy -q -p firmware-example --target thumbv7m-none-eabi -- -D warnings
 cargo clippy -q -p firmware-example --target thumbv7em-none-eabihf \

@@ -15,7 +15,23 @@
 //! - [`frame`]: a checked zero-copy view of one frame and the emitter;
 //! - [`decoder`]: a push decoder that finds frames in a byte stream;
 //! - [`message`]: typed messages declared field by field;
-//! - [`position`]: position-table records shared by the position messages.
+//! - [`position`]: position-table records shared by the position messages;
+//! - [`stream`]: position tables of any size, encoded and decoded record by
+//!   record through fixed buffers;
+//! - [`transfer`], [`readback`]: write a table in confirmed, controller-sized
+//!   commands and read it back, with timeouts and retries;
+//! - [`profile`]: the limits of each kind of controller;
+//! - [`io`]: glue to `embedded-io` and `nb` drivers.
+//!
+//! Start with the [`guide`]: three runnable walkthroughs (receive a frame,
+//! send a command and read the reply, stream a position table).
+//!
+//! # Cargo features
+//! - `async`: `Transfer::run_async` and the `AsyncClock` trait in
+//!   [`transfer`], the transfer engine over an `embedded-io-async` UART.
+//! - `defmt`: `defmt::Format` for the public types.
+//!
+//! Neither is on by default. The minimum supported Rust version is 1.87.
 //!
 //! # Panic freedom
 //! No function of this crate panics on any input: buffer accesses use
@@ -40,6 +56,7 @@ pub mod error;
 mod exchange;
 pub mod field;
 pub mod frame;
+pub mod guide;
 pub mod io;
 pub mod message;
 pub mod position;

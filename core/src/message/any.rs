@@ -133,14 +133,18 @@ macro_rules! catalogue {
         /// Any typed command.
         #[derive(Debug, Clone, PartialEq, Eq)]
         #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-        #[allow(missing_docs)]
-        pub enum Command<'a> { $( $cmd($cmd $(<$cl>)?), )* }
+        pub enum Command<'a> { $(
+            #[doc = concat!("Command ", stringify!($id), " (", $name, ").")]
+            $cmd($cmd $(<$cl>)?),
+        )* }
 
         /// Any typed normal response.
         #[derive(Debug, Clone, PartialEq, Eq)]
         #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-        #[allow(missing_docs)]
-        pub enum Response<'a> { $( $( $resp($resp $(<$rl>)?), )? )* }
+        pub enum Response<'a> { $( $(
+            #[doc = concat!("Normal response to ", stringify!($id), " (", $name, ").")]
+            $resp($resp $(<$rl>)?),
+        )? )* }
 
         impl<'a> Command<'a> {
             /// Parses a checked `!` frame as the command its ID names.

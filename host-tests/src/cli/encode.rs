@@ -1,0 +1,533 @@
+//! `iai encode`: one frame from `field=value` arguments.
+//!
+//! The layout comes from the core itself, not from a second copy of the
+//! catalogue: a sample frame of the message is found by letting the core's
+//! decoder say what is wrong with a candidate body and fixing that (too
+//! short: add digits; trailing bytes: cut; a digit or value refused: try
+//! another digit at that offset), until [`decode_any`] accepts it. The
+//! field visitor then shows the sample's fields, widths and repeat groups;
+//! the new body is written from those with the user's values, and the
+//! result must decode again before it is printed.
+//!
+//! Values: decimal or `0x` hex, negative for signed fields, text for text
+//! fields. A field inside a repeat group takes one value per item,
+//! comma-separated (`position=1000,-2000`); inside a group nested in a
+//! group, items of the outer group are separated by `/`
+//! (`position=1000,2000/3000`). A field left out is 0, except an axis
+//! pattern followed by a per-axis group, which defaults to the first N
+//! axes for N values given.
+
+use std::collections::BTreeMap;
+
+use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
+use iai_protocol_b::field::{encode_signed, encode_unsigned, FieldSpec, Radix};
+use iai_protocol_b::frame::{emit_frame, Frame, Header, Station};
+use iai_protocol_b::message::{decode_any, message_name, AnyMessage, MESSAGE_IDS};
+
+use super::fields::{tree, Node, Val};
+
+/// Digits tried, in order, at an offset the decoder refuses.
+const DIGITS: &[u8] = b"1023456789ABCDEF ";
+
+fn frame_bytes(
+    header: Header,
+    station: Station,
+    id: u16,
+    body: &[u8],
+    mode: ChecksumMode,
+) -> Vec<u8> {
+    let mut buf = vec![0u8; body.len() + 16];
+    let n = emit_frame(&mut buf, header, station, id, mode, |w| w.put(body)).unwrap_or(0);
+    buf.truncate(n);
+    buf
+}
+
+/// The `n`-th rewrite tried at a refused offset.
+fn rewrite(n: usize) -> Option<Vec<u8>> {
+    let small = 3 * 8;
+    if n < small {
+        let w = n / 3 + 1;
+        let mut v = vec![b'0'; w];
+        *v.last_mut()? = [b'1', b'8', b'0'][n % 3];
+        return Some(v);
+    }
+    let k = n - small;
+    let pos = k / DIGITS.len();
+    if pos >= 8 {
+        return None;
+    }
+    let mut v = vec![b'0'; pos + 1];
+    *v.last_mut()? = *DIGITS.get(k % DIGITS.len())?;
+    Some(v)
+}
+
+/// A body the core decodes for message `id` in direction `header`, with
+/// every repeat group holding at least one item where the decoder allows.
+pub fn sample_body(header: Header, id: u16) -> Option<Vec<u8>> {
+    use iai_protocol_b::Error as E;
+    let mut body: Vec<u8> = Vec::new();
+    let mut tries: BTreeMap<usize, usize> = BTreeMap::new();
+    for _ in 0..20_000 {
+        let bytes = frame_bytes(header, Station(0x99), id, &body, ChecksumMode::Compute);
+        let err = match Frame::new_checked(&bytes, BypassPolicy::Accept) {
+            Ok(f) => match decode_any(&f) {
+                Ok(_) => return Some(body),
+                Err(e) => e,
+            },
+            Err(e) => e,
+        };
+        let bad_at = match err {
+            E::BodyTooShort { .. } => {
+                let grow = (body.len() / 2).max(8);
+                body.extend(std::iter::repeat_n(b'1', grow));
+                continue;
+            }
+            E::TrailingBytes { offset } => {
+                body.truncate(offset.checked_sub(6)?);
+                continue;
+            }
+            E::InvalidHexDigit { offset, .. }
+            | E::InvalidDecimalDigit { offset, .. }
+            | E::ValueOutOfRange { offset }
+            | E::InvalidFixedField { offset } => offset.checked_sub(6)?,
+            E::CountTooLarge { count, .. } => {
+                // No offset: lower the first count field that says `count`.
+                let digits = format!("{count:X}");
+                let at = body
+                    .windows(digits.len())
+                    .position(|w| w == digits.as_bytes())?;
+                *body.get_mut(at)? = b'0';
+                continue;
+            }
+            _ => return None,
+        };
+        // Try the next rewrite of the field at the offset the decoder
+        // refused: small values of growing width first (a count of 1, a
+        // fixed "00"), then every digit at each of its first characters.
+        let n = tries.entry(bad_at).or_insert(0);
+        let candidate = rewrite(*n)?;
+        *n += 1;
+        let end = bad_at + candidate.len();
+        if end > body.len() {
+            body.resize(end, b'1');
+        }
+        body.get_mut(bad_at..end)?.copy_from_slice(&candidate);
+    }
+    None
+}
+
+/// Finds a message ID from `212`, `212H`, `0x212`, a catalogue name or a
+/// Rust type name (case, spaces and punctuation ignored).
+pub fn find_message(name: &str, header: Header) -> Result<u16, String> {
+    let hex = name
+        .strip_prefix("0x")
+        .or_else(|| name.strip_suffix(['H', 'h']))
+        .unwrap_or(name);
+    if let Ok(id) = u16::from_str_radix(hex, 16) {
+        if MESSAGE_IDS.contains(&id) {
+            return Ok(id);
+        }
+    }
+    let norm = |s: &str| -> String {
+        s.chars()
+            .filter(char::is_ascii_alphanumeric)
+            .map(|c| c.to_ascii_lowercase())
+            .collect()
+    };
+    let want = norm(name);
+    let mut hits: Vec<u16> = Vec::new();
+    for &id in MESSAGE_IDS {
+        let names = [
+            message_name(id).map(norm).unwrap_or_default(),
+            type_name(header, id).map(|t| norm(&t)).unwrap_or_default(),
+        ];
+        if names.contains(&want) {
+            return Ok(id);
+        }
+        if names.iter().any(|n| n.contains(&want)) {
+            hits.push(id);
+        }
+    }
+    match hits.as_slice() {
+        [id] => Ok(*id),
+        [] => Err(format!("no message is called {name:?}")),
+        many => Err(format!(
+            "{name:?} is ambiguous: {}",
+            many.iter()
+                .map(|id| format!("{id:03X}H {}", message_name(*id).unwrap_or("")))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )),
+    }
+}
+
+/// The Rust type name of message `id` in this direction.
+pub fn type_name(header: Header, id: u16) -> Option<String> {
+    let body = sample_body(header, id)?;
+    let bytes = frame_bytes(header, Station(0x99), id, &body, ChecksumMode::Compute);
+    let f = Frame::new_checked(&bytes, BypassPolicy::Accept).ok()?;
+    let d = decode_any(&f).ok()?;
+    let debug = match &d.message {
+        AnyMessage::Command(c) => format!("{c:?}"),
+        AnyMessage::Response(r) => format!("{r:?}"),
+        AnyMessage::Error(_) => return None,
+    };
+    debug.split(['(', ' ', '{']).next().map(str::to_string)
+}
+
+/// The field layout of message `id` (a decoded sample's tree).
+pub fn layout(header: Header, id: u16) -> Option<Vec<Node>> {
+    let body = sample_body(header, id)?;
+    let bytes = frame_bytes(header, Station(0x99), id, &body, ChecksumMode::Compute);
+    let f = Frame::new_checked(&bytes, BypassPolicy::Accept).ok()?;
+    let d = decode_any(&f).ok()?;
+    Some(tree(&d.message))
+}
+
+/// User values by field name, each split into items.
+struct Args {
+    values: BTreeMap<String, String>,
+    used: BTreeMap<String, bool>,
+}
+
+impl Args {
+    /// The raw value for a field (`name` or `group.name`).
+    fn get(&mut self, path: &[&str], name: &str) -> Option<String> {
+        let mut keys = vec![name.to_string()];
+        if let Some(g) = path.last() {
+            keys.insert(0, format!("{g}.{name}"));
+        }
+        for k in keys {
+            if let Some(v) = self.values.get(&k) {
+                self.used.insert(k, true);
+                return Some(v.clone());
+            }
+        }
+        None
+    }
+}
+
+/// The value of one item of a field: `depth` is the number of repeat
+/// groups around it, `index` the item numbers from the outermost.
+fn item_value(raw: &str, index: &[usize]) -> Option<String> {
+    match index {
+        [] => Some(raw.to_string()),
+        [i] => raw.split(',').nth(*i).map(str::to_string),
+        [o, i] => raw
+            .split('/')
+            .nth(*o)?
+            .split(',')
+            .nth(*i)
+            .map(str::to_string),
+        _ => None,
+    }
+}
+
+fn item_count(raw: &str, outer: &[usize]) -> usize {
+    let part = match outer {
+        [] => Some(raw),
+        [o] => raw.split('/').nth(*o),
+        _ => None,
+    };
+    match part {
+        Some(p) if !p.is_empty() => p.split(',').count(),
+        _ => 0,
+    }
+}
+
+/// Names of the leaves of a group's sample item, with the group they are in.
+fn leaf_names(nodes: &[Node], group: &str, out: &mut Vec<(String, String)>) {
+    for n in nodes {
+        match n {
+            Node::Leaf { name, .. } => out.push((group.to_string(), name.to_string())),
+            Node::Group { name, items, .. } => {
+                if let Some(first) = items.first() {
+                    leaf_names(first, name, out);
+                }
+            }
+        }
+    }
+}
+
+fn write_value(
+    spec: FieldSpec,
+    text: Option<&str>,
+    fixed: Option<&[u8]>,
+    name: &str,
+    out: &mut Vec<u8>,
+) -> Result<(), String> {
+    let width = usize::from(spec.width);
+    let mut digits = vec![b'0'; width];
+    if let (Some(lit), None) = (fixed, text) {
+        out.extend_from_slice(lit);
+        return Ok(());
+    }
+    if spec.radix == Radix::Text {
+        let t = super::text::unescape(text.unwrap_or("").as_bytes());
+        if t.len() > width {
+            return Err(format!("{name}: at most {width} characters"));
+        }
+        let mut t = t;
+        t.resize(width, b' ');
+        out.extend_from_slice(&t);
+        return Ok(());
+    }
+    let v = match text {
+        None => 0,
+        Some(t) => {
+            super::text::parse_int(t).ok_or_else(|| format!("{name}: {t:?} is not a number"))?
+        }
+    };
+    let res = if spec.signed {
+        let v = i64::try_from(v).map_err(|_| format!("{name}: {v} out of range"))?;
+        encode_signed(spec, v, &mut digits)
+    } else {
+        let v = u64::try_from(v)
+            .map_err(|_| format!("{name}: {v} is negative, the field is unsigned"))?;
+        encode_unsigned(spec, v, &mut digits)
+    };
+    res.map_err(|_| {
+        let range = if spec.signed {
+            let (lo, hi) = spec.signed_range();
+            format!("{lo}..={hi}")
+        } else {
+            format!("0..={}", spec.max_unsigned())
+        };
+        format!("{name}: {v} does not fit {} ({range})", describe(spec))
+    })?;
+    out.extend_from_slice(&digits);
+    Ok(())
+}
+
+/// `hex 4`, `signed hex 8`, `dec 2`, `text 10`.
+pub fn describe(spec: FieldSpec) -> String {
+    let r = match (spec.radix, spec.signed) {
+        (Radix::Hex, false) => "hex",
+        (Radix::Hex, true) => "signed hex",
+        (Radix::Dec, _) => "dec",
+        (Radix::Text, _) => "text",
+    };
+    format!("{r} {}", spec.width)
+}
+
+/// A group of single characters (a counted text such as 216H's message):
+/// its value is one string, not a list.
+fn char_group(n: &Node) -> Option<(&'static str, FieldSpec)> {
+    let Node::Group { name, items, .. } = n else {
+        return None;
+    };
+    match items.first().map(Vec::as_slice) {
+        Some(
+            [Node::Leaf {
+                name: leaf, spec, ..
+            }],
+        ) if leaf == name && spec.radix == Radix::Text && spec.width == 1 => Some((name, *spec)),
+        _ => None,
+    }
+}
+
+/// Writes one level (a list of nodes) of the layout.
+fn write_level(
+    nodes: &[Node],
+    path: &[&str],
+    index: &[usize],
+    args: &mut Args,
+    out: &mut Vec<u8>,
+) -> Result<(), String> {
+    // Items of each group of this level, known before its pattern is written.
+    let mut counts: Vec<usize> = Vec::new();
+    for n in nodes {
+        if let Some((name, _)) = char_group(n) {
+            let text = args.get(path, name).unwrap_or_default();
+            counts.push(super::text::unescape(text.as_bytes()).len());
+            continue;
+        }
+        if let Node::Group { name, items, .. } = n {
+            let mut leaves = Vec::new();
+            if let Some(first) = items.first() {
+                leaf_names(first, name, &mut leaves);
+            }
+            let mut count = 0;
+            for (group, leaf) in leaves {
+                if group != *name {
+                    continue;
+                }
+                let mut p = path.to_vec();
+                p.push(name);
+                if let Some(raw) = args.get(&p, &leaf) {
+                    count = count.max(item_count(&raw, index));
+                }
+            }
+            counts.push(count);
+        }
+    }
+    let mut group_no = 0;
+    for (i, n) in nodes.iter().enumerate() {
+        match n {
+            Node::Leaf {
+                name, spec, value, ..
+            } => {
+                let fixed = match value {
+                    Val::Text(t) if spec.radix != Radix::Text => Some(t.as_slice()),
+                    _ => None,
+                };
+                let raw = args.get(path, name);
+                let mut text = raw.and_then(|r| item_value(&r, index));
+                // The pattern that sizes the next per-axis group of this level.
+                let next_is_axes = matches!(
+                    nodes.get(i + 1..).unwrap_or(&[]).iter().find(|n| matches!(n, Node::Group { .. })),
+                    Some(Node::Group { info, .. }) if info.count_field.is_none()
+                );
+                if text.is_none() && name.ends_with("pattern") && next_is_axes {
+                    let n = counts.get(group_no).copied().unwrap_or(0).min(8);
+                    text = Some(((1u32 << n) - 1).to_string());
+                }
+                write_value(*spec, text.as_deref(), fixed, name, out)?;
+            }
+            Node::Group { name, info, items } => {
+                let count = counts.get(group_no).copied().unwrap_or(0);
+                group_no += 1;
+                if let Some(cf) = info.count_field {
+                    let units = (count * info.per_item).to_string();
+                    write_value(cf, Some(&units), None, name, out)?;
+                }
+                if char_group(n).is_some() {
+                    let text = args.get(path, name).unwrap_or_default();
+                    out.extend_from_slice(&super::text::unescape(text.as_bytes()));
+                    continue;
+                }
+                let Some(sample) = items.first() else {
+                    if count > 0 {
+                        return Err(format!("{name}: no sample item to encode from"));
+                    }
+                    continue;
+                };
+                let mut p = path.to_vec();
+                p.push(name);
+                for k in 0..count {
+                    let mut idx = index.to_vec();
+                    idx.push(k);
+                    write_level(sample, &p, &idx, args, out)?;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Options of `iai encode`.
+#[derive(Debug, Clone)]
+pub struct EncodeOptions {
+    /// Message ID or name.
+    pub message: String,
+    /// `field=value` pairs.
+    pub assignments: Vec<String>,
+    /// Station.
+    pub station: u8,
+    /// Build the normal response instead of the command.
+    pub response: bool,
+    /// Send `@@` instead of the checksum.
+    pub bypass: bool,
+}
+
+/// Builds the frame. Returns it, or a message saying what is wrong.
+pub fn encode(opts: &EncodeOptions) -> Result<Vec<u8>, String> {
+    let header = if opts.response {
+        Header::Response
+    } else {
+        Header::Command
+    };
+    let id = find_message(&opts.message, header)?;
+    let nodes = layout(header, id).ok_or_else(|| {
+        format!(
+            "{id:03X}H has no {} this tool can build",
+            if opts.response {
+                "normal response"
+            } else {
+                "command"
+            }
+        )
+    })?;
+    let mut values = BTreeMap::new();
+    for a in &opts.assignments {
+        let (k, v) = a
+            .split_once('=')
+            .ok_or_else(|| format!("{a:?}: expected field=value"))?;
+        values.insert(k.to_string(), v.to_string());
+    }
+    let mut args = Args {
+        values,
+        used: BTreeMap::new(),
+    };
+    let mut body = Vec::new();
+    write_level(&nodes, &[], &[], &mut args, &mut body)?;
+    let unknown: Vec<&String> = args
+        .values
+        .keys()
+        .filter(|k| !args.used.contains_key(*k))
+        .collect();
+    if !unknown.is_empty() {
+        let mut known = Vec::new();
+        leaf_names(&nodes, "", &mut known);
+        return Err(format!(
+            "{id:03X}H has no field {}; its fields: {}",
+            unknown
+                .iter()
+                .map(|s| s.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
+            known
+                .iter()
+                .map(|(g, n)| if g.is_empty() || g == n {
+                    n.clone()
+                } else {
+                    format!("{g}.{n}")
+                })
+                .collect::<Vec<_>>()
+                .join(" ")
+        ));
+    }
+    let mode = if opts.bypass {
+        ChecksumMode::Bypass
+    } else {
+        ChecksumMode::Compute
+    };
+    let bytes = frame_bytes(header, Station(opts.station), id, &body, mode);
+    let frame = Frame::new_checked(&bytes, BypassPolicy::Accept).map_err(|e| e.to_string())?;
+    decode_any(&frame).map_err(|e| format!("the frame does not decode: {e}"))?;
+    Ok(bytes)
+}
+
+/// The usage lines of a message's fields (for `iai encode MESSAGE --help`).
+pub fn field_help(header: Header, id: u16) -> Vec<String> {
+    let mut out = Vec::new();
+    if let Some(nodes) = layout(header, id) {
+        help_level(&nodes, 0, &mut out);
+    }
+    out
+}
+
+fn help_level(nodes: &[Node], depth: usize, out: &mut Vec<String>) {
+    let pad = "  ".repeat(depth + 1);
+    for n in nodes {
+        match n {
+            Node::Leaf {
+                name,
+                unit,
+                spec,
+                value,
+            } => {
+                let fixed = matches!(value, Val::Text(_)) && spec.radix != Radix::Text;
+                let unit = super::fields::unit_suffix(", ", unit);
+                let note = if fixed { ", fixed" } else { "" };
+                out.push(format!("{pad}{name} ({}{unit}{note})", describe(*spec)));
+            }
+            Node::Group { name, info, items } => {
+                out.push(format!("{pad}{name}: repeated, up to {} item(s)", info.max));
+                if let Some(first) = items.first() {
+                    help_level(first, depth + 1, out);
+                }
+            }
+        }
+    }
+}
