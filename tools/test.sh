@@ -46,8 +46,9 @@ step "docs (no warnings) and doctests"
 RUSTDOCFLAGS="-D warnings" cargo doc -q -p iai-protocol-b --no-deps
 cargo test -q -p iai-protocol-b --doc
 
-step "size report"
-./tools/size-report.sh || echo "(size report failed)"
+step "size report and instruction counts (figures, not assertions)"
+./tools/size-report.sh
+cargo run -q -p host-tests --bin icount
 
 step "tests"
 cargo nextest run -p iai-protocol-b -p host-tests --no-fail-fast
