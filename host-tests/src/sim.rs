@@ -225,7 +225,11 @@ impl Simulator {
         let Some(mut reply) = reply else { return };
         self.reply_no += 1;
         let n = self.reply_no;
-        if self.faults.drop_every_nth_reply.is_some_and(|k| n % k == 0) {
+        if self
+            .faults
+            .drop_every_nth_reply
+            .is_some_and(|k| n.is_multiple_of(k))
+        {
             self.stats.dropped_replies += 1;
             return;
         }
@@ -246,7 +250,7 @@ impl Simulator {
         }
         let mut at = now + self.response_delay_ms;
         if let Some((k, late)) = self.faults.late_every_nth_reply {
-            if n % k == 0 {
+            if n.is_multiple_of(k) {
                 self.stats.late_replies += 1;
                 at = now + late;
             }
