@@ -199,6 +199,83 @@ fn run<'a, M: Message<'a> + Describe>(frame: &Frame<'a>) -> Result<Outcome, Erro
     })
 }
 
+/// Messages without data read `-`.
+macro_rules! describe_empty {
+    ($($t:ty),*) => {$(
+        impl Describe for $t {
+            fn describe(&self) -> String {
+                "-".to_string()
+            }
+        }
+    )*};
+}
+describe_empty!(
+    EffectivePositionCountQuery,
+    ServoOnOffResponse,
+    HomeReturnResponse,
+    AbsoluteMoveResponse,
+    AlarmReset,
+    SoftwareReset
+);
+
+impl Describe for EffectivePositionCountResponse {
+    fn describe(&self) -> String {
+        format!(
+            "number_of_effective_positions={}",
+            self.number_of_effective_positions
+        )
+    }
+}
+
+impl Describe for EffectivePositionQuery {
+    fn describe(&self) -> String {
+        format!(
+            "query_head_position_number={} number_of_query_records={}",
+            self.query_head_position_number, self.number_of_query_records
+        )
+    }
+}
+
+impl Describe for ServoOnOff {
+    fn describe(&self) -> String {
+        format!(
+            "axis_pattern=0x{:02X} operation_type={}",
+            self.axis_pattern.bits(),
+            self.operation_type
+        )
+    }
+}
+
+impl Describe for HomeReturn {
+    fn describe(&self) -> String {
+        format!(
+            "axis_pattern=0x{:02X} end_search_speed={} creep_speed={}",
+            self.axis_pattern.bits(),
+            self.end_search_speed,
+            self.creep_speed
+        )
+    }
+}
+
+impl Describe for AbsoluteMove {
+    fn describe(&self) -> String {
+        let mut v = vec![
+            format!("axis_pattern=0x{:02X}", self.axis_pattern.bits()),
+            format!("acceleration={}", self.acceleration),
+            format!("deceleration={}", self.deceleration),
+            format!("speed={}", self.speed),
+        ];
+        for (axis, c) in self
+            .axis_pattern
+            .iter()
+            .zip(self.absolute_coordinate.iter())
+        {
+            v.push(format!("axis{axis}.absolute_coordinate={c}"));
+        }
+        pairs(v)
+    }
+}
+
 /// One typed message: the header and ID it answers to, and its decoder.
 struct Typed {
     header: Header,
@@ -225,9 +302,8 @@ macro_rules! typed {
 /// parsed value. Frames of other IDs get the envelope checks only.
 ///
 /// To add a message: implement `Describe` for it above (field names and
-/// number notation as in the `means:` lines of `fixtures/frames.txt`, which
-/// already hold the expected values for 208H, 209H, 232H, 233H, 234H, 252H
-/// and 25BH) and add one `typed!` row. The test
+/// number notation as in the `means:` lines of `fixtures/frames.txt`) and
+/// add one `typed!` row. The test
 /// `every_typed_fixture_frame_decodes_to_its_meaning` then covers it.
 fn typed_messages() -> Vec<Typed> {
     vec![
@@ -241,7 +317,17 @@ fn typed_messages() -> Vec<Typed> {
         typed!(Response, 0x216, ErrorDetailResponse),
         typed!(Command, 0x26D, ChangePositionData2),
         typed!(Response, 0x26D, ChangePositionData2Response),
-        // The catalogue helper adds the remaining messages here.
+        typed!(Command, 0x208, EffectivePositionCountQuery),
+        typed!(Response, 0x208, EffectivePositionCountResponse),
+        typed!(Command, 0x209, EffectivePositionQuery),
+        typed!(Command, 0x232, ServoOnOff),
+        typed!(Response, 0x232, ServoOnOffResponse),
+        typed!(Command, 0x233, HomeReturn),
+        typed!(Response, 0x233, HomeReturnResponse),
+        typed!(Command, 0x234, AbsoluteMove),
+        typed!(Response, 0x234, AbsoluteMoveResponse),
+        typed!(Command, 0x252, AlarmReset),
+        typed!(Command, 0x25B, SoftwareReset),
     ]
 }
 // =========================================================================
