@@ -9,7 +9,7 @@ cargo build -q -p firmware-example --profile firmware --target thumbv7em-none-ea
   --no-default-features --features board-mps2-an386
 echo "memory.x: FLASH 256 KiB (262144 B), RAM 64 KiB (65536 B)"
 for t in thumbv7m-none-eabi thumbv7em-none-eabihf; do
-  elf=target/$t/firmware/firmware-example
+  elf=${CARGO_TARGET_DIR:-target}/$t/firmware/firmware-example
   $size -A "$elf" | awk -v t="$t" '
     $1==".vector_table"||$1==".text"||$1==".rodata" {flash+=$2}
     $1==".data" {flash+=$2; data=$2}
