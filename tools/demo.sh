@@ -11,6 +11,7 @@ echo "==> building the firmware (release, lm3s6965evb)"
 cargo build -q -p firmware-example --release --target thumbv7m-none-eabi
 echo "==> building the demo (release)"
 cargo build -q -p host-tests --release --bin demo
-elf=target/thumbv7m-none-eabi/release/firmware-example
+target=${CARGO_TARGET_DIR:-target}
+elf=$target/thumbv7m-none-eabi/release/firmware-example
 echo "==> running"
-exec target/release/demo --elf "$elf" "$@"
+exec "$target/release/demo" --elf "$elf" "$@"
