@@ -403,7 +403,18 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         let limit = cfg.max_frame.min(N);
         let first_index = self.stats.records_confirmed;
         if self.frame_len == 0 {
-            let start = cfg.start.wrapping_add(first_index as u16);
+            // Only start a frame when there is a record for it: a table that
+            // ends exactly at the top of a range write's start field must
+            // complete, not fail on a start number it never needs.
+            match self.pull() {
+                Pull::Record(r) => {
+                    let _ = self.held.push_front(r);
+                }
+                Pull::Pending => return Ok(Built::Pending),
+                Pull::End => return Ok(Built::Exhausted),
+            }
+            let start = u16::try_from(u32::from(cfg.start) + first_index)
+                .map_err(|_| TransferError::Config(Error::ValueOutOfRange { offset: 6 }))?;
             let mut w = Writer::new(&mut self.frame);
             emit_envelope(&mut w, Header::Command, cfg.station, cfg.stream.id)
                 .and_then(|()| cfg.stream.write_prefix(&mut w, start, 0))
@@ -420,6 +431,20 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             };
             let len = cfg.stream.layout.record_len(rec.axes.count());
             let n = self.frame_records;
+            // In a range write, record i is position start + i: it must be
+            // a number the start field can express.
+            let index = first_index + u32::from(n);
+            if cfg.stream.start_width > 0
+                && u64::from(cfg.start) + u64::from(index)
+                    > FieldSpec::hex(cfg.stream.start_width).max_unsigned()
+            {
+                let _ = self.held.push_front(rec);
+                if n == 0 {
+                    self.frame_len = 0;
+                    return Err(TransferError::Config(Error::ValueOutOfRange { offset: 6 }));
+                }
+                break true;
+            }
             if n >= cfg.stream.max_records || self.frame_len + len + 4 > limit {
                 let _ = self.held.push_front(rec);
                 if n == 0 {

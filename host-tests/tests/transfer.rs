@@ -218,3 +218,37 @@ fn the_simulator_answers_every_catalogue_command() {
         }
     }
 }
+
+#[test]
+fn a_range_write_ending_at_the_top_of_its_start_field_completes() {
+    // Found by the `transfer` fuzz target: 244H with start FFE and two
+    // records used to fail building a third, empty frame with start 1000.
+    let mut sim = Simulator::tta(ST);
+    let cfg = TransferConfig {
+        stream: PositionStream::RANGE,
+        start: 0xFFE,
+        ..TransferConfig::tta(ST)
+    };
+    let recs: Vec<_> = table(2, 1, 40).collect();
+    let mut t: Transfer<_> = Transfer::new(cfg, recs.clone().into_iter());
+    assert_eq!(
+        run(&mut t, &mut sim, 0).result.unwrap().records_confirmed,
+        2
+    );
+    assert_eq!(
+        sim.table.keys().copied().collect::<Vec<_>>(),
+        vec![0xFFE, 0xFFF]
+    );
+    // One record more cannot be numbered: refused, after the two that fit.
+    let mut sim = Simulator::tta(ST);
+    let mut t: Transfer<_> = Transfer::new(cfg, table(3, 1, 41));
+    let r = run(&mut t, &mut sim, 0);
+    assert!(
+        matches!(
+            r.result,
+            Err(TransferError::Config(_)) | Err(TransferError::InvalidRecord { .. })
+        ),
+        "{:?}",
+        r.result
+    );
+}
