@@ -50,5 +50,8 @@ step "size report and instruction counts (figures, not assertions)"
 ./tools/size-report.sh
 cargo run -q -p host-tests --bin icount
 
+step "fuzzing smoke run: 30 s per cargo-fuzz target (installs nightly and cargo-fuzz if missing)"
+./fuzz/smoke.sh 30
+
 step "tests"
 cargo nextest run -p iai-protocol-b -p host-tests --no-fail-fast
