@@ -132,8 +132,8 @@ impl RecordLayout {
         self.number_width as usize + 2 + 12 + 8 * axes + if self.extended { 2 } else { 0 }
     }
 
-    /// Wire length of one record: bytes before the coordinates, from the
-    /// record start (the axis pattern ends here).
+    /// Offset, from the record start, where the axis pattern ends: a
+    /// streaming reader needs this many bytes to know the record's length.
     pub const fn pattern_end(self) -> usize {
         self.number_width as usize + 2
     }
