@@ -416,19 +416,42 @@ impl Simulator {
     }
 }
 
+/// What passed over a served connection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Traffic<'a> {
+    /// Bytes from the host.
+    Received(&'a [u8]),
+    /// Bytes the simulator sent.
+    Sent(&'a [u8]),
+    /// The host closed the connection.
+    Closed,
+}
+
 /// Serves the simulator on a TCP stream with real time until the peer
 /// closes the connection.
-pub fn serve_tcp(sim: &mut Simulator, mut stream: std::net::TcpStream) -> std::io::Result<()> {
+pub fn serve_tcp(sim: &mut Simulator, stream: std::net::TcpStream) -> std::io::Result<()> {
+    serve_tcp_observed(sim, stream, |_| Ok(()))
+}
+
+/// Like [`serve_tcp`], showing every read and write to `observe`.
+pub fn serve_tcp_observed(
+    sim: &mut Simulator,
+    mut stream: std::net::TcpStream,
+    mut observe: impl FnMut(Traffic<'_>) -> std::io::Result<()>,
+) -> std::io::Result<()> {
     use std::io::{Read, Write};
     let t0 = std::time::Instant::now();
-    let now = || t0.elapsed().as_millis() as u32;
+    let now = || u32::try_from(t0.elapsed().as_millis()).unwrap_or(u32::MAX);
     stream.set_read_timeout(Some(std::time::Duration::from_millis(1)))?;
     stream.set_nodelay(true)?;
     let mut buf = [0u8; 4096];
     loop {
         match stream.read(&mut buf) {
-            Ok(0) => return Ok(()),
-            Ok(n) => sim.receive(&buf[..n], now()),
+            Ok(0) => return observe(Traffic::Closed),
+            Ok(n) => {
+                sim.receive(&buf[..n], now());
+                observe(Traffic::Received(&buf[..n]))?;
+            }
             Err(e)
                 if matches!(
                     e.kind(),
@@ -439,6 +462,7 @@ pub fn serve_tcp(sim: &mut Simulator, mut stream: std::net::TcpStream) -> std::i
         let out = sim.take_output(now());
         if !out.is_empty() {
             stream.write_all(&out)?;
+            observe(Traffic::Sent(&out))?;
         }
     }
 }

@@ -1,14 +1,13 @@
 //! `iai simulate`: the controller simulator on a TCP port of this machine,
 //! printing every frame it receives and sends.
 
-use std::io::{Read, Write};
+use std::io::Write;
 use std::net::{TcpListener, TcpStream};
-use std::time::{Duration, Instant};
 
 use iai_protocol_b::frame::Station;
 
 use super::inspect::{text_entry, Inspector, Item, Origin};
-use crate::sim::Simulator;
+use crate::sim::{serve_tcp_observed, Simulator, Traffic};
 
 /// Which controller the simulator behaves like.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -50,13 +49,9 @@ fn log(out: &mut impl Write, arrow: &str, items: Vec<Item>) -> std::io::Result<(
 /// Serves one connection until the peer closes it, logging both directions.
 pub fn serve_logged(
     sim: &mut Simulator,
-    mut stream: TcpStream,
+    stream: TcpStream,
     out: &mut impl Write,
 ) -> std::io::Result<()> {
-    let t0 = Instant::now();
-    let now = || u32::try_from(t0.elapsed().as_millis()).unwrap_or(u32::MAX);
-    stream.set_read_timeout(Some(Duration::from_millis(1)))?;
-    stream.set_nodelay(true)?;
     let (mut rx, mut tx) = (Inspector::new(), Inspector::new());
     rx.set_origin(Origin {
         line: None,
@@ -66,34 +61,20 @@ pub fn serve_logged(
         line: None,
         dir: Some("tx"),
     });
-    let mut buf = [0u8; 4096];
-    loop {
-        match stream.read(&mut buf) {
-            Ok(0) => {
-                rx.finish();
-                log(out, "<", rx.take_items())?;
-                return Ok(());
-            }
-            Ok(n) => {
-                let bytes = buf.get(..n).unwrap_or(&[]);
-                sim.receive(bytes, now());
-                rx.feed(bytes);
-                log(out, "<", rx.take_items())?;
-            }
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                ) => {}
-            Err(e) => return Err(e),
+    serve_tcp_observed(sim, stream, |traffic| match traffic {
+        Traffic::Received(bytes) => {
+            rx.feed(bytes);
+            log(out, "<", rx.take_items())
         }
-        let reply = sim.take_output(now());
-        if !reply.is_empty() {
-            stream.write_all(&reply)?;
-            tx.feed(&reply);
-            log(out, ">", tx.take_items())?;
+        Traffic::Sent(bytes) => {
+            tx.feed(bytes);
+            log(out, ">", tx.take_items())
         }
-    }
+        Traffic::Closed => {
+            rx.finish();
+            log(out, "<", rx.take_items())
+        }
+    })
 }
 
 /// Runs the simulator: prints `listening on 127.0.0.1:PORT`, then serves
