@@ -854,3 +854,15 @@ fn zero_capacity_decoder_accounts_for_every_byte() {
         "events {events:?}"
     );
 }
+
+#[test]
+fn a_parsed_group_received_in_lower_case_re_emits_in_upper_case() {
+    // Found by the frame_parse fuzz target: a 24DH whose real value arrived
+    // with a lower-case digit was re-emitted with it unchanged.
+    let wire = sealed(b"!9924DB24C001F0FE9924dB100FF0");
+    let f = Frame::new_checked(&wire, BypassPolicy::Reject).unwrap();
+    let cmd = RealVariableChange::parse(&f).unwrap();
+    let mut buf = [0u8; 64];
+    let n = cmd.emit(Station(0x99), &mut buf).unwrap();
+    assert_eq!(&buf[..n - 4], b"!9924DB24C001F0FE9924DB100FF0");
+}

@@ -271,17 +271,14 @@ fn write_count(spec: FieldSpec, max: usize, n: usize, w: &mut Writer<'_>) -> Res
     w.unsigned(spec, n as u64)
 }
 
-impl<'a, T, C: FieldCodec<'a, T> + Copy> FieldCodec<'a, Repeated<'a, T, C>> for Counted<C> {
+impl<'a, T: Clone, C: FieldCodec<'a, T> + Copy> FieldCodec<'a, Repeated<'a, T, C>> for Counted<C> {
     fn read(&self, r: &mut Reader<'a>) -> Result<Repeated<'a, T, C>> {
         let count = read_count(self.count, self.max, r)?;
         read_items(count, self.item, r)
     }
     fn write(&self, value: &Repeated<'a, T, C>, w: &mut Writer<'_>) -> Result<()> {
         write_count(self.count, self.max, value.len(), w)?;
-        match value.items {
-            Items::Wire { bytes, .. } => w.put(bytes),
-            Items::Slice(items) => items.iter().try_for_each(|v| self.item.write(v, w)),
-        }
+        value.write_items(&self.item, w)
     }
 }
 
@@ -387,6 +384,17 @@ impl<'a, T: Clone, C: FieldCodec<'a, T> + Copy> Repeated<'a, T, C> {
             Items::Slice(s) => RepeatedIter {
                 inner: IterInner::Slice(s.iter()),
             },
+        }
+    }
+}
+
+impl<'a, T: Clone, C: FieldCodec<'a, T> + Copy> Repeated<'a, T, C> {
+    /// Writes every item with `codec`, in normal form (upper-case digits)
+    /// whatever case a parsed group arrived in.
+    fn write_items(&self, codec: &C, w: &mut Writer<'_>) -> Result<()> {
+        match self.items {
+            Items::Wire { .. } => self.iter().try_for_each(|v| codec.write(&v, w)),
+            Items::Slice(items) => items.iter().try_for_each(|v| codec.write(v, w)),
         }
     }
 }
@@ -806,7 +814,9 @@ fn read_items<'a, T, C: FieldCodec<'a, T> + Copy>(
     })
 }
 
-impl<'a, T, C: FieldCodec<'a, T> + Copy> FieldCodec<'a, Repeated<'a, T, C>> for CountedPer<C> {
+impl<'a, T: Clone, C: FieldCodec<'a, T> + Copy> FieldCodec<'a, Repeated<'a, T, C>>
+    for CountedPer<C>
+{
     fn read(&self, r: &mut Reader<'a>) -> Result<Repeated<'a, T, C>> {
         let at = r.offset();
         let units = r.unsigned(self.count)?;
@@ -836,10 +846,7 @@ impl<'a, T, C: FieldCodec<'a, T> + Copy> FieldCodec<'a, Repeated<'a, T, C>> for 
             .checked_mul(self.per_item.max(1))
             .ok_or(Error::ValueOutOfRange { offset: w.len() })?;
         w.unsigned(self.count, units as u64)?;
-        match value.items {
-            Items::Wire { bytes, .. } => w.put(bytes),
-            Items::Slice(items) => items.iter().try_for_each(|v| self.item.write(v, w)),
-        }
+        value.write_items(&self.item, w)
     }
 }
 
