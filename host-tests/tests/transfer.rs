@@ -156,17 +156,28 @@ fn persistent_error_replies_fail_with_the_code() {
 
 #[test]
 fn an_invalid_record_stops_before_anything_is_sent_for_it() {
-    let mut bad: Vec<_> = table(30, 2, 18).collect();
-    bad[27].positions.pop(); // 2 axes in the pattern, 1 coordinate
+    // 2-axis records are 34 bytes: 59 fit a 2,051-byte frame (14 + 59 x 34).
+    let mut bad: Vec<_> = table(100, 2, 18).collect();
+    bad[70].positions.pop(); // 2 axes in the pattern, 1 coordinate
     let mut sim = Simulator::tta(ST);
     let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), bad.clone().into_iter());
     let r = run(&mut t, &mut sim, 0);
     match r.result {
-        Err(TransferError::InvalidRecord { index: 27, .. }) => {}
+        Err(TransferError::InvalidRecord {
+            index: 70,
+            error:
+                iai_protocol_b::Error::CountMismatch {
+                    expected: 2,
+                    found: 1,
+                },
+        }) => {}
         other => panic!("{other:?}"),
     }
-    // Records before the first frame that holds the bad one are confirmed.
-    assert_eq!(sim.table.len() as u32, t.stats().records_confirmed);
+    // The first frame (records 0..59) went out and was confirmed; the frame
+    // holding the bad record was never sent.
+    assert_eq!(t.stats().records_confirmed, 59);
+    assert_eq!(t.stats().frames_sent, 1);
+    assert_table_equal(&sim, bad.into_iter().take(59));
 }
 
 #[test]
