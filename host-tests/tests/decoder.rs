@@ -6,19 +6,15 @@
 
 #[path = "../fixtures/fixture_file.rs"]
 mod fixture_file;
+mod replay;
+
+use replay::{decode_chunks, push_bytes, Out};
 
 use iai_protocol_b::checksum::{BypassPolicy, Checksum, ChecksumField};
 use iai_protocol_b::decoder::{Event, FrameDecoder, DEFAULT_CAPACITY};
 use iai_protocol_b::frame::Frame;
 use iai_protocol_b::Error;
 use proptest::prelude::*;
-
-/// An event with the frame copied out of the decoder.
-#[derive(Debug, Clone, PartialEq, Eq)]
-enum Out {
-    Frame(Vec<u8>),
-    Error(Error),
-}
 
 /// Small deterministic generator (SplitMix64), so failures reproduce.
 struct Rng(u64);
@@ -38,51 +34,6 @@ impl Rng {
     fn byte(&mut self) -> u8 {
         self.next() as u8
     }
-}
-
-/// Feeds `input` in the given chunk lengths (the last chunk takes the rest)
-/// through `decode`, collecting every event. Checks the `consumed` contract.
-fn decode_chunks<const N: usize>(
-    dec: &mut FrameDecoder<N>,
-    input: &[u8],
-    cuts: &[usize],
-) -> Vec<Out> {
-    let mut out = Vec::new();
-    let mut rest = input;
-    let mut cuts = cuts.iter();
-    while !rest.is_empty() {
-        let n = cuts.next().copied().unwrap_or(rest.len()).min(rest.len());
-        let mut chunk = &rest[..n];
-        rest = &rest[n..];
-        loop {
-            let d = dec.decode(chunk);
-            assert!(d.consumed <= chunk.len());
-            match d.event {
-                Event::NeedMore => {
-                    assert_eq!(d.consumed, chunk.len(), "NeedMore before the chunk ended");
-                    break;
-                }
-                Event::Frame(f) => out.push(Out::Frame(f.as_bytes().to_vec())),
-                Event::Error(e) => out.push(Out::Error(e)),
-            }
-            assert!(d.consumed >= 1, "an event without consuming input");
-            chunk = &chunk[d.consumed..];
-        }
-    }
-    out
-}
-
-/// Feeds `input` one byte at a time through `push`.
-fn push_bytes<const N: usize>(dec: &mut FrameDecoder<N>, input: &[u8]) -> Vec<Out> {
-    let mut out = Vec::new();
-    for &b in input {
-        match dec.push(b) {
-            Event::NeedMore => {}
-            Event::Frame(f) => out.push(Out::Frame(f.as_bytes().to_vec())),
-            Event::Error(e) => out.push(Out::Error(e)),
-        }
-    }
-    out
 }
 
 /// Every byte given to the decoder is in a returned frame, counted as

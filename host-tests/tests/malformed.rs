@@ -14,6 +14,8 @@
 //!
 //! Part 3: regression tests for core defects this catalogue found (fixed).
 
+mod replay;
+
 use iai_protocol_b::axis::{AxisPattern, PerAxis};
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameDecoder, DEFAULT_CAPACITY};
@@ -23,15 +25,10 @@ use iai_protocol_b::message::*;
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::Error;
 use iai_protocol_b::Error::*;
+use replay::{decode_chunks, push_bytes, Out};
 
 /// The valid frame appended to every row.
 const NEXT: &[u8] = b"#992322C\r\n";
-
-#[derive(Debug, Clone, PartialEq, Eq)]
-enum Out {
-    Frame(Vec<u8>),
-    Error(Error),
-}
 
 fn fr(bytes: &[u8]) -> Out {
     Out::Frame(bytes.to_vec())
@@ -182,37 +179,13 @@ fn stream_cases() -> Vec<Case> {
 /// Runs `input` through a fresh decoder in the given chunks.
 fn run(input: &[u8], policy: BypassPolicy, cuts: &[usize]) -> (Vec<Out>, FrameDecoder) {
     let mut dec: FrameDecoder = FrameDecoder::with_policy(policy);
-    let mut out = Vec::new();
-    let mut rest = input;
-    let mut cuts = cuts.iter();
-    while !rest.is_empty() {
-        let n = cuts.next().copied().unwrap_or(rest.len()).min(rest.len());
-        let mut chunk = &rest[..n];
-        rest = &rest[n..];
-        loop {
-            let d = dec.decode(chunk);
-            match d.event {
-                Event::NeedMore => break,
-                Event::Frame(f) => out.push(Out::Frame(f.as_bytes().to_vec())),
-                Event::Error(e) => out.push(Out::Error(e)),
-            }
-            chunk = &chunk[d.consumed..];
-        }
-    }
+    let out = decode_chunks(&mut dec, input, cuts);
     (out, dec)
 }
 
 fn run_push(input: &[u8], policy: BypassPolicy) -> Vec<Out> {
     let mut dec: FrameDecoder = FrameDecoder::with_policy(policy);
-    let mut out = Vec::new();
-    for &b in input {
-        match dec.push(b) {
-            Event::NeedMore => {}
-            Event::Frame(f) => out.push(Out::Frame(f.as_bytes().to_vec())),
-            Event::Error(e) => out.push(Out::Error(e)),
-        }
-    }
-    out
+    push_bytes(&mut dec, input)
 }
 
 fn accounted(dec: &FrameDecoder, events: &[Out], input_len: usize) {

@@ -1,0 +1,57 @@
+//! Replaying a byte stream through the push decoder, shared by the decoder
+//! and malformed-input tests.
+
+use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::Error;
+
+/// An event with the frame copied out of the decoder.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Out {
+    Frame(Vec<u8>),
+    Error(Error),
+}
+
+/// Feeds `input` in the given chunk lengths (the last chunk takes the rest)
+/// through `decode`, collecting every event. Checks the `consumed` contract.
+pub fn decode_chunks<const N: usize>(
+    dec: &mut FrameDecoder<N>,
+    input: &[u8],
+    cuts: &[usize],
+) -> Vec<Out> {
+    let mut out = Vec::new();
+    let mut rest = input;
+    let mut cuts = cuts.iter();
+    while !rest.is_empty() {
+        let n = cuts.next().copied().unwrap_or(rest.len()).min(rest.len());
+        let mut chunk = &rest[..n];
+        rest = &rest[n..];
+        loop {
+            let d = dec.decode(chunk);
+            assert!(d.consumed <= chunk.len());
+            match d.event {
+                Event::NeedMore => {
+                    assert_eq!(d.consumed, chunk.len(), "NeedMore before the chunk ended");
+                    break;
+                }
+                Event::Frame(f) => out.push(Out::Frame(f.as_bytes().to_vec())),
+                Event::Error(e) => out.push(Out::Error(e)),
+            }
+            assert!(d.consumed >= 1, "an event without consuming input");
+            chunk = &chunk[d.consumed..];
+        }
+    }
+    out
+}
+
+/// Feeds `input` one byte at a time through `push`.
+pub fn push_bytes<const N: usize>(dec: &mut FrameDecoder<N>, input: &[u8]) -> Vec<Out> {
+    let mut out = Vec::new();
+    for &b in input {
+        match dec.push(b) {
+            Event::NeedMore => {}
+            Event::Frame(f) => out.push(Out::Frame(f.as_bytes().to_vec())),
+            Event::Error(e) => out.push(Out::Error(e)),
+        }
+    }
+    out
+}
