@@ -523,6 +523,10 @@ fn fixture_frames_decode_to_the_tabled_values() {
         ));
     }
     assert!(failures.is_empty(), "{failures:#?}");
+    eprintln!(
+        "{} catalogue fixture frames decoded to their tabled values",
+        fixtures().len()
+    );
     // One fixture per message and direction (25BH has no normal response).
     for &id in MESSAGE_IDS {
         assert!(
