@@ -38,10 +38,11 @@
 use crate::checksum::BypassPolicy;
 use crate::error::Error;
 use crate::frame::{self, Envelope, Frame, Header, ENVELOPE_LEN};
+use crate::limits;
 
-/// Default capacity: the largest frame a TTA receives (2,051 bytes; it
-/// sends at most 2,048).
-pub const DEFAULT_CAPACITY: usize = 2051;
+/// Default capacity: the largest frame a controller sends or receives
+/// ([`limits::LARGEST_FRAME`], the TTA's 2,051-byte receive buffer).
+pub const DEFAULT_CAPACITY: usize = limits::LARGEST_FRAME;
 
 /// What one step of decoding produced.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -90,7 +91,7 @@ enum State {
 }
 
 /// Text fields are located by the time this many bytes are buffered.
-const TEXT_PROBE_MAX: usize = crate::message::TEXT_SPAN_KNOWN_BY;
+const TEXT_PROBE_MAX: usize = crate::catalogue::TEXT_KNOWN_BY;
 
 /// Internal result of one byte, free of borrows.
 enum Step {
@@ -255,7 +256,7 @@ impl<const N: usize> FrameDecoder<N> {
                 if self.text.is_none() && (ENVELOPE_LEN..=TEXT_PROBE_MAX).contains(&self.len) {
                     let head = self.buf.first().copied().and_then(Header::from_byte);
                     let prefix = self.buf.get(..self.len).unwrap_or(&[]);
-                    self.text = head.and_then(|h| crate::message::text_span(h, prefix));
+                    self.text = head.and_then(|h| frame::text_span(h, prefix));
                 }
                 true
             }
