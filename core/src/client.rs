@@ -435,12 +435,10 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
     pub fn received(&mut self, bytes: &[u8], now: u32) -> Received<Heard> {
         let running = matches!(self.phase, Phase::Running { .. });
         let d = self.replies.decode(bytes);
+        let consumed = d.consumed;
         let event = match d.event {
             Event::NeedMore => Heard::NeedMore,
-            Event::Error(e) => {
-                self.stats.line_errors += 1;
-                Heard::Broken(e)
-            }
+            Event::Error(e) => Heard::Broken(e),
             Event::Frame(f) => {
                 // Chapter 5 condition 1: a normal response must have its
                 // message's layout.
@@ -461,10 +459,13 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
                 Heard::Frame(offer)
             }
         };
-        Received {
-            consumed: d.consumed,
-            event,
+        if let Heard::Broken(_) = event {
+            self.stats.line_errors += 1;
+            if running {
+                self.exchange.broken_frame(self.replies.failed_envelope(), now);
+            }
         }
+        Received { consumed, event }
     }
 
     /// Feeds all of `bytes` ([`Client::received`] in a loop), ignoring what
