@@ -475,7 +475,10 @@ mod tests {
     use super::*;
 
     /// Every event of `input` fed in one piece, as `(frame bytes | error)`.
-    fn events<const N: usize>(dec: &mut FrameDecoder<N>, mut input: &[u8]) -> Vec<Result<Vec<u8>, Error>> {
+    fn events<const N: usize>(
+        dec: &mut FrameDecoder<N>,
+        mut input: &[u8],
+    ) -> Vec<Result<Vec<u8>, Error>> {
         let mut out = Vec::new();
         loop {
             let d = dec.decode(input);
@@ -496,7 +499,10 @@ mod tests {
     #[test]
     fn golden_frame_after_noise() {
         let mut dec: FrameDecoder = FrameDecoder::new();
-        assert_eq!(events(&mut dec, b"xx#992322C\r\n"), [Ok(SERVO_REPLY.to_vec())]);
+        assert_eq!(
+            events(&mut dec, b"xx#992322C\r\n"),
+            [Ok(SERVO_REPLY.to_vec())]
+        );
         assert_eq!(dec.stats().discarded_bytes, 2);
         assert_eq!(dec.stats().frames, 1);
     }

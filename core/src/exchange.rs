@@ -70,7 +70,13 @@ pub enum Verdict {
 /// assert_eq!(judge(s, 0x212, Header::Error, s, 0xC74), Verdict::ErrorReply(0xC74));
 /// assert_eq!(judge(s, 0x212, Header::Response, Station(0x01), 0x212), Verdict::Foreign);
 /// ```
-pub const fn judge(expected: Station, id: u16, header: Header, station: Station, code: u16) -> Verdict {
+pub const fn judge(
+    expected: Station,
+    id: u16,
+    header: Header,
+    station: Station,
+    code: u16,
+) -> Verdict {
     if station.0 != expected.0 {
         return Verdict::Foreign;
     }
@@ -449,9 +455,7 @@ impl Exchange {
                 stale = stale.saturating_add(1);
                 until = later(until, now.wrapping_add(self.cfg.duplicate_window_ms));
             }
-            let turnaround = now
-                .wrapping_add(self.cfg.turnaround_ms)
-                .wrapping_add(1);
+            let turnaround = now.wrapping_add(self.cfg.turnaround_ms).wrapping_add(1);
             self.not_before = later(self.not_before, turnaround);
         }
         // Stale replies of older commands are still possible until their
@@ -474,9 +478,7 @@ impl Exchange {
     /// after its reply the controller is ready for the next command.)
     pub fn reply_lost(&mut self, now: u32) {
         if let Phase::Await { deadline } = self.phase {
-            let soon = now
-                .wrapping_add(self.cfg.turnaround_ms)
-                .wrapping_add(1);
+            let soon = now.wrapping_add(self.cfg.turnaround_ms).wrapping_add(1);
             if reached(deadline, soon) {
                 self.phase = Phase::Await { deadline: soon };
             }

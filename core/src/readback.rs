@@ -292,7 +292,9 @@ impl<const N: usize> ReadBack<N> {
                         None => {
                             let id = self.cfg.stream.id;
                             self.state =
-                                State::Failed(TransferError::Config(Error::UnknownMessageId { id }));
+                                State::Failed(TransferError::Config(Error::UnknownMessageId {
+                                    id,
+                                }));
                             continue;
                         }
                     }
@@ -328,7 +330,9 @@ impl<const N: usize> ReadBack<N> {
                 State::Deliver => {
                     // The window came through: let it grow back.
                     let full = self.cfg.window();
-                    let grown = self.window_limit.saturating_add((self.window_limit / 4).max(1));
+                    let grown = self
+                        .window_limit
+                        .saturating_add((self.window_limit / 4).max(1));
                     self.window_limit = grown.min(full);
                     // Deliver once; the next poll moves on.
                     let turnaround = now.wrapping_add(self.cfg.exchange.turnaround_ms + 1);
@@ -420,8 +424,13 @@ impl<const N: usize> ReadBack<N> {
 
     fn frame(&mut self, seen: Seen, window: (u32, u16), now: u32) -> ReadEvent {
         let offer = if self.state == State::Exchange {
-            self.exchange
-                .offer_head(seen.header, seen.station, seen.code, seen.check.is_some(), now)
+            self.exchange.offer_head(
+                seen.header,
+                seen.station,
+                seen.code,
+                seen.check.is_some(),
+                now,
+            )
         } else if crate::exchange::judge(
             self.cfg.exchange.station,
             self.cfg.stream.id,
@@ -572,7 +581,11 @@ impl Seen {
                 if count == 0 {
                     return None;
                 }
-                cfg.stream.layout.read_record(&mut r).ok().map(|rec| rec.number)
+                cfg.stream
+                    .layout
+                    .read_record(&mut r)
+                    .ok()
+                    .map(|rec| rec.number)
             })
             .flatten();
         Seen {

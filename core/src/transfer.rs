@@ -364,7 +364,9 @@ pub enum TransferEvent {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum State {
     /// Packing the next frame (from this tick on).
-    Build { not_before: u32 },
+    Build {
+        not_before: u32,
+    },
     /// The frame is being sent and confirmed.
     Write,
     /// The confirmed frame is being read back.
@@ -661,12 +663,20 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                         Due::Done(Finish::Replied) if writing => self.confirmed(now),
                         Due::Done(Finish::Replied) => self.window_answered(now),
                         Due::Done(Finish::ErrorReply(code)) => {
-                            let resume = if writing { Resume::Write } else { Resume::Verify };
+                            let resume = if writing {
+                                Resume::Write
+                            } else {
+                                Resume::Verify
+                            };
                             self.state = State::Failed(TransferError::rejected(code), resume);
                         }
                         Due::Done(_) | Due::Idle => {
                             self.stats.timeouts += 1;
-                            let resume = if writing { Resume::Write } else { Resume::Verify };
+                            let resume = if writing {
+                                Resume::Write
+                            } else {
+                                Resume::Verify
+                            };
                             self.state = State::Failed(TransferError::Timeout, resume);
                         }
                     }
@@ -970,7 +980,11 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
     /// the chunk's verdict.
     fn start_verify(&mut self, now: u32) {
         let all = self.chunk.map_or(0, |c| c.records);
-        let all_mask = if all >= 128 { u128::MAX } else { bit(usize::from(all)) - 1 };
+        let all_mask = if all >= 128 {
+            u128::MAX
+        } else {
+            bit(usize::from(all)) - 1
+        };
         let checked = self.verifier.checked;
         let lowest = self
             .chunk_numbers()
@@ -985,7 +999,10 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         let v = &mut self.verifier;
         let field_max = v.stream.count_field().max_unsigned();
         let room = field_max.saturating_add(1).saturating_sub(u64::from(head));
-        let full = v.stream.window(self.cfg.max_response).min(self.window_limit);
+        let full = v
+            .stream
+            .window(self.cfg.max_response)
+            .min(self.window_limit);
         let window = u64::from(full).min(room).max(1);
         v.head = head;
         v.asked = window as u16;
@@ -1010,7 +1027,12 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
     fn write_query(&mut self) -> Result<(), Error> {
         let v = &mut self.verifier;
         let mut w = Writer::new(&mut v.query);
-        emit_envelope(&mut w, Header::Command, self.cfg.exchange.station, v.stream.id)?;
+        emit_envelope(
+            &mut w,
+            Header::Command,
+            self.cfg.exchange.station,
+            v.stream.id,
+        )?;
         v.stream.write_query(&mut w, v.head, v.asked)?;
         emit_trailer(&mut w, self.cfg.checksum)?;
         v.query_len = w.len();
@@ -1094,7 +1116,10 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 v.hunting = true;
                 v.started = false;
                 let (station, id, ok) = (v.station, v.stream.id, v.candidate);
-                match self.exchange.offer_head(Header::Response, station, id, ok, now) {
+                match self
+                    .exchange
+                    .offer_head(Header::Response, station, id, ok, now)
+                {
                     Offer::Accepted => self.commit_window(),
                     // A reply to another window, or one that came early.
                     Offer::Mismatch | Offer::Stale => {
@@ -1233,7 +1258,9 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 self.held = Some(rec);
                 if self.packed == 0 {
                     self.fill = 0;
-                    return Err(TransferError::Config(Error::ValueOutOfRange { offset: ENVELOPE_LEN }));
+                    return Err(TransferError::Config(Error::ValueOutOfRange {
+                        offset: ENVELOPE_LEN,
+                    }));
                 }
                 break true;
             }
@@ -1263,14 +1290,20 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         let recent = &self.recent;
         let taken = |n: u16| recent.iter().any(|&(c, _)| c == n);
         let Some(n) = (1..=self.packed).rev().find(|&n| !taken(n)) else {
-            let wake = recent.iter().map(|&(_, u)| u).min_by_key(|&u| u.wrapping_sub(now));
+            let wake = recent
+                .iter()
+                .map(|&(_, u)| u)
+                .min_by_key(|&u| u.wrapping_sub(now));
             return Ok(Built::Wait(wake.unwrap_or(now.wrapping_add(1))));
         };
         if n < self.packed {
             self.stats.guarded_frames += 1;
         }
-        let start = u16::try_from(start)
-            .map_err(|_| TransferError::Config(Error::ValueOutOfRange { offset: ENVELOPE_LEN }))?;
+        let start = u16::try_from(start).map_err(|_| {
+            TransferError::Config(Error::ValueOutOfRange {
+                offset: ENVELOPE_LEN,
+            })
+        })?;
         let (cut, saved) = self.close_frame(n, start)?;
         self.chunk = Some(Chunk {
             records: n,
@@ -1286,7 +1319,11 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
     /// Closes the frame after its first `n` packed records: envelope and
     /// prefix with that count, the trailer after the `n`-th record. Returns
     /// where the trailer starts and the bytes it covers.
-    fn close_frame(&mut self, n: u16, start: u16) -> Result<(usize, [u8; TRAILER_LEN]), TransferError> {
+    fn close_frame(
+        &mut self,
+        n: u16,
+        start: u16,
+    ) -> Result<(usize, [u8; TRAILER_LEN]), TransferError> {
         let cfg = self.cfg;
         let stream = cfg.stream;
         let cut = {
@@ -1354,7 +1391,10 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             v.asked /= 2;
             self.window_limit = v.asked;
             if self.write_query().is_err() {
-                self.state = State::Failed(TransferError::Config(Error::BufferTooSmall), Resume::Nothing);
+                self.state = State::Failed(
+                    TransferError::Config(Error::BufferTooSmall),
+                    Resume::Nothing,
+                );
             }
         }
     }
@@ -1521,7 +1561,7 @@ impl<I: Iterator<Item = PositionRecord>> RecordSource for I {
 }
 
 /// A bounded FIFO of records that a producer fills as they arrive (for
-/// example from a [`PositionStreamDecoder`](crate::stream::PositionStreamDecoder))
+/// example from a [`PositionStreamDecoder`])
 /// and a [`Transfer`] drains. It is pending while empty, until
 /// [`RecordQueue::finish`].
 #[derive(Debug, Clone, Default)]
@@ -1573,4 +1613,3 @@ impl<const Q: usize> RecordSource for RecordQueue<Q> {
         }
     }
 }
-

@@ -72,8 +72,8 @@ use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
 use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::field::{decode_unsigned, FieldSpec};
 use iai_protocol_b::frame::{emit_frame, Header, Station, ENVELOPE_LEN};
-use iai_protocol_b::stream::{PositionStream, PositionStreamDecoder, StreamEvent};
 use iai_protocol_b::limits;
+use iai_protocol_b::stream::{PositionStream, PositionStreamDecoder, StreamEvent};
 use iai_protocol_b::transfer::{RecordQueue, Step, Transfer, TransferConfig, TransferError};
 
 use crate::log;
