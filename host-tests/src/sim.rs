@@ -382,7 +382,7 @@ impl Simulator {
             }
             0x216 => {
                 let q = ErrorDetailQuery::parse(f).ok()?;
-                // Illustrative details, as in EXAMPLES.md 5.2.
+                // Illustrative details (error C74H, program 1, step 5, axis 2, point -3).
                 Some(self.emit(&ErrorDetailResponse {
                     error_number: 0xC74,
                     detail_1: u32::from(q.type_2),
