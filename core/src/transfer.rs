@@ -29,14 +29,24 @@
 //! records were written. A reply can come late (after the timeout and the
 //! resend) or twice (an echoing converter). So that no such reply confirms
 //! a frame it does not belong to, the engine never gives a frame a record
-//! count that a reply still in flight could carry: the count of any frame
-//! whose reply came within `duplicate_window_ms`, or that was sent within
-//! `timeout_ms + late_window_ms` and not answered (3 s and 3 + 3 s by
-//! default). It sends fewer records instead, carrying the rest to the next
-//! frame. On a clean line this costs a few per-frame overheads (about 1 %
-//! of the wire time at 115,200 baud, none at 9,600); it never costs a
-//! record. A reply later than those windows is outside what the engine
-//! can tell apart; [`Verify::Full`] catches what it would do.
+//! count that a reply still in flight could carry; it sends fewer records
+//! instead and carries the rest to the next frame:
+//!
+//! - never the count of the frame answered last;
+//! - never the count of a frame sent within `timeout_ms + late_window_ms`
+//!   (3 + 3 s) whose reply did not come, or that was sent more than once;
+//! - once the line has shown a late or duplicated reply (a reply while
+//!   none was awaited, or one with the wrong count), never the count of a
+//!   frame answered within `duplicate_window_ms` (3 s).
+//!
+//! The last rule waits for evidence because it is costly: at 115,200
+//! baud more frames fit in 3 s than an 8-axis frame has counts (24), so
+//! frames get shorter and the transfer takes about 40 % longer. On a clean
+//! line the guard costs about 2 % (every other frame one record shorter).
+//! A reply later than those windows is outside what the engine can tell
+//! apart, and so is the first duplicate on a line that arrives while a
+//! frame with its count was lost: [`Verify::Full`] catches what they would
+//! do.
 //!
 //! # Verification
 //! A confirmed frame means the controller *said* it wrote that many
@@ -474,6 +484,85 @@ fn bit(i: usize) -> u128 {
     1u128.checked_shl(i as u32).unwrap_or(0)
 }
 
+/// The record counts a reply still in flight could carry (see the module
+/// docs on late and duplicated replies).
+#[derive(Debug, Clone)]
+struct Guard {
+    /// `(count, until, only a duplicate could carry it)`, one per count.
+    entries: heapless::Vec<(u16, u32, bool), RECENT>,
+    /// A late or duplicated reply was seen on this line: from then on the
+    /// counts of answered frames are guarded for the duplicate window too.
+    duplicates_seen: bool,
+    /// The count of the frame answered last (always avoided).
+    previous: u16,
+}
+
+impl Guard {
+    const fn new() -> Self {
+        Guard {
+            entries: heapless::Vec::new(),
+            duplicates_seen: false,
+            previous: 0,
+        }
+    }
+
+    fn prune(&mut self, now: u32) {
+        self.entries.retain(|&(_, u, _)| !reached(now, u));
+    }
+
+    /// Sets the entry of `count` (merging with one that exists).
+    fn note(&mut self, count: u16, until: u32, dup_only: bool, now: u32) {
+        self.prune(now);
+        if let Some(e) = self.entries.iter_mut().find(|e| e.0 == count) {
+            e.1 = crate::clock::later(e.1, until);
+            e.2 &= dup_only;
+        } else if self.entries.push((count, until, dup_only)).is_err() {
+            // Full: keep the latest deadline in the last slot, so that no
+            // count is forgotten early (one may be guarded longer).
+            if let Some(last) = self.entries.last_mut() {
+                last.1 = crate::clock::later(last.1, until);
+                last.2 = false;
+            }
+        }
+    }
+
+    /// A frame of `count` records was sent: its reply may come until
+    /// `until` (timeout plus late window).
+    fn sent(&mut self, count: u16, until: u32, now: u32) {
+        self.note(count, until, false, now);
+    }
+
+    /// The frame of `count` records was answered after `sends` sends.
+    /// Sent once, only a duplicate of the reply can still come (until
+    /// `dup_until`); sent more often, the other sends' replies can too.
+    fn answered(&mut self, count: u16, sends: u8, dup_until: u32, now: u32) {
+        if sends <= 1 {
+            self.entries.retain(|e| e.0 != count);
+        }
+        self.note(count, dup_until, sends <= 1, now);
+        self.previous = count;
+    }
+
+    /// Whether a frame of `n` records could be confirmed by a reply still
+    /// in flight.
+    fn blocks(&self, n: u16, now: u32) -> bool {
+        n == self.previous
+            || self
+                .entries
+                .iter()
+                .any(|&(c, u, dup)| c == n && !reached(now, u) && (!dup || self.duplicates_seen))
+    }
+
+    /// The earliest tick at which a blocked count frees up.
+    fn wake(&self, now: u32) -> u32 {
+        self.entries
+            .iter()
+            .map(|&(_, u, _)| u)
+            .min_by_key(|&u| u.wrapping_sub(now))
+            .unwrap_or(now.wrapping_add(1))
+    }
+}
+
 /// Writes a position table to a controller in confirmed (and verified)
 /// chunks.
 pub struct Transfer<I, const N: usize = { limits::TTA.command }> {
@@ -490,8 +579,8 @@ pub struct Transfer<I, const N: usize = { limits::TTA.command }> {
     /// Records packed, the chunk's first.
     packed: u16,
     chunk: Option<Chunk>,
-    /// Record counts a reply still in flight could carry, and until when.
-    recent: heapless::Vec<(u16, u32), RECENT>,
+    /// Record counts a reply still in flight could carry.
+    guard: Guard,
     /// An unexpected frame came between two frames: the next is faulted.
     pending_fault: bool,
     /// Records per frame now: halved after a timeout, grown back after
@@ -520,11 +609,18 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             fill: 0,
             packed: 0,
             chunk: None,
-            recent: heapless::Vec::new(),
+            guard: Guard::new(),
             pending_fault: false,
             frame_limit: MAX_FRAME_RECORDS,
             window_limit: cfg.stream.read_back().window(cfg.max_response),
-            exchange: Exchange::new(cfg.exchange, Quarantine::ByContent),
+            exchange: Exchange::new(
+                ExchangeConfig {
+                    // Applied by the engine's own guard (see the module docs).
+                    duplicate_window_ms: 0,
+                    ..cfg.exchange
+                },
+                Quarantine::ByContent,
+            ),
             replies: FrameDecoder::with_policy(BypassPolicy::Reject),
             verifier: Verifier::new(cfg.stream.read_back()),
             state: State::Build { not_before: 0 },
@@ -736,24 +832,10 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 let until = now
                     .wrapping_add(self.cfg.exchange.timeout_ms)
                     .wrapping_add(self.cfg.exchange.late_window_ms);
-                self.remember(c.records, until, now);
+                self.guard.sent(c.records, until, now);
             }
         }
         self.exchange.sent(now);
-    }
-
-    /// Notes that replies carrying `count` may arrive until `until`.
-    fn remember(&mut self, count: u16, until: u32, now: u32) {
-        self.recent.retain(|&(_, u)| !reached(now, u));
-        if let Some(e) = self.recent.iter_mut().find(|(c, _)| *c == count) {
-            e.1 = crate::clock::later(e.1, until);
-        } else if self.recent.push((count, until)).is_err() {
-            // Full: keep the latest deadline of all in the last slot, so
-            // that no count is forgotten early (it may be guarded longer).
-            if let Some(last) = self.recent.last_mut() {
-                last.1 = crate::clock::later(last.1, until);
-            }
-        }
     }
 
     /// Bytes received from the controller at tick `now`. Returns at the
@@ -830,6 +912,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                     // A late or duplicated write reply between frames.
                     self.stats.stale_replies += 1;
                     self.pending_fault = true;
+                    self.guard.duplicates_seen = true;
                     return TransferEvent::Stale;
                 }
                 let (content_ok, reported) = match (self.state, self.chunk) {
@@ -869,6 +952,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             }
             Offer::Mismatch => {
                 self.stats.count_mismatches += 1;
+                self.guard.duplicates_seen = true;
                 TransferEvent::CountMismatch {
                     sent: self.chunk.map_or(0, |c| c.records),
                     reported,
@@ -876,6 +960,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             }
             Offer::Stale => {
                 self.stats.stale_replies += 1;
+                self.guard.duplicates_seen = true;
                 TransferEvent::Stale
             }
             Offer::Foreign => {
@@ -898,7 +983,8 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         // Duplicates of this reply may come for a while; replies to its
         // other sends until their own late window closes.
         let dup = now.wrapping_add(self.cfg.exchange.duplicate_window_ms);
-        self.remember(c.records, dup, now);
+        self.guard
+            .answered(c.records, self.exchange.sends(), dup, now);
         let verify = match self.cfg.verify {
             Verify::Off => false,
             Verify::AfterFault => c.faulted,
@@ -1286,15 +1372,12 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             return Ok(Built::Exhausted);
         }
         // The most records that no reply still in flight could confirm.
-        self.recent.retain(|&(_, u)| !reached(now, u));
-        let recent = &self.recent;
-        let taken = |n: u16| recent.iter().any(|&(c, _)| c == n);
-        let Some(n) = (1..=self.packed).rev().find(|&n| !taken(n)) else {
-            let wake = recent
-                .iter()
-                .map(|&(_, u)| u)
-                .min_by_key(|&u| u.wrapping_sub(now));
-            return Ok(Built::Wait(wake.unwrap_or(now.wrapping_add(1))));
+        self.guard.prune(now);
+        let Some(n) = (1..=self.packed)
+            .rev()
+            .find(|&n| !self.guard.blocks(n, now))
+        else {
+            return Ok(Built::Wait(self.guard.wake(now)));
         };
         if n < self.packed {
             self.stats.guarded_frames += 1;
@@ -1356,11 +1439,10 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
     /// count still avoids those a late reply could carry.
     fn shrink_chunk(&mut self, now: u32) {
         let Some(c) = self.chunk else { return };
-        self.recent.retain(|&(_, u)| !reached(now, u));
-        let recent = &self.recent;
+        self.guard.prune(now);
         let Some(n) = (1..=c.records / 2)
             .rev()
-            .find(|&n| !recent.iter().any(|&(k, _)| k == n))
+            .find(|&n| !self.guard.blocks(n, now))
         else {
             return;
         };

@@ -58,6 +58,8 @@ pub struct Faults {
     /// The controller stops answering anything once this many position
     /// records were written (it hangs in the middle of a table).
     pub stop_after_records: Option<u64>,
+    /// The controller stops answering anything after this many commands.
+    pub stop_after_commands: Option<u32>,
     /// Chance, per position write, that one record is stored altered in a
     /// way that keeps the frame's SC valid (two hex digits of a coordinate
     /// swapped): what only reading back can catch.
@@ -300,6 +302,10 @@ impl Simulator {
         self.faults
             .stop_after_records
             .is_some_and(|n| self.stats.records_written >= n)
+            || self
+                .faults
+                .stop_after_commands
+                .is_some_and(|n| self.stats.commands >= n)
     }
 
     /// Alters one coordinate of one of `recs` so that the frame's SC would

@@ -34,7 +34,53 @@ fn a_written_table_reads_back_equal() {
     let (got, stats) = read_back(&mut rb, &mut sim);
     let stats = stats.unwrap();
     assert_eq!(got, table(2_000, 8, 31).collect::<Vec<_>>());
-    assert_eq!(stats.queries, 2_000u32.div_ceil(24));
+    // Confirmed reads: every window read twice, the same both times.
+    let windows = 2_000u32.div_ceil(24);
+    assert_eq!(stats.windows_confirmed, windows);
+    assert_eq!(stats.queries, 2 * windows);
+    // Unconfirmed: once each.
+    let cfg = ReadBackConfig {
+        confirm: false,
+        ..ReadBackConfig::tta(ST, 1, 2_000)
+    };
+    let mut rb: ReadBack = ReadBack::new(cfg);
+    let (got, stats) = read_back(&mut rb, &mut sim);
+    assert_eq!(got, table(2_000, 8, 31).collect::<Vec<_>>());
+    assert_eq!(stats.unwrap().queries, windows);
+}
+
+#[test]
+fn a_late_empty_reply_never_stands_in_for_the_next_window() {
+    // Positions 1-24 and 49-72 defined, 25-48 not: window 2 is empty. Its
+    // reply comes late (past the timeout), the resend's at once; the late
+    // copy must not be taken as window 3's answer, which holds records.
+    let mut sim = Simulator::tta(ST).with_faults(
+        Faults {
+            late_every_nth_reply: Some((2, 3_500)),
+            ..Faults::default()
+        },
+        1,
+    );
+    let recs: Vec<_> = (0..72u32)
+        .filter(|i| !(24..48).contains(i))
+        .map(|i| {
+            let mut r = host_tests::table::record(i, 8, 2);
+            r.number = (i + 1) as u16;
+            r
+        })
+        .collect();
+    for r in &recs {
+        sim.table.insert(r.number, r.clone());
+    }
+    let cfg = ReadBackConfig {
+        confirm: false,
+        ..ReadBackConfig::tta(ST, 1, 96)
+    };
+    let mut rb: ReadBack = ReadBack::new(cfg);
+    let (got, stats) = read_back(&mut rb, &mut sim);
+    let stats = stats.unwrap();
+    assert_eq!(got, recs, "records 49-72 are there");
+    assert!(stats.retries > 0);
 }
 
 #[test]
