@@ -1695,3 +1695,198 @@ impl<const Q: usize> RecordSource for RecordQueue<Q> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use std::vec::Vec;
+
+    use super::*;
+    use crate::message::{
+        ChangePositionData2Response, EffectivePositionResponse2, Message, Repeated,
+    };
+
+    const ST: Station = Station(0x99);
+
+    fn records(n: u16, axes: u8) -> Vec<PositionRecord> {
+        (1..=n)
+            .map(|i| {
+                let coords: Vec<(u8, i32)> = (1..=axes).map(|a| (a, i32::from(i) * 10)).collect();
+                PositionRecord::new(i, 30, 30, 100, &coords).unwrap()
+            })
+            .collect()
+    }
+
+    fn reply_26dh(count: u16) -> Vec<u8> {
+        let r = ChangePositionData2Response {
+            number_of_changed_positions: count,
+        };
+        let mut buf = [0u8; 16];
+        let n = r.emit(ST, &mut buf).unwrap();
+        buf[..n].to_vec()
+    }
+
+    fn events(
+        t: &mut Transfer<std::vec::IntoIter<PositionRecord>>,
+        mut bytes: &[u8],
+    ) -> Vec<TransferEvent> {
+        let mut out = Vec::new();
+        loop {
+            let r = t.received(bytes, 10);
+            bytes = &bytes[r.consumed..];
+            if r.event == TransferEvent::NeedMore {
+                return out;
+            }
+            out.push(r.event);
+        }
+    }
+
+    fn transmitted(t: &mut Transfer<std::vec::IntoIter<PositionRecord>>, now: u32) -> Vec<u8> {
+        match t.poll(now) {
+            Step::Transmit(b) => b.to_vec(),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_reply_with_another_count_never_confirms_and_a_reply_before_the_send_is_stale() {
+        let cfg = TransferConfig::tta(ST).with_verify(Verify::Off);
+        let mut t = Transfer::<_>::new(cfg, records(3, 2).into_iter());
+        let frame = transmitted(&mut t, 0);
+        assert_eq!(&frame[..10], b"!9926D0003");
+        // Before `sent`: not a reply to this frame.
+        assert_eq!(events(&mut t, &reply_26dh(3)), [TransferEvent::Stale]);
+        t.sent(5);
+        assert_eq!(
+            events(&mut t, &reply_26dh(2)),
+            [TransferEvent::CountMismatch {
+                sent: 3,
+                reported: 2
+            }]
+        );
+        assert!(matches!(t.poll(10), Step::WaitUntil(3_005)));
+        assert_eq!(
+            events(&mut t, &reply_26dh(3)),
+            [TransferEvent::Confirmed { records: 3 }]
+        );
+        // The turnaround (1 ms, two ticks), then nothing is left to send.
+        assert_eq!(t.poll(20), Step::WaitUntil(22));
+        match t.poll(22) {
+            Step::Complete(r) => {
+                assert_eq!(r.guarantee, Guarantee::Unverified);
+                assert_eq!(r.stats.records_confirmed, 3);
+                assert_eq!(r.stats.count_mismatches, 1);
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn consecutive_frames_never_share_a_count() {
+        // 8-axis records: 24 fit a frame. 48 records go as 24, 23, 1.
+        let cfg = TransferConfig::tta(ST).with_verify(Verify::Off);
+        let mut t = Transfer::<_>::new(cfg, records(48, 8).into_iter());
+        let mut counts = Vec::new();
+        let mut now = 0;
+        loop {
+            match t.poll(now) {
+                Step::Transmit(b) => {
+                    let n =
+                        u16::from_str_radix(std::str::from_utf8(&b[6..10]).unwrap(), 16).unwrap();
+                    counts.push(n);
+                    t.sent(now);
+                    t.received_all(&reply_26dh(n), now + 1);
+                }
+                Step::WaitUntil(d) => now = d,
+                Step::Complete(_) => break,
+                other => panic!("{other:?}"),
+            }
+        }
+        assert_eq!(counts, [24, 23, 1]);
+    }
+
+    #[test]
+    fn a_frame_that_reads_back_different_is_rewritten() {
+        let recs = records(2, 1);
+        let mut t = Transfer::<_>::new(TransferConfig::tta(ST), recs.clone().into_iter());
+        let mut now = 0;
+        let mut writes = 0;
+        let mut stored = recs.clone();
+        stored[1].positions[0] += 1; // the controller holds record 2 altered
+        loop {
+            match t.poll(now) {
+                Step::Transmit(b) if b.starts_with(b"!9926D") => {
+                    writes += 1;
+                    t.sent(now);
+                    if writes > 1 {
+                        stored = recs.clone(); // the rewrite lands
+                    }
+                    t.received_all(&reply_26dh(2), now + 1);
+                }
+                Step::Transmit(b) => {
+                    assert!(
+                        b.starts_with(b"!9921F00010018"),
+                        "a 24-position window from 1"
+                    );
+                    t.sent(now);
+                    let r = EffectivePositionResponse2 {
+                        records: Repeated::from_slice(&stored),
+                    };
+                    let mut buf = [0u8; 128];
+                    let n = r.emit(ST, &mut buf).unwrap();
+                    t.received_all(&buf[..n], now + 1);
+                }
+                Step::WaitUntil(d) => now = d.max(now + 1),
+                Step::Complete(r) => {
+                    assert_eq!(r.guarantee, Guarantee::Verified);
+                    assert_eq!(r.stats.rewrites, 1);
+                    assert_eq!(r.stats.records_verified, 2);
+                    break;
+                }
+                other => panic!("{other:?}"),
+            }
+        }
+        assert_eq!(writes, 2);
+    }
+
+    #[test]
+    fn a_frame_that_stays_different_fails_naming_its_records() {
+        let recs = records(3, 1);
+        let cfg = TransferConfig {
+            rewrites: 1,
+            ..TransferConfig::tta(ST)
+        };
+        let mut t = Transfer::<_>::new(cfg, recs.clone().into_iter());
+        let mut stored = recs.clone();
+        stored.remove(1); // position 2 never gets stored
+        let mut now = 0;
+        let err = loop {
+            match t.poll(now) {
+                Step::Transmit(b) if b.starts_with(b"!9926D") => {
+                    t.sent(now);
+                    t.received_all(&reply_26dh(3), now + 1);
+                }
+                Step::Transmit(_) => {
+                    t.sent(now);
+                    let r = EffectivePositionResponse2 {
+                        records: Repeated::from_slice(&stored),
+                    };
+                    let mut buf = [0u8; 128];
+                    let n = r.emit(ST, &mut buf).unwrap();
+                    t.received_all(&buf[..n], now + 1);
+                }
+                Step::WaitUntil(d) => now = d.max(now + 1),
+                Step::Failed(e) => break e,
+                other => panic!("{other:?}"),
+            }
+        };
+        assert_eq!(
+            err,
+            TransferError::Mismatch {
+                first_position: 2,
+                records: 1
+            }
+        );
+        assert_eq!(t.mismatched_positions().collect::<Vec<_>>(), [2]);
+    }
+}
