@@ -50,6 +50,7 @@ use crate::checksum::{BypassPolicy, ChecksumMode};
 use crate::client::Received;
 use crate::clock::{later, reached};
 use crate::decoder::{Event, FrameDecoder};
+use crate::drive::{self, Engine, Want};
 use crate::error::{Error, BRIDGE_CODES};
 use crate::exchange::{Due, Exchange, ExchangeConfig, Finish, Offer, Quarantine};
 use crate::field::{Reader, Writer};
@@ -634,6 +635,75 @@ fn fnv1a(bytes: &[u8]) -> u32 {
     bytes.iter().fold(0x811C_9DC5, |h, &b| {
         (h ^ u32::from(b)).wrapping_mul(0x0100_0193)
     })
+}
+
+impl<const N: usize> ReadBack<N> {
+    /// Reads every window over a UART, blocking, handing each window's
+    /// records to `sink` as they come.
+    pub fn run_blocking<U, C>(
+        &mut self,
+        uart: &mut U,
+        clock: &mut C,
+        sink: impl FnMut(ReplyRecords<'_>),
+    ) -> Result<ReadBackStats, TransferError<U::Error>>
+    where
+        U: embedded_io::Read + embedded_io::ReadReady + embedded_io::Write,
+        C: crate::clock::Clock,
+    {
+        let mut reading = Reading { rb: self, sink };
+        drive::run_blocking(&mut reading, uart, clock).map_err(TransferError::from_stop)
+    }
+
+    /// [`ReadBack::run_blocking`] over an `embedded-io-async` UART,
+    /// sleeping at most `poll_ms` between checks while it waits.
+    #[cfg(feature = "async")]
+    pub async fn run_async<U, C>(
+        &mut self,
+        uart: &mut U,
+        clock: &mut C,
+        poll_ms: u32,
+        sink: impl FnMut(ReplyRecords<'_>),
+    ) -> Result<ReadBackStats, TransferError<U::Error>>
+    where
+        U: embedded_io_async::Read + embedded_io_async::ReadReady + embedded_io_async::Write,
+        C: crate::clock::AsyncClock,
+    {
+        let mut reading = Reading { rb: self, sink };
+        drive::run_async(&mut reading, uart, clock, poll_ms)
+            .await
+            .map_err(TransferError::from_stop)
+    }
+}
+
+/// A read-back with somewhere to put its records: what the flavours drive.
+struct Reading<'r, const N: usize, F> {
+    rb: &'r mut ReadBack<N>,
+    sink: F,
+}
+
+impl<const N: usize, F: FnMut(ReplyRecords<'_>)> Engine for Reading<'_, N, F> {
+    type Output = ReadBackStats;
+    type Error = TransferError;
+    fn feed(&mut self, bytes: &[u8], now: u32) {
+        // What follows a window's reply arrived before the next query was
+        // sent: it can be no reply to it.
+        self.rb.received_all(bytes, now);
+    }
+    fn want(&mut self, now: u32) -> Want<'_, Result<ReadBackStats, TransferError>> {
+        match self.rb.poll(now) {
+            ReadStep::Transmit(bytes) => Want::Transmit(bytes),
+            ReadStep::WaitUntil(t) => Want::WaitUntil(t),
+            ReadStep::Records(records) => {
+                (self.sink)(records);
+                Want::WaitUntil(now)
+            }
+            ReadStep::Complete(stats) => Want::Done(Ok(stats)),
+            ReadStep::Failed(e) => Want::Done(Err(e)),
+        }
+    }
+    fn sent(&mut self, now: u32) {
+        self.rb.sent(now);
+    }
 }
 
 /// What [`ReadBack`] needs of a frame after the decoder moves on.

@@ -101,6 +101,7 @@ use crate::checksum::{BypassPolicy, ChecksumMode};
 use crate::client::Received;
 use crate::clock::{reached, Clock};
 use crate::decoder::{Event, FrameDecoder};
+use crate::drive::{self, Engine, Stop, Want};
 use crate::error::{Error, BRIDGE_CODES};
 use crate::exchange::{Due, Exchange, ExchangeConfig, Finish, Offer, Quarantine};
 use crate::field::{move_within, FieldSpec, Reader, Writer};
@@ -1505,13 +1506,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         U: embedded_io::Read + embedded_io::ReadReady + embedded_io::Write,
         C: Clock,
     {
-        loop {
-            match self.poll_nb(uart, clock) {
-                Ok(report) => return Ok(report),
-                Err(nb::Error::Other(e)) => return Err(e),
-                Err(nb::Error::WouldBlock) => clock.idle(),
-            }
-        }
+        drive::run_blocking(self, uart, clock).map_err(TransferError::from_stop)
     }
 
     /// Makes what progress is possible without waiting: reads the bytes
@@ -1528,41 +1523,18 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         U: embedded_io::Read + embedded_io::ReadReady + embedded_io::Write,
         C: Clock,
     {
-        let io = |e| nb::Error::Other(TransferError::Io(e));
-        let mut buf = [0u8; 32];
-        while uart.read_ready().map_err(io)? {
-            let n = uart.read(&mut buf).map_err(io)?;
-            if n == 0 {
-                break;
-            }
-            let now = clock.now_ms();
-            self.received_all(buf.get(..n).unwrap_or(&[]), now);
-        }
-        match self.poll(clock.now_ms()) {
-            Step::Transmit(bytes) => {
-                uart.write_all(bytes).map_err(io)?;
-                uart.flush().map_err(io)?;
-                let end = clock.now_ms();
-                self.sent(end);
-                Err(nb::Error::WouldBlock)
-            }
-            Step::WaitUntil(_) | Step::NeedRecords => Err(nb::Error::WouldBlock),
-            Step::Complete(report) => Ok(report),
-            Step::Failed(e) => Err(nb::Error::Other(e.widen())),
-        }
+        drive::poll_nb(self, uart, clock).map_err(|e| e.map(TransferError::from_stop))
     }
-}
 
-#[cfg(feature = "async")]
-impl<I: RecordSource, const N: usize> Transfer<I, N> {
     /// Runs the transfer to the end over an `embedded-io-async` UART.
     ///
-    /// While waiting for a reply it polls [`embedded_io_async::ReadReady`]
-    /// and sleeps `poll_ms` between checks, so the deadline is always seen
-    /// even if no byte ever arrives. The clock is read after each write, so
-    /// the reply timeout starts at the end of the transmission. A
+    /// While waiting it checks [`embedded_io_async::ReadReady`] and sleeps
+    /// at most `poll_ms` between checks, so the deadline is always seen
+    /// even if no byte arrives. The clock is read after each write, so the
+    /// reply timeout starts at the end of the transmission. A
     /// [`RecordQueue`] source is filled by whoever owns the transfer
     /// between calls; here a pending source just sleeps.
+    #[cfg(feature = "async")]
     pub async fn run_async<U, C>(
         &mut self,
         uart: &mut U,
@@ -1573,33 +1545,37 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         U: embedded_io_async::Read + embedded_io_async::ReadReady + embedded_io_async::Write,
         C: crate::clock::AsyncClock,
     {
-        let mut buf = [0u8; 32];
-        loop {
-            while uart.read_ready().map_err(TransferError::Io)? {
-                let n = uart.read(&mut buf).await.map_err(TransferError::Io)?;
-                if n == 0 {
-                    break;
-                }
-                let now = clock.now_ms();
-                self.received_all(buf.get(..n).unwrap_or(&[]), now);
-            }
-            let now = clock.now_ms();
-            match self.poll(now) {
-                Step::Transmit(bytes) => {
-                    uart.write_all(bytes).await.map_err(TransferError::Io)?;
-                    uart.flush().await.map_err(TransferError::Io)?;
-                    let end = clock.now_ms();
-                    self.sent(end);
-                }
-                Step::WaitUntil(t) => {
-                    clock
-                        .sleep_ms(t.wrapping_sub(now).clamp(1, poll_ms.max(1)))
-                        .await
-                }
-                Step::NeedRecords => clock.sleep_ms(poll_ms.max(1)).await,
-                Step::Complete(report) => return Ok(report),
-                Step::Failed(e) => return Err(e.widen()),
-            }
+        drive::run_async(self, uart, clock, poll_ms)
+            .await
+            .map_err(TransferError::from_stop)
+    }
+}
+
+impl<I: RecordSource, const N: usize> Engine for Transfer<I, N> {
+    type Output = TransferReport;
+    type Error = TransferError;
+    fn feed(&mut self, bytes: &[u8], now: u32) {
+        self.received_all(bytes, now);
+    }
+    fn want(&mut self, now: u32) -> Want<'_, Result<TransferReport, TransferError>> {
+        match self.poll(now) {
+            Step::Transmit(bytes) => Want::Transmit(bytes),
+            Step::WaitUntil(t) => Want::WaitUntil(t),
+            Step::NeedRecords => Want::Idle,
+            Step::Complete(report) => Want::Done(Ok(report)),
+            Step::Failed(e) => Want::Done(Err(e)),
+        }
+    }
+    fn sent(&mut self, now: u32) {
+        Transfer::sent(self, now);
+    }
+}
+
+impl<E> TransferError<E> {
+    pub(crate) fn from_stop(stop: Stop<TransferError, E>) -> Self {
+        match stop {
+            Stop::Engine(e) => e.widen(),
+            Stop::Io(e) => TransferError::Io(e),
         }
     }
 }

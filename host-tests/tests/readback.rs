@@ -110,3 +110,65 @@ fn read_back_of_a_sparse_table_with_faults_skips_nothing() {
     assert_eq!(got, recs);
     assert!(stats.retries > 0 && stats.timeouts > 0);
 }
+
+/// The simulator behind a blocking `embedded-io` UART on a virtual clock.
+struct SimPort<'s> {
+    sim: &'s mut Simulator,
+    now: std::rc::Rc<std::cell::Cell<u32>>,
+    inbox: std::collections::VecDeque<u8>,
+}
+
+impl embedded_io::ErrorType for SimPort<'_> {
+    type Error = std::convert::Infallible;
+}
+impl embedded_io::ReadReady for SimPort<'_> {
+    fn read_ready(&mut self) -> Result<bool, Self::Error> {
+        self.inbox.extend(self.sim.take_output(self.now.get()));
+        Ok(!self.inbox.is_empty())
+    }
+}
+impl embedded_io::Read for SimPort<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
+        let n = buf.len().min(self.inbox.len());
+        for (slot, b) in buf.iter_mut().zip(self.inbox.drain(..n)) {
+            *slot = b;
+        }
+        Ok(n)
+    }
+}
+impl embedded_io::Write for SimPort<'_> {
+    fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+        self.sim.receive(buf, self.now.get());
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}
+
+#[test]
+fn the_blocking_flavour_hands_every_window_to_the_sink() {
+    let mut sim = Simulator::tta(ST);
+    for r in table(300, 4, 8) {
+        sim.table.insert(r.number, r);
+    }
+    let now = std::rc::Rc::new(std::cell::Cell::new(0u32));
+    let tick = now.clone();
+    // The clock advances a millisecond each time the engine reads it.
+    let mut clock = move || {
+        tick.set(tick.get() + 1);
+        tick.get()
+    };
+    let mut port = SimPort {
+        sim: &mut sim,
+        now,
+        inbox: Default::default(),
+    };
+    let mut rb: ReadBack = ReadBack::new(ReadBackConfig::tta(ST, 1, 300));
+    let mut got = Vec::new();
+    let stats = rb
+        .run_blocking(&mut port, &mut clock, |records| got.extend(records))
+        .unwrap();
+    assert_eq!(got, table(300, 4, 8).collect::<Vec<_>>());
+    assert_eq!(stats.windows_confirmed, 300u32.div_ceil(24));
+}
