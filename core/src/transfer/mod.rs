@@ -58,7 +58,8 @@
 //! held for retries, and rewrites the frame when one differs (up to
 //! `rewrites` times, then [`TransferError::Mismatch`] naming the first
 //! differing position). The reply is compared as it streams in through a
-//! [`PositionStreamDecoder`] (no second frame buffer); a comparison counts
+//! [`PositionStreamDecoder`](crate::stream::PositionStreamDecoder) (no
+//! second frame buffer); a comparison counts
 //! only when the reply's SC, station and ID check out.
 //!
 //! What is compared: every field the write sends (position number, axis

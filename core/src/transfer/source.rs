@@ -41,8 +41,8 @@ impl<I: Iterator<Item = PositionRecord>> RecordSource for I {
 }
 
 /// A bounded FIFO of records that a producer fills as they arrive (for
-/// example from a [`PositionStreamDecoder`])
-/// and a [`Transfer`] drains. It is pending while empty, until
+/// example from a [`PositionStreamDecoder`](crate::stream::PositionStreamDecoder))
+/// and a [`Transfer`](super::Transfer) drains. It is pending while empty, until
 /// [`RecordQueue::finish`].
 #[derive(Debug, Clone, Default)]
 pub struct RecordQueue<const Q: usize> {
