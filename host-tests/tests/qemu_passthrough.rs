@@ -8,7 +8,7 @@
 
 use std::time::{Duration, Instant};
 
-use host_tests::bridge::{exchange, SimThread};
+use host_tests::bridge::{HostLink, SimThread};
 use host_tests::qemu::{build_firmware, Board, QemuSession};
 use host_tests::sim::Simulator;
 use iai_protocol_b::axis::AxisPattern;
@@ -37,14 +37,11 @@ fn bridges_a_query_and_quits(board: Board) {
     let mut oracle = Simulator::tta(STATION);
     oracle.receive(&buf[..n], 0);
     let want = oracle.take_output(1_000);
-    let got = exchange(
-        &mut qemu.upstream,
-        &buf[..n],
-        Duration::from_secs(5),
-        |_| {},
-    )
-    .expect("exchange")
-    .expect("a reply through the bridge");
+    let link = HostLink::new(&qemu.upstream, Some(115_200), true).expect("host link");
+    let got = link
+        .exchange(&buf[..n], Duration::from_secs(5))
+        .expect("exchange")
+        .expect("a reply through the bridge");
     assert_eq!(got, want);
 
     qemu.quit().expect("send quit sequence");
