@@ -1,14 +1,15 @@
 //! Link setup for the board binaries.
 //!
-//! * Memory maps live at the repository root: `memory.x` for the QEMU
-//!   boards, `memory-stm32g030.x` for the STM32G030. cortex-m-rt's `link.x`
-//!   includes `memory.x` from the linker search path. The `lm3s6965` device
-//!   crate puts a `memory.x` of its own on that path too, so which one the
-//!   linker takes would depend on the order of search paths. The root map
-//!   therefore defines `_bridge_config` (the address of the configuration
-//!   block), which the boards reference: linking with any other map fails
-//!   with an undefined symbol, and `tools/size-report.sh` prints the symbol
-//!   from each ELF. There must be no `memory.x` in this crate's folder.
+//! * Memory maps live at the repository root. cortex-m-rt's `link.x`
+//!   includes `memory.x`; the linker finds the root one first (it runs in
+//!   the repository root), ahead of the `memory.x` that the `lm3s6965`
+//!   device crate puts on the search path. The root `memory.x` includes
+//!   `board-memory.x`, which this script copies from the board's
+//!   `memory-<board>.x` into its output folder and puts on the search
+//!   path. The root map defines `_bridge_config`, which the boards
+//!   reference: a link with any other `memory.x` fails (undefined symbol),
+//!   and `tools/size-report.sh` prints the symbol from each ELF. There must
+//!   be no `memory.x` in this crate's folder.
 //! * The device crates (`lm3s6965`, `mps2-an386`, `stm32g0`) provide
 //!   `device.x` and the interrupt vector table for cortex-m-rt's `device`
 //!   feature.
@@ -46,24 +47,32 @@ fn main() {
     );
 
     let map = if env::var_os("CARGO_FEATURE_BOARD_STM32G030").is_some() {
-        // link.x includes "memory.x": give the G0 map that name in a folder
-        // of our own.
-        let src = repo_root.join("memory-stm32g030.x");
-        let dir = PathBuf::from(env::var_os("OUT_DIR").expect("OUT_DIR")).join("stm32g030");
-        fs::create_dir_all(&dir).expect("create map folder");
-        fs::copy(&src, dir.join("memory.x")).expect("copy memory-stm32g030.x");
-        println!("cargo:rustc-link-search={}", dir.display());
-        src
+        "memory-stm32g030.x"
     } else {
-        println!("cargo:rustc-link-search={}", repo_root.display());
-        repo_root.join("memory.x")
+        "memory-qemu.x"
     };
+    let map = repo_root.join(map);
     assert!(
         map.is_file(),
         "expected the memory map at {}",
         map.display()
     );
+    assert!(
+        repo_root.join("memory.x").is_file(),
+        "expected the root memory.x"
+    );
+    let dir = PathBuf::from(env::var_os("OUT_DIR").expect("OUT_DIR")).join("map");
+    fs::create_dir_all(&dir).expect("create the map folder");
+    fs::copy(&map, dir.join("board-memory.x")).expect("copy the board's memory map");
+    println!("cargo:rustc-link-search={}", dir.display());
+    // Also on the search path, ahead of the device crates' folders, for a
+    // linker that does not run in the repository root.
+    println!("cargo:rustc-link-search={}", repo_root.display());
     println!("cargo:rerun-if-changed={}", map.display());
+    println!(
+        "cargo:rerun-if-changed={}",
+        repo_root.join("memory.x").display()
+    );
     println!("cargo:rustc-link-arg-bins=-Tlink.x");
     if env::var_os("CARGO_FEATURE_DEFMT").is_some() {
         println!("cargo:rustc-link-arg-bins=-Tdefmt.x");

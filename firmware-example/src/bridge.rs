@@ -1318,8 +1318,8 @@ mod tests {
         settle(&mut b, &mut up, &mut down, 7);
         settle(&mut b, &mut up, &mut down, 8);
         assert!(down.output.is_empty());
-        let status = Frame::new_checked(&up.output[..status::REPLY_LEN], BypassPolicy::Reject)
-            .unwrap();
+        let status =
+            Frame::new_checked(&up.output[..status::REPLY_LEN], BypassPolicy::Reject).unwrap();
         let fields = status::parse(status.body()).unwrap();
         assert_eq!(fields[1], ("uptime_ms", 7));
         assert_eq!(fields[16], ("own_queries", 1));

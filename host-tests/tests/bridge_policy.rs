@@ -85,7 +85,10 @@ fn command() -> impl Strategy<Value = (u8, u16, Vec<u8>, bool)> {
             0x200u16..0x300,
             0u16..0x1000,
         ],
-        proptest::collection::vec(proptest::sample::select(b"0123456789ABCDEF".to_vec()), 0..40),
+        proptest::collection::vec(
+            proptest::sample::select(b"0123456789ABCDEF".to_vec()),
+            0..40,
+        ),
         any::<bool>(),
     )
 }

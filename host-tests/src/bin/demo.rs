@@ -11,8 +11,9 @@
 //! and the firmware's measured stack peak. It asserts no timing.
 //!
 //! Run through `./tools/demo.sh`. Options: `--records N` (1..=20000),
-//! `--baud B`, `--board lm3s6965|mps2-an386`, `--faults SEED` (controller
-//! faults: flipped bits, dropped and `&` replies), `--elf PATH`,
+//! `--baud B`, `--processing-ms MS` (the controller's time per command,
+//! default 50), `--board lm3s6965|mps2-an386`, `--faults SEED` (controller
+//! faults: flipped reply bits, dropped and `&` replies), `--elf PATH`,
 //! `--timeout SECS` (whole run, default 600). Exit code 0 only if the
 //! simulator's table equals the source and QEMU exited cleanly.
 
@@ -35,6 +36,7 @@ use iai_protocol_b::frame::{emit_frame, Frame, Header};
 
 struct Options {
     records: u16,
+    processing_ms: u32,
     baud: u32,
     board: Board,
     faults: Option<u64>,
@@ -45,6 +47,7 @@ struct Options {
 fn parse_args() -> Result<Options, String> {
     let mut o = Options {
         records: 20_000,
+        processing_ms: 50,
         baud: 115_200,
         board: Board::Lm3s6965,
         faults: None,
@@ -61,6 +64,11 @@ fn parse_args() -> Result<Options, String> {
                     .ok()
                     .filter(|n| (1..=20_000).contains(n))
                     .ok_or("--records takes 1..=20000")?;
+            }
+            "--processing-ms" => {
+                o.processing_ms = value()?
+                    .parse()
+                    .map_err(|_| "--processing-ms takes milliseconds".to_owned())?;
             }
             "--baud" => {
                 o.baud = value()?
@@ -92,7 +100,7 @@ fn parse_args() -> Result<Options, String> {
                 );
             }
             "-h" | "--help" => {
-                return Err("usage: demo [--records N] [--baud B] [--board NAME] [--faults SEED] [--elf PATH] [--timeout SECS]".to_owned())
+                return Err("usage: demo [--records N] [--baud B] [--processing-ms MS] [--board NAME] [--faults SEED] [--elf PATH] [--timeout SECS]".to_owned())
             }
             other => return Err(format!("unknown argument {other:?} (try --help)")),
         }
@@ -103,6 +111,8 @@ fn parse_args() -> Result<Options, String> {
 /// A text progress bar on stderr: records the controller has written.
 fn progress_bar(done: usize, total: usize, started: Instant) {
     const WIDTH: usize = 40;
+    // Records written again after a re-send count once.
+    let done = done.min(total);
     let filled = (done * WIDTH).checked_div(total).unwrap_or(WIDTH);
     let secs = started.elapsed().as_secs_f64();
     let rate = if secs > 0.0 { done as f64 / secs } else { 0.0 };
@@ -187,10 +197,11 @@ fn run() -> Result<(), String> {
             .unwrap_or_default()
     );
     let mut sim = Simulator::tta(station);
+    sim.response_delay_ms = o.processing_ms;
     if let Some(seed) = o.faults {
         sim = sim.with_faults(
             Faults {
-                flip_bit_out: 0.0005,
+                flip_bit_out: 0.001,
                 drop_every_nth_reply: Some(25),
                 error_reply: 0.05,
                 garbage_before_reply: 0.05,
