@@ -87,3 +87,33 @@ fn mps2_an386_firmware_builds_and_links() {
         "not an ARM ELF"
     );
 }
+
+/// The watchdog (modelled by QEMU on both boards) resets a board whose loop
+/// stalls: a build with the `stall` feature stops feeding it after start,
+/// and the firmware boots again.
+#[test]
+fn the_watchdog_resets_a_stalled_loop() {
+    for board in Board::ALL {
+        let dir = host_tests::qemu::target_dir().join("stall");
+        let elf = host_tests::qemu::build_firmware_with(
+            board,
+            host_tests::qemu::FIRMWARE_PROFILE,
+            &["stall"],
+            Some(&dir),
+        )
+        .unwrap_or_else(|e| panic!("build {board} with the stall feature: {e}"));
+        let qemu = QemuSession::start(board, &elf, Duration::from_secs(10)).expect("start QEMU");
+        // Up to two watchdog periods of 2 s, plus margin for a slow host.
+        let deadline = Instant::now() + Duration::from_secs(30);
+        let boots = loop {
+            let out = qemu.stdout_so_far();
+            let boots = out.matches("bridge up").count();
+            if boots >= 2 || Instant::now() >= deadline {
+                break boots;
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        };
+        assert!(boots >= 2, "{board}: no reset after the loop stalled");
+        eprintln!("{board}: reset by the watchdog");
+    }
+}

@@ -14,6 +14,10 @@
 //! in the host model.
 #![no_std]
 #![no_main]
+#![cfg_attr(
+    feature = "stall",
+    allow(unreachable_code, unused_variables, unused_mut)
+)]
 
 #[path = "../runtime.rs"]
 mod runtime;
@@ -256,6 +260,12 @@ fn main() -> ! {
         source, cfg.flow
     ));
 
+    #[cfg(feature = "stall")]
+    {
+        runtime::host_print(format_args!("firmware-example: stalling the loop\n"));
+        #[allow(clippy::empty_loop)]
+        loop {}
+    }
     let rts_cts = cfg.flow == FlowControl::RtsCts;
     let result = bridge::run(
         bridge,

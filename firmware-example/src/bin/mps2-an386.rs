@@ -13,6 +13,10 @@
 //! of bridging (see `src/bench.rs`).
 #![no_std]
 #![no_main]
+#![cfg_attr(
+    feature = "stall",
+    allow(unreachable_code, unused_variables, unused_mut)
+)]
 #![cfg_attr(feature = "bench", allow(dead_code, unused_imports, unreachable_code))]
 
 #[path = "../runtime.rs"]
@@ -229,6 +233,12 @@ fn main() -> ! {
         source, cfg.flow
     ));
 
+    #[cfg(feature = "stall")]
+    {
+        runtime::host_print(format_args!("firmware-example: stalling the loop\n"));
+        #[allow(clippy::empty_loop)]
+        loop {}
+    }
     let result = bridge::run(
         bridge,
         &mut up,
