@@ -93,3 +93,42 @@ fn without_flow_control_the_loss_shows_and_the_bridge_answers_b07() {
         assert!(sim.table.len() < 2_000);
     }
 }
+
+/// The marks leave room for the host's latency: a host that stops within
+/// [`HOST_LATENCY`](firmware_example::serial::HOST_LATENCY) bytes (and a
+/// good deal more) never overruns; one that sends 120 bytes after XOFF
+/// does, and the bridge says so with B07 instead of a false `#`.
+#[test]
+fn host_latency_within_the_margin_never_overruns() {
+    for (latency, overruns_expected) in [
+        (0, false),
+        (4, false),
+        (17, false),
+        (60, false),
+        (120, true),
+    ] {
+        let mut cfg = ModelConfig::new(115_200, FlowControl::XonXoff);
+        cfg.host_latency = latency;
+        let station = cfg.bridge.controller_station;
+        let records: Vec<_> = table(300, 8, 3).collect();
+        let cmd = command_26dh(station, &records);
+        let mut sim = Simulator::tta(station);
+        sim.response_delay_ms = PROCESSING_MS;
+        let mut bridge = model::bridge(&cfg.bridge);
+        let r = model::run(&cfg, &mut bridge, &mut sim, &[&cmd]);
+        eprintln!(
+            "host latency {latency} bytes: {} overruns, ring peak {}",
+            r.overruns, r.max_ring
+        );
+        if overruns_expected {
+            assert!(r.overruns > 0);
+            assert_eq!(
+                r.replies,
+                vec![Some(error_reply(station, codes::UPSTREAM_OVERRUN))]
+            );
+        } else {
+            assert_eq!(r.overruns, 0);
+            assert_eq!(r.replies, vec![Some(reply_26dh(station, 300))]);
+        }
+    }
+}
