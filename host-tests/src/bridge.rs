@@ -13,6 +13,8 @@ pub mod model;
 use std::collections::{BTreeMap, VecDeque};
 use std::io::{self, Read, Write};
 use std::net::TcpStream;
+use std::os::fd::AsRawFd;
+use std::os::unix::net::UnixStream;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::thread::{self, JoinHandle};
@@ -158,6 +160,15 @@ pub fn error_reply(station: Station, code: u16) -> Vec<u8> {
 /// few bytes.
 const HOST_CHUNK: usize = 8;
 
+/// `ioctl` request: bytes written to a socket that its peer has not read
+/// yet (for a Unix stream socket: the memory they take, 0 once all are
+/// read).
+const SIOCOUTQ: u64 = 0x5411;
+
+extern "C" {
+    fn ioctl(fd: i32, request: u64, ...) -> i32;
+}
+
 /// What the host's receive thread shares with the writer.
 #[derive(Default)]
 struct LinkRx {
@@ -187,8 +198,15 @@ pub struct LinkStats {
 /// with `xon_xoff`, received XOFF/XON bytes stop and restart the writer and
 /// never reach the reader (a UART driver with IXON on). Methods take
 /// `&self`: one thread may send while another reads.
+///
+/// A wire holds no bytes: what a host sends reaches the UART one byte time
+/// later. QEMU is not real time: when the machine is busy it may not run
+/// for milliseconds, and would then take in at once all a paced writer
+/// sent meanwhile, a burst no UART sees. So the link writes its next few
+/// bytes only once QEMU has read the previous ones (the socket's unread
+/// count, `SIOCOUTQ`): while QEMU stands still, so does the line.
 pub struct HostLink {
-    writer: TcpStream,
+    writer: UnixStream,
     rx: Arc<(Mutex<LinkRx>, Condvar)>,
     baud: Option<u32>,
     xon_xoff: bool,
@@ -197,7 +215,7 @@ pub struct HostLink {
 
 impl HostLink {
     /// A link on `stream` (the session's upstream socket).
-    pub fn new(stream: &TcpStream, baud: Option<u32>, xon_xoff: bool) -> io::Result<Self> {
+    pub fn new(stream: &UnixStream, baud: Option<u32>, xon_xoff: bool) -> io::Result<Self> {
         let writer = stream.try_clone()?;
         let mut reader = stream.try_clone()?;
         reader.set_read_timeout(None)?;
@@ -274,6 +292,31 @@ impl HostLink {
         Ok(start.elapsed())
     }
 
+    /// Wait (at most `limit`) until the peer has read everything written;
+    /// returns the time waited.
+    fn wait_until_read(&self, limit: Duration) -> io::Result<Duration> {
+        let start = Instant::now();
+        loop {
+            let mut unread: i32 = 0;
+            // SAFETY: SIOCOUTQ writes one int through the pointer; the fd
+            // is this link's open socket.
+            let rc = unsafe { ioctl(self.writer.as_raw_fd(), SIOCOUTQ, &mut unread) };
+            if rc != 0 {
+                return Err(io::Error::last_os_error());
+            }
+            if unread == 0 {
+                return Ok(start.elapsed());
+            }
+            if start.elapsed() >= limit {
+                return Err(io::Error::new(
+                    io::ErrorKind::TimedOut,
+                    format!("QEMU read nothing for {limit:?}"),
+                ));
+            }
+            thread::sleep(Duration::from_micros(50));
+        }
+    }
+
     /// Write `bytes` upstream at the link's rate, honouring XOFF; calls
     /// `progress` with the bytes written so far.
     pub fn send(&self, bytes: &[u8], mut progress: impl FnMut(usize)) -> io::Result<()> {
@@ -295,6 +338,12 @@ impl HostLink {
             };
             if !waited.is_zero() {
                 paused += waited;
+                base = Instant::now();
+                since_base = 0;
+            }
+            let waited = self.wait_until_read(Duration::from_secs(60))?;
+            if waited > Duration::from_millis(1) {
+                // QEMU stood still: the line restarts from now.
                 base = Instant::now();
                 since_base = 0;
             }

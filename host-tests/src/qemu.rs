@@ -6,9 +6,9 @@
 //! made the first test of a board pay for the whole optimised build: the
 //! mps2-an386 pass-through test took about 9 s, nearly all of it cargo).
 //! [`QemuSession::start`] boots an ELF with both serial ports wired to TCP
-//! sockets on the loopback interface: [`QemuSession::upstream`] is the
-//! first serial port (the host side of the bridge), [`QemuSession::downstream`]
-//! the second (the controller side), and a configuration block (see
+//! sockets: [`QemuSession::upstream`] is the first serial port (the host
+//! side of the bridge, a Unix socket), [`QemuSession::downstream`] the
+//! second (the controller side, TCP on the loopback interface), and a configuration block (see
 //! `firmware_example::config`) loaded into the flash page at the ELF's
 //! `_bridge_config` symbol. The firmware ends the run through semihosting
 //! `exit`, which becomes QEMU's exit code (0 on success).
@@ -22,6 +22,7 @@
 use std::fmt;
 use std::io::{self, Read, Write};
 use std::net::{Ipv4Addr, TcpListener, TcpStream};
+use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -234,7 +235,7 @@ impl ExitOutcome {
 /// A running QEMU with both serial ports connected.
 pub struct QemuSession {
     /// First serial port: the host side of the bridge.
-    pub upstream: TcpStream,
+    pub upstream: UnixStream,
     /// Second serial port: the controller side of the bridge.
     pub downstream: TcpStream,
     board: Board,
@@ -393,9 +394,19 @@ impl QemuSession {
             Some(cfg) => Some(config_loader_arg(elf, cfg)?),
             None => None,
         };
-        let upstream_listener = TcpListener::bind((Ipv4Addr::LOCALHOST, 0))?;
+        // The upstream is a Unix socket: its sender can tell how much QEMU
+        // has not read yet (see `HostLink`).
+        static SOCKETS: AtomicU32 = AtomicU32::new(0);
+        let sock_dir = target_dir().join("qemu-sockets");
+        std::fs::create_dir_all(&sock_dir)?;
+        let sock = sock_dir.join(format!(
+            "up-{}-{}.sock",
+            std::process::id(),
+            SOCKETS.fetch_add(1, Ordering::Relaxed)
+        ));
+        let _ = std::fs::remove_file(&sock);
+        let upstream_listener = UnixListener::bind(&sock)?;
         let downstream_listener = TcpListener::bind((Ipv4Addr::LOCALHOST, 0))?;
-        let p0 = upstream_listener.local_addr()?.port();
         let p1 = downstream_listener.local_addr()?.port();
 
         let mut command = Command::new(QEMU);
@@ -404,7 +415,7 @@ impl QemuSession {
             .args(["-nographic", "-monitor", "none"])
             .args(["-semihosting-config", "enable=on,target=native"])
             .arg("-chardev")
-            .arg(format!("socket,id=u0,host=127.0.0.1,port={p0}"))
+            .arg(format!("socket,id=u0,path={}", sock.display()))
             .args(["-serial", "chardev:u0"])
             .arg("-chardev")
             .arg(format!("socket,id=u1,host=127.0.0.1,port={p1}"))
@@ -429,7 +440,7 @@ impl QemuSession {
         let stderr = child.stderr.take().map(Capture::spawn).unwrap_or_default();
 
         let deadline = Instant::now() + timeout;
-        let accepted = accept_until(&upstream_listener, &mut child, deadline)
+        let accepted = accept_unix_until(&upstream_listener, &mut child, deadline)
             .and_then(|up| {
                 let down = accept_until(&downstream_listener, &mut child, deadline)?;
                 Ok((up, down))
@@ -441,6 +452,7 @@ impl QemuSession {
                 )),
                 _ => Ok(streams),
             });
+        let _ = std::fs::remove_file(&sock);
         let (upstream, downstream) = match accepted {
             Ok(streams) => streams,
             Err(e) => {
@@ -468,12 +480,14 @@ impl QemuSession {
             stdout,
             stderr,
         };
-        for stream in [&session.upstream, &session.downstream] {
-            stream.set_nonblocking(false)?;
-            stream.set_nodelay(true)?;
-            stream.set_read_timeout(Some(timeout))?;
-            stream.set_write_timeout(Some(timeout))?;
-        }
+        session.upstream.set_nonblocking(false)?;
+        session.upstream.set_read_timeout(Some(timeout))?;
+        session.upstream.set_write_timeout(Some(timeout))?;
+        let down = &session.downstream;
+        down.set_nonblocking(false)?;
+        down.set_nodelay(true)?;
+        down.set_read_timeout(Some(timeout))?;
+        down.set_write_timeout(Some(timeout))?;
         Ok(session)
     }
 
@@ -657,6 +671,32 @@ pub fn config_loader_arg(elf: &Path, cfg: &Config) -> io::Result<String> {
     ));
     std::fs::write(&file, cfg.to_block())?;
     Ok(format!("loader,file={},addr={addr:#x}", file.display()))
+}
+
+/// [`accept_until`] for a Unix socket.
+fn accept_unix_until(
+    listener: &UnixListener,
+    child: &mut Child,
+    deadline: Instant,
+) -> io::Result<UnixStream> {
+    listener.set_nonblocking(true)?;
+    loop {
+        match listener.accept() {
+            Ok((stream, _)) => return Ok(stream),
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
+            Err(e) => return Err(e),
+        }
+        if let Some(status) = child.try_wait()? {
+            return Err(io::Error::other(format!("QEMU exited early with {status}")));
+        }
+        if Instant::now() >= deadline {
+            return Err(io::Error::new(
+                io::ErrorKind::TimedOut,
+                "timed out waiting for QEMU to connect",
+            ));
+        }
+        thread::sleep(Duration::from_millis(5));
+    }
 }
 
 /// Accept one connection on `listener` before `deadline`, giving up early

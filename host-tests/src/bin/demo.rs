@@ -12,7 +12,7 @@
 //!
 //! Run through `./tools/demo.sh`. Options: `--records N` (1..=20000),
 //! `--baud B`, `--processing-ms MS` (the controller's time per command,
-//! default 50), `--board lm3s6965|mps2-an386`, `--faults SEED` (controller
+//! default 100), `--board lm3s6965|mps2-an386`, `--faults SEED` (controller
 //! faults: flipped reply bits, dropped and `&` replies), `--elf PATH`,
 //! `--timeout SECS` (whole run, default 600). Exit code 0 only if the
 //! simulator's table equals the source and QEMU exited cleanly.
@@ -47,7 +47,7 @@ struct Options {
 fn parse_args() -> Result<Options, String> {
     let mut o = Options {
         records: 20_000,
-        processing_ms: 50,
+        processing_ms: 100,
         baud: 115_200,
         board: Board::Lm3s6965,
         faults: None,
