@@ -3,14 +3,21 @@
 //! exit, and the fault handlers. Included by each `src/bin/<board>.rs` with
 //! `#[path]` (it is not part of the host-testable library).
 
+use core::cell::RefCell;
 use core::fmt::Write as _;
+use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicU32, Ordering};
 
+use cortex_m::interrupt::Mutex;
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::SYST;
 use cortex_m_rt::{exception, ExceptionFrame};
 use cortex_m_semihosting::{debug, hio};
+use firmware_example::bridge::Bridge;
 use firmware_example::config::{Config, Source, BLOCK_LEN};
+use firmware_example::serial::{
+    DownstreamLine, FlowControl, IsrEnd, ThreadEnd, UpstreamLine, DOWNSTREAM_MARKS, UPSTREAM_MARKS,
+};
 
 /// System tick rate of [`now_ms`].
 pub const TICK_HZ: u32 = 1_000;
@@ -50,6 +57,69 @@ pub fn sleep_unless(ready: &mut dyn FnMut() -> bool) {
             cortex_m::asm::wfi();
         }
     });
+}
+
+/// Where `main` hands a line's interrupt end to its handler.
+pub type Handoff = Mutex<RefCell<Option<IsrEnd<'static>>>>;
+
+/// An empty [`Handoff`].
+pub const fn handoff() -> Handoff {
+    Mutex::new(RefCell::new(None))
+}
+
+/// Runs `f` on a line's interrupt end, taking it from `handoff` on first
+/// use (`slot` is the handler's own `static mut`).
+pub fn with_end(
+    slot: &mut Option<IsrEnd<'static>>,
+    handoff: &Handoff,
+    f: impl FnOnce(&mut IsrEnd<'static>),
+) {
+    if slot.is_none() {
+        *slot = cortex_m::interrupt::free(|cs| handoff.borrow(cs).borrow_mut().take());
+    }
+    if let Some(end) = slot {
+        f(end);
+    }
+}
+
+/// The statics a board gives [`setup`].
+pub struct Statics {
+    /// Room for the bridge.
+    pub bridge: &'static mut MaybeUninit<Bridge>,
+    /// The host line.
+    pub up: &'static mut UpstreamLine,
+    /// The controller line.
+    pub down: &'static mut DownstreamLine,
+    /// Pends the host UART's interrupt.
+    pub pend_up: &'static dyn Fn(),
+    /// Pends the controller UART's interrupt.
+    pub pend_down: &'static dyn Fn(),
+    /// Hand-off to the host UART's handler.
+    pub up_end: &'static Handoff,
+    /// Hand-off to the controller UART's handler.
+    pub down_end: &'static Handoff,
+}
+
+/// Builds the bridge from `cfg`, splits both lines and hands their
+/// interrupt ends over; the caller unmasks the interrupts afterwards.
+/// Not inlined, so that its stack frame (the bridge is built on the way
+/// into its static) is gone before the loop runs.
+#[inline(never)]
+pub fn setup(
+    s: Statics,
+    cfg: Config,
+    source: Source,
+) -> (&'static mut Bridge, ThreadEnd<'static>, ThreadEnd<'static>) {
+    let bridge = s.bridge.write(Bridge::new(cfg, source));
+    let (up_isr, up) = s.up.split(cfg.flow, UPSTREAM_MARKS, s.pend_up);
+    let (down_isr, down) = s
+        .down
+        .split(FlowControl::None, DOWNSTREAM_MARKS, s.pend_down);
+    cortex_m::interrupt::free(|cs| {
+        s.up_end.borrow(cs).replace(Some(up_isr));
+        s.down_end.borrow(cs).replace(Some(down_isr));
+    });
+    (bridge, up, down)
 }
 
 extern "C" {

@@ -164,6 +164,8 @@ const HOST_CHUNK: usize = 8;
 /// yet (for a Unix stream socket: the memory they take, 0 once all are
 /// read).
 const SIOCOUTQ: u64 = 0x5411;
+/// `ioctl` request: bytes received on a socket and not read yet.
+const FIONREAD: u64 = 0x541B;
 
 extern "C" {
     fn ioctl(fd: i32, request: u64, ...) -> i32;
@@ -292,25 +294,25 @@ impl HostLink {
         Ok(start.elapsed())
     }
 
-    /// Wait (at most `limit`) until the peer has read everything written;
-    /// returns the time waited.
-    fn wait_until_read(&self, limit: Duration) -> io::Result<Duration> {
+    /// Wait (at most `limit`) until `request` (an `ioctl` count on the
+    /// socket) reads 0; returns the time waited.
+    fn wait_for_zero(&self, request: u64, what: &str, limit: Duration) -> io::Result<Duration> {
         let start = Instant::now();
         loop {
-            let mut unread: i32 = 0;
-            // SAFETY: SIOCOUTQ writes one int through the pointer; the fd
-            // is this link's open socket.
-            let rc = unsafe { ioctl(self.writer.as_raw_fd(), SIOCOUTQ, &mut unread) };
+            let mut count: i32 = 0;
+            // SAFETY: both requests write one int through the pointer; the
+            // fd is this link's open socket.
+            let rc = unsafe { ioctl(self.writer.as_raw_fd(), request, &mut count) };
             if rc != 0 {
                 return Err(io::Error::last_os_error());
             }
-            if unread == 0 {
+            if count == 0 {
                 return Ok(start.elapsed());
             }
             if start.elapsed() >= limit {
                 return Err(io::Error::new(
                     io::ErrorKind::TimedOut,
-                    format!("QEMU read nothing for {limit:?}"),
+                    format!("{what} for {limit:?}"),
                 ));
             }
             thread::sleep(Duration::from_micros(50));
@@ -330,19 +332,11 @@ impl HostLink {
         let mut since_base = 0u32;
         let mut paused = Duration::ZERO;
         let mut done = 0;
+        let limit = Duration::from_secs(60);
         for chunk in bytes.chunks(HOST_CHUNK) {
-            let waited = if self.xon_xoff {
-                self.wait_until_allowed(Duration::from_secs(60))?
-            } else {
-                Duration::ZERO
-            };
-            if !waited.is_zero() {
-                paused += waited;
-                base = Instant::now();
-                since_base = 0;
-            }
-            let waited = self.wait_until_read(Duration::from_secs(60))?;
-            if waited > Duration::from_millis(1) {
+            // QEMU has taken what was written before (see the type's docs).
+            let stood = self.wait_for_zero(SIOCOUTQ, "QEMU read nothing", limit)?;
+            if stood > Duration::from_millis(1) {
                 // QEMU stood still: the line restarts from now.
                 base = Instant::now();
                 since_base = 0;
@@ -352,6 +346,17 @@ impl HostLink {
                 let now = Instant::now();
                 if due > now {
                     thread::sleep(due - now);
+                }
+            }
+            // What the bridge sent is read before the next bytes go (it may
+            // be an XOFF: a UART driver sees it before it queues more).
+            self.wait_for_zero(FIONREAD, "the reader took nothing", limit)?;
+            if self.xon_xoff {
+                let waited = self.wait_until_allowed(limit)?;
+                if !waited.is_zero() {
+                    paused += waited;
+                    base = Instant::now();
+                    since_base = 0;
                 }
             }
             (&self.writer).write_all(chunk).map_err(|e| {

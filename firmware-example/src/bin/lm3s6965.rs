@@ -22,18 +22,15 @@
 #[path = "../runtime.rs"]
 mod runtime;
 
-use core::cell::RefCell;
 use core::mem::MaybeUninit;
 use core::ptr::{addr_of_mut, read_volatile, write_volatile};
 
-use cortex_m::interrupt::Mutex;
 use cortex_m::peripheral::NVIC;
 use cortex_m_rt::entry;
 use firmware_example::bridge::{self, Bridge};
-use firmware_example::serial::{
-    DownstreamLine, FlowControl, IsrEnd, Line, UpstreamLine, DOWNSTREAM_MARKS, UPSTREAM_MARKS,
-};
+use firmware_example::serial::{DownstreamLine, FlowControl, IsrEnd, Line, UpstreamLine};
 use lm3s6965::{interrupt, Interrupt};
+use runtime::Handoff;
 
 /// Name printed in the start-up banner.
 const NAME: &str = "lm3s6965evb";
@@ -50,8 +47,8 @@ static mut DOWN_LINE: DownstreamLine = Line::new();
 static mut BRIDGE: MaybeUninit<Bridge> = MaybeUninit::uninit();
 
 /// The interrupt ends, handed from `main` to the handlers.
-static UP_END: Mutex<RefCell<Option<IsrEnd<'static>>>> = Mutex::new(RefCell::new(None));
-static DOWN_END: Mutex<RefCell<Option<IsrEnd<'static>>>> = Mutex::new(RefCell::new(None));
+static UP_END: Handoff = runtime::handoff();
+static DOWN_END: Handoff = runtime::handoff();
 
 // System control (clock gating) and GPIO.
 const SYSCTL_RCGC0: usize = 0x400F_E100;
@@ -168,30 +165,16 @@ fn pend_down() {
     NVIC::pend(Interrupt::UART1);
 }
 
-/// Runs `f` on the interrupt end, taking it from `main` on first use.
-fn with_end(
-    slot: &mut Option<IsrEnd<'static>>,
-    handoff: &Mutex<RefCell<Option<IsrEnd<'static>>>>,
-    f: impl FnOnce(&mut IsrEnd<'static>),
-) {
-    if slot.is_none() {
-        *slot = cortex_m::interrupt::free(|cs| handoff.borrow(cs).borrow_mut().take());
-    }
-    if let Some(end) = slot {
-        f(end);
-    }
-}
-
 #[interrupt]
 fn UART0() {
     static mut END: Option<IsrEnd<'static>> = None;
-    with_end(END, &UP_END, |e| Uart(UART_BASE[0]).service(e));
+    runtime::with_end(END, &UP_END, |e| Uart(UART_BASE[0]).service(e));
 }
 
 #[interrupt]
 fn UART1() {
     static mut END: Option<IsrEnd<'static>> = None;
-    with_end(END, &DOWN_END, |e| Uart(UART_BASE[1]).service(e));
+    runtime::with_end(END, &DOWN_END, |e| Uart(UART_BASE[1]).service(e));
 }
 
 /// Clocks for the UARTs, their GPIO ports and the watchdog; UART pins to
@@ -233,22 +216,21 @@ fn main() -> ! {
     up_hw.init(cfg.upstream_baud);
     down_hw.init(cfg.downstream_baud);
 
-    // SAFETY: `main` runs once; these are the only references to the lines
-    // and the bridge, and the interrupts that use the ends are unmasked
-    // only after the hand-off.
-    let (line_up, line_down, bridge) = unsafe {
-        (
-            &mut *addr_of_mut!(UP_LINE),
-            &mut *addr_of_mut!(DOWN_LINE),
-            (*addr_of_mut!(BRIDGE)).write(Bridge::new(cfg, source)),
-        )
+    // SAFETY: `main` runs once; these are the only references to these
+    // statics, and the interrupts that use the ends are unmasked only
+    // after `setup` handed them over.
+    let statics = unsafe {
+        runtime::Statics {
+            bridge: &mut *addr_of_mut!(BRIDGE),
+            up: &mut *addr_of_mut!(UP_LINE),
+            down: &mut *addr_of_mut!(DOWN_LINE),
+            pend_up: &pend_up,
+            pend_down: &pend_down,
+            up_end: &UP_END,
+            down_end: &DOWN_END,
+        }
     };
-    let (up_isr, mut up) = line_up.split(cfg.flow, UPSTREAM_MARKS, &pend_up);
-    let (down_isr, mut down) = line_down.split(FlowControl::None, DOWNSTREAM_MARKS, &pend_down);
-    cortex_m::interrupt::free(|cs| {
-        UP_END.borrow(cs).replace(Some(up_isr));
-        DOWN_END.borrow(cs).replace(Some(down_isr));
-    });
+    let (bridge, mut up, mut down) = runtime::setup(statics, cfg, source);
     // SAFETY: the handlers only touch their ends, handed over above.
     unsafe {
         NVIC::unmask(Interrupt::UART0);

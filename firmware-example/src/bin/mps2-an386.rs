@@ -33,19 +33,16 @@ mod board {
     pub use crate::CORE_CLOCK_HZ;
 }
 
-use core::cell::RefCell;
 use core::mem::MaybeUninit;
 use core::ptr::addr_of_mut;
 
-use cortex_m::interrupt::Mutex;
 use cortex_m::peripheral::NVIC;
 use cortex_m_rt::{entry, exception};
 use firmware_example::bridge::{self, Bridge};
-use firmware_example::serial::{
-    DownstreamLine, FlowControl, IsrEnd, Line, UpstreamLine, DOWNSTREAM_MARKS, UPSTREAM_MARKS,
-};
+use firmware_example::serial::{DownstreamLine, FlowControl, IsrEnd, Line, UpstreamLine};
 use mps2_an386::uart::{self, RegisterBlock};
 use mps2_an386::{interrupt, watchdog, Interrupt};
+use runtime::Handoff;
 
 /// Name printed in the start-up banner.
 const NAME: &str = "mps2-an386";
@@ -60,8 +57,8 @@ static mut DOWN_LINE: DownstreamLine = Line::new();
 /// initial image would cost as much flash as the bridge has bytes).
 static mut BRIDGE: MaybeUninit<Bridge> = MaybeUninit::uninit();
 
-static UP_END: Mutex<RefCell<Option<IsrEnd<'static>>>> = Mutex::new(RefCell::new(None));
-static DOWN_END: Mutex<RefCell<Option<IsrEnd<'static>>>> = Mutex::new(RefCell::new(None));
+static UP_END: Handoff = runtime::handoff();
+static DOWN_END: Handoff = runtime::handoff();
 
 fn uart_regs(i: usize) -> &'static RegisterBlock {
     // SAFETY: this is the mps2-an386 board; UART0 and UART1 belong to the
@@ -123,26 +120,13 @@ fn pend_down() {
     NVIC::pend(Interrupt::UART1RX);
 }
 
-fn with_end(
-    slot: &mut Option<IsrEnd<'static>>,
-    handoff: &Mutex<RefCell<Option<IsrEnd<'static>>>>,
-    f: impl FnOnce(&mut IsrEnd<'static>),
-) {
-    if slot.is_none() {
-        *slot = cortex_m::interrupt::free(|cs| handoff.borrow(cs).borrow_mut().take());
-    }
-    if let Some(end) = slot {
-        f(end);
-    }
-}
-
 /// UART0: receive and transmit share the end (the transmit interrupt pends
 /// the receive one, whose handler does both; they have the same priority,
 /// so they never preempt each other).
 #[interrupt]
 fn UART0RX() {
     static mut END: Option<IsrEnd<'static>> = None;
-    with_end(END, &UP_END, |e| service(uart_regs(0), e));
+    runtime::with_end(END, &UP_END, |e| service(uart_regs(0), e));
 }
 
 #[interrupt]
@@ -153,7 +137,7 @@ fn UART0TX() {
 #[interrupt]
 fn UART1RX() {
     static mut END: Option<IsrEnd<'static>> = None;
-    with_end(END, &DOWN_END, |e| service(uart_regs(1), e));
+    runtime::with_end(END, &DOWN_END, |e| service(uart_regs(1), e));
 }
 
 #[interrupt]
@@ -205,21 +189,21 @@ fn main() -> ! {
     init_uart(uart_regs(0), cfg.upstream_baud);
     init_uart(uart_regs(1), cfg.downstream_baud);
 
-    // SAFETY: `main` runs once; these are the only references to the lines
-    // and the bridge, and the interrupts are unmasked after the hand-off.
-    let (line_up, line_down, bridge) = unsafe {
-        (
-            &mut *addr_of_mut!(UP_LINE),
-            &mut *addr_of_mut!(DOWN_LINE),
-            (*addr_of_mut!(BRIDGE)).write(Bridge::new(cfg, source)),
-        )
+    // SAFETY: `main` runs once; these are the only references to these
+    // statics, and the interrupts that use the ends are unmasked only
+    // after `setup` handed them over.
+    let statics = unsafe {
+        runtime::Statics {
+            bridge: &mut *addr_of_mut!(BRIDGE),
+            up: &mut *addr_of_mut!(UP_LINE),
+            down: &mut *addr_of_mut!(DOWN_LINE),
+            pend_up: &pend_up,
+            pend_down: &pend_down,
+            up_end: &UP_END,
+            down_end: &DOWN_END,
+        }
     };
-    let (up_isr, mut up) = line_up.split(cfg.flow, UPSTREAM_MARKS, &pend_up);
-    let (down_isr, mut down) = line_down.split(FlowControl::None, DOWNSTREAM_MARKS, &pend_down);
-    cortex_m::interrupt::free(|cs| {
-        UP_END.borrow(cs).replace(Some(up_isr));
-        DOWN_END.borrow(cs).replace(Some(down_isr));
-    });
+    let (bridge, mut up, mut down) = runtime::setup(statics, cfg, source);
     // SAFETY: the handlers only touch their ends, handed over above.
     unsafe {
         NVIC::unmask(Interrupt::UART0RX);

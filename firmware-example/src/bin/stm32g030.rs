@@ -17,17 +17,14 @@
 #[path = "../runtime.rs"]
 mod runtime;
 
-use core::cell::RefCell;
 use core::mem::MaybeUninit;
 use core::ptr::addr_of_mut;
 
-use cortex_m::interrupt::Mutex;
 use cortex_m::peripheral::NVIC;
 use cortex_m_rt::entry;
 use firmware_example::bridge::{self, Bridge};
-use firmware_example::serial::{
-    DownstreamLine, FlowControl, IsrEnd, Line, UpstreamLine, DOWNSTREAM_MARKS, UPSTREAM_MARKS,
-};
+use firmware_example::serial::{DownstreamLine, FlowControl, IsrEnd, Line, UpstreamLine};
+use runtime::Handoff;
 use stm32g0::stm32g030::{interrupt, Interrupt, GPIOA, IWDG, RCC, USART1, USART2};
 
 /// Core and USART clock at reset (HSI16).
@@ -41,8 +38,8 @@ static mut DOWN_LINE: DownstreamLine = Line::new();
 /// initial image would cost as much flash as the bridge has bytes).
 static mut BRIDGE: MaybeUninit<Bridge> = MaybeUninit::uninit();
 
-static UP_END: Mutex<RefCell<Option<IsrEnd<'static>>>> = Mutex::new(RefCell::new(None));
-static DOWN_END: Mutex<RefCell<Option<IsrEnd<'static>>>> = Mutex::new(RefCell::new(None));
+static UP_END: Handoff = runtime::handoff();
+static DOWN_END: Handoff = runtime::handoff();
 
 type UsartRegs = stm32g0::stm32g030::usart1::RegisterBlock;
 
@@ -115,23 +112,10 @@ fn pend_down() {
     NVIC::pend(Interrupt::USART1);
 }
 
-fn with_end(
-    slot: &mut Option<IsrEnd<'static>>,
-    handoff: &Mutex<RefCell<Option<IsrEnd<'static>>>>,
-    f: impl FnOnce(&mut IsrEnd<'static>),
-) {
-    if slot.is_none() {
-        *slot = cortex_m::interrupt::free(|cs| handoff.borrow(cs).borrow_mut().take());
-    }
-    if let Some(end) = slot {
-        f(end);
-    }
-}
-
 #[interrupt]
 fn USART2() {
     static mut END: Option<IsrEnd<'static>> = None;
-    with_end(END, &UP_END, |e| {
+    runtime::with_end(END, &UP_END, |e| {
         let rts = e.flow() == FlowControl::RtsCts;
         service(up_regs(), e, rts)
     });
@@ -140,7 +124,7 @@ fn USART2() {
 #[interrupt]
 fn USART1() {
     static mut END: Option<IsrEnd<'static>> = None;
-    with_end(END, &DOWN_END, |e| service(down_regs(), e, false));
+    runtime::with_end(END, &DOWN_END, |e| service(down_regs(), e, false));
 }
 
 /// Clocks for GPIOA and both USARTs; PA2/PA3/PA9/PA10 (and PA0 for CTS)
@@ -209,21 +193,21 @@ fn main() -> ! {
     init_usart(up_regs(), cfg.upstream_baud, rts_cts);
     init_usart(down_regs(), cfg.downstream_baud, false);
 
-    // SAFETY: `main` runs once; these are the only references to the lines
-    // and the bridge, and the interrupts are unmasked after the hand-off.
-    let (line_up, line_down, bridge) = unsafe {
-        (
-            &mut *addr_of_mut!(UP_LINE),
-            &mut *addr_of_mut!(DOWN_LINE),
-            (*addr_of_mut!(BRIDGE)).write(Bridge::new(cfg, source)),
-        )
+    // SAFETY: `main` runs once; these are the only references to these
+    // statics, and the interrupts that use the ends are unmasked only
+    // after `setup` handed them over.
+    let statics = unsafe {
+        runtime::Statics {
+            bridge: &mut *addr_of_mut!(BRIDGE),
+            up: &mut *addr_of_mut!(UP_LINE),
+            down: &mut *addr_of_mut!(DOWN_LINE),
+            pend_up: &pend_up,
+            pend_down: &pend_down,
+            up_end: &UP_END,
+            down_end: &DOWN_END,
+        }
     };
-    let (up_isr, mut up) = line_up.split(cfg.flow, UPSTREAM_MARKS, &pend_up);
-    let (down_isr, mut down) = line_down.split(FlowControl::None, DOWNSTREAM_MARKS, &pend_down);
-    cortex_m::interrupt::free(|cs| {
-        UP_END.borrow(cs).replace(Some(up_isr));
-        DOWN_END.borrow(cs).replace(Some(down_isr));
-    });
+    let (bridge, mut up, mut down) = runtime::setup(statics, cfg, source);
     // SAFETY: the handlers only touch their ends, handed over above.
     unsafe {
         NVIC::unmask(Interrupt::USART1);
