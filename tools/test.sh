@@ -52,6 +52,7 @@ echo "ok: no panic path survives in the decoders or the bridge (see firmware-exa
 
 step "docs (no warnings) and doctests"
 RUSTDOCFLAGS="-D warnings" cargo doc -q -p iai-protocol-b --no-deps
+RUSTDOCFLAGS="-D warnings" cargo doc -q -p firmware-example --no-deps --no-default-features
 cargo test -q -p iai-protocol-b --doc
 
 step "size report (flash, static RAM, stack measured under QEMU) and instruction counts (figures, not assertions)"
