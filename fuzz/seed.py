@@ -211,6 +211,14 @@ def main():
         write("readback", f"kind{ki}-one-window", readback_seed(ki, 1, 5, 7, [3]))
         write("readback", f"kind{ki}-three-windows", readback_seed(ki, 1, 20, 0, [1, 0, 1] + [1] * 20))
     write("readback", "near-top", readback_seed(0, 0xFFF8, 20, 1, [2, 2, 2, 2, 2]))
+    # bridge_policy: mode (policy, flow), [allow-list map], tick step, host bytes.
+    allow = bytearray(32)
+    for i in (0x12, 0x16, 0x6D):
+        allow[i // 8] |= 1 << (i % 8)
+    for mode in (0x00, 0x01, 0x11, 0x20):
+        write("bridge_policy", f"fixtures-mode{mode:02x}", bytes([mode, 4]) + stream)
+    write("bridge_policy", "fixtures-allow", bytes([0x02]) + bytes(allow) + bytes([4]) + stream)
+    write("bridge_policy", "status-query", bytes([0x01, 1]) + b"!BBB0047\r\n" + stream)
     print(f"seeded {len(gen)} generated frames, {len(pos_frames)} fixture position frames")
     print(f"seeded {len(frames)} fixture frames into {os.path.join(HERE, 'corpus')}")
 

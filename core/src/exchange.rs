@@ -476,13 +476,22 @@ impl Exchange {
     /// passed, instead of `timeout_ms` later. (Resending before the
     /// timeout is an **inference** from the half-duplex rules, 2003 p. 8:
     /// after its reply the controller is ready for the next command.)
+    ///
+    /// Only when the frame can be nothing else: after a resend, or while a
+    /// reply to an older command may still come, a broken frame may be one
+    /// of those late replies, and the awaited one may still arrive; the
+    /// timeout then stands (cutting it would spend the sends on replies
+    /// that were never lost).
     pub fn reply_lost(&mut self, now: u32) {
         if let Phase::Await { deadline } = self.phase {
+            self.faulted = true;
+            if self.sends > 1 || self.stale_possible(now) {
+                return;
+            }
             let soon = now.wrapping_add(self.cfg.turnaround_ms).wrapping_add(1);
             if reached(deadline, soon) {
                 self.phase = Phase::Await { deadline: soon };
             }
-            self.faulted = true;
         }
     }
 
@@ -628,6 +637,25 @@ mod tests {
         assert_eq!(x.poll(151), Due::WaitUntil(152));
         assert_eq!(x.poll(152), Due::Transmit { fresh: true });
         assert_eq!(x.sends(), 2);
+    }
+
+    #[test]
+    fn after_a_resend_a_broken_frame_may_be_the_first_sends_late_reply() {
+        let mut x = exchange();
+        x.start(&catalogue::AXIS_STATUS_QUERY, 0);
+        x.poll(0);
+        x.sent(0);
+        assert_eq!(x.poll(3_000), Due::Transmit { fresh: true });
+        x.sent(3_010);
+        // Broken: the first send's reply, late, or the second's? The
+        // second's may still come, so its timeout stands.
+        x.reply_lost(4_000);
+        assert_eq!(x.poll(4_002), Due::WaitUntil(6_010));
+        assert!(x.faulted());
+        assert_eq!(
+            x.offer(&frame(b"#992122A\r\n"), true, 4_100),
+            Offer::Accepted
+        );
     }
 
     #[test]

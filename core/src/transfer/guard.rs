@@ -15,8 +15,13 @@ pub(super) struct Guard {
     /// A late or duplicated reply was seen on this line: from then on the
     /// counts of answered frames are guarded for the duplicate window too.
     pub(super) duplicates_seen: bool,
-    /// The count of the frame answered last (always avoided).
-    pub(super) previous: u16,
+    /// The count of the frame answered last, avoided even before the
+    /// line showed a duplicate, until the tick beside it (its answer plus
+    /// the duplicate window). It must expire: when the records left are
+    /// exactly that count (one record after a frame of one), no other
+    /// count is possible, and waiting out the window is what keeps an
+    /// unannounced duplicate from confirming the last frame.
+    pub(super) previous: (u16, u32),
 }
 
 impl Guard {
@@ -24,7 +29,7 @@ impl Guard {
         Guard {
             entries: heapless::Vec::new(),
             duplicates_seen: false,
-            previous: 0,
+            previous: (0, 0),
         }
     }
 
@@ -62,25 +67,73 @@ impl Guard {
             self.entries.retain(|e| e.0 != count);
         }
         self.note(count, dup_until, sends <= 1, now);
-        self.previous = count;
+        self.previous = (count, dup_until);
+    }
+
+    /// Whether the rule on the previous count still holds at `now`.
+    fn previous_blocks(&self, n: u16, now: u32) -> bool {
+        n == self.previous.0 && !reached(now, self.previous.1)
     }
 
     /// Whether a frame of `n` records could be confirmed by a reply still
     /// in flight.
     pub(super) fn blocks(&self, n: u16, now: u32) -> bool {
-        n == self.previous
+        self.previous_blocks(n, now)
             || self
                 .entries
                 .iter()
                 .any(|&(c, u, dup)| c == n && !reached(now, u) && (!dup || self.duplicates_seen))
     }
 
-    /// The earliest tick at which a blocked count frees up.
+    /// The earliest tick, later than `now`, at which a blocked count
+    /// frees up (every rule expires, so this is never a busy wait).
     pub(super) fn wake(&self, now: u32) -> u32 {
+        let previous = (!reached(now, self.previous.1)).then_some(self.previous.1);
         self.entries
             .iter()
             .map(|&(_, u, _)| u)
+            .chain(previous)
+            .filter(|&u| !reached(now, u))
             .min_by_key(|&u| u.wrapping_sub(now))
             .unwrap_or(now.wrapping_add(1))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_previous_count_is_avoided_for_the_duplicate_window_only() {
+        let mut g = Guard::new();
+        // A frame of one record answered at its first send, at 100 ms.
+        g.sent(1, 6_100, 0);
+        g.answered(1, 1, 3_100, 100);
+        assert!(g.blocks(1, 200));
+        assert!(!g.blocks(2, 200));
+        // One record is left: the frame waits for the window, not forever.
+        assert_eq!(g.wake(200), 3_100);
+        assert!(!g.blocks(1, 3_100));
+    }
+
+    #[test]
+    fn a_count_sent_twice_stays_guarded_for_its_late_window() {
+        let mut g = Guard::new();
+        g.sent(5, 6_000, 0);
+        g.sent(5, 9_000, 3_000);
+        g.answered(5, 2, 6_100, 3_100);
+        // A duplicate was never seen, but the first send's reply may come.
+        assert!(g.blocks(5, 7_000));
+        assert_eq!(g.wake(7_000), 9_000);
+        assert!(!g.blocks(5, 9_000));
+    }
+
+    #[test]
+    fn wake_is_always_later_than_now() {
+        let g = Guard::new();
+        assert_eq!(g.wake(u32::MAX), 0);
+        let mut g = Guard::new();
+        g.answered(3, 1, 10, 5);
+        assert_eq!(g.wake(20), 21);
     }
 }

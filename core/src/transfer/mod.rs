@@ -32,7 +32,9 @@
 //! count that a reply still in flight could carry; it sends fewer records
 //! instead and carries the rest to the next frame:
 //!
-//! - never the count of the frame answered last;
+//! - never the count of the frame answered last, for `duplicate_window_ms`
+//!   after its reply (when the records left allow no other count, as with
+//!   one last record after a frame of one, the frame waits that long);
 //! - never the count of a frame sent within `timeout_ms + late_window_ms`
 //!   (3 + 3 s) whose reply did not come, or that was sent more than once;
 //! - once the line has shown a late or duplicated reply (a reply while
@@ -169,6 +171,10 @@ pub struct TransferConfig {
     pub verify: Verify,
     /// Rewrites of a frame that read back different before giving up.
     pub rewrites: u8,
+    /// Most records per frame (at most [`MAX_FRAME_RECORDS`]): fewer make
+    /// each frame's write and read-back shorter, e.g. so that a bridge's
+    /// last frames fit its host's reply timeout on a slow line.
+    pub max_records: u16,
 }
 
 impl TransferConfig {
@@ -187,6 +193,7 @@ impl TransferConfig {
             checksum: ChecksumMode::Compute,
             verify: Verify::Full,
             rewrites: 2,
+            max_records: MAX_FRAME_RECORDS,
         }
     }
 
@@ -470,7 +477,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             chunk: None,
             guard: Guard::new(),
             pending_fault: false,
-            frame_limit: MAX_FRAME_RECORDS,
+            frame_limit: cfg.max_records.clamp(1, MAX_FRAME_RECORDS),
             window_limit: cfg.stream.read_back().window(cfg.max_response),
             exchange: Exchange::new(
                 ExchangeConfig {
@@ -837,7 +844,10 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         };
         c.faulted |= self.exchange.faulted();
         c.confirmed = true;
-        self.frame_limit = grow(self.frame_limit, MAX_FRAME_RECORDS);
+        self.frame_limit = grow(
+            self.frame_limit,
+            self.cfg.max_records.clamp(1, MAX_FRAME_RECORDS),
+        );
         self.chunk = Some(c);
         // Duplicates of this reply may come for a while; replies to its
         // other sends until their own late window closes.
@@ -1287,8 +1297,8 @@ mod tests {
                 }
                 Step::Transmit(b) => {
                     assert!(
-                        b.starts_with(b"!9921F00010018"),
-                        "a 24-position window from 1"
+                        b.starts_with(b"!9921F00010002"),
+                        "the frame's two positions from 1, not a whole 24-record window"
                     );
                     t.sent(now);
                     let r = EffectivePositionResponse2 {

@@ -130,13 +130,13 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             bit(usize::from(all)) - 1
         };
         let checked = self.verifier.checked;
-        let lowest = self
-            .chunk_numbers()
-            .enumerate()
-            .filter(|(i, _)| checked & bit(*i) == 0)
-            .map(|(_, n)| n)
-            .min();
-        let Some(head) = lowest else {
+        let unchecked = || {
+            self.chunk_numbers()
+                .enumerate()
+                .filter(move |(i, _)| checked & bit(*i) == 0)
+                .map(|(_, n)| n)
+        };
+        let (Some(head), Some(highest)) = (unchecked().min(), unchecked().max()) else {
             self.verdict(now, all_mask);
             return;
         };
@@ -147,7 +147,10 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             .stream
             .window(self.cfg.max_response)
             .min(self.window_limit);
-        let window = u64::from(full).min(room).max(1);
+        // No further than the chunk's highest unchecked position: what lies
+        // beyond it was not written by this frame.
+        let span = u64::from(highest - head) + 1;
+        let window = u64::from(full).min(room).min(span).max(1);
         v.head = head;
         v.asked = window as u16;
         let built = self.write_query();

@@ -9,9 +9,15 @@
 //!
 //! Covered: the frame decoder, `Frame::new_checked`, `decode_any` and the
 //! field visitor of every message, the position-stream decoder, every
-//! record layout, and the request client, the transfer engine (its write
-//! and streamed read-back paths) and the read-back engine fed arbitrary
-//! reply bytes, including a raw command frame passed through the client.
+//! record layout, the request client, the transfer engine (its write and
+//! streamed read-back paths) and the read-back engine fed arbitrary reply
+//! bytes (including a raw command frame passed through the client), and the
+//! bridge library (`Bridge::poll`, the configuration block, the serial
+//! line) fed arbitrary bytes on both ports.
+//!
+//! Build: `cargo build --release --features no-panic-proof --bin
+//! no_panic_proof --target thumbv7m-none-eabi` (a debug build keeps panic
+//! paths the optimiser would remove, so only release builds prove it).
 #![no_std]
 #![no_main]
 
@@ -28,6 +34,10 @@ use iai_protocol_b::position::RecordLayout;
 use iai_protocol_b::readback::{ReadBack, ReadBackConfig, ReadStep};
 use iai_protocol_b::stream::{PositionStreamDecoder, StreamEvent};
 use iai_protocol_b::transfer::{Step, Transfer, TransferConfig};
+
+use firmware_example::bridge::{Bridge, Port};
+use firmware_example::config::Config;
+use firmware_example::serial::{FlowControl, Line, Watermarks};
 
 extern "C" {
     /// Deliberately undefined (see the module docs).
@@ -48,6 +58,48 @@ static __INTERRUPTS: [usize; 1] = [0];
 
 /// Stand-in for bytes from a UART.
 static INPUT: [u8; 4096] = [0; 4096];
+
+/// A port that reads the given bytes and swallows what is written.
+struct Wire<'a>(&'a [u8]);
+
+impl embedded_io::ErrorType for Wire<'_> {
+    type Error = core::convert::Infallible;
+}
+impl embedded_io::ReadReady for Wire<'_> {
+    fn read_ready(&mut self) -> Result<bool, Self::Error> {
+        Ok(!self.0.is_empty())
+    }
+}
+impl embedded_io::Read for Wire<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
+        let n = buf.len().min(self.0.len());
+        let (head, rest) = self.0.split_at(n);
+        if let Some(dst) = buf.get_mut(..n) {
+            dst.copy_from_slice(head);
+        }
+        self.0 = rest;
+        Ok(n)
+    }
+}
+impl embedded_io::WriteReady for Wire<'_> {
+    fn write_ready(&mut self) -> Result<bool, Self::Error> {
+        Ok(black_box(true))
+    }
+}
+impl embedded_io::Write for Wire<'_> {
+    fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+        black_box(buf);
+        Ok(black_box(buf.len()))
+    }
+    fn flush(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}
+impl Port for Wire<'_> {
+    fn take_overruns(&mut self) -> u32 {
+        black_box(0)
+    }
+}
 
 /// Visits every field and keeps the values alive.
 struct Sink;
@@ -151,6 +203,30 @@ fn main() -> ! {
             black_box(r);
         }
     }
+
+    // The bridge, both ports fed arbitrary bytes, under any configuration.
+    let (cfg, source) = Config::from_block(input);
+    let mut bridge = Bridge::new(black_box(cfg), black_box(source));
+    let half = input.len() / 2;
+    let mut up = Wire(input.get(..half).unwrap_or(&[]));
+    let mut down = Wire(input.get(half..).unwrap_or(&[]));
+    for tick in 0..black_box(64u32) {
+        let _ = black_box(bridge.poll(&mut up, &mut down, black_box(tick)));
+    }
+    black_box(bridge.stats());
+
+    // The serial line's interrupt end, fed the same bytes.
+    let mut line: Line<256, 64> = Line::new();
+    let marks = Watermarks::for_latency(black_box(255), black_box(17));
+    let (mut isr, mut thr) = line.split(black_box(FlowControl::XonXoff), marks, &|| {});
+    for &b in input {
+        isr.on_receive(b);
+        isr.service();
+        black_box(isr.next_tx(black_box(true)));
+    }
+    let mut buf = [0u8; 32];
+    let _ = black_box(embedded_io::Read::read(&mut thr, &mut buf));
+    black_box(thr.take_overruns());
 
     loop {
         cortex_m::asm::wfi();
