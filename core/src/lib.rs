@@ -57,6 +57,7 @@ mod exchange;
 pub mod field;
 pub mod frame;
 pub mod guide;
+pub mod hex;
 pub mod io;
 pub mod message;
 pub mod position;
