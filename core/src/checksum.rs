@@ -100,3 +100,49 @@ impl BypassPolicy {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn golden_sums() {
+        // 2003 p. 10: "!99209001005" sums to 254h, SC "54".
+        assert_eq!(Checksum::of(b"!99209001005"), 0x54);
+        // A response without data: "#99232" + SC "2C".
+        assert_eq!(Checksum::of(b"#99232"), 0x2C);
+        assert_eq!(Checksum::of(b""), 0);
+        assert_eq!(Checksum::of(&[0xFF, 0x02]), 0x01, "low byte of the sum");
+    }
+
+    #[test]
+    fn running_sum() {
+        let mut c = Checksum::new();
+        assert_eq!(c, Checksum::default());
+        assert_eq!(c.value(), 0);
+        c.push(b'!');
+        assert_eq!(c.value(), b'!');
+        c.update(b"99209");
+        c.update(b"");
+        c.update(b"001005");
+        assert_eq!(c.value(), 0x54);
+        c.push(0xAC);
+        assert_eq!(c.value(), 0x00, "wraps modulo 256");
+        let mut d = Checksum::new();
+        for &b in b"!99209001005" {
+            d.push(b);
+        }
+        assert_eq!(d.value(), 0x54);
+    }
+
+    #[test]
+    fn bypass_policy() {
+        use Header::{Command, Error, Response};
+        assert_eq!(BypassPolicy::default(), BypassPolicy::CommandsOnly);
+        assert_eq!(ChecksumMode::default(), ChecksumMode::Compute);
+        let allows = |p: BypassPolicy| [Command, Response, Error].map(|h| p.allows(h));
+        assert_eq!(allows(BypassPolicy::Reject), [false, false, false]);
+        assert_eq!(allows(BypassPolicy::CommandsOnly), [true, false, false]);
+        assert_eq!(allows(BypassPolicy::Accept), [true, true, true]);
+    }
+}

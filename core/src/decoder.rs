@@ -338,3 +338,283 @@ impl<const N: usize> FrameDecoder<N> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::checksum::{Checksum, ChecksumField};
+    use crate::frame::Station;
+
+    /// 2003 p. 10: a 209H query and its checksum.
+    const P10: &[u8] = b"!9920900100554\r\n";
+    /// A 232H response without data.
+    const R232: &[u8] = b"#992322C\r\n";
+
+    /// `head` + its SC + CR LF, in `buf`; the frame's length.
+    fn framed(head: &[u8], buf: &mut [u8; 128]) -> usize {
+        let n = head.len();
+        buf[..n].copy_from_slice(head);
+        let sc = Checksum::of(head);
+        let hex = b"0123456789ABCDEF";
+        buf[n..n + 4].copy_from_slice(&[
+            hex[usize::from(sc >> 4)],
+            hex[usize::from(sc & 0xF)],
+            b'\r',
+            b'\n',
+        ]);
+        n + 4
+    }
+
+    /// Feeds `input` whole, collecting up to 8 events (frames as their
+    /// lengths) and the bytes consumed by each call.
+    fn events<const N: usize>(
+        dec: &mut FrameDecoder<N>,
+        mut input: &[u8],
+    ) -> ([Option<Result<usize, Error>>; 8], usize) {
+        let mut out = [None; 8];
+        let mut k = 0;
+        while !input.is_empty() {
+            let d = dec.decode(input);
+            assert!(d.consumed >= 1 && d.consumed <= input.len());
+            input = &input[d.consumed..];
+            let ev = match d.event {
+                Event::NeedMore => {
+                    assert!(input.is_empty(), "NeedMore with input left");
+                    break;
+                }
+                Event::Frame(f) => Ok(f.len()),
+                Event::Error(e) => Err(e),
+            };
+            out[k] = Some(ev);
+            k += 1;
+        }
+        (out, k)
+    }
+
+    #[test]
+    fn one_frame_byte_by_byte() {
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        assert_eq!(dec.capacity(), DEFAULT_CAPACITY);
+        let (last, head) = P10.split_last().unwrap();
+        for (i, &b) in head.iter().enumerate() {
+            assert_eq!(dec.push(b), Event::NeedMore);
+            assert_eq!(dec.pending(), i + 1);
+            assert_eq!(dec.last_frame(), None);
+        }
+        match dec.push(*last) {
+            Event::Frame(f) => {
+                assert_eq!(f.as_bytes(), P10);
+                assert_eq!(f.station(), Station(0x99));
+                assert_eq!(f.code(), 0x209);
+                assert_eq!(f.body(), b"001005");
+                assert_eq!(f.checksum(), ChecksumField::Sum(0x54));
+            }
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(dec.pending(), 0);
+        assert_eq!(dec.last_frame().map(|f| f.len()), Some(P10.len()));
+        assert_eq!(
+            dec.stats(),
+            DecoderStats {
+                frames: 1,
+                errors: 0,
+                discarded_bytes: 0
+            }
+        );
+        // The next byte clears the frame.
+        assert_eq!(dec.push(b'x'), Event::NeedMore);
+        assert_eq!(dec.last_frame(), None);
+        assert_eq!(dec.stats().discarded_bytes, 1);
+    }
+
+    #[test]
+    fn frames_back_to_back_after_noise() {
+        let mut input = [0u8; 64];
+        let parts: [&[u8]; 4] = [b"\r\nxyz", P10, R232, P10];
+        let mut n = 0;
+        for p in parts {
+            input[n..n + p.len()].copy_from_slice(p);
+            n += p.len();
+        }
+        let mut dec: FrameDecoder = FrameDecoder::default();
+        let d = dec.decode(&input[..n]);
+        assert_eq!(d.consumed, 5 + P10.len());
+        assert!(matches!(d.event, Event::Frame(f) if f.as_bytes() == P10));
+        let (ev, k) = events(&mut dec, &input[5 + P10.len()..n]);
+        assert_eq!(k, 2);
+        assert_eq!(ev[0], Some(Ok(R232.len())));
+        assert_eq!(ev[1], Some(Ok(P10.len())));
+        assert_eq!(dec.stats().frames, 3);
+        assert_eq!(dec.stats().discarded_bytes, 5);
+        assert_eq!(dec.stats().errors, 0);
+    }
+
+    #[test]
+    fn a_header_inside_a_frame_cuts_it() {
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (ev, k) = events(&mut dec, b"!99209001#992322C\r\n");
+        assert_eq!(k, 2);
+        assert_eq!(ev[0], Some(Err(Error::Truncated { len: 9 })));
+        assert_eq!(ev[1], Some(Ok(R232.len())));
+        assert_eq!(
+            dec.stats(),
+            DecoderStats {
+                frames: 1,
+                errors: 1,
+                discarded_bytes: 9
+            }
+        );
+        for h in [b'!', b'&', b'%'] {
+            let mut dec: FrameDecoder = FrameDecoder::new();
+            let (ev, _) = events(&mut dec, &[b'#', b'9', h]);
+            assert_eq!(ev[0], Some(Err(Error::Truncated { len: 2 })));
+            assert_eq!(dec.pending(), 1, "the new header starts a frame");
+        }
+    }
+
+    #[test]
+    fn line_end_errors() {
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (ev, k) = events(&mut dec, b"!99209\n");
+        assert_eq!((ev[0], k), (Some(Err(Error::MissingCarriageReturn)), 1));
+        assert_eq!(dec.stats().discarded_bytes, 7);
+        assert_eq!(dec.pending(), 0);
+
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (ev, _) = events(&mut dec, b"!99209\rX");
+        assert_eq!(ev[0], Some(Err(Error::MissingLineFeed { byte: b'X' })));
+        assert_eq!(dec.stats().discarded_bytes, 8);
+        assert_eq!(dec.pending(), 0);
+
+        // CR then a header byte: the header starts the next frame.
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (ev, k) = events(&mut dec, b"!99209\r#992322C\r\n");
+        assert_eq!(k, 2);
+        assert_eq!(ev[0], Some(Err(Error::MissingLineFeed { byte: b'#' })));
+        assert_eq!(ev[1], Some(Ok(R232.len())));
+        assert_eq!(dec.stats().discarded_bytes, 7);
+        assert_eq!(dec.stats().errors, 1);
+    }
+
+    #[test]
+    fn checks_of_the_whole_frame() {
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (ev, k) = events(&mut dec, b"!9920900100555\r\n#992322C\r\n");
+        assert_eq!(k, 2);
+        assert_eq!(
+            ev[0],
+            Some(Err(Error::ChecksumMismatch {
+                computed: 0x54,
+                received: 0x55
+            }))
+        );
+        assert_eq!(ev[1], Some(Ok(R232.len())));
+        assert_eq!(dec.stats().discarded_bytes, 16);
+
+        let (ev, _) = events(&mut dec, b"!99\r\n");
+        assert_eq!(ev[0], Some(Err(Error::FrameTooShort { len: 5 })));
+        let (ev, _) = events(&mut dec, b"!992090010G554\r\n");
+        assert_eq!(
+            ev[0],
+            Some(Err(Error::InvalidHexDigit {
+                offset: 10,
+                byte: b'G'
+            }))
+        );
+        assert_eq!(dec.stats().errors, 3);
+    }
+
+    #[test]
+    fn bypass_policy() {
+        let bypass: &[u8] = b"!992000123456789@@\r\n";
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        assert_eq!(dec.policy(), BypassPolicy::CommandsOnly);
+        let (ev, _) = events(&mut dec, bypass);
+        assert_eq!(ev[0], Some(Ok(bypass.len())));
+        dec.set_policy(BypassPolicy::Reject);
+        assert_eq!(dec.policy(), BypassPolicy::Reject);
+        let (ev, _) = events(&mut dec, bypass);
+        assert_eq!(ev[0], Some(Err(Error::ChecksumBypassRejected)));
+        let mut dec: FrameDecoder = FrameDecoder::with_policy(BypassPolicy::Accept);
+        let (ev, _) = events(&mut dec, b"#99232@@\r\n");
+        assert_eq!(ev[0], Some(Ok(10)));
+    }
+
+    #[test]
+    fn text_fields_may_hold_any_byte() {
+        // 200H: ten raw characters, here header bytes, CR and LF.
+        let mut buf = [0u8; 128];
+        let n = framed(b"!99200!#&%\r\n\r\nAB", &mut buf);
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (ev, k) = events(&mut dec, &buf[..n]);
+        assert_eq!((ev[0], k), (Some(Ok(n)), 1));
+        assert_eq!(
+            dec.last_frame().map(|f| f.body()),
+            Some(&b"!#&%\r\n\r\nAB"[..])
+        );
+
+        // 216H response: the message length is known at offset 90.
+        // The recorded 94-byte response (EXAMPLES.md 5) up to its message
+        // count, then a 5-character message.
+        let recorded = b"#99216C74000000010000000500000002FFFFFFFD0000000000000000000000000000000000000000000000000C2";
+        let mut msg = [0u8; 95];
+        msg[..88].copy_from_slice(&recorded[..88]);
+        msg[88..].copy_from_slice(b"05!\r\n#%");
+        let n = framed(&msg, &mut buf);
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (ev, k) = events(&mut dec, &buf[..n]);
+        assert_eq!((ev[0], k), (Some(Ok(n)), 1));
+
+        // After the text a header byte cuts the frame again.
+        let mut msg = [0u8; 96];
+        msg[..95].copy_from_slice(&buf[..95]);
+        msg[95] = b'!';
+        let (ev, _) = events(&mut dec, &msg);
+        assert_eq!(ev[0], Some(Err(Error::Truncated { len: 95 })));
+    }
+
+    #[test]
+    fn a_frame_longer_than_the_buffer() {
+        let mut dec: FrameDecoder<12> = FrameDecoder::new();
+        assert_eq!(dec.capacity(), 12);
+        let (ev, k) = events(&mut dec, b"!9920900100554\r\n#992322C\r\n");
+        assert_eq!(ev[0], Some(Err(Error::FrameTooLong { limit: 12 })));
+        assert_eq!(ev[1], Some(Ok(R232.len())));
+        assert_eq!(k, 2);
+        assert_eq!(dec.stats().discarded_bytes, 16);
+        // Exactly the capacity fits.
+        let mut dec: FrameDecoder<10> = FrameDecoder::new();
+        let (ev, _) = events(&mut dec, R232);
+        assert_eq!(ev[0], Some(Ok(10)));
+        let mut dec: FrameDecoder<9> = FrameDecoder::new();
+        let (ev, _) = events(&mut dec, R232);
+        assert_eq!(ev[0], Some(Err(Error::FrameTooLong { limit: 9 })));
+    }
+
+    #[test]
+    fn reset_and_an_empty_buffer() {
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        assert_eq!(dec.decode(b"!992").event, Event::NeedMore);
+        assert_eq!(dec.pending(), 4);
+        dec.reset();
+        assert_eq!(dec.pending(), 0);
+        assert_eq!(dec.stats().discarded_bytes, 4);
+        let (ev, _) = events(&mut dec, b"09001005");
+        assert_eq!(ev[0], None, "no frame starts without a header");
+        assert_eq!(dec.stats().discarded_bytes, 12);
+        let (ev, _) = events(&mut dec, P10);
+        assert_eq!(ev[0], Some(Ok(P10.len())));
+        dec.reset();
+        assert_eq!(
+            dec.stats().discarded_bytes,
+            12,
+            "a returned frame is not discarded"
+        );
+
+        let mut none: FrameDecoder<0> = FrameDecoder::new();
+        let (ev, _) = events(&mut none, R232);
+        assert_eq!(ev[0], None);
+        assert_eq!(none.stats().discarded_bytes, 10);
+        assert_eq!(none.pending(), 0);
+    }
+}
