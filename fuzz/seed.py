@@ -211,6 +211,11 @@ def main():
         write("readback", f"kind{ki}-one-window", readback_seed(ki, 1, 5, 7, [3]))
         write("readback", f"kind{ki}-three-windows", readback_seed(ki, 1, 20, 0, [1, 0, 1] + [1] * 20))
     write("readback", "near-top", readback_seed(0, 0xFFF8, 20, 1, [2, 2, 2, 2, 2]))
+    # hex: any bytes; the fixture frames hold digits of both cases and
+    # every kind of non-digit next to them.
+    for name, frame in frames[:8]:
+        write("hex", name, frame)
+    write("hex", "digits-both-cases", b"0123456789ABCDEFabcdef@G`g/:\x00\xff")
     print(f"seeded {len(gen)} generated frames, {len(pos_frames)} fixture position frames")
     print(f"seeded {len(frames)} fixture frames into {os.path.join(HERE, 'corpus')}")
 
