@@ -248,6 +248,72 @@ pub fn decode8(d: &[u8; 8]) -> Option<u32> {
     }
 }
 
+/// Decodes many fields and validates them all with one comparison at the
+/// end: for a whole record, one check instead of one per field.
+///
+/// The values it returns are meaningful only if [`Batch::is_valid`] says
+/// so afterwards; otherwise some byte was not a hex digit (find which with
+/// [`first_invalid`] or the per-byte path).
+///
+/// ```
+/// use iai_protocol_b::hex::Batch;
+/// let mut b = Batch::new();
+/// let axes = b.decode2(b"03");
+/// let speed = b.decode4(b"0064");
+/// let x = b.decode8(b"FFFF9C64") as i32;
+/// assert!(b.is_valid());
+/// assert_eq!((axes, speed, x), (3, 100, -25_500));
+/// b.decode2(b"0x");
+/// assert!(!b.is_valid());
+/// ```
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Batch {
+    /// The OR of every group's raw value: above `0xFFFF` once a byte was
+    /// not a hex digit.
+    seen: u32,
+}
+
+impl Batch {
+    /// A batch that has seen no digit.
+    pub const fn new() -> Self {
+        Batch { seen: 0 }
+    }
+
+    /// Two digits (see [`decode2`]).
+    #[inline(always)]
+    pub fn decode2(&mut self, d: &[u8; 2]) -> u8 {
+        let [a, b] = *d;
+        // A bad digit sets bits 20-31 or 16-31: above 0xFFFF either way.
+        let v = (lookup(a) << 4) | lookup(b);
+        self.seen |= v;
+        v as u8
+    }
+
+    /// Four digits (see [`decode4`]).
+    #[inline(always)]
+    pub fn decode4(&mut self, d: &[u8; 4]) -> u16 {
+        let v = raw4(d);
+        self.seen |= v;
+        v as u16
+    }
+
+    /// Eight digits (see [`decode8`]).
+    #[inline(always)]
+    pub fn decode8(&mut self, d: &[u8; 8]) -> u32 {
+        let [a, b, c, e, f, g, h, i] = *d;
+        let hi = raw4(&[a, b, c, e]);
+        let lo = raw4(&[f, g, h, i]);
+        self.seen |= hi | lo;
+        (hi << 16) | lo
+    }
+
+    /// Whether every byte decoded so far was a hex digit.
+    #[inline(always)]
+    pub fn is_valid(&self) -> bool {
+        self.seen <= 0xFFFF
+    }
+}
+
 /// The index of the first byte of `digits` that is not a hex digit.
 pub fn first_invalid(digits: &[u8]) -> Option<usize> {
     digits.iter().position(|&b| !is_digit(b))
@@ -474,6 +540,61 @@ mod tests {
                     assert_eq!(decode2(&two), decode_bytewise(&two).ok().map(|v| v as u8));
                 }
                 assert_eq!(first_invalid(&d), (!b.is_ascii_hexdigit()).then_some(pos));
+            }
+        }
+    }
+
+    #[test]
+    fn a_batch_is_valid_exactly_when_every_group_is() {
+        let groups: [&[u8]; 6] = [b"00", b"ff", b"1E00", b"abcd", b"FFFF9C64", b"7fffffff"];
+        let mut clean = Batch::new();
+        assert!(clean.is_valid());
+        for g in groups {
+            match g.len() {
+                2 => assert_eq!(
+                    Some(clean.decode2(g.try_into().unwrap())),
+                    decode2(g.try_into().unwrap())
+                ),
+                4 => assert_eq!(
+                    Some(clean.decode4(g.try_into().unwrap())),
+                    decode4(g.try_into().unwrap())
+                ),
+                _ => assert_eq!(
+                    Some(clean.decode8(g.try_into().unwrap())),
+                    decode8(g.try_into().unwrap())
+                ),
+            }
+        }
+        assert!(clean.is_valid());
+        // One bad byte anywhere in any group spoils the batch.
+        for (k, g) in groups.iter().enumerate() {
+            for pos in 0..g.len() {
+                for bad in [b'G', b'g', b'/', b':', b'@', b'`', 0x00, 0x80, 0xFF] {
+                    let mut b = Batch::new();
+                    for (j, h) in groups.iter().enumerate() {
+                        let mut d = [0u8; 8];
+                        d[..h.len()].copy_from_slice(h);
+                        if j == k {
+                            d[pos] = bad;
+                        }
+                        match h.len() {
+                            2 => drop(b.decode2(&[d[0], d[1]])),
+                            4 => drop(b.decode4(&[d[0], d[1], d[2], d[3]])),
+                            _ => drop(b.decode8(&d)),
+                        }
+                    }
+                    assert!(!b.is_valid(), "{bad:#04X} at {pos} of group {k}");
+                }
+            }
+        }
+        // Every byte value as the last digit of a 2-digit group (the group
+        // whose marker is shifted least).
+        for x in 0..=255u8 {
+            let mut b = Batch::new();
+            let v = b.decode2(&[b'A', x]);
+            assert_eq!(b.is_valid(), x.is_ascii_hexdigit(), "{x:#04X}");
+            if b.is_valid() {
+                assert_eq!(Some(v), decode2(&[b'A', x]));
             }
         }
     }
