@@ -47,6 +47,21 @@ pub struct Faults {
     pub error_reply: f64,
     /// Chance that noise bytes precede a reply.
     pub garbage_before_reply: f64,
+    /// Chance that a reply is not sent at all.
+    pub drop_reply: f64,
+    /// Chance that a reply is sent this many ms late (past the host's
+    /// timeout, so that it meets the resend).
+    pub late_reply: Option<(f64, u32)>,
+    /// Chance that a reply is sent a second time, up to this many ms after
+    /// the first (an echoing converter, a late copy).
+    pub dup_reply: Option<(f64, u32)>,
+    /// The controller stops answering anything once this many position
+    /// records were written (it hangs in the middle of a table).
+    pub stop_after_records: Option<u64>,
+    /// Chance, per position write, that one record is stored altered in a
+    /// way that keeps the frame's SC valid (two hex digits of a coordinate
+    /// swapped): what only reading back can catch.
+    pub swap_record: f64,
 }
 
 /// What the simulator counted.
@@ -72,6 +87,10 @@ pub struct SimStats {
     pub bytes_out: u64,
     /// Position records written.
     pub records_written: u64,
+    /// Replies sent twice.
+    pub duplicated_replies: u32,
+    /// Records stored altered (SC-preserving swap).
+    pub swapped_records: u32,
 }
 
 /// Deterministic xorshift generator (tests must be reproducible).
@@ -212,6 +231,9 @@ impl Simulator {
                 }
             };
             if let Some(cmd) = reply {
+                if self.stopped() {
+                    continue;
+                }
                 self.stats.commands += 1;
                 let frame = Frame::new_checked(&cmd, BypassPolicy::CommandsOnly)
                     .expect("decoder checked it");
@@ -229,6 +251,7 @@ impl Simulator {
             .faults
             .drop_every_nth_reply
             .is_some_and(|k| n.is_multiple_of(k))
+            || self.rng.chance(self.faults.drop_reply)
         {
             self.stats.dropped_replies += 1;
             return;
@@ -255,8 +278,53 @@ impl Simulator {
                 at = now + late;
             }
         }
+        if let Some((p, late)) = self.faults.late_reply {
+            if self.rng.chance(p) {
+                self.stats.late_replies += 1;
+                at = now + late;
+            }
+        }
+        if let Some((p, max)) = self.faults.dup_reply {
+            if self.rng.chance(p) {
+                self.stats.duplicated_replies += 1;
+                let again = at + 1 + self.rng.below(u64::from(max.max(1))) as u32;
+                self.outbox.push((again, reply.clone()));
+            }
+        }
         self.stats.replies += 1;
         self.outbox.push((at, reply));
+    }
+
+    /// Whether the controller has stopped (see [`Faults::stop_after_records`]).
+    pub fn stopped(&self) -> bool {
+        self.faults
+            .stop_after_records
+            .is_some_and(|n| self.stats.records_written >= n)
+    }
+
+    /// Alters one coordinate of one of `recs` so that the frame's SC would
+    /// not change: two different hex digits of its wire form swapped.
+    fn swap_one(&mut self, recs: &mut [PositionRecord]) {
+        let with_axes: Vec<usize> = (0..recs.len())
+            .filter(|&i| !recs[i].positions.is_empty())
+            .collect();
+        if with_axes.is_empty() {
+            return;
+        }
+        let i = with_axes[self.rng.below(with_axes.len() as u64) as usize];
+        let rec = &mut recs[i];
+        let a = self.rng.below(rec.positions.len() as u64) as usize;
+        let digits = format!("{:08X}", rec.positions[a] as u32).into_bytes();
+        for j in 0..7 {
+            if digits[j] != digits[j + 1] {
+                let mut d = digits.clone();
+                d.swap(j, j + 1);
+                let v = u32::from_str_radix(std::str::from_utf8(&d).unwrap(), 16).unwrap();
+                rec.positions[a] = v as i32;
+                self.stats.swapped_records += 1;
+                return;
+            }
+        }
     }
 
     fn error_frame(&self, code: u16) -> Vec<u8> {
@@ -356,9 +424,12 @@ impl Simulator {
             r.finish()?;
             Ok::<_, iai_protocol_b::Error>((start, recs))
         })();
-        let Ok((start, recs)) = parsed else {
+        let Ok((start, mut recs)) = parsed else {
             return self.error_frame(UNSUPPORTED_ERROR_CODE);
         };
+        if self.rng.chance(self.faults.swap_record) {
+            self.swap_one(&mut recs);
+        }
         let n = recs.len() as u16;
         for rec in recs {
             self.table.insert(rec.number, rec);

@@ -9,7 +9,7 @@ use host_tests::cli::inspect::{self, Format};
 use host_tests::cli::simulate::{self, SimProfile, SimulateOptions};
 use host_tests::cli::text::escape;
 use iai_protocol_b::frame::Header;
-use iai_protocol_b::message::message_name;
+use iai_protocol_b::catalogue;
 
 const USAGE: &str = "\
 iai — IAI protocol B tools
@@ -112,7 +112,7 @@ fn run(args: &[String]) -> Result<ExitCode, String> {
                 let _ = writeln!(
                     stdout,
                     "{id:03X}H {} ({}):",
-                    message_name(id).unwrap_or(""),
+                    catalogue::lookup(id).map(|m| m.name).unwrap_or(""),
                     if opts.response { "response" } else { "command" }
                 );
                 for l in field_help(header, id) {
