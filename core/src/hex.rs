@@ -271,12 +271,14 @@ pub struct Batch {
     /// The OR of every group's raw value: above `0xFFFF` once a byte was
     /// not a hex digit.
     seen: u32,
+    /// The sum of every byte decoded (what they add to the checksum).
+    sum: u32,
 }
 
 impl Batch {
     /// A batch that has seen no digit.
     pub const fn new() -> Self {
-        Batch { seen: 0 }
+        Batch { seen: 0, sum: 0 }
     }
 
     /// Two digits (see [`decode2`]).
@@ -286,6 +288,7 @@ impl Batch {
         // A bad digit sets bits 20-31 or 16-31: above 0xFFFF either way.
         let v = (lookup(a) << 4) | lookup(b);
         self.seen |= v;
+        self.sum += u32::from(a) + u32::from(b);
         v as u8
     }
 
@@ -294,6 +297,7 @@ impl Batch {
     pub fn decode4(&mut self, d: &[u8; 4]) -> u16 {
         let v = raw4(d);
         self.seen |= v;
+        self.sum += d.iter().map(|&b| u32::from(b)).sum::<u32>();
         v as u16
     }
 
@@ -304,7 +308,15 @@ impl Batch {
         let hi = raw4(&[a, b, c, e]);
         let lo = raw4(&[f, g, h, i]);
         self.seen |= hi | lo;
+        self.sum += d.iter().map(|&b| u32::from(b)).sum::<u32>();
         (hi << 16) | lo
+    }
+
+    /// The sum of every byte decoded so far (what they add to the
+    /// checksum), valid digits or not.
+    #[inline(always)]
+    pub fn sum(&self) -> u32 {
+        self.sum
     }
 
     /// Whether every byte decoded so far was a hex digit.
@@ -361,6 +373,19 @@ const BLOCK: usize = 1024;
 /// assert_eq!(iai_protocol_b::hex::sum(0, b"!99209001005"), 0x54);
 /// ```
 pub fn sum(acc: u8, bytes: &[u8]) -> u8 {
+    // Armv6-M (Cortex-M0/M0+) cannot load a word from an unaligned
+    // address, so a word costs it four byte loads: it adds bytes. Lacking
+    // compare-and-swap is what tells it apart in a stable `cfg`.
+    #[cfg(not(target_has_atomic = "32"))]
+    return sum_bytewise(acc, bytes);
+    #[cfg(target_has_atomic = "32")]
+    sum_words(acc, bytes)
+}
+
+/// [`sum`] a word at a time, on any target (tested against
+/// [`sum_bytewise`] on the host whatever `sum` picks).
+#[inline]
+pub fn sum_words(acc: u8, bytes: &[u8]) -> u8 {
     let mut total = u32::from(acc);
     for block in bytes.chunks(BLOCK) {
         let mut even = 0u32;
@@ -566,6 +591,8 @@ mod tests {
             }
         }
         assert!(clean.is_valid());
+        let all: u32 = groups.iter().flat_map(|g| g.iter()).map(|&b| u32::from(b)).sum();
+        assert_eq!(clean.sum(), all);
         // One bad byte anywhere in any group spoils the batch.
         for (k, g) in groups.iter().enumerate() {
             for pos in 0..g.len() {
@@ -657,6 +684,7 @@ mod tests {
                 let s = &bytes[start..start + len];
                 for acc in [0u8, 0x5A, 0xFF] {
                     assert_eq!(sum(acc, s), sum_bytewise(acc, s), "{start}+{len}");
+                    assert_eq!(sum_words(acc, s), sum_bytewise(acc, s), "{start}+{len}");
                 }
             }
         }
@@ -666,7 +694,11 @@ mod tests {
     fn sums_of_long_runs_of_0xff_do_not_overflow_a_lane() {
         let ff = [0xFFu8; 5000];
         for len in [1023, 1024, 1025, 2048, 4096, 5000] {
-            assert_eq!(sum(0, &ff[..len]), sum_bytewise(0, &ff[..len]), "{len}");
+            assert_eq!(
+                sum_words(0, &ff[..len]),
+                sum_bytewise(0, &ff[..len]),
+                "{len}"
+            );
         }
     }
 }

@@ -6,7 +6,9 @@
 //! is taken as a `u32` value, encoded as 8, 4 and 2 digits and compared with
 //! `encode_bytewise` (and the returned sums with `sum_bytewise`, the
 //! digits decoded back); the checksum of every suffix, from three starting
-//! values, is compared with `sum_bytewise`.
+//! values, is compared with `sum_bytewise` (both `sum` and `sum_words`).
+//! `Batch` decodes every window as 2+2+4 digits: valid exactly when all
+//! eight bytes are digits, values and sum as the per-byte path.
 #![no_main]
 
 use iai_protocol_b::hex;
@@ -14,6 +16,15 @@ use libfuzzer_sys::fuzz_target;
 
 fn decode_window(d: &[u8; 8]) {
     let reference = hex::decode_bytewise(d);
+    let mut b = hex::Batch::new();
+    let x = b.decode2(d[..2].try_into().unwrap());
+    let y = b.decode2(d[2..4].try_into().unwrap());
+    let z = b.decode4(d[4..].try_into().unwrap());
+    assert_eq!(b.is_valid(), reference.is_ok());
+    assert_eq!(b.sum(), d.iter().map(|&c| u32::from(c)).sum::<u32>());
+    if let Ok(v) = reference {
+        assert_eq!(u64::from(x) << 24 | u64::from(y) << 16 | u64::from(z), v);
+    }
     assert_eq!(hex::decode8(d), reference.ok().map(|v| v as u32), "{d:?}");
     assert_eq!(hex::first_invalid(d), reference.err());
     for half in [&d[..4], &d[4..]] {
@@ -63,6 +74,7 @@ fuzz_target!(|data: &[u8]| {
         let s = &data[start..];
         for acc in [0u8, 0x80, 0xFF] {
             assert_eq!(hex::sum(acc, s), hex::sum_bytewise(acc, s));
+            assert_eq!(hex::sum_words(acc, s), hex::sum_bytewise(acc, s));
         }
     }
 });
