@@ -30,10 +30,17 @@ impl Checksum {
         self.0 = self.0.wrapping_add(byte);
     }
 
-    /// Adds every byte of `bytes`.
+    /// Adds every byte of `bytes` (a word at a time, [`crate::hex::sum`]).
     #[inline]
     pub fn update(&mut self, bytes: &[u8]) {
-        self.0 = bytes.iter().fold(self.0, |s, &b| s.wrapping_add(b));
+        self.0 = crate::hex::sum(self.0, bytes);
+    }
+
+    /// Adds a sum of bytes computed elsewhere, such as the one
+    /// [`crate::hex::put8`] returns for the digits it wrote.
+    #[inline]
+    pub fn add_sum(&mut self, sum: u32) {
+        self.0 = self.0.wrapping_add(sum as u8);
     }
 
     /// The checksum value.
@@ -133,6 +140,23 @@ mod tests {
             d.push(b);
         }
         assert_eq!(d.value(), 0x54);
+        // A sum computed elsewhere: only its low byte counts.
+        let mut e = Checksum::new();
+        e.add_sum(0x254);
+        assert_eq!(e.value(), 0x54);
+        e.add_sum(0x1AC);
+        assert_eq!(e.value(), 0x00);
+        // Long input takes the word-at-a-time path.
+        let mut long = [0u8; 3000];
+        for (i, b) in long.iter_mut().enumerate() {
+            *b = (i * 7 + 3) as u8;
+        }
+        let expect = long.iter().fold(0u8, |s, &b| s.wrapping_add(b));
+        assert_eq!(Checksum::of(&long), expect);
+        let mut f = Checksum::new();
+        f.update(&long[..1001]);
+        f.update(&long[1001..]);
+        assert_eq!(f.value(), expect);
     }
 
     #[test]
