@@ -15,6 +15,7 @@
 //! ```
 
 use crate::error::{Error, Result};
+use crate::hex;
 
 /// How the characters of a field encode its value.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -124,60 +125,67 @@ impl FieldSpec {
     }
 }
 
-/// Digit values of every byte: 0..=15 for hex digits of either case, 0xFF otherwise.
-// Indexing in a const initialiser is checked at compile time: it cannot panic at run time.
-#[allow(clippy::indexing_slicing)]
-const HEX_VALUES: [u8; 256] = {
-    let mut t = [0xFFu8; 256];
-    let mut i = 0;
-    while i < 10 {
-        t[b'0' as usize + i] = i as u8;
-        i += 1;
-    }
-    let mut i = 0;
-    while i < 6 {
-        t[b'A' as usize + i] = 10 + i as u8;
-        t[b'a' as usize + i] = 10 + i as u8;
-        i += 1;
-    }
-    t
-};
-
 /// Value of one hex digit (either case), or `None`.
 #[inline]
 pub fn hex_value(byte: u8) -> Option<u8> {
-    match HEX_VALUES.get(usize::from(byte)) {
-        Some(&v) if v < 16 => Some(v),
-        _ => None,
-    }
+    hex::value(byte)
 }
 
 /// The upper-case hex digit for a nibble (`n` is masked to 0..=15).
 #[inline]
 pub const fn hex_digit(n: u8) -> u8 {
-    let n = n & 0xF;
-    if n < 10 {
-        b'0' + n
-    } else {
-        b'A' - 10 + n
-    }
+    hex::digit(n)
 }
 
 /// Whether `byte` is a hex digit of either case.
 #[inline]
 pub fn is_hex_digit(byte: u8) -> bool {
-    hex_value(byte).is_some()
+    hex::is_digit(byte)
 }
 
-/// Writes `value` as upper-case hex digits filling `out` exactly.
-/// Returns `false` if it does not fit.
+/// Writes `value` as upper-case hex digits filling `out` exactly: 2, 4
+/// and 8 digits a field at a time ([`crate::hex`]), other widths a digit
+/// at a time. Returns `false` if it does not fit.
 #[inline]
-fn put_hex(mut value: u64, out: &mut [u8]) -> bool {
-    for slot in out.iter_mut().rev() {
-        *slot = hex_digit((value & 0xF) as u8);
-        value >>= 4;
+fn put_hex(value: u64, out: &mut [u8]) -> bool {
+    match out.len() {
+        8 => {
+            if let (Ok(d), Ok(v)) = (<&mut [u8; 8]>::try_from(&mut *out), u32::try_from(value)) {
+                hex::put8(v, d);
+                return true;
+            }
+        }
+        4 => {
+            if let (Ok(d), Ok(v)) = (<&mut [u8; 4]>::try_from(&mut *out), u16::try_from(value)) {
+                hex::put4(v, d);
+                return true;
+            }
+        }
+        2 => {
+            if let (Ok(d), Ok(v)) = (<&mut [u8; 2]>::try_from(&mut *out), u8::try_from(value)) {
+                hex::put2(v, d);
+                return true;
+            }
+        }
+        _ => {}
     }
-    value == 0
+    hex::encode_bytewise(value, out)
+}
+
+/// The value of 2, 4 or 8 hex digits a field at a time; `None` for other
+/// widths and for any byte that is not a hex digit (the per-digit path
+/// then says which).
+#[inline]
+fn hex_fast(digits: &[u8]) -> Option<u64> {
+    if let Ok(d) = <&[u8; 8]>::try_from(digits) {
+        hex::decode8(d).map(u64::from)
+    } else if let Ok(d) = <&[u8; 4]>::try_from(digits) {
+        hex::decode4(d).map(u64::from)
+    } else if let Ok(d) = <&[u8; 2]>::try_from(digits) {
+        hex::decode2(d).map(u64::from)
+    } else {
+        None
+    }
 }
 
 /// Writes an unsigned value into `out` (whose length must be the field width).
@@ -234,6 +242,9 @@ pub fn decode_unsigned(spec: FieldSpec, digits: &[u8], offset: usize) -> Result<
     let mut value: u64 = 0;
     match spec.radix {
         Radix::Hex => {
+            if let Some(v) = hex_fast(digits) {
+                return Ok(v);
+            }
             for (i, &b) in digits.iter().enumerate() {
                 let d = hex_value(b).ok_or(Error::InvalidHexDigit {
                     offset: offset + i,
@@ -295,6 +306,10 @@ impl<'a> Reader<'a> {
     /// Bytes not yet read.
     pub fn remaining(&self) -> usize {
         self.bytes.len().saturating_sub(self.pos)
+    }
+    /// The bytes not yet read, without taking them.
+    pub fn rest(&self) -> &'a [u8] {
+        self.bytes.get(self.pos..).unwrap_or(&[])
     }
     /// Takes the next `n` bytes.
     pub fn take(&mut self, n: usize) -> Result<&'a [u8]> {
@@ -361,6 +376,11 @@ impl<'b> Writer<'b> {
     /// The bytes written so far.
     pub fn written(&self) -> &[u8] {
         self.buf.get(..self.len).unwrap_or(&[])
+    }
+    /// The room left after what was written, to fill before
+    /// [`Writer::reserve`]-ing it.
+    pub fn spare(&mut self) -> &mut [u8] {
+        self.buf.get_mut(self.len..).unwrap_or(&mut [])
     }
     /// Reserves the next `n` bytes and returns them for filling.
     pub fn reserve(&mut self, n: usize) -> Result<&mut [u8]> {
@@ -702,7 +722,10 @@ mod tests {
         assert_eq!(r.take(0), Ok(&b""[..]));
 
         let mut r = Reader::new(b"12345", 6);
+        assert_eq!(r.rest(), b"12345");
         assert_eq!(r.take(2), Ok(&b"12"[..]));
+        assert_eq!(r.rest(), b"345", "rest does not take");
+        assert_eq!(r.rest(), b"345");
         assert_eq!(r.take(usize::MAX), Err(Error::BodyTooShort { offset: 8 }));
         assert_eq!(r.take(4), Err(Error::BodyTooShort { offset: 8 }));
         assert_eq!(r.take(3), Ok(&b"345"[..]));
@@ -764,8 +787,13 @@ mod tests {
         assert_eq!(w.reserve(0).map(|s| s.len()), Ok(0));
 
         let mut buf = *b"!99209001005....";
-        let w = Writer::resume(&mut buf, 12);
+        let mut w = Writer::resume(&mut buf, 12);
         assert_eq!(w.written(), b"!99209001005");
+        assert_eq!(w.spare(), b"....");
+        w.spare()[0] = b'5';
+        assert_eq!(w.len(), 12, "spare does not reserve");
+        assert_eq!(w.reserve(1).map(|s| s[0]), Ok(b'5'));
+        assert_eq!(w.spare(), b"...");
         let w = Writer::resume(&mut buf, 100);
         assert_eq!(w.len(), 16, "clamped to the buffer");
     }
