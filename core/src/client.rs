@@ -243,12 +243,17 @@ enum Phase {
     Idle,
     /// The command (or the 216H detail query after an error response with
     /// this code) is in the exchange.
-    Running { detail_for: Option<u16> },
+    Running {
+        detail_for: Option<u16>,
+    },
     Done(Result<Outcome, CallError>),
 }
 
 /// Sends commands and matches their replies.
-pub struct Client<const CMD: usize = { limits::TTA.command }, const REPLY: usize = { limits::TTA.response }> {
+pub struct Client<
+    const CMD: usize = { limits::TTA.command },
+    const REPLY: usize = { limits::TTA.response },
+> {
     cfg: ClientConfig,
     exchange: Exchange,
     command: [u8; CMD],
@@ -298,7 +303,11 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
     pub fn start<'a, R: Request<'a>>(&mut self, req: &R, now: u32) -> Result<(), Error> {
         self.exchange.abandon(now);
         self.phase = Phase::Idle;
-        self.command_len = req.emit_with(self.cfg.exchange.station, self.cfg.checksum, &mut self.command)?;
+        self.command_len = req.emit_with(
+            self.cfg.exchange.station,
+            self.cfg.checksum,
+            &mut self.command,
+        )?;
         self.exchange.start(R::INFO, now);
         self.begin();
         Ok(())
@@ -318,12 +327,17 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
         }
         self.exchange.abandon(now);
         self.phase = Phase::Idle;
-        let dst = self.command.get_mut(..frame.len()).ok_or(Error::BufferTooSmall)?;
+        let dst = self
+            .command
+            .get_mut(..frame.len())
+            .ok_or(Error::BufferTooSmall)?;
         dst.copy_from_slice(frame);
         self.command_len = frame.len();
         match catalogue::lookup(f.code()) {
             Some(info) => self.exchange.start(info, now),
-            None => self.exchange.start_raw(f.code(), Resend::Unsafe, Reply::Normal, now),
+            None => self
+                .exchange
+                .start_raw(f.code(), Resend::Unsafe, Reply::Normal, now),
         }
         self.begin();
         Ok(())
@@ -352,7 +366,9 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
                         }
                         self.replies.reset();
                     }
-                    return ClientStep::Transmit(self.command.get(..self.command_len).unwrap_or(&[]));
+                    return ClientStep::Transmit(
+                        self.command.get(..self.command_len).unwrap_or(&[]),
+                    );
                 }
                 Due::WaitUntil(t) => return ClientStep::WaitUntil(t),
                 Due::Done(f) => self.finished(f, detail_for, now),
@@ -410,7 +426,11 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
     /// cannot be emitted.
     fn fetch_detail(&mut self, code: u16, now: u32) -> bool {
         let q = ErrorDetailQuery::latest_system_error();
-        match q.emit_with(self.cfg.exchange.station, self.cfg.checksum, &mut self.command) {
+        match q.emit_with(
+            self.cfg.exchange.station,
+            self.cfg.checksum,
+            &mut self.command,
+        ) {
             Ok(n) => {
                 self.command_len = n;
                 self.exchange.start(ErrorDetailQuery::INFO, now);
@@ -435,12 +455,10 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
     pub fn received(&mut self, bytes: &[u8], now: u32) -> Received<Heard> {
         let running = matches!(self.phase, Phase::Running { .. });
         let d = self.replies.decode(bytes);
+        let consumed = d.consumed;
         let event = match d.event {
             Event::NeedMore => Heard::NeedMore,
-            Event::Error(e) => {
-                self.stats.line_errors += 1;
-                Heard::Broken(e)
-            }
+            Event::Error(e) => Heard::Broken(e),
             Event::Frame(f) => {
                 // Chapter 5 condition 1: a normal response must have its
                 // message's layout.
@@ -461,10 +479,14 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
                 Heard::Frame(offer)
             }
         };
-        Received {
-            consumed: d.consumed,
-            event,
+        if let Heard::Broken(_) = event {
+            self.stats.line_errors += 1;
+            if running {
+                self.exchange
+                    .broken_frame(self.replies.failed_envelope(), now);
+            }
         }
+        Received { consumed, event }
     }
 
     /// Feeds all of `bytes` ([`Client::received`] in a loop), ignoring what
@@ -499,7 +521,9 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
         match self.phase {
             Phase::Done(Ok(Outcome::NoReplyExpected)) => Ok(Default::default()),
             _ => {
-                let frame = self.reply_frame().ok_or(Error::UnknownMessageId { id: R::ID })?;
+                let frame = self
+                    .reply_frame()
+                    .ok_or(Error::UnknownMessageId { id: R::ID })?;
                 <R::Response<'c> as Message<'c>>::parse(&frame)
             }
         }
@@ -533,7 +557,11 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
     /// Makes what progress is possible without waiting for the started
     /// request: reads what arrived, sends what is due (taking the time
     /// after the write), checks the deadline. `Ok(())` once it succeeded.
-    pub fn poll_nb<U, C>(&mut self, uart: &mut U, clock: &mut C) -> nb::Result<(), CallError<U::Error>>
+    pub fn poll_nb<U, C>(
+        &mut self,
+        uart: &mut U,
+        clock: &mut C,
+    ) -> nb::Result<(), CallError<U::Error>>
     where
         U: embedded_io::Read + embedded_io::ReadReady + embedded_io::Write,
         C: Clock,
@@ -556,9 +584,11 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
                 Err(nb::Error::WouldBlock)
             }
             ClientStep::WaitUntil(_) => Err(nb::Error::WouldBlock),
-            ClientStep::Idle => Err(nb::Error::Other(CallError::Protocol(Error::UnknownMessageId {
-                id: self.exchange.id(),
-            }))),
+            ClientStep::Idle => Err(nb::Error::Other(CallError::Protocol(
+                Error::UnknownMessageId {
+                    id: self.exchange.id(),
+                },
+            ))),
             ClientStep::Done(Ok(_)) => Ok(()),
             ClientStep::Done(Err(e)) => Err(nb::Error::Other(e.widen())),
         }
@@ -688,7 +718,9 @@ fn loopback_reply(cmd: &Frame<'_>, out: &mut [u8]) -> usize {
         return r.emit(cmd.station(), out).unwrap_or(0);
     }
     match Response::default_for(cmd.code()) {
-        Some(r) if crate::message::Command::parse(cmd).is_ok() => r.emit(cmd.station(), out).unwrap_or(0),
+        Some(r) if crate::message::Command::parse(cmd).is_ok() => {
+            r.emit(cmd.station(), out).unwrap_or(0)
+        }
         _ => 0,
     }
 }

@@ -70,7 +70,13 @@ pub enum Verdict {
 /// assert_eq!(judge(s, 0x212, Header::Error, s, 0xC74), Verdict::ErrorReply(0xC74));
 /// assert_eq!(judge(s, 0x212, Header::Response, Station(0x01), 0x212), Verdict::Foreign);
 /// ```
-pub const fn judge(expected: Station, id: u16, header: Header, station: Station, code: u16) -> Verdict {
+pub const fn judge(
+    expected: Station,
+    id: u16,
+    header: Header,
+    station: Station,
+    code: u16,
+) -> Verdict {
     if station.0 != expected.0 {
         return Verdict::Foreign;
     }
@@ -449,9 +455,7 @@ impl Exchange {
                 stale = stale.saturating_add(1);
                 until = later(until, now.wrapping_add(self.cfg.duplicate_window_ms));
             }
-            let turnaround = now
-                .wrapping_add(self.cfg.turnaround_ms)
-                .wrapping_add(1);
+            let turnaround = now.wrapping_add(self.cfg.turnaround_ms).wrapping_add(1);
             self.not_before = later(self.not_before, turnaround);
         }
         // Stale replies of older commands are still possible until their
@@ -463,6 +467,34 @@ impl Exchange {
         self.stale = stale;
         self.stale_until = until;
         Due::Done(f)
+    }
+
+    /// The awaited reply arrived broken (it ended with CR LF, carried this
+    /// command's station and ID, and failed its checksum or layout): the
+    /// controller answers each command once, so no valid reply will come.
+    /// The command is treated as timed out as soon as the turnaround has
+    /// passed, instead of `timeout_ms` later. (Resending before the
+    /// timeout is an **inference** from the half-duplex rules, 2003 p. 8:
+    /// after its reply the controller is ready for the next command.)
+    pub fn reply_lost(&mut self, now: u32) {
+        if let Phase::Await { deadline } = self.phase {
+            let soon = now.wrapping_add(self.cfg.turnaround_ms).wrapping_add(1);
+            if reached(deadline, soon) {
+                self.phase = Phase::Await { deadline: soon };
+            }
+            self.faulted = true;
+        }
+    }
+
+    /// A frame ended broken; `envelope` is what could be read of it
+    /// ([`crate::decoder::FrameDecoder::failed_envelope`]). If it was this
+    /// command's reply, see [`Exchange::reply_lost`].
+    pub fn broken_frame(&mut self, envelope: Option<(Header, Station, u16)>, now: u32) {
+        if let Some((header, station, code)) = envelope {
+            if judge(self.cfg.station, self.id, header, station, code) != Verdict::Foreign {
+                self.reply_lost(now);
+            }
+        }
     }
 
     /// Forgets the current command (its replies become stale).
@@ -584,6 +616,18 @@ mod tests {
         // It arrives meanwhile: stale, never the next command's reply.
         assert_eq!(x.offer(&f, true, 3_500), Offer::Stale);
         assert_eq!(x.poll(9_010), Due::Transmit { fresh: true });
+    }
+
+    #[test]
+    fn a_broken_reply_is_resent_after_the_turnaround_not_the_timeout() {
+        let mut x = exchange();
+        x.start(&catalogue::AXIS_STATUS_QUERY, 0);
+        x.poll(0);
+        x.sent(100);
+        x.reply_lost(150);
+        assert_eq!(x.poll(151), Due::WaitUntil(152));
+        assert_eq!(x.poll(152), Due::Transmit { fresh: true });
+        assert_eq!(x.sends(), 2);
     }
 
     #[test]

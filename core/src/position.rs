@@ -25,7 +25,9 @@
 
 use crate::axis::{per_axis_values, AxisPattern, PerAxis, MAX_AXES};
 use crate::catalogue;
-use crate::codec::{counted, inspect_items, Counted, FieldCodec, Fixed, GroupInfo, Inspect, Value, Visitor};
+use crate::codec::{
+    counted, inspect_items, Counted, FieldCodec, Fixed, GroupInfo, Inspect, Value, Visitor,
+};
 use crate::error::{Error, Result};
 use crate::field::{decode_unsigned, FieldSpec, Reader, Writer};
 use crate::frame::{Frame, Header, ENVELOPE_LEN, TRAILER_LEN};
@@ -346,7 +348,12 @@ impl Inspect<PositionRecord> for RecordLayout {
             let spec = FieldSpec::hex(self.number_width);
             v.field("position_number", "", spec, unsigned(rec.number));
         }
-        v.field("axis_pattern", "", AXES, Value::Unsigned(rec.axes.bits().into()));
+        v.field(
+            "axis_pattern",
+            "",
+            AXES,
+            Value::Unsigned(rec.axes.bits().into()),
+        );
         v.field("acceleration", "0.01G", WORD, unsigned(rec.acceleration));
         v.field("deceleration", "0.01G", WORD, unsigned(rec.deceleration));
         v.field("speed", "mm/s", WORD, unsigned(rec.speed));
@@ -354,11 +361,24 @@ impl Inspect<PositionRecord> for RecordLayout {
             count: rec.positions.len(),
             count_field: None,
             per_item: 1,
+            units: rec.positions.len(),
             max: MAX_AXES,
         };
-        inspect_items(&COORD, rec.positions.iter(), "position", "0.001mm", group, v);
+        inspect_items(
+            &COORD,
+            rec.positions.iter(),
+            "position",
+            "0.001mm",
+            group,
+            v,
+        );
         if self.extended {
-            v.field("extended_data", "", EXT, Value::Unsigned(rec.extended.into()));
+            v.field(
+                "extended_data",
+                "",
+                EXT,
+                Value::Unsigned(rec.extended.into()),
+            );
         }
     }
 }
@@ -801,17 +821,34 @@ mod tests {
 
     #[test]
     fn streams_know_their_read_back_query_and_window() {
-        assert_eq!(PositionStream::CHANGE_2.read_back(), PositionStream::QUERY_2_RESPONSE);
-        assert_eq!(PositionStream::CHANGE_3.read_back(), PositionStream::QUERY_3_RESPONSE);
-        assert_eq!(PositionStream::RANGE_3.read_back(), PositionStream::QUERY_3_RESPONSE);
-        assert_eq!(PositionStream::RANGE.read_back(), PositionStream::QUERY_RESPONSE);
-        assert_eq!(PositionStream::CHANGE.read_back(), PositionStream::QUERY_RESPONSE);
+        assert_eq!(
+            PositionStream::CHANGE_2.read_back(),
+            PositionStream::QUERY_2_RESPONSE
+        );
+        assert_eq!(
+            PositionStream::CHANGE_3.read_back(),
+            PositionStream::QUERY_3_RESPONSE
+        );
+        assert_eq!(
+            PositionStream::RANGE_3.read_back(),
+            PositionStream::QUERY_3_RESPONSE
+        );
+        assert_eq!(
+            PositionStream::RANGE.read_back(),
+            PositionStream::QUERY_RESPONSE
+        );
+        assert_eq!(
+            PositionStream::CHANGE.read_back(),
+            PositionStream::QUERY_RESPONSE
+        );
         // 21FH on a TTA: (2048 - 14) / 82 = 24 positions per query.
         assert_eq!(PositionStream::QUERY_2_RESPONSE.window(2048), 24);
         assert_eq!(PositionStream::QUERY_RESPONSE.window(1024), 12);
         let mut buf = [0u8; 16];
         let mut w = Writer::new(&mut buf);
-        PositionStream::QUERY_3_RESPONSE.write_query(&mut w, 0x10, 24).unwrap();
+        PositionStream::QUERY_3_RESPONSE
+            .write_query(&mut w, 0x10, 24)
+            .unwrap();
         assert_eq!(w.written(), b"0000100018");
     }
 

@@ -25,6 +25,10 @@
 //!   empty (its duplicate came first), that window is read again and its
 //!   records delivered then, marked [`ReplyRecords::reread`].
 //!
+//! A window whose reply keeps timing out is asked again at half the size
+//! (a long reply is more likely hit by noise), and grows back as answers
+//! come.
+//!
 //! Left unguarded: the very first duplicate on a line arriving while the
 //! next window's query *and* its reply were both lost. Where reading back
 //! verifies a write ([`crate::transfer::Verify`]), such a window reads as
@@ -214,6 +218,9 @@ pub struct ReadBack<const N: usize = { limits::TTA.response }> {
     asked: u16,
     /// Whether the window in flight is a re-read.
     rereading: bool,
+    /// Positions asked per query now: halved after a timeout, grown back
+    /// after each answer.
+    window_limit: u16,
     query: [u8; 24],
     query_len: usize,
     exchange: Exchange,
@@ -239,6 +246,7 @@ impl<const N: usize> ReadBack<N> {
             current_head: u32::from(cfg.first),
             asked: 0,
             rereading: false,
+            window_limit: cfg.window(),
             query: [0; 24],
             query_len: 0,
             exchange: Exchange::new(cfg.exchange, Quarantine::Wait),
@@ -284,7 +292,9 @@ impl<const N: usize> ReadBack<N> {
                         None => {
                             let id = self.cfg.stream.id;
                             self.state =
-                                State::Failed(TransferError::Config(Error::UnknownMessageId { id }));
+                                State::Failed(TransferError::Config(Error::UnknownMessageId {
+                                    id,
+                                }));
                             continue;
                         }
                     }
@@ -297,6 +307,7 @@ impl<const N: usize> ReadBack<N> {
                             if self.exchange.sends() > 1 {
                                 self.stats.retries += 1;
                                 self.stats.timeouts += 1;
+                                self.shrink();
                             }
                         }
                         return ReadStep::Transmit(self.query.get(..self.query_len).unwrap_or(&[]));
@@ -317,6 +328,12 @@ impl<const N: usize> ReadBack<N> {
                     }
                 },
                 State::Deliver => {
+                    // The window came through: let it grow back.
+                    let full = self.cfg.window();
+                    let grown = self
+                        .window_limit
+                        .saturating_add((self.window_limit / 4).max(1));
+                    self.window_limit = grown.min(full);
                     // Deliver once; the next poll moves on.
                     let turnaround = now.wrapping_add(self.cfg.exchange.turnaround_ms + 1);
                     self.state = State::Query {
@@ -394,6 +411,10 @@ impl<const N: usize> ReadBack<N> {
             Err(None) => ReadEvent::NeedMore,
             Err(Some(e)) => {
                 self.stats.ignored += 1;
+                if self.state == State::Exchange {
+                    let envelope = self.replies.failed_envelope();
+                    self.exchange.broken_frame(envelope, now);
+                }
                 ReadEvent::Broken(e)
             }
             Ok(seen) => self.frame(seen, window, now),
@@ -403,8 +424,13 @@ impl<const N: usize> ReadBack<N> {
 
     fn frame(&mut self, seen: Seen, window: (u32, u16), now: u32) -> ReadEvent {
         let offer = if self.state == State::Exchange {
-            self.exchange
-                .offer_head(seen.header, seen.station, seen.code, seen.check.is_some(), now)
+            self.exchange.offer_head(
+                seen.header,
+                seen.station,
+                seen.code,
+                seen.check.is_some(),
+                now,
+            )
         } else if crate::exchange::judge(
             self.cfg.exchange.station,
             self.cfg.stream.id,
@@ -422,7 +448,10 @@ impl<const N: usize> ReadBack<N> {
                 let records = seen.check.unwrap_or(0);
                 self.stats.queries += 1;
                 self.stats.records += u32::from(records);
-                self.empties.retain_mut(|e| !reached(now, e.until));
+                // Entries expire in the order they were made.
+                while self.empties.front().is_some_and(|e| reached(now, e.until)) {
+                    self.empties.pop_front();
+                }
                 if records == 0 {
                     self.last_empty = Some(now);
                     let until = now.wrapping_add(self.cfg.exchange.duplicate_window_ms);
@@ -496,19 +525,38 @@ impl<const N: usize> ReadBack<N> {
             Some(w) => w,
             None => {
                 let left = u32::from(cfg.last) + 1 - self.head;
-                (self.head, left.min(u32::from(cfg.window())) as u16)
+                (self.head, left.min(u32::from(self.window_limit)) as u16)
             }
         };
         self.rereading = reread.is_some();
         self.current_head = head;
         self.asked = asked.max(1);
+        self.write_query()
+    }
+
+    fn write_query(&mut self) -> Result<(), Error> {
+        let cfg = self.cfg;
         let mut w = Writer::new(&mut self.query);
         emit_envelope(&mut w, Header::Command, cfg.exchange.station, cfg.stream.id)?;
-        let head16 = u16::try_from(head).map_err(|_| Error::ValueOutOfRange { offset: 6 })?;
+        let head16 =
+            u16::try_from(self.current_head).map_err(|_| Error::ValueOutOfRange { offset: 6 })?;
         cfg.stream.write_query(&mut w, head16, self.asked)?;
         emit_trailer(&mut w, ChecksumMode::Compute)?;
         self.query_len = w.len();
         Ok(())
+    }
+
+    /// A query timed out: ask the same head for half the window (a long
+    /// reply is more likely hit by noise). A reply to the larger window
+    /// still answers it exactly: it lists every record of the smaller one.
+    fn shrink(&mut self) {
+        if self.asked > 1 {
+            self.asked /= 2;
+            self.window_limit = self.asked;
+            if self.write_query().is_err() {
+                self.state = State::Failed(TransferError::Config(Error::BufferTooSmall));
+            }
+        }
     }
 }
 
@@ -533,7 +581,11 @@ impl Seen {
                 if count == 0 {
                     return None;
                 }
-                cfg.stream.layout.read_record(&mut r).ok().map(|rec| rec.number)
+                cfg.stream
+                    .layout
+                    .read_record(&mut r)
+                    .ok()
+                    .map(|rec| rec.number)
             })
             .flatten();
         Seen {

@@ -66,6 +66,15 @@
 //! | [`Verify::AfterFault`] | every frame confirmed after a timeout, a resend, a count mismatch or an unexpected reply is read back; a frame confirmed at its first send is trusted ([`Guarantee::FaultsVerified`]): a corruption that passes the SC goes unseen | none on a clean line; about one frame's length per faulty frame |
 //! | [`Verify::Full`] | every record ([`Guarantee::Verified`]) | about as much again as the write (a 21FH reply carries the same 82 bytes per 8-axis record as the 26DH), plus an 18-byte query per window |
 //!
+//! A frame whose reply times out (or arrives broken) is sent again with
+//! half its records (the rest go to the next frame), and frames stay that
+//! short until they get through again, growing by a quarter per confirmed
+//! frame: on a noisy line a long frame rarely arrives whole (at one
+//! flipped bit in 1,000 bytes, 2 KB frames fail seven times in eight).
+//! Read-back windows shrink and grow the same way. Each command is still
+//! sent at most `max_sends` times; after [`Step::Failed`], resuming keeps
+//! the smaller sizes.
+//!
 //! After a failure, [`Transfer::resume`] sends the unconfirmed frame (or
 //! the interrupted read-back) again: no record is lost, skipped or
 //! reordered.
@@ -84,7 +93,7 @@ use crate::clock::{reached, Clock};
 use crate::decoder::{Event, FrameDecoder};
 use crate::error::{Error, BRIDGE_CODES};
 use crate::exchange::{Due, Exchange, ExchangeConfig, Finish, Offer, Quarantine};
-use crate::field::{FieldSpec, Reader, Writer};
+use crate::field::{move_within, FieldSpec, Reader, Writer};
 use crate::frame::{emit_envelope, emit_trailer, Header, Station, ENVELOPE_LEN, TRAILER_LEN};
 use crate::limits;
 use crate::position::{PositionRecord, PositionStream};
@@ -200,6 +209,8 @@ pub struct TransferStats {
     /// Frames sent with fewer records than fitted, so that no reply still
     /// in flight could confirm them.
     pub guarded_frames: u32,
+    /// Frames cut to half their records after a timeout.
+    pub shrunk_frames: u32,
     /// Frames read back and compared equal.
     pub frames_verified: u32,
     /// Records read back and compared equal.
@@ -353,7 +364,9 @@ pub enum TransferEvent {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum State {
     /// Packing the next frame (from this tick on).
-    Build { not_before: u32 },
+    Build {
+        not_before: u32,
+    },
     /// The frame is being sent and confirmed.
     Write,
     /// The confirmed frame is being read back.
@@ -378,8 +391,6 @@ struct Chunk {
     /// Where the records end and the trailer starts.
     cut: usize,
     saved: [u8; TRAILER_LEN],
-    /// Index, in source order, of its first record.
-    first_index: u32,
     /// Start number (range writes).
     start: u16,
     /// Something abnormal happened while it was written.
@@ -407,6 +418,9 @@ struct Verifier {
     seen: u128,
     /// Whether the reply being decoded can still be the awaited one.
     candidate: bool,
+    /// Whether the frame being decoded is a read-back reply from the
+    /// station (so that breaking means the reply was lost).
+    started: bool,
     station: Station,
     rewrites: u8,
 }
@@ -425,6 +439,7 @@ impl Verifier {
             differ: 0,
             seen: 0,
             candidate: false,
+            started: false,
             station: Station(0),
             rewrites: 0,
         }
@@ -447,6 +462,12 @@ impl<'a> Iterator for Walk<'a> {
         self.at += len;
         Some(rec)
     }
+}
+
+/// A frame or window limit after a success: a quarter more, at least one,
+/// at most `max`.
+fn grow(limit: u16, max: u16) -> u16 {
+    limit.saturating_add((limit / 4).max(1)).min(max)
 }
 
 fn bit(i: usize) -> u128 {
@@ -473,6 +494,11 @@ pub struct Transfer<I, const N: usize = { limits::TTA.command }> {
     recent: heapless::Vec<(u16, u32), RECENT>,
     /// An unexpected frame came between two frames: the next is faulted.
     pending_fault: bool,
+    /// Records per frame now: halved after a timeout, grown back after
+    /// each confirmation.
+    frame_limit: u16,
+    /// Positions per read-back query now, likewise.
+    window_limit: u16,
     exchange: Exchange,
     replies: FrameDecoder<32>,
     verifier: Verifier,
@@ -496,6 +522,8 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             chunk: None,
             recent: heapless::Vec::new(),
             pending_fault: false,
+            frame_limit: MAX_FRAME_RECORDS,
+            window_limit: cfg.stream.read_back().window(cfg.max_response),
             exchange: Exchange::new(cfg.exchange, Quarantine::ByContent),
             replies: FrameDecoder::with_policy(BypassPolicy::Reject),
             verifier: Verifier::new(cfg.stream.read_back()),
@@ -513,6 +541,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 ignored_frames: 0,
                 line_errors: 0,
                 guarded_frames: 0,
+                shrunk_frames: 0,
                 frames_verified: 0,
                 records_verified: 0,
                 verify_queries: 0,
@@ -608,6 +637,13 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                     let writing = self.state == State::Write;
                     match self.exchange.poll(now) {
                         Due::Transmit { fresh } => {
+                            if fresh && self.exchange.sends() > 1 {
+                                if writing {
+                                    self.shrink_chunk(now);
+                                } else {
+                                    self.shrink_window();
+                                }
+                            }
                             let end = if writing {
                                 self.chunk.map_or(0, |c| c.cut + TRAILER_LEN)
                             } else {
@@ -627,12 +663,20 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                         Due::Done(Finish::Replied) if writing => self.confirmed(now),
                         Due::Done(Finish::Replied) => self.window_answered(now),
                         Due::Done(Finish::ErrorReply(code)) => {
-                            let resume = if writing { Resume::Write } else { Resume::Verify };
+                            let resume = if writing {
+                                Resume::Write
+                            } else {
+                                Resume::Verify
+                            };
                             self.state = State::Failed(TransferError::rejected(code), resume);
                         }
                         Due::Done(_) | Due::Idle => {
                             self.stats.timeouts += 1;
-                            let resume = if writing { Resume::Write } else { Resume::Verify };
+                            let resume = if writing {
+                                Resume::Write
+                            } else {
+                                Resume::Verify
+                            };
                             self.state = State::Failed(TransferError::Timeout, resume);
                         }
                     }
@@ -761,6 +805,10 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                     return TransferEvent::NeedMore;
                 }
                 self.stats.line_errors += 1;
+                if matches!(self.state, State::Write | State::Verify) {
+                    let envelope = self.replies.failed_envelope();
+                    self.exchange.broken_frame(envelope, now);
+                }
                 TransferEvent::Broken(e)
             }
             Event::Frame(f) => {
@@ -845,6 +893,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         };
         c.faulted |= self.exchange.faulted();
         c.confirmed = true;
+        self.frame_limit = grow(self.frame_limit, MAX_FRAME_RECORDS);
         self.chunk = Some(c);
         // Duplicates of this reply may come for a while; replies to its
         // other sends until their own late window closes.
@@ -874,10 +923,8 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 dst.copy_from_slice(&c.saved);
             }
             let carried = self.fill.saturating_sub(c.cut);
-            let fits = c.cut + carried <= N && records_start + carried <= N;
-            if fits {
-                self.frame.copy_within(c.cut..c.cut + carried, records_start);
-            }
+            // Both ranges lie inside the frame buffer: the chunk was built there.
+            let _ = move_within(&mut self.frame, c.cut, carried, records_start);
             self.packed = self.packed.saturating_sub(c.records);
             self.fill = if self.packed > 0 {
                 records_start + carried
@@ -933,7 +980,11 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
     /// the chunk's verdict.
     fn start_verify(&mut self, now: u32) {
         let all = self.chunk.map_or(0, |c| c.records);
-        let all_mask = if all >= 128 { u128::MAX } else { bit(usize::from(all)) - 1 };
+        let all_mask = if all >= 128 {
+            u128::MAX
+        } else {
+            bit(usize::from(all)) - 1
+        };
         let checked = self.verifier.checked;
         let lowest = self
             .chunk_numbers()
@@ -948,28 +999,44 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         let v = &mut self.verifier;
         let field_max = v.stream.count_field().max_unsigned();
         let room = field_max.saturating_add(1).saturating_sub(u64::from(head));
-        let window = u64::from(v.stream.window(self.cfg.max_response)).min(room).max(1);
+        let full = v
+            .stream
+            .window(self.cfg.max_response)
+            .min(self.window_limit);
+        let window = u64::from(full).min(room).max(1);
         v.head = head;
         v.asked = window as u16;
-        let mut w = Writer::new(&mut v.query);
-        let built = emit_envelope(&mut w, Header::Command, self.cfg.exchange.station, v.stream.id)
-            .and_then(|()| v.stream.write_query(&mut w, head, window as u16))
-            .and_then(|()| emit_trailer(&mut w, self.cfg.checksum));
-        let len = w.len();
-        match (built, catalogue::lookup(v.stream.id)) {
+        let built = self.write_query();
+        match (built, catalogue::lookup(self.verifier.stream.id)) {
             (Ok(()), Some(info)) => {
-                v.query_len = len;
                 self.exchange.start(info, now);
                 self.state = State::Verify;
             }
             (Err(e), _) => self.state = State::Failed(TransferError::Config(e), Resume::Nothing),
             (_, None) => {
+                let id = self.verifier.stream.id;
                 self.state = State::Failed(
-                    TransferError::Config(Error::UnknownMessageId { id: v.stream.id }),
+                    TransferError::Config(Error::UnknownMessageId { id }),
                     Resume::Nothing,
                 )
             }
         }
+    }
+
+    /// Writes the read-back query for the verifier's window.
+    fn write_query(&mut self) -> Result<(), Error> {
+        let v = &mut self.verifier;
+        let mut w = Writer::new(&mut v.query);
+        emit_envelope(
+            &mut w,
+            Header::Command,
+            self.cfg.exchange.station,
+            v.stream.id,
+        )?;
+        v.stream.write_query(&mut w, v.head, v.asked)?;
+        emit_trailer(&mut w, self.cfg.checksum)?;
+        v.query_len = w.len();
+        Ok(())
     }
 
     fn verdict(&mut self, now: u32, all: u128) {
@@ -997,8 +1064,11 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         );
     }
 
-    /// A read-back window was answered (and compared).
+    /// A read-back window was answered (and compared): let the window
+    /// grow back, ask the next.
     fn window_answered(&mut self, now: u32) {
+        let full = self.verifier.stream.window(self.cfg.max_response);
+        self.window_limit = grow(self.window_limit, full);
         self.start_verify(now);
     }
 
@@ -1025,6 +1095,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 v.station = station;
                 v.seen = 0;
                 v.candidate = kind == v.stream && count <= v.asked;
+                v.started = kind == v.stream && station == self.cfg.exchange.station;
                 TransferEvent::NeedMore
             }
             StreamEvent::Record(rec) => {
@@ -1043,8 +1114,12 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             StreamEvent::End { .. } => {
                 let v = &mut self.verifier;
                 v.hunting = true;
+                v.started = false;
                 let (station, id, ok) = (v.station, v.stream.id, v.candidate);
-                match self.exchange.offer_head(Header::Response, station, id, ok, now) {
+                match self
+                    .exchange
+                    .offer_head(Header::Response, station, id, ok, now)
+                {
                     Offer::Accepted => self.commit_window(),
                     // A reply to another window, or one that came early.
                     Offer::Mismatch | Offer::Stale => {
@@ -1056,6 +1131,17 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             }
             StreamEvent::Error { .. } => {
                 v.hunting = true;
+                if core::mem::take(&mut v.started) {
+                    // The awaited read-back reply arrived broken.
+                    self.exchange.reply_lost(now);
+                    let v = &mut self.verifier;
+                    if Header::from_byte(b).is_some() {
+                        v.decoder.reset();
+                        v.hunting = false;
+                        let _ = v.decoder.push(b);
+                    }
+                    return TransferEvent::NeedMore;
+                }
                 if Header::from_byte(b).is_some() {
                     v.decoder.reset();
                     v.hunting = false;
@@ -1142,7 +1228,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         let records_start = ENVELOPE_LEN + stream.prefix_len();
         let first_index = self.stats.records_confirmed;
         let start = u32::from(cfg.start) + first_index;
-        let max_records = stream.max_records.min(MAX_FRAME_RECORDS);
+        let max_records = stream.max_records.min(self.frame_limit);
         if self.fill < records_start {
             // Begin a frame only when a record is there for it: a table that
             // ends at the top of a range write's start field must complete.
@@ -1172,7 +1258,9 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 self.held = Some(rec);
                 if self.packed == 0 {
                     self.fill = 0;
-                    return Err(TransferError::Config(Error::ValueOutOfRange { offset: ENVELOPE_LEN }));
+                    return Err(TransferError::Config(Error::ValueOutOfRange {
+                        offset: ENVELOPE_LEN,
+                    }));
                 }
                 break true;
             }
@@ -1202,16 +1290,46 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         let recent = &self.recent;
         let taken = |n: u16| recent.iter().any(|&(c, _)| c == n);
         let Some(n) = (1..=self.packed).rev().find(|&n| !taken(n)) else {
-            let wake = recent.iter().map(|&(_, u)| u).min_by_key(|&u| u.wrapping_sub(now));
+            let wake = recent
+                .iter()
+                .map(|&(_, u)| u)
+                .min_by_key(|&u| u.wrapping_sub(now));
             return Ok(Built::Wait(wake.unwrap_or(now.wrapping_add(1))));
         };
         if n < self.packed {
             self.stats.guarded_frames += 1;
         }
+        let start = u16::try_from(start).map_err(|_| {
+            TransferError::Config(Error::ValueOutOfRange {
+                offset: ENVELOPE_LEN,
+            })
+        })?;
+        let (cut, saved) = self.close_frame(n, start)?;
+        self.chunk = Some(Chunk {
+            records: n,
+            cut,
+            saved,
+            start,
+            faulted: core::mem::take(&mut self.pending_fault),
+            confirmed: false,
+        });
+        Ok(Built::Ready)
+    }
+
+    /// Closes the frame after its first `n` packed records: envelope and
+    /// prefix with that count, the trailer after the `n`-th record. Returns
+    /// where the trailer starts and the bytes it covers.
+    fn close_frame(
+        &mut self,
+        n: u16,
+        start: u16,
+    ) -> Result<(usize, [u8; TRAILER_LEN]), TransferError> {
+        let cfg = self.cfg;
+        let stream = cfg.stream;
         let cut = {
             let mut walk = Walk {
                 bytes: self.frame.get(..self.fill).unwrap_or(&[]),
-                at: records_start,
+                at: ENVELOPE_LEN + stream.prefix_len(),
                 stream,
             };
             for _ in 0..n {
@@ -1219,8 +1337,6 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             }
             walk.at
         };
-        let start = u16::try_from(start)
-            .map_err(|_| TransferError::Config(Error::ValueOutOfRange { offset: ENVELOPE_LEN }))?;
         let mut saved = [0u8; TRAILER_LEN];
         if let Some(src) = self.frame.get(cut..cut + TRAILER_LEN) {
             saved.copy_from_slice(src);
@@ -1231,16 +1347,56 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             .map_err(TransferError::Config)?;
         let mut w = Writer::resume(&mut self.frame, cut);
         emit_trailer(&mut w, cfg.checksum).map_err(TransferError::Config)?;
-        self.chunk = Some(Chunk {
-            records: n,
-            cut,
-            saved,
-            first_index,
-            start,
-            faulted: core::mem::take(&mut self.pending_fault),
-            confirmed: false,
-        });
-        Ok(Built::Ready)
+        Ok((cut, saved))
+    }
+
+    /// The frame in flight timed out: send its first half instead (a long
+    /// frame is more likely hit by noise) and keep frames that small until
+    /// they get through again. The rest is carried to the next frame; the
+    /// count still avoids those a late reply could carry.
+    fn shrink_chunk(&mut self, now: u32) {
+        let Some(c) = self.chunk else { return };
+        self.recent.retain(|&(_, u)| !reached(now, u));
+        let recent = &self.recent;
+        let Some(n) = (1..=c.records / 2)
+            .rev()
+            .find(|&n| !recent.iter().any(|&(k, _)| k == n))
+        else {
+            return;
+        };
+        if let Some(dst) = self.frame.get_mut(c.cut..c.cut + TRAILER_LEN) {
+            dst.copy_from_slice(&c.saved);
+        }
+        match self.close_frame(n, c.start) {
+            Ok((cut, saved)) => {
+                self.chunk = Some(Chunk {
+                    records: n,
+                    cut,
+                    saved,
+                    ..c
+                });
+                self.frame_limit = n;
+                self.stats.shrunk_frames += 1;
+            }
+            Err(e) => self.state = State::Failed(e, Resume::Nothing),
+        }
+    }
+
+    /// A read-back query timed out: ask the same head for half the window.
+    /// A late reply to the larger window still answers the smaller one
+    /// exactly: it lists every record in it.
+    fn shrink_window(&mut self) {
+        let v = &mut self.verifier;
+        if v.asked > 1 {
+            v.asked /= 2;
+            self.window_limit = v.asked;
+            if self.write_query().is_err() {
+                self.state = State::Failed(
+                    TransferError::Config(Error::BufferTooSmall),
+                    Resume::Nothing,
+                );
+            }
+        }
     }
 }
 
@@ -1405,7 +1561,7 @@ impl<I: Iterator<Item = PositionRecord>> RecordSource for I {
 }
 
 /// A bounded FIFO of records that a producer fills as they arrive (for
-/// example from a [`PositionStreamDecoder`](crate::stream::PositionStreamDecoder))
+/// example from a [`PositionStreamDecoder`])
 /// and a [`Transfer`] drains. It is pending while empty, until
 /// [`RecordQueue::finish`].
 #[derive(Debug, Clone, Default)]
@@ -1457,4 +1613,3 @@ impl<const Q: usize> RecordSource for RecordQueue<Q> {
         }
     }
 }
-

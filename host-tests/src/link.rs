@@ -217,7 +217,9 @@ pub fn call<'a, R: Request<'a>, const C: usize, const P: usize>(
     req: &R,
     mut now: u32,
 ) -> (Result<Outcome, iai_protocol_b::client::CallError>, u32) {
-    client.start(req, now).expect("the request fits the command buffer");
+    client
+        .start(req, now)
+        .expect("the request fits the command buffer");
     loop {
         let reply = sim.take_output(now);
         if !reply.is_empty() {

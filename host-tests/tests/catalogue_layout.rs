@@ -15,8 +15,8 @@
 mod common;
 
 use common::*;
-use iai_protocol_b::frame::Station;
 use iai_protocol_b::catalogue::{self, Generation, Status};
+use iai_protocol_b::frame::Station;
 use iai_protocol_b::message::{decode_any, AnyMessage, ErrorResponse, Fields};
 
 fn decode_and_record(bytes: &[u8]) -> (Recorder, Vec<u8>) {

@@ -664,11 +664,29 @@ fn values_beyond_their_field_are_refused() {
         q.emit(Station(0x99), &mut buf),
         Err(Error::ValueOutOfRange { .. })
     ));
-    // A port count that is not a multiple of 8 (rounding is not documented).
+    // 12 ports take 2 bytes (ceil(12 / 8)): one byte is too few.
     let bytes = frame_text('#', "20B", "0000000CFF");
     assert!(matches!(
         decode_any(&check(&bytes)),
-        Err(Error::ValueOutOfRange { offset: 10 })
+        Err(Error::BodyTooShort { .. })
+    ));
+    let bytes = frame_text('#', "20B", "0000000CFF0F");
+    assert!(decode_any(&check(&bytes)).is_ok());
+    // A port count and a number of bytes that disagree cannot be emitted.
+    let data = iai_protocol_b::message::PortData {
+        units: 12,
+        items: iai_protocol_b::message::Repeated::from_slice(&[0xFF]),
+    };
+    let resp = iai_protocol_b::message::InputPortResponse {
+        response_start_port_number: 0,
+        input_port_data: data,
+    };
+    assert!(matches!(
+        resp.emit(Station(0x99), &mut buf),
+        Err(Error::CountMismatch {
+            expected: 2,
+            found: 1
+        })
     ));
     // 2A2H zones have at most 4 coordinate axes.
     let bytes = frame_text(
@@ -839,7 +857,12 @@ fn profile_differences() {
         let scara_only = [0x2A0, 0x2A1, 0x2A2, 0x2A3, 0x2A4, 0x2D4, 0x2D5, 0x2D6];
         let id = m.code();
         let tta_generation = m.layout_source == "tta";
-        assert_eq!(Profile::TTA.supports(id), !scara_only.contains(&id), "{}", m.id);
+        assert_eq!(
+            Profile::TTA.supports(id),
+            !scara_only.contains(&id),
+            "{}",
+            m.id
+        );
         assert_eq!(
             Profile::XSEL_2003.supports(id),
             !tta_generation && !scara_only.contains(&id),

@@ -141,7 +141,9 @@ fn the_core_allocates_nothing() {
 
     // The request engine: a 212H and its typed reply.
     let mut client: iai_protocol_b::client::Client = core_call(|| {
-        iai_protocol_b::client::Client::new(iai_protocol_b::client::ClientConfig::new(Station(0x99)))
+        iai_protocol_b::client::Client::new(iai_protocol_b::client::ClientConfig::new(Station(
+            0x99,
+        )))
     });
     let q = iai_protocol_b::message::AxisStatusQuery::of(&[1, 2]).unwrap();
     let mut now = 0u32;
@@ -170,7 +172,11 @@ fn the_core_allocates_nothing() {
         }
     };
     assert!(outcome.is_ok());
-    let status = core_call(|| client.response::<iai_protocol_b::message::AxisStatusQuery>().map(|r| r.axes.len()));
+    let status = core_call(|| {
+        client
+            .response::<iai_protocol_b::message::AxisStatusQuery>()
+            .map(|r| r.axes.len())
+    });
     assert_eq!(status, Ok(2));
 
     assert_eq!(allocations() - before, 0, "the core allocated");

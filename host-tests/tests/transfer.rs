@@ -249,9 +249,9 @@ fn records_arriving_a_few_at_a_time_through_a_queue_lose_nothing() {
 
 #[test]
 fn the_simulator_answers_every_catalogue_command() {
+    use iai_protocol_b::catalogue;
     use iai_protocol_b::checksum::BypassPolicy;
     use iai_protocol_b::frame::Frame;
-    use iai_protocol_b::catalogue;
     use iai_protocol_b::message::{decode_any, AnyMessage, Command};
     let mut sim = Simulator::tta(ST);
     for (i, id) in catalogue::ALL.iter().map(|m| m.id).enumerate() {
@@ -286,7 +286,11 @@ fn a_range_write_ending_at_the_top_of_its_start_field_completes() {
     let recs: Vec<_> = table(2, 1, 40).collect();
     let mut t: Transfer<_> = Transfer::new(cfg, recs.clone().into_iter());
     assert_eq!(
-        run(&mut t, &mut sim, 0).result.unwrap().stats.records_confirmed,
+        run(&mut t, &mut sim, 0)
+            .result
+            .unwrap()
+            .stats
+            .records_confirmed,
         2
     );
     assert_eq!(

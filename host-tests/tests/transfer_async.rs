@@ -11,8 +11,8 @@ use std::task::{Context, Poll, Waker};
 
 use host_tests::sim::{Faults, Simulator};
 use host_tests::table::table;
-use iai_protocol_b::frame::Station;
 use iai_protocol_b::clock::AsyncClock;
+use iai_protocol_b::frame::Station;
 use iai_protocol_b::transfer::{Guarantee, Transfer, TransferConfig};
 
 struct SimUart {

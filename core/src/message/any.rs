@@ -15,11 +15,11 @@
 //! assert_eq!(decoded.frame.as_bytes(), b"#992322C\r\n");
 //! ```
 
-use crate::codec::{Fields, Visitor};
 use super::declarations::*;
 use super::{Message, Request};
 use crate::catalogue::{self, MessageInfo};
 use crate::checksum::ChecksumMode;
+use crate::codec::{Fields, Visitor};
 use crate::error::{Error, Result};
 use crate::frame::{emit_frame, Frame, Header, Station};
 

@@ -16,9 +16,9 @@
 //! Layouts marked **inferred** below are readings the sources do not state
 //! outright; `messages.toml` has the reasoning.
 
-use crate::codec::*;
 use super::wire;
 use crate::axis::{per_axis_values, AxisPattern, PerAxis};
+use crate::codec::*;
 use crate::error::Result;
 use crate::field::FieldSpec;
 use crate::position::{PositionRecord, PositionStream, RecordLayout, RESERVED};
@@ -138,7 +138,7 @@ wire! {
     /// The record number is used by type 5 only and must be 0 otherwise;
     /// `type_2` is unused by type 5 and sent as `00` (**inferred**: the
     /// manual says "not used", not what to send). Both rules are checked
-    /// when parsing and emitting ([`Error::ValueOutOfRange`] at the field).
+    /// when parsing and emitting ([`Error::ValueOutOfRange`](crate::Error::ValueOutOfRange) at the field).
     pub struct ErrorDetailQuery {
         /// 0 system, 1 axis, 2 program, 3 error-list record,
         /// 5 error-list record with extended count (TTA only; the 2003
@@ -156,28 +156,52 @@ wire! {
 impl ErrorDetailQuery {
     /// The most serious system error (type 0, `00`).
     pub const fn critical_system_error() -> Self {
-        ErrorDetailQuery { type_1: 0, type_2: 0, record_number: 0 }
+        ErrorDetailQuery {
+            type_1: 0,
+            type_2: 0,
+            record_number: 0,
+        }
     }
     /// The latest system error (type 0, `01`).
     pub const fn latest_system_error() -> Self {
-        ErrorDetailQuery { type_1: 0, type_2: 1, record_number: 0 }
+        ErrorDetailQuery {
+            type_1: 0,
+            type_2: 1,
+            record_number: 0,
+        }
     }
     /// The error of axis `axis` (type 1).
     pub const fn axis(axis: u8) -> Self {
-        ErrorDetailQuery { type_1: 1, type_2: axis, record_number: 0 }
+        ErrorDetailQuery {
+            type_1: 1,
+            type_2: axis,
+            record_number: 0,
+        }
     }
     /// The error of program `program` (type 2).
     pub const fn program(program: u8) -> Self {
-        ErrorDetailQuery { type_1: 2, type_2: program, record_number: 0 }
+        ErrorDetailQuery {
+            type_1: 2,
+            type_2: program,
+            record_number: 0,
+        }
     }
     /// Record `record` (from 1) of the error list (type 3).
     pub const fn list_record(record: u8) -> Self {
-        ErrorDetailQuery { type_1: 3, type_2: record, record_number: 0 }
+        ErrorDetailQuery {
+            type_1: 3,
+            type_2: record,
+            record_number: 0,
+        }
     }
     /// Record `record` (from 1) of the error list with the extended record
     /// count (type 5, TTA generation only).
     pub const fn list_record_extended(record: u16) -> Self {
-        ErrorDetailQuery { type_1: 5, type_2: 0, record_number: record }
+        ErrorDetailQuery {
+            type_1: 5,
+            type_2: 0,
+            record_number: record,
+        }
     }
 }
 
@@ -472,38 +496,43 @@ wire! {
 
 // ---------------------------------------------------------------- ports, flags
 
-/// Port or flag bytes: 8 consecutive ports/flags per byte. That bit 0 is
-/// the lowest port of the byte is **inferred** from the axis-pattern rule.
-pub type BitBytes<'a> = Repeated<'a, u8, FieldSpec>;
+/// Port or flag states: the number of ports or flags, and one byte per 8
+/// of them (the last possibly partly used). That bit 0 is the lowest port
+/// of its byte is **inferred** from the axis-pattern rule.
+pub type PortData<'a> = Units<'a, u8, FieldSpec>;
 
 wire! {
     /// 20BH Input Port Query.
     pub struct InputPortQuery {
-        /// First port: a category head number plus a multiple of 8.
+        /// First port: must be a category head number plus a multiple of 8
+        /// (the category heads are the controller's, not in the protocol
+        /// documents, so not checked here).
         pub query_start_port_number: u16 = hex(4),
-        /// Number of ports asked for.
+        /// Number of ports asked for (any number).
         pub number_of_query_ports: u16 = hex(4),
     }
 }
 
 wire! {
-    /// 20BH response. The count field holds a number of *ports*; one byte
-    /// follows per 8 ports. The catalogue does not say how other counts
-    /// round, so a count that is not a multiple of 8 is refused.
+    /// 20BH response. The count field holds a number of *ports*, any
+    /// number; one byte follows per 8 of them, the last possibly partly
+    /// used (TTA p. 20, 2003 p. 19).
     pub struct InputPortResponse<'a> {
         /// First port reported.
         pub response_start_port_number: u16 = hex(4),
-        /// Port states (1 = ON), 8 per byte; the count written is 8 × bytes.
-        pub input_port_data: BitBytes<'a> = counted_per(hex(4), 8, 8192, hex(2)),
+        /// The number of ports and their states (1 = ON), 8 per byte.
+        pub input_port_data: PortData<'a> = counted_per(hex(4), 8, 8192, hex(2)),
     }
 }
 
 wire! {
     /// 20CH Output Port Query.
     pub struct OutputPortQuery {
-        /// First port: a category head number plus a multiple of 8.
+        /// First port: must be a category head number plus a multiple of 8
+        /// (the category heads are the controller's, not in the protocol
+        /// documents, so not checked here).
         pub query_start_port_number: u16 = hex(4),
-        /// Number of ports asked for.
+        /// Number of ports asked for (any number).
         pub number_of_query_ports: u16 = hex(4),
     }
 }
@@ -513,8 +542,8 @@ wire! {
     pub struct OutputPortResponse<'a> {
         /// First port reported.
         pub response_start_port_number: u16 = hex(4),
-        /// Port states, 8 per byte; the count written is 8 × bytes.
-        pub output_port_data: BitBytes<'a> = counted_per(hex(4), 8, 8192, hex(2)),
+        /// The number of ports and their states, 8 per byte.
+        pub output_port_data: PortData<'a> = counted_per(hex(4), 8, 8192, hex(2)),
     }
 }
 
@@ -523,9 +552,10 @@ wire! {
     pub struct FlagQuery {
         /// Program number; `00` = global flags.
         pub program_number: u8 = hex(2),
-        /// First flag: a category head number plus a multiple of 8.
+        /// First flag: a category head number plus a multiple of 8 (not
+        /// checked here, as for the ports).
         pub query_start_flag_number: u16 = hex(4),
-        /// Number of flags asked for.
+        /// Number of flags asked for (any number).
         pub number_of_query_flags: u16 = hex(4),
     }
 }
@@ -537,8 +567,8 @@ wire! {
         pub program_number: u8 = hex(2),
         /// First flag reported.
         pub response_start_flag_number: u16 = hex(4),
-        /// Flag states, 8 per byte; the count written is 8 × bytes.
-        pub flag_data: BitBytes<'a> = counted_per(hex(4), 8, 8192, hex(2)),
+        /// The number of flags and their states, 8 per byte.
+        pub flag_data: PortData<'a> = counted_per(hex(4), 8, 8192, hex(2)),
     }
 }
 

@@ -172,4 +172,3 @@ macro_rules! wire {
     (@unit $unit:literal) => { $unit };
 }
 pub(crate) use wire;
-

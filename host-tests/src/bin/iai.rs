@@ -8,8 +8,8 @@ use host_tests::cli::encode::{encode, field_help, find_message, EncodeOptions};
 use host_tests::cli::inspect::{self, Format};
 use host_tests::cli::simulate::{self, SimProfile, SimulateOptions};
 use host_tests::cli::text::escape;
-use iai_protocol_b::frame::Header;
 use iai_protocol_b::catalogue;
+use iai_protocol_b::frame::Header;
 
 const USAGE: &str = "\
 iai — IAI protocol B tools

@@ -19,10 +19,10 @@
 
 use std::collections::BTreeMap;
 
+use iai_protocol_b::catalogue;
 use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
 use iai_protocol_b::field::{encode_signed, encode_unsigned, FieldSpec, Radix};
 use iai_protocol_b::frame::{emit_frame, Frame, Header, Station};
-use iai_protocol_b::catalogue;
 use iai_protocol_b::message::{decode_any, AnyMessage};
 
 use super::fields::{tree, Node, Val};
@@ -139,7 +139,10 @@ pub fn find_message(name: &str, header: Header) -> Result<u16, String> {
     let mut hits: Vec<u16> = Vec::new();
     for id in catalogue::ALL.iter().map(|m| m.id) {
         let names = [
-            catalogue::lookup(id).map(|m| m.name).map(norm).unwrap_or_default(),
+            catalogue::lookup(id)
+                .map(|m| m.name)
+                .map(norm)
+                .unwrap_or_default(),
             type_name(header, id).map(|t| norm(&t)).unwrap_or_default(),
         ];
         if names.contains(&want) {
@@ -155,7 +158,10 @@ pub fn find_message(name: &str, header: Header) -> Result<u16, String> {
         many => Err(format!(
             "{name:?} is ambiguous: {}",
             many.iter()
-                .map(|id| format!("{id:03X}H {}", catalogue::lookup(*id).map(|m| m.name).unwrap_or("")))
+                .map(|id| format!(
+                    "{id:03X}H {}",
+                    catalogue::lookup(*id).map(|m| m.name).unwrap_or("")
+                ))
                 .collect::<Vec<_>>()
                 .join(", ")
         )),

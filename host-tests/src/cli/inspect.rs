@@ -10,10 +10,10 @@
 
 use std::io::{BufRead, Read, Write};
 
+use iai_protocol_b::catalogue;
 use iai_protocol_b::checksum::{BypassPolicy, ChecksumField};
 use iai_protocol_b::decoder::{Event, FrameDecoder, DEFAULT_CAPACITY};
 use iai_protocol_b::frame::{Frame, Header};
-use iai_protocol_b::catalogue;
 use iai_protocol_b::message::{decode_any, AnyMessage};
 use iai_protocol_b::stream::{PositionStream, PositionStreamDecoder, StreamEvent};
 
@@ -649,7 +649,9 @@ pub fn text_entry(item: &Item) -> Vec<String> {
                 format!(
                     "{:03X}H {}",
                     f.code,
-                    catalogue::lookup(f.code).map(|m| m.name).unwrap_or("(unknown message)")
+                    catalogue::lookup(f.code)
+                        .map(|m| m.name)
+                        .unwrap_or("(unknown message)")
                 )
             };
             out.push(format!(
