@@ -591,7 +591,11 @@ mod tests {
             }
         }
         assert!(clean.is_valid());
-        let all: u32 = groups.iter().flat_map(|g| g.iter()).map(|&b| u32::from(b)).sum();
+        let all: u32 = groups
+            .iter()
+            .flat_map(|g| g.iter())
+            .map(|&b| u32::from(b))
+            .sum();
         assert_eq!(clean.sum(), all);
         // One bad byte anywhere in any group spoils the batch.
         for (k, g) in groups.iter().enumerate() {

@@ -1015,7 +1015,12 @@ mod whole_fields {
             Err(Error::ValueOutOfRange { offset: 0 })
         );
         rec.number = 0xFFF;
-        assert_eq!(RecordLayout::NUMBER_3.put_record(&rec, &mut out).map(|r| r.0), Ok(25));
+        assert_eq!(
+            RecordLayout::NUMBER_3
+                .put_record(&rec, &mut out)
+                .map(|r| r.0),
+            Ok(25)
+        );
         assert_eq!(&out[..3], b"FFF");
         assert_eq!(
             RecordLayout::NUMBER_3.put_record(&rec, &mut out[..24]),
