@@ -582,7 +582,7 @@ mod tests {
 mod golden {
     use super::*;
     use crate::checksum::{Checksum, ChecksumField};
-    use crate::frame::Station;
+    use crate::frame::{Header, Station};
 
     /// 2003 p. 10: a 209H query and its checksum.
     const P10: &[u8] = b"!9920900100554\r\n";
@@ -828,6 +828,104 @@ mod golden {
         let mut dec: FrameDecoder<9> = FrameDecoder::new();
         let (ev, _) = events(&mut dec, R232);
         assert_eq!(ev[0], Some(Err(Error::FrameTooLong { limit: 9 })));
+    }
+
+    #[test]
+    fn the_envelope_of_a_frame_that_failed_its_check() {
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (ev, _) = events(&mut dec, b"!9920900100555\r\n");
+        assert!(matches!(ev[0], Some(Err(Error::ChecksumMismatch { .. }))));
+        assert_eq!(
+            dec.failed_envelope(),
+            Some((Header::Command, Station(0x99), 0x209))
+        );
+        assert_eq!(dec.push(b'x'), Event::NeedMore);
+        assert_eq!(dec.failed_envelope(), None, "forgotten at the next byte");
+        // An unreadable envelope, and errors before CR LF, leave nothing.
+        for bad in [&b"!9G209001005@@\r\n"[..], b"#99232\r\r", b"#99232\n"] {
+            let mut dec: FrameDecoder = FrameDecoder::new();
+            let (ev, _) = events(&mut dec, bad);
+            assert!(matches!(ev[0], Some(Err(_))), "{bad:?}");
+            assert_eq!(dec.failed_envelope(), None, "{bad:?}");
+        }
+    }
+
+    /// A 200H whose ten text characters swallow the start of a valid reply
+    /// fails; the reply is decoded again from its header byte.
+    const SWALLOWED: &[u8] = b"!99200AB#992322C\r\n";
+
+    #[test]
+    fn a_swallowed_reply_is_decoded_again_and_counted_as_pending() {
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let d = dec.decode(SWALLOWED);
+        assert_eq!(d.consumed, SWALLOWED.len());
+        assert_eq!(d.event, Event::Error(Error::BodyTooShort { offset: 14 }));
+        assert_eq!(
+            dec.pending(),
+            R232.len(),
+            "the reply waits to be decoded again"
+        );
+        assert_eq!(dec.stats().discarded_bytes, 8);
+        let d = dec.decode(b"");
+        assert_eq!(d.consumed, 0);
+        assert!(matches!(d.event, Event::Frame(f) if f.as_bytes() == R232));
+        assert_eq!(dec.pending(), 0);
+        assert_eq!(dec.decode(b"").event, Event::NeedMore);
+    }
+
+    #[test]
+    fn a_pushed_byte_joins_the_bytes_decoded_again() {
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (last, head) = SWALLOWED.split_last().unwrap();
+        for &b in head {
+            assert_eq!(dec.push(b), Event::NeedMore);
+        }
+        assert_eq!(
+            dec.push(*last),
+            Event::Error(Error::BodyTooShort { offset: 14 })
+        );
+        // The next byte comes after the waiting reply, which comes out first.
+        assert!(matches!(dec.push(b'!'), Event::Frame(f) if f.as_bytes() == R232));
+        assert_eq!(dec.decode(b"").event, Event::NeedMore);
+        assert_eq!(dec.pending(), 1, "the '!' starts the next frame");
+        let (ev, _) = events(&mut dec, b"99209001005@@\r\n");
+        assert_eq!(ev[0], Some(Ok(16)));
+    }
+
+    #[test]
+    fn a_reply_swallowed_twice_still_comes_out() {
+        // The first 200H's text holds a second 200H whose text holds the
+        // reply's start.
+        let input = b"!99200AB!99200CD#992322C\r\n";
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (ev, k) = events(&mut dec, input);
+        assert_eq!(k, 2, "{ev:?}");
+        assert_eq!(ev[0], Some(Err(Error::Truncated { len: 16 })));
+        assert_eq!(ev[1], Some(Err(Error::BodyTooShort { offset: 14 })));
+        // The reply waits to be decoded again.
+        assert_eq!(dec.pending(), R232.len());
+        assert!(matches!(dec.decode(b"").event, Event::Frame(f) if f.as_bytes() == R232));
+        assert_eq!(dec.decode(b"").event, Event::NeedMore);
+        assert_eq!(dec.stats().frames, 1);
+        assert_eq!(dec.pending(), 0);
+        // Every byte is accounted for: in the frame or discarded.
+        assert_eq!(
+            dec.stats().discarded_bytes as usize,
+            input.len() - R232.len()
+        );
+        // The same byte by byte.
+        let mut bytewise: FrameDecoder = FrameDecoder::new();
+        let mut frames = 0;
+        for &b in &input[..] {
+            if let Event::Frame(_) = bytewise.push(b) {
+                frames += 1;
+            }
+            while let Event::Frame(_) | Event::Error(_) = bytewise.decode(b"").event {
+                frames += usize::from(bytewise.last_frame().is_some());
+            }
+        }
+        assert_eq!(frames, 1);
+        assert_eq!(bytewise.stats(), dec.stats());
     }
 
     #[test]
