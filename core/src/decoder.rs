@@ -318,8 +318,10 @@ impl<const N: usize> FrameDecoder<N> {
         if total > N || (waiting > 0 && self.replay_pos < self.len) {
             return None;
         }
-        let moved = move_within(&mut self.buf, self.replay_pos, waiting, kept + extra_len)
-            && move_within(&mut self.buf, p, kept, 0);
+        // The failed frame's bytes first: the waiting ones land where they
+        // were (`kept + extra_len <= len <= replay_pos`).
+        let moved = move_within(&mut self.buf, p, kept, 0)
+            && move_within(&mut self.buf, self.replay_pos, waiting, kept + extra_len);
         if !moved {
             return None;
         }
@@ -926,6 +928,129 @@ mod golden {
         }
         assert_eq!(frames, 1);
         assert_eq!(bytewise.stats(), dec.stats());
+    }
+
+    /// A cut 216H announcing 255 characters swallows a 200H whose own
+    /// text swallows an error frame's start: the 200H fails while bytes of
+    /// the 216H still wait to be decoded again, and both sets come out in
+    /// order, every byte a frame's or discarded.
+    #[test]
+    fn a_failure_while_bytes_wait_to_be_decoded_again() {
+        let mut input = [0u8; 400];
+        let mut n = 0;
+        let mut put = |b: &[u8]| {
+            input[n..n + b.len()].copy_from_slice(b);
+            n += b.len();
+        };
+        put(b"#99216");
+        put(&[b'0'; 82]);
+        put(b"FF");
+        // The 216H's text (offsets 90..345): a 200H whose ten characters
+        // hold '&', then a header byte that cuts the 200H, then a reply.
+        put(b"!99200AB&DEFGHIJ#992322C\r\n");
+        put(&[b'x'; 345 - 90 - 26]);
+        // After the text: a reply that cuts the 216H.
+        put(R232);
+        let input = &input[..n];
+
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let mut frames = 0;
+        let mut errors = [None; 8];
+        let mut k = 0;
+        let mut rest = input;
+        loop {
+            let d = dec.decode(rest);
+            rest = &rest[d.consumed..];
+            match d.event {
+                Event::NeedMore if rest.is_empty() => break,
+                Event::NeedMore => {}
+                Event::Frame(f) => {
+                    assert_eq!(f.as_bytes(), R232);
+                    frames += 1;
+                }
+                Event::Error(e) => {
+                    errors[k] = Some(e);
+                    k += 1;
+                }
+            }
+        }
+        assert_eq!(frames, 2, "{errors:?}");
+        assert_eq!(
+            &errors[..k],
+            &[
+                Some(Error::Truncated { len: 345 }),
+                Some(Error::Truncated { len: 16 }),
+                Some(Error::Truncated { len: 8 }),
+            ]
+        );
+        assert_eq!(dec.pending(), 0);
+        let s = dec.stats();
+        assert_eq!(s.discarded_bytes as usize, n - 2 * R232.len());
+        assert_eq!((s.frames, s.errors), (2, 3));
+
+        // Byte by byte, draining after each: the same counts.
+        let mut bytewise: FrameDecoder = FrameDecoder::new();
+        for &b in input {
+            let _ = bytewise.push(b);
+            while !matches!(bytewise.decode(b"").event, Event::NeedMore) {}
+        }
+        assert_eq!(bytewise.stats(), s);
+        assert_eq!(bytewise.pending(), 0);
+    }
+
+    /// As above, but the 200H ends with CR LF (and a wrong checksum) inside
+    /// the bytes decoded again: its own failed bytes go back ahead of the
+    /// ones still waiting.
+    #[test]
+    fn a_checked_failure_while_bytes_wait_to_be_decoded_again() {
+        let mut input = [0u8; 400];
+        let mut n = 0;
+        let mut put = |b: &[u8]| {
+            input[n..n + b.len()].copy_from_slice(b);
+            n += b.len();
+        };
+        put(b"#99216");
+        put(&[b'0'; 82]);
+        put(b"FF");
+        put(b"!99200AB&DEFGHIJ00\r\n#992322C\r\n");
+        put(&[b'x'; 345 - 90 - 30]);
+        put(R232);
+        let input = &input[..n];
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let mut seen = [None; 8];
+        let mut k = 0;
+        let mut rest = input;
+        loop {
+            let d = dec.decode(rest);
+            rest = &rest[d.consumed..];
+            let ev = match d.event {
+                Event::NeedMore if rest.is_empty() => break,
+                Event::NeedMore => continue,
+                Event::Frame(f) => Ok(f.len()),
+                Event::Error(e) => Err(e),
+            };
+            seen[k] = Some(ev);
+            k += 1;
+        }
+        assert_eq!(
+            &seen[..k],
+            &[
+                Some(Err(Error::Truncated { len: 345 })),
+                Some(Err(Error::ChecksumMismatch {
+                    computed: Checksum::of(b"!99200AB&DEFGHIJ"),
+                    received: 0
+                })),
+                // "&DEFGHIJ00\r\n": an error frame whose code is not hex.
+                Some(Err(Error::InvalidHexDigit {
+                    offset: 4,
+                    byte: b'G'
+                })),
+                Some(Ok(R232.len())),
+                Some(Ok(R232.len())),
+            ]
+        );
+        assert_eq!(dec.pending(), 0);
+        assert_eq!(dec.stats().discarded_bytes as usize, n - 2 * R232.len());
     }
 
     #[test]
