@@ -31,7 +31,7 @@
 //!   upstream unchanged. Anything else from the controller is ignored. If
 //!   no valid reply arrives within [`REPLY_TIMEOUT_MS`] (3 s) the bridge
 //!   returns to idle without answering: the host times out and re-sends,
-//!   as protocol B prescribes (PROTOCOL.md §8, timeout and retry).
+//!   as protocol B prescribes (2003 p. 62, timeout and retry).
 //! * frames the host should never send (`#`, `&`) and noise are dropped.
 //!
 //! # Error responses of the bridge (26DH only)
@@ -49,7 +49,7 @@
 //! command again. Records before the failure may already be written;
 //! writing them again is harmless. The codes are outside anything the
 //! controllers are known to use, but the controllers' own code list is not
-//! published (PROTOCOL.md §9), so treat `B01`..`B05` as the bridge's.
+//! published (TTA p. 15, 2003 p. 13), so treat `B01`..`B05` as the bridge's.
 //!
 //! # Flow control
 //!

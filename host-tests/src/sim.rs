@@ -58,6 +58,8 @@ pub struct Faults {
     /// The controller stops answering anything once this many position
     /// records were written (it hangs in the middle of a table).
     pub stop_after_records: Option<u64>,
+    /// The controller stops answering anything after this many commands.
+    pub stop_after_commands: Option<u32>,
     /// Chance, per position write, that one record is stored altered in a
     /// way that keeps the frame's SC valid (two hex digits of a coordinate
     /// swapped): what only reading back can catch.
@@ -300,6 +302,10 @@ impl Simulator {
         self.faults
             .stop_after_records
             .is_some_and(|n| self.stats.records_written >= n)
+            || self
+                .faults
+                .stop_after_commands
+                .is_some_and(|n| self.stats.commands >= n)
     }
 
     /// Alters one coordinate of one of `recs` so that the frame's SC would
@@ -382,7 +388,7 @@ impl Simulator {
             }
             0x216 => {
                 let q = ErrorDetailQuery::parse(f).ok()?;
-                // Illustrative details, as in EXAMPLES.md 5.2.
+                // Illustrative details (error C74H, program 1, step 5, axis 2, point -3).
                 Some(self.emit(&ErrorDetailResponse {
                     error_number: 0xC74,
                     detail_1: u32::from(q.type_2),

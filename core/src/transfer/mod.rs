@@ -29,14 +29,24 @@
 //! records were written. A reply can come late (after the timeout and the
 //! resend) or twice (an echoing converter). So that no such reply confirms
 //! a frame it does not belong to, the engine never gives a frame a record
-//! count that a reply still in flight could carry: the count of any frame
-//! whose reply came within `duplicate_window_ms`, or that was sent within
-//! `timeout_ms + late_window_ms` and not answered (3 s and 3 + 3 s by
-//! default). It sends fewer records instead, carrying the rest to the next
-//! frame. On a clean line this costs a few per-frame overheads (about 1 %
-//! of the wire time at 115,200 baud, none at 9,600); it never costs a
-//! record. A reply later than those windows is outside what the engine
-//! can tell apart; [`Verify::Full`] catches what it would do.
+//! count that a reply still in flight could carry; it sends fewer records
+//! instead and carries the rest to the next frame:
+//!
+//! - never the count of the frame answered last;
+//! - never the count of a frame sent within `timeout_ms + late_window_ms`
+//!   (3 + 3 s) whose reply did not come, or that was sent more than once;
+//! - once the line has shown a late or duplicated reply (a reply while
+//!   none was awaited, or one with the wrong count), never the count of a
+//!   frame answered within `duplicate_window_ms` (3 s).
+//!
+//! The last rule waits for evidence because it is costly: at 115,200
+//! baud more frames fit in 3 s than an 8-axis frame has counts (24), so
+//! frames get shorter and the transfer takes about 40 % longer. On a clean
+//! line the guard costs about 2 % (every other frame one record shorter).
+//! A reply later than those windows is outside what the engine can tell
+//! apart, and so is the first duplicate on a line that arrives while a
+//! frame with its count was lost: [`Verify::Full`] catches what they would
+//! do.
 //!
 //! # Verification
 //! A confirmed frame means the controller *said* it wrote that many
@@ -48,7 +58,8 @@
 //! held for retries, and rewrites the frame when one differs (up to
 //! `rewrites` times, then [`TransferError::Mismatch`] naming the first
 //! differing position). The reply is compared as it streams in through a
-//! [`PositionStreamDecoder`] (no second frame buffer); a comparison counts
+//! [`PositionStreamDecoder`](crate::stream::PositionStreamDecoder) (no
+//! second frame buffer); a comparison counts
 //! only when the reply's SC, station and ID check out.
 //!
 //! What is compared: every field the write sends (position number, axis
@@ -86,25 +97,31 @@
 //! a non-blocking main loop, `Transfer::run_async` with the `async`
 //! feature.
 
+mod guard;
+mod source;
+mod verify;
+
+pub use source::{Pull, RecordQueue, RecordSource};
+
+use guard::Guard;
+use verify::{bit, Verifier, Walk};
+
 use crate::catalogue;
 use crate::checksum::{BypassPolicy, ChecksumMode};
 use crate::client::Received;
 use crate::clock::{reached, Clock};
 use crate::decoder::{Event, FrameDecoder};
+use crate::drive::{self, Engine, Stop, Want};
 use crate::error::{Error, BRIDGE_CODES};
 use crate::exchange::{Due, Exchange, ExchangeConfig, Finish, Offer, Quarantine};
-use crate::field::{move_within, FieldSpec, Reader, Writer};
+use crate::field::{move_within, Writer};
 use crate::frame::{emit_envelope, emit_trailer, Header, Station, ENVELOPE_LEN, TRAILER_LEN};
 use crate::limits;
 use crate::position::{PositionRecord, PositionStream};
-use crate::stream::{PositionStreamDecoder, StreamEvent};
 
 /// Most records one frame carries (the read-back keeps one bit per record).
 /// A 2,051-byte 26DH holds at most 113 (records without axes).
 pub const MAX_FRAME_RECORDS: u16 = 128;
-
-/// Counts held back by the late-reply guard at once.
-const RECENT: usize = 32;
 
 /// How much the engine reads back.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -399,79 +416,10 @@ struct Chunk {
     confirmed: bool,
 }
 
-/// The read-back of the frame in flight.
-#[derive(Debug, Clone)]
-struct Verifier {
-    stream: PositionStream,
-    decoder: PositionStreamDecoder,
-    /// After a frame ended or broke: waiting for the next header byte.
-    hunting: bool,
-    query: [u8; 24],
-    query_len: usize,
-    head: u16,
-    asked: u16,
-    /// Records of the frame compared (or superseded by a later copy).
-    checked: u128,
-    /// Records of the frame found different or missing.
-    differ: u128,
-    /// For the reply being decoded: records found equal so far.
-    seen: u128,
-    /// Whether the reply being decoded can still be the awaited one.
-    candidate: bool,
-    /// Whether the frame being decoded is a read-back reply from the
-    /// station (so that breaking means the reply was lost).
-    started: bool,
-    station: Station,
-    rewrites: u8,
-}
-
-impl Verifier {
-    const fn new(stream: PositionStream) -> Self {
-        Verifier {
-            stream,
-            decoder: PositionStreamDecoder::new(BypassPolicy::Reject),
-            hunting: true,
-            query: [0; 24],
-            query_len: 0,
-            head: 0,
-            asked: 0,
-            checked: 0,
-            differ: 0,
-            seen: 0,
-            candidate: false,
-            started: false,
-            station: Station(0),
-            rewrites: 0,
-        }
-    }
-}
-
-/// The records of a frame, walked from their wire bytes.
-struct Walk<'a> {
-    bytes: &'a [u8],
-    at: usize,
-    stream: PositionStream,
-}
-
-impl<'a> Iterator for Walk<'a> {
-    type Item = &'a [u8];
-    fn next(&mut self) -> Option<&'a [u8]> {
-        let rest = self.bytes.get(self.at..)?;
-        let len = self.stream.layout.record_len_at(rest)?;
-        let rec = rest.get(..len)?;
-        self.at += len;
-        Some(rec)
-    }
-}
-
 /// A frame or window limit after a success: a quarter more, at least one,
 /// at most `max`.
 fn grow(limit: u16, max: u16) -> u16 {
     limit.saturating_add((limit / 4).max(1)).min(max)
-}
-
-fn bit(i: usize) -> u128 {
-    1u128.checked_shl(i as u32).unwrap_or(0)
 }
 
 /// Writes a position table to a controller in confirmed (and verified)
@@ -490,8 +438,8 @@ pub struct Transfer<I, const N: usize = { limits::TTA.command }> {
     /// Records packed, the chunk's first.
     packed: u16,
     chunk: Option<Chunk>,
-    /// Record counts a reply still in flight could carry, and until when.
-    recent: heapless::Vec<(u16, u32), RECENT>,
+    /// Record counts a reply still in flight could carry.
+    guard: Guard,
     /// An unexpected frame came between two frames: the next is faulted.
     pending_fault: bool,
     /// Records per frame now: halved after a timeout, grown back after
@@ -520,11 +468,18 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             fill: 0,
             packed: 0,
             chunk: None,
-            recent: heapless::Vec::new(),
+            guard: Guard::new(),
             pending_fault: false,
             frame_limit: MAX_FRAME_RECORDS,
             window_limit: cfg.stream.read_back().window(cfg.max_response),
-            exchange: Exchange::new(cfg.exchange, Quarantine::ByContent),
+            exchange: Exchange::new(
+                ExchangeConfig {
+                    // Applied by the engine's own guard (see the module docs).
+                    duplicate_window_ms: 0,
+                    ..cfg.exchange
+                },
+                Quarantine::ByContent,
+            ),
             replies: FrameDecoder::with_policy(BypassPolicy::Reject),
             verifier: Verifier::new(cfg.stream.read_back()),
             state: State::Build { not_before: 0 },
@@ -736,24 +691,10 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 let until = now
                     .wrapping_add(self.cfg.exchange.timeout_ms)
                     .wrapping_add(self.cfg.exchange.late_window_ms);
-                self.remember(c.records, until, now);
+                self.guard.sent(c.records, until, now);
             }
         }
         self.exchange.sent(now);
-    }
-
-    /// Notes that replies carrying `count` may arrive until `until`.
-    fn remember(&mut self, count: u16, until: u32, now: u32) {
-        self.recent.retain(|&(_, u)| !reached(now, u));
-        if let Some(e) = self.recent.iter_mut().find(|(c, _)| *c == count) {
-            e.1 = crate::clock::later(e.1, until);
-        } else if self.recent.push((count, until)).is_err() {
-            // Full: keep the latest deadline of all in the last slot, so
-            // that no count is forgotten early (it may be guarded longer).
-            if let Some(last) = self.recent.last_mut() {
-                last.1 = crate::clock::later(last.1, until);
-            }
-        }
     }
 
     /// Bytes received from the controller at tick `now`. Returns at the
@@ -830,6 +771,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                     // A late or duplicated write reply between frames.
                     self.stats.stale_replies += 1;
                     self.pending_fault = true;
+                    self.guard.duplicates_seen = true;
                     return TransferEvent::Stale;
                 }
                 let (content_ok, reported) = match (self.state, self.chunk) {
@@ -869,6 +811,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             }
             Offer::Mismatch => {
                 self.stats.count_mismatches += 1;
+                self.guard.duplicates_seen = true;
                 TransferEvent::CountMismatch {
                     sent: self.chunk.map_or(0, |c| c.records),
                     reported,
@@ -876,6 +819,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             }
             Offer::Stale => {
                 self.stats.stale_replies += 1;
+                self.guard.duplicates_seen = true;
                 TransferEvent::Stale
             }
             Offer::Foreign => {
@@ -898,7 +842,8 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         // Duplicates of this reply may come for a while; replies to its
         // other sends until their own late window closes.
         let dup = now.wrapping_add(self.cfg.exchange.duplicate_window_ms);
-        self.remember(c.records, dup, now);
+        self.guard
+            .answered(c.records, self.exchange.sends(), dup, now);
         let verify = match self.cfg.verify {
             Verify::Off => false,
             Verify::AfterFault => c.faulted,
@@ -938,269 +883,6 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         self.state = State::Build {
             not_before: turnaround,
         };
-    }
-
-    /// Records of the chunk that a later copy in the same chunk replaces.
-    fn superseded(&self) -> u128 {
-        let mut mask = 0u128;
-        for (i, n) in self.chunk_numbers().enumerate() {
-            if self.chunk_numbers().skip(i + 1).any(|m| m == n) {
-                mask |= bit(i);
-            }
-        }
-        mask
-    }
-
-    fn walk(&self) -> Walk<'_> {
-        let records_start = ENVELOPE_LEN + self.cfg.stream.prefix_len();
-        let cut = self.chunk.map_or(records_start, |c| c.cut);
-        Walk {
-            bytes: self.frame.get(..cut).unwrap_or(&[]),
-            at: records_start,
-            stream: self.cfg.stream,
-        }
-    }
-
-    /// The position numbers of the chunk's records, in order.
-    fn chunk_numbers(&self) -> impl Iterator<Item = u16> + '_ {
-        let start = self.chunk.map_or(0, |c| c.start);
-        let layout = self.cfg.stream.layout;
-        self.walk().enumerate().map(move |(i, rec)| {
-            if layout.number_width == 0 {
-                start.wrapping_add(i as u16)
-            } else {
-                let digits = rec.get(..usize::from(layout.number_width)).unwrap_or(&[]);
-                let spec = FieldSpec::hex(layout.number_width);
-                crate::field::decode_unsigned(spec, digits, 0).map_or(0, |n| n as u16)
-            }
-        })
-    }
-
-    /// Starts the query for the next window of unchecked records, or gives
-    /// the chunk's verdict.
-    fn start_verify(&mut self, now: u32) {
-        let all = self.chunk.map_or(0, |c| c.records);
-        let all_mask = if all >= 128 {
-            u128::MAX
-        } else {
-            bit(usize::from(all)) - 1
-        };
-        let checked = self.verifier.checked;
-        let lowest = self
-            .chunk_numbers()
-            .enumerate()
-            .filter(|(i, _)| checked & bit(*i) == 0)
-            .map(|(_, n)| n)
-            .min();
-        let Some(head) = lowest else {
-            self.verdict(now, all_mask);
-            return;
-        };
-        let v = &mut self.verifier;
-        let field_max = v.stream.count_field().max_unsigned();
-        let room = field_max.saturating_add(1).saturating_sub(u64::from(head));
-        let full = v
-            .stream
-            .window(self.cfg.max_response)
-            .min(self.window_limit);
-        let window = u64::from(full).min(room).max(1);
-        v.head = head;
-        v.asked = window as u16;
-        let built = self.write_query();
-        match (built, catalogue::lookup(self.verifier.stream.id)) {
-            (Ok(()), Some(info)) => {
-                self.exchange.start(info, now);
-                self.state = State::Verify;
-            }
-            (Err(e), _) => self.state = State::Failed(TransferError::Config(e), Resume::Nothing),
-            (_, None) => {
-                let id = self.verifier.stream.id;
-                self.state = State::Failed(
-                    TransferError::Config(Error::UnknownMessageId { id }),
-                    Resume::Nothing,
-                )
-            }
-        }
-    }
-
-    /// Writes the read-back query for the verifier's window.
-    fn write_query(&mut self) -> Result<(), Error> {
-        let v = &mut self.verifier;
-        let mut w = Writer::new(&mut v.query);
-        emit_envelope(
-            &mut w,
-            Header::Command,
-            self.cfg.exchange.station,
-            v.stream.id,
-        )?;
-        v.stream.write_query(&mut w, v.head, v.asked)?;
-        emit_trailer(&mut w, self.cfg.checksum)?;
-        v.query_len = w.len();
-        Ok(())
-    }
-
-    fn verdict(&mut self, now: u32, all: u128) {
-        let differ = self.verifier.differ & all;
-        if differ == 0 {
-            self.stats.frames_verified += 1;
-            self.stats.records_verified += u32::from(self.chunk.map_or(0, |c| c.records));
-            self.verifier.rewrites = 0;
-            self.finish_chunk(now);
-            return;
-        }
-        if self.verifier.rewrites < self.cfg.rewrites {
-            self.verifier.rewrites += 1;
-            self.stats.rewrites += 1;
-            self.start_write(now);
-            return;
-        }
-        let first_position = self.mismatched_positions().next().unwrap_or(0);
-        self.state = State::Failed(
-            TransferError::Mismatch {
-                first_position,
-                records: differ.count_ones() as u16,
-            },
-            Resume::Write,
-        );
-    }
-
-    /// A read-back window was answered (and compared): let the window
-    /// grow back, ask the next.
-    fn window_answered(&mut self, now: u32) {
-        let full = self.verifier.stream.window(self.cfg.max_response);
-        self.window_limit = grow(self.window_limit, full);
-        self.start_verify(now);
-    }
-
-    /// One byte in the read-back: the stream decoder compares the reply's
-    /// records as they arrive; the comparison counts when its SC checks.
-    fn verify_byte(&mut self, b: u8, now: u32) -> TransferEvent {
-        let v = &mut self.verifier;
-        if v.hunting {
-            if Header::from_byte(b).is_none() {
-                return TransferEvent::NeedMore;
-            }
-            v.decoder.reset();
-            v.hunting = false;
-            v.candidate = false;
-        }
-        match v.decoder.push(b) {
-            StreamEvent::NeedMore => TransferEvent::NeedMore,
-            StreamEvent::Start {
-                kind,
-                station,
-                count,
-                ..
-            } => {
-                v.station = station;
-                v.seen = 0;
-                v.candidate = kind == v.stream && count <= v.asked;
-                v.started = kind == v.stream && station == self.cfg.exchange.station;
-                TransferEvent::NeedMore
-            }
-            StreamEvent::Record(rec) => {
-                let (head, asked) = (self.verifier.head, self.verifier.asked);
-                let inside = u32::from(rec.number) >= u32::from(head)
-                    && u32::from(rec.number) < u32::from(head) + u32::from(asked);
-                if !inside {
-                    self.verifier.candidate = false;
-                } else if self.verifier.candidate {
-                    if let Some(i) = self.matching_record(&rec) {
-                        self.verifier.seen |= bit(i);
-                    }
-                }
-                TransferEvent::NeedMore
-            }
-            StreamEvent::End { .. } => {
-                let v = &mut self.verifier;
-                v.hunting = true;
-                v.started = false;
-                let (station, id, ok) = (v.station, v.stream.id, v.candidate);
-                match self
-                    .exchange
-                    .offer_head(Header::Response, station, id, ok, now)
-                {
-                    Offer::Accepted => self.commit_window(),
-                    // A reply to another window, or one that came early.
-                    Offer::Mismatch | Offer::Stale => {
-                        self.stats.stale_replies += 1;
-                        TransferEvent::Stale
-                    }
-                    other => self.judged(other, 0),
-                }
-            }
-            StreamEvent::Error { .. } => {
-                v.hunting = true;
-                if core::mem::take(&mut v.started) {
-                    // The awaited read-back reply arrived broken.
-                    self.exchange.reply_lost(now);
-                    let v = &mut self.verifier;
-                    if Header::from_byte(b).is_some() {
-                        v.decoder.reset();
-                        v.hunting = false;
-                        let _ = v.decoder.push(b);
-                    }
-                    return TransferEvent::NeedMore;
-                }
-                if Header::from_byte(b).is_some() {
-                    v.decoder.reset();
-                    v.hunting = false;
-                    let _ = v.decoder.push(b);
-                }
-                TransferEvent::NeedMore
-            }
-        }
-    }
-
-    /// The index of the chunk record `rec` should equal, if it does.
-    fn matching_record(&self, rec: &PositionRecord) -> Option<usize> {
-        let last = self
-            .chunk_numbers()
-            .enumerate()
-            .filter(|&(_, n)| n == rec.number)
-            .map(|(i, _)| i)
-            .last()?;
-        let bytes = self.walk().nth(last)?;
-        let mut r = Reader::new(bytes, 0);
-        let mut mine = self.cfg.stream.layout.read_record(&mut r).ok()?;
-        mine.number = rec.number;
-        let extended_ok = !self.cfg.stream.layout.extended || mine.extended == rec.extended;
-        let same = mine.axes == rec.axes
-            && mine.acceleration == rec.acceleration
-            && mine.deceleration == rec.deceleration
-            && mine.speed == rec.speed
-            && mine.positions == rec.positions
-            && extended_ok;
-        same.then_some(last)
-    }
-
-    fn commit_window(&mut self) -> TransferEvent {
-        let (head, asked) = (self.verifier.head, self.verifier.asked);
-        let end = u32::from(head) + u32::from(asked);
-        let seen = self.verifier.seen;
-        let mut checked = self.verifier.checked;
-        let mut differ = self.verifier.differ;
-        let (mut equal, mut missing) = (0u16, 0u16);
-        for (i, n) in self.chunk_numbers().enumerate() {
-            let m = bit(i);
-            if checked & m != 0 || u32::from(n) < u32::from(head) || u32::from(n) >= end {
-                continue;
-            }
-            checked |= m;
-            if seen & m != 0 {
-                equal += 1;
-            } else {
-                differ |= m;
-                missing += 1;
-            }
-        }
-        self.verifier.checked = checked;
-        self.verifier.differ = differ;
-        TransferEvent::Compared {
-            head,
-            equal,
-            differ: missing,
-        }
     }
 
     /// Takes the next record: the held-back one first, then the source.
@@ -1286,15 +968,12 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             return Ok(Built::Exhausted);
         }
         // The most records that no reply still in flight could confirm.
-        self.recent.retain(|&(_, u)| !reached(now, u));
-        let recent = &self.recent;
-        let taken = |n: u16| recent.iter().any(|&(c, _)| c == n);
-        let Some(n) = (1..=self.packed).rev().find(|&n| !taken(n)) else {
-            let wake = recent
-                .iter()
-                .map(|&(_, u)| u)
-                .min_by_key(|&u| u.wrapping_sub(now));
-            return Ok(Built::Wait(wake.unwrap_or(now.wrapping_add(1))));
+        self.guard.prune(now);
+        let Some(n) = (1..=self.packed)
+            .rev()
+            .find(|&n| !self.guard.blocks(n, now))
+        else {
+            return Ok(Built::Wait(self.guard.wake(now)));
         };
         if n < self.packed {
             self.stats.guarded_frames += 1;
@@ -1356,11 +1035,10 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
     /// count still avoids those a late reply could carry.
     fn shrink_chunk(&mut self, now: u32) {
         let Some(c) = self.chunk else { return };
-        self.recent.retain(|&(_, u)| !reached(now, u));
-        let recent = &self.recent;
+        self.guard.prune(now);
         let Some(n) = (1..=c.records / 2)
             .rev()
-            .find(|&n| !recent.iter().any(|&(k, _)| k == n))
+            .find(|&n| !self.guard.blocks(n, now))
         else {
             return;
         };
@@ -1379,23 +1057,6 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 self.stats.shrunk_frames += 1;
             }
             Err(e) => self.state = State::Failed(e, Resume::Nothing),
-        }
-    }
-
-    /// A read-back query timed out: ask the same head for half the window.
-    /// A late reply to the larger window still answers the smaller one
-    /// exactly: it lists every record in it.
-    fn shrink_window(&mut self) {
-        let v = &mut self.verifier;
-        if v.asked > 1 {
-            v.asked /= 2;
-            self.window_limit = v.asked;
-            if self.write_query().is_err() {
-                self.state = State::Failed(
-                    TransferError::Config(Error::BufferTooSmall),
-                    Resume::Nothing,
-                );
-            }
         }
     }
 }
@@ -1423,13 +1084,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         U: embedded_io::Read + embedded_io::ReadReady + embedded_io::Write,
         C: Clock,
     {
-        loop {
-            match self.poll_nb(uart, clock) {
-                Ok(report) => return Ok(report),
-                Err(nb::Error::Other(e)) => return Err(e),
-                Err(nb::Error::WouldBlock) => clock.idle(),
-            }
-        }
+        drive::run_blocking(self, uart, clock).map_err(TransferError::from_stop)
     }
 
     /// Makes what progress is possible without waiting: reads the bytes
@@ -1446,41 +1101,18 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         U: embedded_io::Read + embedded_io::ReadReady + embedded_io::Write,
         C: Clock,
     {
-        let io = |e| nb::Error::Other(TransferError::Io(e));
-        let mut buf = [0u8; 32];
-        while uart.read_ready().map_err(io)? {
-            let n = uart.read(&mut buf).map_err(io)?;
-            if n == 0 {
-                break;
-            }
-            let now = clock.now_ms();
-            self.received_all(buf.get(..n).unwrap_or(&[]), now);
-        }
-        match self.poll(clock.now_ms()) {
-            Step::Transmit(bytes) => {
-                uart.write_all(bytes).map_err(io)?;
-                uart.flush().map_err(io)?;
-                let end = clock.now_ms();
-                self.sent(end);
-                Err(nb::Error::WouldBlock)
-            }
-            Step::WaitUntil(_) | Step::NeedRecords => Err(nb::Error::WouldBlock),
-            Step::Complete(report) => Ok(report),
-            Step::Failed(e) => Err(nb::Error::Other(e.widen())),
-        }
+        drive::poll_nb(self, uart, clock).map_err(|e| e.map(TransferError::from_stop))
     }
-}
 
-#[cfg(feature = "async")]
-impl<I: RecordSource, const N: usize> Transfer<I, N> {
     /// Runs the transfer to the end over an `embedded-io-async` UART.
     ///
-    /// While waiting for a reply it polls [`embedded_io_async::ReadReady`]
-    /// and sleeps `poll_ms` between checks, so the deadline is always seen
-    /// even if no byte ever arrives. The clock is read after each write, so
-    /// the reply timeout starts at the end of the transmission. A
+    /// While waiting it checks [`embedded_io_async::ReadReady`] and sleeps
+    /// at most `poll_ms` between checks, so the deadline is always seen
+    /// even if no byte arrives. The clock is read after each write, so the
+    /// reply timeout starts at the end of the transmission. A
     /// [`RecordQueue`] source is filled by whoever owns the transfer
     /// between calls; here a pending source just sleeps.
+    #[cfg(feature = "async")]
     pub async fn run_async<U, C>(
         &mut self,
         uart: &mut U,
@@ -1491,125 +1123,232 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         U: embedded_io_async::Read + embedded_io_async::ReadReady + embedded_io_async::Write,
         C: crate::clock::AsyncClock,
     {
-        let mut buf = [0u8; 32];
+        drive::run_async(self, uart, clock, poll_ms)
+            .await
+            .map_err(TransferError::from_stop)
+    }
+}
+
+impl<I: RecordSource, const N: usize> Engine for Transfer<I, N> {
+    type Output = TransferReport;
+    type Error = TransferError;
+    fn feed(&mut self, bytes: &[u8], now: u32) {
+        self.received_all(bytes, now);
+    }
+    fn want(&mut self, now: u32) -> Want<'_, Result<TransferReport, TransferError>> {
+        match self.poll(now) {
+            Step::Transmit(bytes) => Want::Transmit(bytes),
+            Step::WaitUntil(t) => Want::WaitUntil(t),
+            Step::NeedRecords => Want::Idle,
+            Step::Complete(report) => Want::Done(Ok(report)),
+            Step::Failed(e) => Want::Done(Err(e)),
+        }
+    }
+    fn sent(&mut self, now: u32) {
+        Transfer::sent(self, now);
+    }
+}
+
+impl<E> TransferError<E> {
+    pub(crate) fn from_stop(stop: Stop<TransferError, E>) -> Self {
+        match stop {
+            Stop::Engine(e) => e.widen(),
+            Stop::Io(e) => TransferError::Io(e),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use std::vec::Vec;
+
+    use super::*;
+    use crate::message::{
+        ChangePositionData2Response, EffectivePositionResponse2, Message, Repeated,
+    };
+
+    const ST: Station = Station(0x99);
+
+    fn records(n: u16, axes: u8) -> Vec<PositionRecord> {
+        (1..=n)
+            .map(|i| {
+                let coords: Vec<(u8, i32)> = (1..=axes).map(|a| (a, i32::from(i) * 10)).collect();
+                PositionRecord::new(i, 30, 30, 100, &coords).unwrap()
+            })
+            .collect()
+    }
+
+    fn reply_26dh(count: u16) -> Vec<u8> {
+        let r = ChangePositionData2Response {
+            number_of_changed_positions: count,
+        };
+        let mut buf = [0u8; 16];
+        let n = r.emit(ST, &mut buf).unwrap();
+        buf[..n].to_vec()
+    }
+
+    fn events(
+        t: &mut Transfer<std::vec::IntoIter<PositionRecord>>,
+        mut bytes: &[u8],
+    ) -> Vec<TransferEvent> {
+        let mut out = Vec::new();
         loop {
-            while uart.read_ready().map_err(TransferError::Io)? {
-                let n = uart.read(&mut buf).await.map_err(TransferError::Io)?;
-                if n == 0 {
+            let r = t.received(bytes, 10);
+            bytes = &bytes[r.consumed..];
+            if r.event == TransferEvent::NeedMore {
+                return out;
+            }
+            out.push(r.event);
+        }
+    }
+
+    fn transmitted(t: &mut Transfer<std::vec::IntoIter<PositionRecord>>, now: u32) -> Vec<u8> {
+        match t.poll(now) {
+            Step::Transmit(b) => b.to_vec(),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_reply_with_another_count_never_confirms_and_a_reply_before_the_send_is_stale() {
+        let cfg = TransferConfig::tta(ST).with_verify(Verify::Off);
+        let mut t = Transfer::<_>::new(cfg, records(3, 2).into_iter());
+        let frame = transmitted(&mut t, 0);
+        assert_eq!(&frame[..10], b"!9926D0003");
+        // Before `sent`: not a reply to this frame.
+        assert_eq!(events(&mut t, &reply_26dh(3)), [TransferEvent::Stale]);
+        t.sent(5);
+        assert_eq!(
+            events(&mut t, &reply_26dh(2)),
+            [TransferEvent::CountMismatch {
+                sent: 3,
+                reported: 2
+            }]
+        );
+        assert!(matches!(t.poll(10), Step::WaitUntil(3_005)));
+        assert_eq!(
+            events(&mut t, &reply_26dh(3)),
+            [TransferEvent::Confirmed { records: 3 }]
+        );
+        // The turnaround (1 ms, two ticks), then nothing is left to send.
+        assert_eq!(t.poll(20), Step::WaitUntil(22));
+        match t.poll(22) {
+            Step::Complete(r) => {
+                assert_eq!(r.guarantee, Guarantee::Unverified);
+                assert_eq!(r.stats.records_confirmed, 3);
+                assert_eq!(r.stats.count_mismatches, 1);
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn consecutive_frames_never_share_a_count() {
+        // 8-axis records: 24 fit a frame. 48 records go as 24, 23, 1.
+        let cfg = TransferConfig::tta(ST).with_verify(Verify::Off);
+        let mut t = Transfer::<_>::new(cfg, records(48, 8).into_iter());
+        let mut counts = Vec::new();
+        let mut now = 0;
+        loop {
+            match t.poll(now) {
+                Step::Transmit(b) => {
+                    let n =
+                        u16::from_str_radix(std::str::from_utf8(&b[6..10]).unwrap(), 16).unwrap();
+                    counts.push(n);
+                    t.sent(now);
+                    t.received_all(&reply_26dh(n), now + 1);
+                }
+                Step::WaitUntil(d) => now = d,
+                Step::Complete(_) => break,
+                other => panic!("{other:?}"),
+            }
+        }
+        assert_eq!(counts, [24, 23, 1]);
+    }
+
+    #[test]
+    fn a_frame_that_reads_back_different_is_rewritten() {
+        let recs = records(2, 1);
+        let mut t = Transfer::<_>::new(TransferConfig::tta(ST), recs.clone().into_iter());
+        let mut now = 0;
+        let mut writes = 0;
+        let mut stored = recs.clone();
+        stored[1].positions[0] += 1; // the controller holds record 2 altered
+        loop {
+            match t.poll(now) {
+                Step::Transmit(b) if b.starts_with(b"!9926D") => {
+                    writes += 1;
+                    t.sent(now);
+                    if writes > 1 {
+                        stored = recs.clone(); // the rewrite lands
+                    }
+                    t.received_all(&reply_26dh(2), now + 1);
+                }
+                Step::Transmit(b) => {
+                    assert!(
+                        b.starts_with(b"!9921F00010018"),
+                        "a 24-position window from 1"
+                    );
+                    t.sent(now);
+                    let r = EffectivePositionResponse2 {
+                        records: Repeated::from_slice(&stored),
+                    };
+                    let mut buf = [0u8; 128];
+                    let n = r.emit(ST, &mut buf).unwrap();
+                    t.received_all(&buf[..n], now + 1);
+                }
+                Step::WaitUntil(d) => now = d.max(now + 1),
+                Step::Complete(r) => {
+                    assert_eq!(r.guarantee, Guarantee::Verified);
+                    assert_eq!(r.stats.rewrites, 1);
+                    assert_eq!(r.stats.records_verified, 2);
                     break;
                 }
-                let now = clock.now_ms();
-                self.received_all(buf.get(..n).unwrap_or(&[]), now);
-            }
-            let now = clock.now_ms();
-            match self.poll(now) {
-                Step::Transmit(bytes) => {
-                    uart.write_all(bytes).await.map_err(TransferError::Io)?;
-                    uart.flush().await.map_err(TransferError::Io)?;
-                    let end = clock.now_ms();
-                    self.sent(end);
-                }
-                Step::WaitUntil(t) => {
-                    clock
-                        .sleep_ms(t.wrapping_sub(now).clamp(1, poll_ms.max(1)))
-                        .await
-                }
-                Step::NeedRecords => clock.sleep_ms(poll_ms.max(1)).await,
-                Step::Complete(report) => return Ok(report),
-                Step::Failed(e) => return Err(e.widen()),
+                other => panic!("{other:?}"),
             }
         }
+        assert_eq!(writes, 2);
     }
-}
 
-/// What a [`RecordSource`] has to offer.
-#[derive(Debug, Clone, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Pull {
-    /// The next record.
-    Record(PositionRecord),
-    /// No record yet; ask again later.
-    Pending,
-    /// No more records.
-    End,
-}
-
-/// Where a transfer takes its records from. Every
-/// `Iterator<Item = PositionRecord>` is one (never pending); a
-/// [`RecordQueue`] is one that fills as records arrive.
-pub trait RecordSource {
-    /// The next record, if ready.
-    fn pull(&mut self) -> Pull;
-    /// Records in all, if known.
-    fn total(&self) -> Option<u32> {
-        None
-    }
-}
-
-impl<I: Iterator<Item = PositionRecord>> RecordSource for I {
-    fn pull(&mut self) -> Pull {
-        self.next().map_or(Pull::End, Pull::Record)
-    }
-    fn total(&self) -> Option<u32> {
-        let (lo, hi) = self.size_hint();
-        if Some(lo) == hi {
-            u32::try_from(lo).ok()
-        } else {
-            None
-        }
-    }
-}
-
-/// A bounded FIFO of records that a producer fills as they arrive (for
-/// example from a [`PositionStreamDecoder`])
-/// and a [`Transfer`] drains. It is pending while empty, until
-/// [`RecordQueue::finish`].
-#[derive(Debug, Clone, Default)]
-pub struct RecordQueue<const Q: usize> {
-    items: heapless::Deque<PositionRecord, Q>,
-    finished: bool,
-}
-
-impl<const Q: usize> RecordQueue<Q> {
-    /// An empty queue.
-    pub const fn new() -> Self {
-        RecordQueue {
-            items: heapless::Deque::new(),
-            finished: false,
-        }
-    }
-    /// Appends a record; gives it back if the queue is full.
-    pub fn push(&mut self, rec: PositionRecord) -> core::result::Result<(), PositionRecord> {
-        self.items.push_back(rec)
-    }
-    /// No more records will come.
-    pub fn finish(&mut self) {
-        self.finished = true;
-    }
-    /// Whether [`RecordQueue::finish`] was called.
-    pub fn is_finished(&self) -> bool {
-        self.finished
-    }
-    /// Records waiting.
-    pub fn len(&self) -> usize {
-        self.items.len()
-    }
-    /// Whether no record is waiting.
-    pub fn is_empty(&self) -> bool {
-        self.items.is_empty()
-    }
-    /// Whether another record would not fit.
-    pub fn is_full(&self) -> bool {
-        self.items.is_full()
-    }
-}
-
-impl<const Q: usize> RecordSource for RecordQueue<Q> {
-    fn pull(&mut self) -> Pull {
-        match self.items.pop_front() {
-            Some(r) => Pull::Record(r),
-            None if self.finished => Pull::End,
-            None => Pull::Pending,
-        }
+    #[test]
+    fn a_frame_that_stays_different_fails_naming_its_records() {
+        let recs = records(3, 1);
+        let cfg = TransferConfig {
+            rewrites: 1,
+            ..TransferConfig::tta(ST)
+        };
+        let mut t = Transfer::<_>::new(cfg, recs.clone().into_iter());
+        let mut stored = recs.clone();
+        stored.remove(1); // position 2 never gets stored
+        let mut now = 0;
+        let err = loop {
+            match t.poll(now) {
+                Step::Transmit(b) if b.starts_with(b"!9926D") => {
+                    t.sent(now);
+                    t.received_all(&reply_26dh(3), now + 1);
+                }
+                Step::Transmit(_) => {
+                    t.sent(now);
+                    let r = EffectivePositionResponse2 {
+                        records: Repeated::from_slice(&stored),
+                    };
+                    let mut buf = [0u8; 128];
+                    let n = r.emit(ST, &mut buf).unwrap();
+                    t.received_all(&buf[..n], now + 1);
+                }
+                Step::WaitUntil(d) => now = d.max(now + 1),
+                Step::Failed(e) => break e,
+                other => panic!("{other:?}"),
+            }
+        };
+        assert_eq!(
+            err,
+            TransferError::Mismatch {
+                first_position: 2,
+                records: 1
+            }
+        );
+        assert_eq!(t.mismatched_positions().collect::<Vec<_>>(), [2]);
     }
 }
