@@ -166,7 +166,7 @@ fn main() -> ! {
     }
     for kind in PositionStream::ALL {
         let count = black_box(3u16);
-        let records = core::iter::repeat(rec.clone()).take(usize::from(black_box(count)));
+        let records = core::iter::repeat_n(rec.clone(), usize::from(black_box(count)));
         if let Ok(mut enc) = PositionStreamEncoder::new(kind, Station(0x99), 0, count, records) {
             let mut chunk = [0u8; 64];
             loop {
