@@ -12,7 +12,8 @@
 //!   be no `memory.x` in this crate's folder.
 //! * The device crates (`lm3s6965`, `mps2-an386`, `stm32g0`) provide
 //!   `device.x` and the interrupt vector table for cortex-m-rt's `device`
-//!   feature.
+//!   feature; without a board (`icount_bench`) an empty `device.x` is
+//!   written here.
 //! * `-Tlink.x` selects cortex-m-rt's linker script; `-Tdefmt.x` is added
 //!   with the `defmt` feature only.
 //! * Nothing is linked for host builds of the library.
@@ -64,6 +65,13 @@ fn main() {
     let dir = PathBuf::from(env::var_os("OUT_DIR").expect("OUT_DIR")).join("map");
     fs::create_dir_all(&dir).expect("create the map folder");
     fs::copy(&map, dir.join("board-memory.x")).expect("copy the board's memory map");
+    if boards == 0 {
+        // No device crate (the board-less `icount_bench`): cortex-m-rt's
+        // `device` feature still includes a `device.x`; the program brings
+        // its own (empty) interrupt table.
+        fs::write(dir.join("device.x"), "/* no device interrupts */\n")
+            .expect("write an empty device.x");
+    }
     println!("cargo:rustc-link-search={}", dir.display());
     // Also on the search path, ahead of the device crates' folders, for a
     // linker that does not run in the repository root.

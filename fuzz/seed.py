@@ -219,6 +219,11 @@ def main():
         write("bridge_policy", f"fixtures-mode{mode:02x}", bytes([mode, 4]) + stream)
     write("bridge_policy", "fixtures-allow", bytes([0x02]) + bytes(allow) + bytes([4]) + stream)
     write("bridge_policy", "status-query", bytes([0x01, 1]) + b"!BBB0047\r\n" + stream)
+    # hex: any bytes; the fixture frames hold digits of both cases and
+    # every kind of non-digit next to them.
+    for name, frame in frames[:8]:
+        write("hex", name, frame)
+    write("hex", "digits-both-cases", b"0123456789ABCDEFabcdef@G`g/:\x00\xff")
     print(f"seeded {len(gen)} generated frames, {len(pos_frames)} fixture position frames")
     print(f"seeded {len(frames)} fixture frames into {os.path.join(HERE, 'corpus')}")
 

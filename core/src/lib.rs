@@ -63,6 +63,7 @@ pub mod field;
 pub mod frame;
 pub mod guide;
 pub mod header;
+pub mod hex;
 pub mod io;
 pub mod limits;
 pub mod message;

@@ -39,7 +39,7 @@ use crate::error::{Error, Result};
 use crate::field::{hex_digit, hex_value, FieldSpec, Reader, Writer};
 use crate::frame::{emit_envelope, Header, Station, ENVELOPE_LEN};
 use crate::io::IoError;
-use crate::position::PositionRecord;
+use crate::position::{axis_count, PositionRecord};
 
 /// Staging buffer size of the streaming encoder and decoder: the longest
 /// record (4 + 2 + 12 + 8 × 8 + 2 = 84 bytes) or the longest envelope and
@@ -134,25 +134,14 @@ impl<I: Iterator<Item = PositionRecord>> PositionStreamEncoder<I> {
     pub fn read(&mut self, out: &mut [u8]) -> Result<usize> {
         let mut n = 0;
         while n < out.len() {
-            if self.stage.pending().is_empty() && !self.refill()? {
-                break;
+            let room = out.get_mut(n..).unwrap_or(&mut []);
+            if self.stage.pos < self.stage.len {
+                let k = copy_words(room, self.stage.pending());
+                self.stage.pos += k;
+                n += k;
+                continue;
             }
-            let src = self.stage.pending();
-            let dst = out.get_mut(n..).unwrap_or(&mut []);
-            let k = src.len().min(dst.len());
-            if let (Some(d), Some(s)) = (dst.get_mut(..k), src.get(..k)) {
-                d.copy_from_slice(s);
-            }
-            self.stage.pos += k;
-            n += k;
-        }
-        Ok(n)
-    }
-
-    /// Loads the next record or the trailer into the stage; `false` when done.
-    fn refill(&mut self) -> Result<bool> {
-        match self.phase {
-            EncPhase::Records if self.emitted < self.count => {
+            if self.phase == EncPhase::Records && self.emitted < self.count {
                 let Some(rec) = self.source.next() else {
                     self.phase = EncPhase::Failed;
                     return Err(Error::CountMismatch {
@@ -160,18 +149,38 @@ impl<I: Iterator<Item = PositionRecord>> PositionStreamEncoder<I> {
                         found: usize::from(self.emitted),
                     });
                 };
-                let mut w = Writer::new(&mut self.stage.buf);
-                if let Err(e) = self.kind.layout.write_record(&rec, &mut w) {
-                    self.phase = EncPhase::Failed;
-                    return Err(e);
+                // Straight into `out` when the record fits, else staged.
+                let fits = room.len() >= self.kind.layout.record_len(axis_count(rec.axes));
+                let dst: &mut [u8] = if fits { room } else { &mut self.stage.buf };
+                match self.kind.layout.put_record(&rec, dst) {
+                    Ok((len, sum)) => {
+                        self.sum.add_sum(sum);
+                        self.emitted += 1;
+                        if fits {
+                            n += len;
+                        } else {
+                            self.stage.len = len;
+                            self.stage.pos = 0;
+                        }
+                    }
+                    Err(e) => {
+                        self.phase = EncPhase::Failed;
+                        return Err(e);
+                    }
                 }
-                let len = w.len();
-                self.stage.len = len;
-                self.stage.pos = 0;
-                self.sum.update(self.stage.pending());
-                self.emitted += 1;
-                Ok(true)
+                continue;
             }
+            if !self.refill()? {
+                break;
+            }
+        }
+        Ok(n)
+    }
+
+    /// After the last record: loads the trailer into the stage; `false`
+    /// when done. (`read` encodes the records.)
+    fn refill(&mut self) -> Result<bool> {
+        match self.phase {
             EncPhase::Records => {
                 if self.source.next().is_some() {
                     self.phase = EncPhase::Failed;
@@ -340,6 +349,18 @@ impl PositionStreamDecoder {
             let rest = input.get(used..).unwrap_or(&[]);
             if rest.is_empty() {
                 break;
+            }
+            // A whole well-formed record in the input: read it in place.
+            if self.phase == DecPhase::RecordHead && self.stage.len == 0 {
+                if let Some(kind) = self.kind {
+                    if let Some((rec, len, sum)) = kind.layout.read_fast(rest) {
+                        self.sum.add_sum(sum);
+                        self.offset += len;
+                        self.done += 1;
+                        self.enter_record_or_trailer(kind);
+                        return (used + len, StreamEvent::Record(rec));
+                    }
+                }
             }
             let want = self.need.saturating_sub(self.stage.len);
             let take = want.min(rest.len());
@@ -524,4 +545,23 @@ impl PositionStreamDecoder {
             self.need = 4;
         }
     }
+}
+
+/// Copies as much of `src` as fits into `dst`, a 4-byte word at a time
+/// (the library `memcpy` is slow for the short, unaligned pieces a record
+/// leaves); returns the bytes copied.
+#[inline(always)]
+fn copy_words(dst: &mut [u8], src: &[u8]) -> usize {
+    let n = dst.len().min(src.len());
+    if let (Some(d), Some(s)) = (dst.get_mut(..n), src.get(..n)) {
+        let mut dw = d.chunks_exact_mut(4);
+        let mut sw = s.chunks_exact(4);
+        for (a, b) in (&mut dw).zip(&mut sw) {
+            a.copy_from_slice(b);
+        }
+        for (a, b) in dw.into_remainder().iter_mut().zip(sw.remainder()) {
+            *a = *b;
+        }
+    }
+    n
 }

@@ -8,30 +8,15 @@
 //! of [`WATCHDOG_MS`]. The CMSDK UART has no modem lines: this board offers
 //! no flow control but XON/XOFF (RTS/CTS in the configuration block is
 //! treated as none, and the status query reports what is in force).
-//!
-//! With the `bench` feature the binary measures the core's codec instead
-//! of bridging (see `src/bench.rs`).
 #![no_std]
 #![no_main]
 #![cfg_attr(
     feature = "stall",
     allow(unreachable_code, unused_variables, unused_mut)
 )]
-#![cfg_attr(feature = "bench", allow(dead_code, unused_imports, unreachable_code))]
 
 #[path = "../runtime.rs"]
 mod runtime;
-
-#[cfg(feature = "bench")]
-#[path = "../bench.rs"]
-mod bench;
-
-/// What `bench.rs` needs from the board.
-#[cfg(feature = "bench")]
-mod board {
-    pub use crate::runtime::{now_ms, TICK_HZ};
-    pub use crate::CORE_CLOCK_HZ;
-}
 
 use core::mem::MaybeUninit;
 use core::ptr::addr_of_mut;
@@ -170,17 +155,6 @@ fn main() -> ! {
         panic!("core peripherals already taken");
     };
     runtime::start_tick(core.SYST, CORE_CLOCK_HZ);
-
-    #[cfg(feature = "bench")]
-    {
-        runtime::host_print(format_args!("firmware-example: bench on {}\n", NAME));
-        let ok = bench::run(runtime::host_print);
-        runtime::exit(if ok {
-            cortex_m_semihosting::debug::EXIT_SUCCESS
-        } else {
-            cortex_m_semihosting::debug::EXIT_FAILURE
-        })
-    }
 
     let (mut cfg, source) = runtime::load_config();
     if cfg.flow == FlowControl::RtsCts {

@@ -11,9 +11,11 @@
 //! field visitor of every message, the position-stream decoder, every
 //! record layout, the request client, the transfer engine (its write and
 //! streamed read-back paths) and the read-back engine fed arbitrary reply
-//! bytes (including a raw command frame passed through the client), and the
-//! bridge library (`Bridge::poll`, the configuration block, the serial
-//! line) fed arbitrary bytes on both ports.
+//! bytes (including a raw command frame passed through the client), the
+//! encoders (`RecordLayout::put_record`, the whole-field record paths, and
+//! `PositionStreamEncoder` for every position stream) on a record made of
+//! those bytes, and the bridge library (`Bridge::poll`, the configuration
+//! block, the serial line) fed arbitrary bytes on both ports.
 //!
 //! Build: `cargo build --release --features no-panic-proof --bin
 //! no_panic_proof --target thumbv7m-none-eabi` (a debug build keeps panic
@@ -24,15 +26,18 @@
 use core::hint::black_box;
 
 use cortex_m_rt::entry;
+use iai_protocol_b::axis::{AxisPattern, PerAxis};
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::client::{Client, ClientConfig, ClientStep};
 use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::field::{FieldSpec, Reader};
 use iai_protocol_b::frame::{Frame, Station};
 use iai_protocol_b::message::{decode_any, AxisStatusQuery, Fields, GroupInfo, Value, Visitor};
-use iai_protocol_b::position::RecordLayout;
+use iai_protocol_b::position::{PositionRecord, RecordLayout};
 use iai_protocol_b::readback::{ReadBack, ReadBackConfig, ReadStep};
-use iai_protocol_b::stream::{PositionStreamDecoder, StreamEvent};
+use iai_protocol_b::stream::{
+    PositionStream, PositionStreamDecoder, PositionStreamEncoder, StreamEvent,
+};
 use iai_protocol_b::transfer::{Step, Transfer, TransferConfig};
 
 use firmware_example::bridge::{Bridge, Port};
@@ -113,6 +118,32 @@ impl Visitor for Sink {
     fn leave_group(&mut self) {}
 }
 
+/// A record whose every field comes from `input`.
+fn opaque_record(input: &[u8]) -> PositionRecord {
+    let byte = |i: usize| input.get(i).copied().unwrap_or(0);
+    let word = |i: usize| u16::from_le_bytes([byte(i), byte(i + 1)]);
+    let axes = AxisPattern::from_bits(byte(2));
+    let mut positions = PerAxis::new();
+    for k in 0..axes.count() {
+        let at = 12 + 4 * k;
+        let _ = positions.push(i32::from_le_bytes([
+            byte(at),
+            byte(at + 1),
+            byte(at + 2),
+            byte(at + 3),
+        ]));
+    }
+    PositionRecord {
+        number: word(0),
+        axes,
+        acceleration: word(3),
+        deceleration: word(5),
+        speed: word(7),
+        positions,
+        extended: byte(9),
+    }
+}
+
 fn wire() -> &'static [u8] {
     let input: &[u8] = black_box(&INPUT[..]);
     input.get(..black_box(input.len())).unwrap_or(&[])
@@ -167,6 +198,38 @@ fn main() -> ! {
     ] {
         let mut r = Reader::new(input, 6);
         let _ = black_box(layout.read_record(&mut r));
+        let _ = black_box(layout.read_fast(input));
+    }
+
+    // The encoders, on a record made of bytes the optimiser cannot see.
+    let rec = opaque_record(input);
+    for layout in [
+        RecordLayout::NUMBER_3,
+        RecordLayout::NUMBER_4,
+        RecordLayout::NUMBER_4_EXTENDED,
+        RecordLayout::RANGE,
+        RecordLayout::RANGE_EXTENDED,
+        black_box(RecordLayout::NUMBER_4),
+    ] {
+        let mut out = [0u8; 96];
+        let end = black_box(out.len());
+        let _ = black_box(layout.put_record(&rec, out.get_mut(..end).unwrap_or(&mut [])));
+    }
+    for kind in PositionStream::ALL {
+        let count = black_box(3u16);
+        let records = core::iter::repeat_n(rec.clone(), usize::from(black_box(count)));
+        if let Ok(mut enc) = PositionStreamEncoder::new(kind, Station(0x99), 0, count, records) {
+            let mut chunk = [0u8; 64];
+            loop {
+                let end = black_box(chunk.len());
+                match enc.read(chunk.get_mut(..end).unwrap_or(&mut [])) {
+                    Ok(0) | Err(_) => break,
+                    Ok(n) => {
+                        black_box((n, &chunk));
+                    }
+                }
+            }
+        }
     }
 
     // The engines, answered with arbitrary bytes.
