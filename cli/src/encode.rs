@@ -282,11 +282,15 @@ fn write_value_as(
         };
     }
     if spec.radix == Radix::Text {
-        let raw = text.unwrap_or("").as_bytes();
+        let raw = text.unwrap_or("");
         let t = if escaped {
-            super::text::unescape(raw)
+            super::text::unescape(raw.as_bytes())
         } else {
-            raw.to_vec()
+            super::fields::from_latin1(raw).ok_or_else(|| {
+                format!(
+                    "{name}: {raw:?} has a character above U+00FF (text is one byte per character)"
+                )
+            })?
         };
         if t.len() > width {
             return Err(format!("{name}: at most {width} characters"));
@@ -580,10 +584,14 @@ fn write_json_level(
                     let t = match given {
                         None => String::new(),
                         Some(J::String(s)) => s.clone(),
+                        Some(J::Array(a)) if a.is_empty() => String::new(),
                         Some(other) => {
                             return Err(format!("{full}: expected a string, found {other}"))
                         }
                     };
+                    let t = super::fields::from_latin1(&t).ok_or_else(|| {
+                        format!("{full}: {t:?} has a character above U+00FF (text is one byte per character)")
+                    })?;
                     check_count(&full, info, t.len(), None)?;
                     if let Some(cf) = info.count_field {
                         write_value(
@@ -594,7 +602,7 @@ fn write_json_level(
                             out,
                         )?;
                     }
-                    out.extend_from_slice(t.as_bytes());
+                    out.extend_from_slice(&t);
                     continue;
                 }
                 let list: &[J] = match given {

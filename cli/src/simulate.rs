@@ -221,9 +221,15 @@ pub fn serve(
     };
     let s = session.stats();
     let held = shared.lock().table.len();
+    let faults = s.dropped_replies
+        + s.late_replies
+        + s.duplicated_replies
+        + s.injected_errors
+        + s.swapped_records;
     format!(
-        "connection {name} {end}: {} command(s), {} reply(ies), {} broken frame(s), {} position record(s) written, table holds {held}",
-        s.commands, s.replies, s.broken_frames, s.records_written
+        "connection {name} {end}: {} command(s), {} reply(ies), {} broken frame(s), {} position record(s) written, table holds {held}; {faults} fault(s) injected ({} dropped, {} late, {} duplicated, {} error replies, {} swapped records)",
+        s.commands, s.replies, s.broken_frames, s.records_written,
+        s.dropped_replies, s.late_replies, s.duplicated_replies, s.injected_errors, s.swapped_records
     )
 }
 

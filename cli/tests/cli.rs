@@ -231,7 +231,7 @@ fn encode_round_trips_through_inspect() {
 
     // Values that do not fit are refused with the field's range.
     let out = iai(&["encode", "212", "query_axis_pattern=0x100"]);
-    assert_eq!(out.status.code(), Some(2));
+    assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("0..=255"));
     let out = iai(&["encode", "212", "no_such_field=1"]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("query_axis_pattern"));
@@ -284,7 +284,7 @@ fn a_position_stream_larger_than_the_decoder_is_summarised() {
 
 #[test]
 fn simulate_answers_an_axis_status_query_over_tcp() {
-    let sim = Sim::tcp(&[]);
+    let mut sim = Sim::tcp(&[]);
     let mut conn = sim.connect();
     conn.write_all(b"!99212038B\r\n").unwrap();
     let reply = common::read_frame(&mut conn);
@@ -294,7 +294,8 @@ fn simulate_answers_an_axis_status_query_over_tcp() {
         String::from_utf8_lossy(&reply)
     );
     drop(conn);
-    // It logs what it received and sent.
+    // It logs what it received and sent, and the connection's end.
+    sim.wait_for("1 command(s), 1 reply(ies)");
     let log = sim.stop();
     assert!(log.contains("< 00000000 rx  command  st 99  212H"), "{log}");
     assert!(log.contains("> 00000000 tx  response st 99  212H"), "{log}");

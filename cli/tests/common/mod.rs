@@ -112,6 +112,7 @@ pub struct Sim {
     /// `127.0.0.1:PORT` or `/dev/pts/N`.
     pub at: String,
     lines: Receiver<String>,
+    seen: Vec<String>,
 }
 
 impl Sim {
@@ -145,6 +146,7 @@ impl Sim {
             child,
             at,
             lines: rx,
+            seen: Vec::new(),
         }
     }
 
@@ -160,13 +162,25 @@ impl Sim {
         c
     }
 
+    /// Waits (at most 10 s) for a line containing `pat`.
+    pub fn wait_for(&mut self, pat: &str) {
+        let end = std::time::Instant::now() + Duration::from_secs(10);
+        while !self.seen.iter().any(|l| l.contains(pat)) {
+            let left = end.saturating_duration_since(std::time::Instant::now());
+            match self.lines.recv_timeout(left) {
+                Ok(l) => self.seen.push(l),
+                Err(_) => panic!("no line with {pat:?} in:\n{}", self.seen.join("\n")),
+            }
+        }
+    }
+
     /// SIGTERM, then everything it printed.
     pub fn stop(mut self) -> String {
         // SAFETY: signalling our own child.
         unsafe { libc::kill(self.child.id() as i32, libc::SIGTERM) };
         let status = self.child.wait().unwrap();
         assert!(status.success(), "simulate exited with {status}");
-        let mut log = Vec::new();
+        let mut log = std::mem::take(&mut self.seen);
         while let Ok(l) = self.lines.recv_timeout(Duration::from_secs(5)) {
             log.push(l);
         }
