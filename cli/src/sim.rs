@@ -1155,7 +1155,8 @@ mod tests {
         };
         send(&mut sim, &home, 10);
         assert_eq!(status(&mut sim, 20).0 & 0b111, 0b011, "in use, homing");
-        assert_eq!(status(&mut sim, 10 + HOME_CREEP_MS + 1).0, 0b1_1_10_0);
+        // Completed, servo on, homed (bits 4, 3, 1-2 = 2).
+        assert_eq!(status(&mut sim, 10 + HOME_CREEP_MS + 1).0, 0x1C);
         // 50 mm at 100 mm/s, 0.3 G: 0.034 s ramps, about 534 ms in all.
         let t0 = 1_000;
         assert_eq!(error_code(&send(&mut sim, &move_to(50_000, 100), t0)), None);
