@@ -666,6 +666,9 @@ pub struct EncodeOptions {
 
 /// Builds the frame. Returns it, or a message saying what is wrong.
 pub fn encode(opts: &EncodeOptions) -> Result<Vec<u8>, String> {
+    if opts.message.eq_ignore_ascii_case("error") {
+        return encode_error(opts);
+    }
     let header = if opts.response {
         Header::Response
     } else {
@@ -691,7 +694,7 @@ pub fn encode(opts: &EncodeOptions) -> Result<Vec<u8>, String> {
             .as_object()
             .ok_or_else(|| format!("the JSON must be an object of fields, found {json}"))?;
         write_json_level(&nodes, obj, "", &mut body)?;
-        return finish(opts, header, id, &body);
+        return finish_frame(opts, header, id, &body);
     }
     let mut values = BTreeMap::new();
     for a in &opts.assignments {
@@ -733,10 +736,15 @@ pub fn encode(opts: &EncodeOptions) -> Result<Vec<u8>, String> {
                 .join(" ")
         ));
     }
-    finish(opts, header, id, &body)
+    finish_frame(opts, header, id, &body)
 }
 
-fn finish(opts: &EncodeOptions, header: Header, id: u16, body: &[u8]) -> Result<Vec<u8>, String> {
+fn finish_frame(
+    opts: &EncodeOptions,
+    header: Header,
+    id: u16,
+    body: &[u8],
+) -> Result<Vec<u8>, String> {
     let mode = if opts.bypass {
         ChecksumMode::Bypass
     } else {
@@ -746,6 +754,52 @@ fn finish(opts: &EncodeOptions, header: Header, id: u16, body: &[u8]) -> Result<
     let frame = Frame::new_checked(&bytes, BypassPolicy::Accept).map_err(|e| e.to_string())?;
     decode_any(&frame).map_err(|e| format!("the frame does not decode: {e}"))?;
     Ok(bytes)
+}
+
+/// An error response (`&`, station, 3-digit code): MESSAGE `error`, the
+/// code as `error_code=…` or `{"error_code": …}`.
+fn encode_error(opts: &EncodeOptions) -> Result<Vec<u8>, String> {
+    let sample = frame_bytes(Header::Error, Station(0x99), 0, &[], ChecksumMode::Compute);
+    let nodes = Frame::new_checked(&sample, BypassPolicy::Accept)
+        .ok()
+        .and_then(|f| decode_any(&f).ok())
+        .map(|d| tree(&d.message))
+        .ok_or("error responses cannot be built")?;
+    let mut digits = Vec::new();
+    match &opts.json {
+        Some(json) => {
+            let obj = json
+                .as_object()
+                .ok_or_else(|| format!("the JSON must be an object of fields, found {json}"))?;
+            write_json_level(&nodes, obj, "", &mut digits)?;
+        }
+        None => {
+            let mut values = BTreeMap::new();
+            for a in &opts.assignments {
+                let (k, v) = a
+                    .split_once('=')
+                    .ok_or_else(|| format!("{a:?}: expected field=value"))?;
+                if values.insert(k.to_string(), v.to_string()).is_some() {
+                    return Err(format!("{k}: given twice"));
+                }
+            }
+            let mut args = Args {
+                values,
+                used: BTreeMap::new(),
+            };
+            write_level(&nodes, &[], &[], &mut args, &mut digits)?;
+            if let Some(k) = args.values.keys().find(|k| !args.used.contains_key(*k)) {
+                return Err(format!(
+                    "an error response has no field {k}; its field: error_code"
+                ));
+            }
+        }
+    }
+    let code = std::str::from_utf8(&digits)
+        .ok()
+        .and_then(|d| u16::from_str_radix(d, 16).ok())
+        .ok_or("error_code: not a 3-digit code")?;
+    finish_frame(opts, Header::Error, code, &[])
 }
 
 /// The usage lines of a message's fields (for `iai encode MESSAGE --help`).

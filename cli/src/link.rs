@@ -112,10 +112,13 @@ impl Link {
             }
         };
         match r {
+            // A signal (Ctrl-C) interrupts a read: the caller looks at its stop flag.
             Err(e)
                 if matches!(
                     e.kind(),
-                    io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock
+                    io::ErrorKind::TimedOut
+                        | io::ErrorKind::WouldBlock
+                        | io::ErrorKind::Interrupted
                 ) =>
             {
                 Ok(0)
