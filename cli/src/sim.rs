@@ -48,7 +48,7 @@
 //! | code | refusal |
 //! |---|---|
 //! | [`INJECTED_ERROR_CODE`] `0E1` | fault injection (`error=P`) |
-//! | [`UNSUPPORTED_ERROR_CODE`] `0E2` | body does not fit the layout, unknown ID, position number past FFFFH |
+//! | [`UNSUPPORTED_ERROR_CODE`] `0E2` | body does not fit the layout, an ID the profile does not know, position number past FFFFH |
 //! | [`SERVO_OFF_CODE`] `0E4` | move, jog or home on an axis whose servo is off |
 //! | [`NOT_HOMED_CODE`] `0E5` | 234H/235H/237H/26BH before the axis was homed (jog and inching are allowed) |
 //! | [`AXIS_BUSY_CODE`] `0E6` | a new operation on an axis that is still moving or homing |
@@ -68,6 +68,7 @@ use iai_protocol_b::message::{
     SystemStatusResponse,
 };
 use iai_protocol_b::position::PositionRecord;
+use iai_protocol_b::profile::Profile;
 use iai_protocol_b::stream::PositionStream;
 
 /// Error code the simulator sends when it injects an error response.
@@ -346,6 +347,8 @@ impl Axis {
 /// The controller's memory: position table, axes, limits.
 #[derive(Debug, Clone)]
 pub struct Controller {
+    /// The kind of controller: which messages it knows.
+    pub profile: Profile,
     /// Station code.
     pub station: Station,
     /// Largest command frame accepted (TTA 2,051; X-SEL J/K 1,023).
@@ -369,6 +372,7 @@ impl Controller {
     /// A TTA at `station`: 2,051 / 2,048-byte buffers, α = 2 ms.
     pub fn tta(station: Station) -> Self {
         Controller {
+            profile: Profile::TTA,
             station,
             max_receive: 2051,
             max_transmit: 2048,
@@ -382,6 +386,7 @@ impl Controller {
     /// A 2003-generation X-SEL (1,023 / 1,024-byte buffers).
     pub fn xsel_2003(station: Station) -> Self {
         Controller {
+            profile: Profile::XSEL_2003,
             max_receive: 1023,
             max_transmit: 1024,
             ..Self::tta(station)
@@ -428,6 +433,10 @@ impl Controller {
     /// `None` for no reply. `swap` alters one record of a position write.
     pub fn execute(&mut self, f: &Frame<'_>, now: u32, swap: Option<&mut Rng>) -> Reply {
         self.settle(now);
+        if !self.profile.supports(f.code()) {
+            // A message this kind of controller does not know.
+            return Some(self.error_frame(UNSUPPORTED_ERROR_CODE));
+        }
         if let Some(kind) = PositionStream::find(Header::Command, f.code()) {
             return Some(self.write_positions(kind, f, swap));
         }
