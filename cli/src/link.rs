@@ -7,6 +7,48 @@ use std::io::{self, Read, Write};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
+/// Reads from a TCP stream what arrives within `wait`: `None` when nothing
+/// did, `Some(0)` when the peer closed. A socket read timeout overshoots a
+/// few milliseconds by several; short waits (the 1 ms turnaround, the
+/// controller's α) are kept by polling instead.
+pub fn tcp_read_for(
+    s: &mut TcpStream,
+    buf: &mut [u8],
+    wait: Duration,
+) -> io::Result<Option<usize>> {
+    let timed_out = |e: &io::Error| {
+        matches!(
+            e.kind(),
+            io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+        )
+    };
+    if wait > Duration::from_millis(20) {
+        s.set_read_timeout(Some(wait))?;
+        return match s.read(buf) {
+            Ok(n) => Ok(Some(n)),
+            Err(e) if timed_out(&e) => Ok(None),
+            Err(e) => Err(e),
+        };
+    }
+    let end = Instant::now() + wait;
+    s.set_nonblocking(true)?;
+    let r = loop {
+        match s.read(buf) {
+            Ok(n) => break Ok(Some(n)),
+            Err(e) if timed_out(&e) => {
+                let now = Instant::now();
+                if now >= end {
+                    break Ok(None);
+                }
+                std::thread::sleep((end - now).min(Duration::from_micros(200)));
+            }
+            Err(e) => break Err(e),
+        }
+    };
+    s.set_nonblocking(false)?;
+    r
+}
+
 /// Where the controller is.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Target {
@@ -100,16 +142,14 @@ impl Link {
                 p.set_timeout(wait)?;
                 p.read(buf)
             }
-            Inner::Tcp(s) => {
-                s.set_read_timeout(Some(wait))?;
-                match s.read(buf) {
-                    Ok(0) => Err(io::Error::new(
-                        io::ErrorKind::UnexpectedEof,
-                        "the connection was closed by the other side",
-                    )),
-                    r => r,
-                }
-            }
+            Inner::Tcp(s) => match tcp_read_for(s, buf, wait)? {
+                None => Ok(0),
+                Some(0) => Err(io::Error::new(
+                    io::ErrorKind::UnexpectedEof,
+                    "the connection was closed by the other side",
+                )),
+                Some(n) => Ok(n),
+            },
         };
         match r {
             // A signal (Ctrl-C) interrupts a read: the caller looks at its stop flag.

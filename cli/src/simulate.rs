@@ -6,7 +6,7 @@
 //! has its own [`Session`] (partial frames, pending replies, fault draws)
 //! and its own thread, so an idle client blocks nobody.
 
-use std::io::{self, Read, Write};
+use std::io::{self, Write};
 use std::net::{TcpListener, TcpStream};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -93,19 +93,7 @@ pub trait Conn {
 
 impl Conn for TcpStream {
     fn read_for(&mut self, buf: &mut [u8], wait: Duration) -> io::Result<Option<usize>> {
-        self.set_read_timeout(Some(wait.max(Duration::from_millis(1))))?;
-        match self.read(buf) {
-            Ok(n) => Ok(Some(n)),
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
-                ) =>
-            {
-                Ok(None)
-            }
-            Err(e) => Err(e),
-        }
+        crate::link::tcp_read_for(self, buf, wait)
     }
     fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
         self.write_all(bytes)
@@ -263,6 +251,7 @@ pub fn serve_tcp(listener: TcpListener, shared: Shared, opts: ServeOptions) -> i
 #[cfg(unix)]
 pub mod pty {
     use super::*;
+    use std::io::Read;
     use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 
     /// The master side of a pseudo-terminal.
