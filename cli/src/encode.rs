@@ -19,10 +19,11 @@
 
 use std::collections::BTreeMap;
 
+use iai_protocol_b::catalogue;
 use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
 use iai_protocol_b::field::{encode_signed, encode_unsigned, FieldSpec, Radix};
 use iai_protocol_b::frame::{emit_frame, Frame, Header, Station};
-use iai_protocol_b::message::{decode_any, message_name, AnyMessage, GroupInfo, MESSAGE_IDS};
+use iai_protocol_b::message::{decode_any, AnyMessage, GroupInfo};
 
 use super::fields::{tree, Node, Val};
 
@@ -124,7 +125,7 @@ pub fn find_message(name: &str, header: Header) -> Result<u16, String> {
         .or_else(|| name.strip_suffix(['H', 'h']))
         .unwrap_or(name);
     if let Ok(id) = u16::from_str_radix(hex, 16) {
-        if MESSAGE_IDS.contains(&id) {
+        if catalogue::lookup(id).is_some() {
             return Ok(id);
         }
     }
@@ -136,9 +137,12 @@ pub fn find_message(name: &str, header: Header) -> Result<u16, String> {
     };
     let want = norm(name);
     let mut hits: Vec<u16> = Vec::new();
-    for &id in MESSAGE_IDS {
+    for id in catalogue::ALL.iter().map(|m| m.id) {
         let names = [
-            message_name(id).map(norm).unwrap_or_default(),
+            catalogue::lookup(id)
+                .map(|m| m.name)
+                .map(norm)
+                .unwrap_or_default(),
             type_name(header, id).map(|t| norm(&t)).unwrap_or_default(),
         ];
         if names.contains(&want) {
@@ -154,7 +158,10 @@ pub fn find_message(name: &str, header: Header) -> Result<u16, String> {
         many => Err(format!(
             "{name:?} is ambiguous: {}",
             many.iter()
-                .map(|id| format!("{id:03X}H {}", message_name(*id).unwrap_or("")))
+                .map(|id| format!(
+                    "{id:03X}H {}",
+                    catalogue::lookup(*id).map(|m| m.name).unwrap_or("")
+                ))
                 .collect::<Vec<_>>()
                 .join(", ")
         )),

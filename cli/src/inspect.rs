@@ -10,10 +10,11 @@
 
 use std::io::{BufRead, Read, Write};
 
+use iai_protocol_b::catalogue;
 use iai_protocol_b::checksum::{BypassPolicy, ChecksumField};
 use iai_protocol_b::decoder::{Event, FrameDecoder, DEFAULT_CAPACITY};
 use iai_protocol_b::frame::{Frame, Header};
-use iai_protocol_b::message::{decode_any, message_name, AnyMessage};
+use iai_protocol_b::message::{decode_any, AnyMessage};
 use iai_protocol_b::stream::{PositionStream, PositionStreamDecoder, StreamEvent};
 
 use super::fields::{json_object, record_tree, text_lines, tree, Node};
@@ -594,7 +595,7 @@ pub fn json_line(item: &Item) -> String {
                 p.push(format!("\"code\":\"{:03X}\"", f.code));
             } else {
                 p.push(format!("\"id\":\"{:03X}\"", f.code));
-                if let Some(n) = message_name(f.code) {
+                if let Some(n) = catalogue::lookup(f.code).map(|m| m.name) {
                     p.push(format!("\"name\":{}", json_str(n)));
                 }
             }
@@ -616,7 +617,7 @@ pub fn json_line(item: &Item) -> String {
                 format!("\"station\":\"{:02X}\"", s.station),
                 format!("\"id\":\"{:03X}\"", s.kind.id),
             ];
-            if let Some(n) = message_name(s.kind.id) {
+            if let Some(n) = catalogue::lookup(s.kind.id).map(|m| m.name) {
                 p.push(format!("\"name\":{}", json_str(n)));
             }
             p.push(format!("\"checksum\":\"{status}\",\"sc\":\"{sc}\""));
@@ -667,7 +668,9 @@ pub fn text_entry(item: &Item) -> Vec<String> {
                 format!(
                     "{:03X}H {}",
                     f.code,
-                    message_name(f.code).unwrap_or("(unknown message)")
+                    catalogue::lookup(f.code)
+                        .map(|m| m.name)
+                        .unwrap_or("(unknown message)")
                 )
             };
             out.push(format!(
@@ -688,7 +691,7 @@ pub fn text_entry(item: &Item) -> Vec<String> {
                 "command",
                 s.station,
                 s.kind.id,
-                message_name(s.kind.id).unwrap_or(""),
+                catalogue::lookup(s.kind.id).map(|m| m.name).unwrap_or(""),
                 item.len
             ));
             out.push(format!(

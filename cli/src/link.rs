@@ -16,10 +16,12 @@ pub fn tcp_read_for(
     buf: &mut [u8],
     wait: Duration,
 ) -> io::Result<Option<usize>> {
+    // A signal (Ctrl-C) interrupting the read counts as nothing read: the
+    // caller looks at its stop flag.
     let timed_out = |e: &io::Error| {
         matches!(
             e.kind(),
-            io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+            io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut | io::ErrorKind::Interrupted
         )
     };
     if wait > Duration::from_millis(20) {

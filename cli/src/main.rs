@@ -16,12 +16,14 @@ use iai_cli::link::{Link, Target};
 use iai_cli::send::{request, Outcome};
 use iai_cli::sim::Controller;
 use iai_cli::simulate::{self, ServeOptions, Shared};
-use iai_cli::table::{self, Plan, TableError, REPAIR_ROUNDS};
+use iai_cli::table::{self, Plan, TableError};
 use iai_cli::text::escape;
+use iai_protocol_b::catalogue;
+use iai_protocol_b::client::CallError;
 use iai_protocol_b::frame::{Header, Station};
-use iai_protocol_b::message::message_name;
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::profile::Profile;
+use iai_protocol_b::transfer::{Guarantee, Verify as CoreVerify};
 
 /// IAI protocol B tools: captures, messages, position tables, a simulator.
 #[derive(Parser)]
@@ -175,6 +177,12 @@ struct LineArgs {
     /// Controller kind: buffer sizes and messages.
     #[arg(long, value_enum, default_value = "tta")]
     profile: ProfileArg,
+    /// Table commands: how long after a reply a duplicate of it may still
+    /// come, ms (the engines guard against it: reading waits this long
+    /// between windows, writing varies frame sizes). Default: the engines'
+    /// 3000; a line known to duplicate faster can use less.
+    #[arg(long)]
+    duplicate_window_ms: Option<u32>,
 }
 
 impl LineArgs {
@@ -190,7 +198,10 @@ impl LineArgs {
         }
     }
     fn plan(&self) -> Plan {
-        Plan::new(self.profile.profile(), Station(self.station))
+        Plan {
+            duplicate_window_ms: self.duplicate_window_ms,
+            ..Plan::new(self.profile.profile(), Station(self.station))
+        }
     }
 }
 
@@ -394,7 +405,7 @@ fn encode_cmd(
         writeln!(
             out,
             "{id:03X}H {} ({}):",
-            message_name(id).unwrap_or(""),
+            catalogue::lookup(id).map(|m| m.name).unwrap_or(""),
             if response { "response" } else { "command" }
         )
         .map_err(out_err)?;
@@ -489,49 +500,62 @@ fn send_cmd(msg: &MessageArgs, line: &LineArgs, output: OutputArg, detail: bool)
     let mut link = Link::open(&target)?;
     let json = output == OutputArg::Json;
     let mut out = io::stdout().lock();
-    let outcome = request(&mut link, &frame).map_err(|e| format!("{target}: {e}"))?;
-    match outcome {
+    let outcome = request(&mut link, Station(line.station), &frame, detail)
+        .map_err(|e| format!("{target}: {e}"))?;
+    let e = match outcome {
         Outcome::Reply(reply) => {
             show_frame(&mut out, &reply, json).map_err(out_err)?;
-            Ok(ExitCode::SUCCESS)
+            return Ok(ExitCode::SUCCESS);
         }
         Outcome::NoReplyExpected => {
-            writeln!(out, "sent; this command has no normal response and no error came within 3 s")
-                .map_err(out_err)?;
-            Ok(ExitCode::SUCCESS)
-        }
-        Outcome::Refused(code) => {
-            let mut text = format!("the controller answered with error code {code:03X}");
-            if detail {
-                let q = build(
-                    &MessageArgs {
-                        message: "216".into(),
-                        assignments: vec!["type_1=0".into(), "type_2=1".into()],
-                        json: None,
-                        json_file: None,
-                    },
-                    line.station,
-                    false,
-                    false,
-                )?;
-                match request(&mut link, &q).map_err(|e| format!("{target}: {e}"))? {
-                    Outcome::Reply(d) => {
-                        show_frame(&mut out, &d, json).map_err(out_err)?;
-                    }
-                    other => text.push_str(&format!(" (216H detail query: {other:?})")),
-                }
-            }
-            Err(text.into())
-        }
-        Outcome::Timeout { sends, resend_safe } => Err(if resend_safe {
-            format!("no valid reply from {target} after {sends} send(s), 3 s each")
-        } else {
-            format!(
-                "no valid reply from {target} within 3 s; not sent again, since a second send could repeat the operation"
+            writeln!(
+                out,
+                "sent; this command has no normal response and no error response came"
             )
+            .map_err(out_err)?;
+            return Ok(ExitCode::SUCCESS);
         }
-        .into()),
+        Outcome::Failed(e) => e,
+    };
+    Err(match e {
+        CallError::Controller {
+            code,
+            detail: fetched,
+        } => {
+            let mut m = format!("the controller answered with error code {code:03X}");
+            if let Some(d) = fetched {
+                m.push_str(&format!(
+                    "; 216H latest system error {:03X}{}: details {} {} {} {} {:?}",
+                    d.error_number,
+                    if d.matches_code {
+                        ""
+                    } else {
+                        " (not the same number: it may be another error)"
+                    },
+                    d.detail_1,
+                    d.detail_2,
+                    d.detail_3,
+                    d.detail_4,
+                    d.detail_5_to_8
+                ));
+            } else if detail {
+                m.push_str("; the 216H detail did not come");
+            }
+            m
+        }
+        CallError::Bridge { code } => {
+            format!("a bridge on the line answered with its error code {code:03X}")
+        }
+        CallError::Timeout { sends } => {
+            format!("no valid reply from {target} after {sends} send(s), 3 s each")
+        }
+        CallError::OutcomeUnknown { sends } => format!(
+            "no valid reply from {target} after {sends} send(s); not sent again, since a second send could repeat the operation: check the controller's state (212H)"
+        ),
+        CallError::Protocol(e) => format!("the reply does not decode: {e}"),
+        CallError::Io(never) => match never {},
     }
+    .into())
 }
 
 /// The resume state kept beside the CSV.
@@ -629,9 +653,15 @@ fn table_write(file: &Path, line: &LineArgs, verify: Verify, resume: bool) -> Ou
     bar.set_position(u64::from(skip));
     let t0 = std::time::Instant::now();
     let mut last_save = std::time::Instant::now();
+    let policy = match verify {
+        Verify::Off => CoreVerify::Off,
+        Verify::AfterFault => CoreVerify::AfterFault,
+        Verify::Full => CoreVerify::Full,
+    };
     let (result, confirmed) = table::write(
         &mut link,
         &plan,
+        policy,
         records.iter().skip(skip as usize).cloned(),
         total - skip,
         |n| {
@@ -648,10 +678,13 @@ fn table_write(file: &Path, line: &LineArgs, verify: Verify, resume: bool) -> Ou
                 );
             }
         },
-        &stopped,
+        &table::Hooks {
+            note: &|m: &str| bar.suspend(|| eprintln!("{m}")),
+            stop: &stopped,
+        },
     );
-    let stats = match result {
-        Ok(s) => s,
+    let report = match result {
+        Ok(r) => r,
         Err(e) => {
             bar.abandon();
             save_state(
@@ -663,90 +696,50 @@ fn table_write(file: &Path, line: &LineArgs, verify: Verify, resume: bool) -> Ou
                 },
             );
             return Err(format!(
-                "{target}: {e}; {} of {total} records confirmed; run again with --resume to continue (state in {})",
+                "{target}: {e}; {} of {total} records confirmed{}; run again with --resume to continue (state in {})",
                 skip + confirmed,
+                if verify == Verify::Off { "" } else { " and verified" },
                 state_file.display()
             )
             .into());
         }
     };
     bar.finish_and_clear();
-    let elapsed = t0.elapsed();
-    let faults = stats.retries + stats.timeouts + stats.error_replies + stats.line_errors;
+    let _ = std::fs::remove_file(&state_file);
+    let s = report.stats;
     eprintln!(
-        "{total} records confirmed in {} frames, {:.1} s ({} bytes sent, {} retries, {} timeouts, {} error replies, {} line errors)",
-        stats.frames_confirmed,
-        elapsed.as_secs_f64(),
-        stats.bytes_sent,
-        stats.retries,
-        stats.timeouts,
-        stats.error_replies,
-        stats.line_errors
+        "{total} records in {} frames, {:.1} s: {} bytes written, {} read-back queries ({} bytes), {} resends, {} timeouts, {} error replies, {} line errors, {} stale replies, {} rewrites",
+        s.frames_confirmed,
+        t0.elapsed().as_secs_f64(),
+        s.bytes_sent,
+        s.verify_queries,
+        s.verify_bytes_sent,
+        s.retries,
+        s.timeouts,
+        s.error_replies,
+        s.line_errors,
+        s.stale_replies,
+        s.rewrites
     );
-    let check = match verify {
-        Verify::Full => true,
-        Verify::AfterFault => faults > 0 || resume,
-        Verify::Off => false,
+    let resumed = if skip > 0 {
+        format!(" (records 1 to {skip} were written before the resume, as the state file says)")
+    } else {
+        String::new()
     };
-    if !check {
-        let _ = std::fs::remove_file(&state_file);
-        println!(
-            "UNVERIFIED: every frame was confirmed, but the table was not read back (--verify {}{})",
-            if verify == Verify::Off { "off" } else { "after-fault" },
-            if verify == Verify::AfterFault { ": no fault seen" } else { "" }
-        );
-        return Ok(ExitCode::SUCCESS);
+    match report.guarantee {
+        Guarantee::Verified => println!(
+            "verified: the controller holds all {} records written now (read back and compared){resumed}",
+            total - skip
+        ),
+        Guarantee::FaultsVerified => println!(
+            "UNVERIFIED in part: every frame was confirmed; the {} frame(s) confirmed after a fault were read back and compared, the others were not (--verify after-fault){resumed}",
+            s.frames_verified
+        ),
+        Guarantee::Unverified => println!(
+            "UNVERIFIED: every frame was confirmed, but the table was not read back (--verify off){resumed}"
+        ),
     }
-    let expected: std::collections::BTreeMap<u16, PositionRecord> =
-        records.iter().map(|r| (r.number, r.clone())).collect();
-    let mut want = expected.clone();
-    for round in 0..=REPAIR_ROUNDS {
-        let bar = progress_bar(want.len() as u64, "verifying");
-        let bad = table::verify(&mut link, &plan, &want, &stopped).map_err(|e| {
-            bar.abandon();
-            format!("{target}: reading back: {e}; the table is NOT verified")
-        })?;
-        bar.finish_and_clear();
-        if bad.is_empty() {
-            let _ = std::fs::remove_file(&state_file);
-            println!(
-                "verified: the controller holds all {total} records (read back and compared{})",
-                if round > 0 {
-                    format!("; {round} repair round(s)")
-                } else {
-                    String::new()
-                }
-            );
-            return Ok(ExitCode::SUCCESS);
-        }
-        if round == REPAIR_ROUNDS {
-            let first = bad.first().map(|m| m.number).unwrap_or(0);
-            return Err(format!(
-                "the controller does NOT hold the table: {} record(s) differ after {REPAIR_ROUNDS} rewrites (first: position {first})",
-                bad.len()
-            )
-            .into());
-        }
-        eprintln!(
-            "{} record(s) read back different; writing them again",
-            bad.len()
-        );
-        want = bad
-            .iter()
-            .filter_map(|m| expected.get(&m.number).map(|r| (m.number, r.clone())))
-            .collect();
-        let n = want.len() as u32;
-        let (r, _) = table::write(
-            &mut link,
-            &plan,
-            want.values().cloned(),
-            n,
-            |_| {},
-            &stopped,
-        );
-        r.map_err(|e| format!("{target}: rewriting: {e}; the table is NOT verified"))?;
-    }
-    Err("the table is NOT verified".to_string().into())
+    Ok(ExitCode::SUCCESS)
 }
 
 fn table_read(
@@ -765,9 +758,19 @@ fn table_read(
     let mut link = Link::open(&target)?;
     let stop = stop_flag();
     let stopped = || stop.load(Ordering::SeqCst);
-    let mut recs = Vec::new();
-    table::read(&mut link, &plan, first, last, |r| recs.push(r), &stopped)
-        .map_err(|e: TableError| format!("{target}: {e}"))?;
+    let mut by_number = std::collections::BTreeMap::new();
+    table::read(
+        &mut link,
+        &plan,
+        first,
+        last,
+        |r| {
+            by_number.insert(r.number, r);
+        },
+        &stopped,
+    )
+    .map_err(|e: TableError| format!("{target}: {e}"))?;
+    let recs: Vec<PositionRecord> = by_number.into_values().collect();
     let axes = axes.map_or_else(|| csvtable::axes_used(&recs), usize::from);
     let write_all = |out: &mut dyn Write| -> io::Result<()> {
         let mut out = io::BufWriter::new(out);

@@ -48,7 +48,7 @@
 //! | code | refusal |
 //! |---|---|
 //! | [`INJECTED_ERROR_CODE`] `0E1` | fault injection (`error=P`) |
-//! | [`UNSUPPORTED_ERROR_CODE`] `0E2` | body does not fit the layout, an ID the profile does not know, position number past FFFFH |
+//! | [`UNSUPPORTED_ERROR_CODE`] `0E2` | body does not fit the layout, an ID a 2003 X-SEL does not know (the TTA simulator answers every catalogue message), position number past FFFFH |
 //! | [`SERVO_OFF_CODE`] `0E4` | move, jog or home on an axis whose servo is off |
 //! | [`NOT_HOMED_CODE`] `0E5` | 234H/235H/237H/26BH before the axis was homed (jog and inching are allowed) |
 //! | [`AXIS_BUSY_CODE`] `0E6` | a new operation on an axis that is still moving or homing |
@@ -111,12 +111,17 @@ pub struct Faults {
     pub error_reply: f64,
     /// Chance that noise bytes precede a reply.
     pub garbage_before_reply: f64,
-    /// Chance that a reply is not sent.
+    /// Chance that a reply is not sent at all.
     pub drop_reply: f64,
-    /// Chance that a reply is sent this many ms late.
-    pub late_reply: (f64, u32),
-    /// Chance that a reply is sent a second time, this many ms later.
-    pub dup_reply: (f64, u32),
+    /// Chance that a reply is sent this many ms after its command (past
+    /// the host's timeout, so that it meets the resend).
+    pub late_reply: Option<(f64, u32)>,
+    /// Chance that a reply is sent a second time, this many ms after the
+    /// first (an echoing converter, a late copy).
+    pub dup_reply: Option<(f64, u32)>,
+    /// The controller stops answering anything once this many position
+    /// records were written (it hangs in the middle of a table).
+    pub stop_after_records: Option<u64>,
     /// Chance, per position-write command, that one stored record differs
     /// from the one sent: two adjacent digits of one of its coordinates
     /// swapped, as a line fault that keeps the checksum valid would. The
@@ -433,8 +438,9 @@ impl Controller {
     /// `None` for no reply. `swap` alters one record of a position write.
     pub fn execute(&mut self, f: &Frame<'_>, now: u32, swap: Option<&mut Rng>) -> Reply {
         self.settle(now);
-        if !self.profile.supports(f.code()) {
-            // A message this kind of controller does not know.
+        if self.profile != Profile::TTA && !self.profile.supports(f.code()) {
+            // A message this kind of controller does not know (the TTA
+            // simulator answers every catalogue message, whatever family).
             return Some(self.error_frame(UNSUPPORTED_ERROR_CODE));
         }
         if let Some(kind) = PositionStream::find(Header::Command, f.code()) {
@@ -901,6 +907,13 @@ impl Session {
                 }
             };
             let Some(cmd) = cmd else { continue };
+            if faults
+                .stop_after_records
+                .is_some_and(|n| ctl.records_written >= n)
+            {
+                // Hung: nothing is executed or answered any more.
+                continue;
+            }
             self.stats.commands += 1;
             let Ok(frame) = Frame::new_checked(&cmd, BypassPolicy::CommandsOnly) else {
                 continue;
@@ -953,15 +966,19 @@ impl Session {
                 at = now.wrapping_add(late);
             }
         }
-        if self.rng.chance(faults.late_reply.0) {
-            self.stats.late_replies += 1;
-            at = at.wrapping_add(faults.late_reply.1);
+        if let Some((p, late)) = faults.late_reply {
+            if self.rng.chance(p) {
+                self.stats.late_replies += 1;
+                at = now.wrapping_add(late);
+            }
         }
-        if self.rng.chance(faults.dup_reply.0) {
-            self.stats.duplicated_replies += 1;
-            self.outbox
-                .push((at.wrapping_add(faults.dup_reply.1), reply.clone()));
+        if let Some((p, later)) = faults.dup_reply {
+            if self.rng.chance(p) {
+                self.stats.duplicated_replies += 1;
+                self.outbox.push((at.wrapping_add(later), reply.clone()));
+            }
         }
+
         self.stats.replies += 1;
         self.outbox.push((at, reply));
     }
@@ -1040,6 +1057,13 @@ impl Simulator {
     pub fn receive(&mut self, bytes: &[u8], now: u32) {
         self.session
             .receive(&mut self.ctl, &self.faults, bytes, now);
+    }
+
+    /// Whether the controller has stopped (see [`Faults::stop_after_records`]).
+    pub fn stopped(&self) -> bool {
+        self.faults
+            .stop_after_records
+            .is_some_and(|n| self.ctl.records_written >= n)
     }
 
     /// A new connection: partial frames and pending replies are dropped,

@@ -48,7 +48,7 @@ pub fn parse_faults(spec: &str) -> Result<Faults, String> {
                 )),
             }
         };
-        let timed = || -> Result<(f64, u32), String> {
+        let timed = || -> Result<Option<(f64, u32)>, String> {
             let (p, ms) = val.split_once(':').ok_or_else(|| {
                 format!("--faults {key}={val}: expected {key}=P:MS (chance, then delay in ms)")
             })?;
@@ -59,7 +59,7 @@ pub fn parse_faults(spec: &str) -> Result<Faults, String> {
                 .ok_or_else(|| {
                     format!("--faults {key}={val}: {ms:?} is not a delay in ms (0 to 4294967295)")
                 })?;
-            Ok((prob(p)?, ms))
+            Ok(Some((prob(p)?, ms)))
         };
         match key {
             "corrupt" => {

@@ -2,26 +2,22 @@
 //! engines driven over a [`Link`] in real time.
 //!
 //! Writing: the transfer engine packs the records into controller-sized
-//! commands and confirms each (timeouts and retries are the engine's).
-//! Verification then reads the written positions back with the read-back
-//! engine and compares them record by record; a record that differs is
-//! written again and read again (at most [`REPAIR_ROUNDS`] times). Only a
-//! table read back equal counts as held by the controller.
+//! commands, confirms each (timeouts, resends and the guards against late
+//! and duplicated replies are the engine's), and reads them back as its
+//! verification policy asks, rewriting a frame that reads back different.
+//! Its report says what the controller is known to hold.
 
-use std::collections::BTreeMap;
 use std::time::Duration;
 
 use iai_protocol_b::frame::Station;
-use iai_protocol_b::position::PositionRecord;
+use iai_protocol_b::position::{PositionRecord, PositionStream};
 use iai_protocol_b::profile::Profile;
 use iai_protocol_b::readback::{ReadBack, ReadBackConfig, ReadStep};
-use iai_protocol_b::stream::PositionStream;
-use iai_protocol_b::transfer::{Step, Transfer, TransferConfig, TransferError, TransferStats};
+use iai_protocol_b::transfer::{
+    Step, Transfer, TransferConfig, TransferError, TransferReport, Verify,
+};
 
 use crate::link::Link;
-
-/// Times a verification may rewrite the records that read back wrong.
-pub const REPAIR_ROUNDS: u32 = 3;
 
 /// Longest wait for one read, so that an interruption is seen promptly.
 const POLL_CAP: Duration = Duration::from_millis(200);
@@ -37,6 +33,9 @@ pub struct Plan {
     pub write: PositionStream,
     /// The query response layout (21FH on a TTA, 209H on a 2003 X-SEL).
     pub read: PositionStream,
+    /// How long a reply may still come twice (the engines' guard against
+    /// duplicated replies); `None` keeps the engines' default (3 s).
+    pub duplicate_window_ms: Option<u32>,
 }
 
 impl Plan {
@@ -52,23 +51,34 @@ impl Plan {
             station,
             write,
             read,
+            duplicate_window_ms: None,
         }
     }
 
-    fn transfer_config(&self) -> TransferConfig {
-        TransferConfig {
+    fn transfer_config(&self, verify: Verify) -> TransferConfig {
+        let mut cfg = TransferConfig {
             stream: self.write,
             max_frame: self.profile.max_command_frame(),
+            max_response: self.profile.max_response_frame(),
             ..TransferConfig::tta(self.station)
         }
+        .with_verify(verify);
+        if let Some(ms) = self.duplicate_window_ms {
+            cfg.exchange.duplicate_window_ms = ms;
+        }
+        cfg
     }
 
     fn read_config(&self, first: u16, last: u16) -> ReadBackConfig {
-        ReadBackConfig {
+        let mut cfg = ReadBackConfig {
             stream: self.read,
             max_response: self.profile.max_response_frame(),
             ..ReadBackConfig::tta(self.station, first, last)
+        };
+        if let Some(ms) = self.duplicate_window_ms {
+            cfg.exchange.duplicate_window_ms = ms;
         }
+        cfg
     }
 }
 
@@ -89,13 +99,24 @@ impl std::fmt::Display for TableError {
             TableError::Engine(TransferError::Timeout) => {
                 write!(f, "the controller did not answer (3 sends, 3 s each)")
             }
-            TableError::Engine(TransferError::ErrorResponse { code }) => {
-                write!(f, "the controller kept refusing with error code {code:03X}")
+            TableError::Engine(TransferError::Controller { code }) => {
+                write!(f, "the controller answered with error code {code:03X}")
             }
+            TableError::Engine(TransferError::Bridge { code }) => {
+                write!(f, "a bridge on the line answered with its error code {code:03X}")
+            }
+            TableError::Engine(TransferError::Mismatch {
+                first_position,
+                records,
+            }) => write!(
+                f,
+                "the controller does NOT hold the table: {records} record(s) of a frame still read back different after rewriting it (first: position {first_position})"
+            ),
             TableError::Engine(TransferError::InvalidRecord { index, error }) => {
                 write!(f, "record {} cannot be encoded: {error}", index + 1)
             }
-            TableError::Engine(e) => write!(f, "{e:?}"),
+            TableError::Engine(TransferError::Config(e)) => write!(f, "{e}"),
+            TableError::Engine(TransferError::Io(never)) => match *never {},
             TableError::Io(e) => write!(f, "the line failed: {e}"),
             TableError::Interrupted => write!(f, "interrupted"),
         }
@@ -105,20 +126,40 @@ impl std::fmt::Display for TableError {
 /// The frame buffer for the engines: the largest frame any profile allows.
 const FRAME: usize = 2051;
 
-/// Writes `records` (in order) over `link`. `progress` is called with the
-/// number of records confirmed so far; `stop` is polled for an
-/// interruption. On failure the records confirmed so far are in the error
-/// path's stats (second tuple member).
+/// What a table operation tells its caller, and asks it.
+#[derive(Clone, Copy)]
+pub struct Hooks<'a> {
+    /// A line for the user (an error response answered by a resend).
+    pub note: &'a dyn Fn(&str),
+    /// Whether the user asked to stop.
+    pub stop: &'a dyn Fn() -> bool,
+}
+
+/// Error responses to one frame that `write` answers by sending it again
+/// (position writes are idempotent; the engine itself stops at the first,
+/// leaving the decision to its caller).
+pub const ERROR_RESENDS: u32 = 3;
+
+/// Writes `records` (in order) over `link`, verified as `verify` asks.
+/// An error response stops the engine; up to [`ERROR_RESENDS`] of them in
+/// a row are answered by resuming (the frame, or its read-back, is sent
+/// again), and `note` is told.
+/// `progress` is called with the number of records confirmed (and
+/// verified as the policy asks) so far; `stop` is polled for an
+/// interruption. The second member is that number when it ended.
 pub fn write(
     link: &mut Link,
     plan: &Plan,
+    verify: Verify,
     records: impl Iterator<Item = PositionRecord>,
     total: u32,
     mut progress: impl FnMut(u32),
-    stop: &dyn Fn() -> bool,
-) -> (Result<TransferStats, TableError>, u32) {
+    hooks: &Hooks<'_>,
+) -> (Result<TransferReport, TableError>, u32) {
+    let Hooks { note, stop } = *hooks;
+    let mut refusals = 0;
     let mut t: Transfer<_, FRAME> =
-        Transfer::new(plan.transfer_config(), records).with_total(total);
+        Transfer::new(plan.transfer_config(verify), records).with_total(total);
     let mut buf = [0u8; 4096];
     let mut last = u32::MAX;
     loop {
@@ -127,6 +168,7 @@ pub fn write(
         if done != last {
             progress(done);
             last = done;
+            refusals = 0;
         }
         if stop() {
             return (Err(TableError::Interrupted), done);
@@ -142,20 +184,28 @@ pub fn write(
                 let left = Duration::from_millis(u64::from(until.saturating_sub(now)));
                 match link.read_for(&mut buf, left.min(POLL_CAP)) {
                     Ok(0) => {}
-                    Ok(n) => t.received(buf.get(..n).unwrap_or(&[]), link.now()),
+                    Ok(n) => t.received_all(buf.get(..n).unwrap_or(&[]), link.now()),
                     Err(e) => return (Err(TableError::Io(e)), done),
                 }
             }
             // The source is a finished iterator: it never waits.
             Step::NeedRecords => std::thread::sleep(Duration::from_millis(1)),
-            Step::Complete(stats) => return (Ok(stats), stats.records_confirmed),
+            Step::Complete(report) => return (Ok(report), report.stats.records_confirmed),
+            Step::Failed(TransferError::Controller { code }) if refusals < ERROR_RESENDS => {
+                refusals += 1;
+                note(&format!(
+                    "the controller answered with error code {code:03X}; sending again ({refusals} of {ERROR_RESENDS})"
+                ));
+                t.resume(link.now());
+            }
             Step::Failed(e) => return (Err(TableError::Engine(e)), done),
         }
     }
 }
 
 /// Reads positions `first..=last` over `link`, calling `each` for every
-/// defined record in order.
+/// defined record (a window the engine reads again delivers its records
+/// late: key them by number).
 pub fn read(
     link: &mut Link,
     plan: &Plan,
@@ -173,7 +223,7 @@ pub fn read(
         }
         let now = link.now();
         if !pending.is_empty() {
-            let used = rb.received(&pending, now);
+            let used = rb.received_all(&pending, now);
             pending.drain(..used.min(pending.len()));
         }
         match rb.poll(now) {
@@ -191,7 +241,7 @@ pub fn read(
                 } else {
                     // Bytes the engine did not take yet: offer them again
                     // after the next poll.
-                    let used = rb.received(&pending, link.now());
+                    let used = rb.received_all(&pending, link.now());
                     if used == 0 {
                         pending.clear();
                     } else {
@@ -204,56 +254,4 @@ pub fn read(
             ReadStep::Failed(e) => return Err(TableError::Engine(e)),
         }
     }
-}
-
-/// One difference between the file and the controller.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Mismatch {
-    /// Position number.
-    pub number: u16,
-    /// What the controller holds (`None`: not defined).
-    pub found: Option<PositionRecord>,
-}
-
-/// Reads back the positions of `expected` and lists those that differ.
-pub fn verify(
-    link: &mut Link,
-    plan: &Plan,
-    expected: &BTreeMap<u16, PositionRecord>,
-    stop: &dyn Fn() -> bool,
-) -> Result<Vec<Mismatch>, TableError> {
-    let mut mismatches = Vec::new();
-    // Read contiguous runs of numbers, so that a sparse table does not
-    // read 65,536 positions.
-    let numbers: Vec<u16> = expected.keys().copied().collect();
-    let mut runs: Vec<(u16, u16)> = Vec::new();
-    for n in numbers {
-        match runs.last_mut() {
-            Some((_, hi)) if u32::from(n) <= u32::from(*hi) + 64 => *hi = n,
-            _ => runs.push((n, n)),
-        }
-    }
-    for (lo, hi) in runs {
-        let mut seen: BTreeMap<u16, PositionRecord> = BTreeMap::new();
-        read(
-            link,
-            plan,
-            lo,
-            hi,
-            |r| {
-                seen.insert(r.number, r);
-            },
-            stop,
-        )?;
-        for (n, want) in expected.range(lo..=hi) {
-            let got = seen.remove(n);
-            if got.as_ref() != Some(want) {
-                mismatches.push(Mismatch {
-                    number: *n,
-                    found: got,
-                });
-            }
-        }
-    }
-    Ok(mismatches)
 }

@@ -9,13 +9,20 @@ use std::time::Duration;
 
 use common::{csv_table, iai, stderr, stdout, temp, Sim};
 
-const FAULTS: &str = "corrupt=0.00001,swap=0.05,drop=0.01,late=0.02:3500,dup=0.03:40,error=0.02";
+/// Faults that cost a timeout (corrupt, drop, late) are rare, so that the
+/// run stays short; the others are frequent.
+const FAULTS: &str = "corrupt=0.000005,swap=0.05,drop=0.005,late=0.01:3500,dup=0.05:40,error=0.03";
+
+/// The simulator's duplicates come 40 ms after the reply: a 200 ms guard
+/// covers them, and the engines need not wait their default 3 s.
+const DUP_WINDOW: [&str; 2] = ["--duplicate-window-ms", "200"];
 
 fn write_then_read(line: &[&str], name: &str, records: u32) {
     let csv = csv_table(records, 8, 11);
     let path = temp(name, csv.as_bytes());
     let mut args = vec!["table", "write", path.to_str().unwrap()];
     args.extend_from_slice(line);
+    args.extend_from_slice(&DUP_WINDOW);
     let out = iai(&args);
     assert!(
         out.status.success(),
@@ -31,6 +38,7 @@ fn write_then_read(line: &[&str], name: &str, records: u32) {
     let count = records.to_string();
     let mut args = vec!["table", "read", "--first", "1", "--count", &count];
     args.extend_from_slice(line);
+    args.extend_from_slice(&DUP_WINDOW);
     let out = iai(&args);
     assert!(out.status.success(), "table read: {}", stderr(&out));
     assert_eq!(stdout(&out), csv, "the CSV read back differs");
@@ -113,25 +121,42 @@ fn a_bad_row_stops_everything_before_sending() {
 
 #[test]
 fn an_interrupted_write_resumes_after_the_last_confirmed_record() {
-    let sim = Sim::tcp(&["--quiet", "--reply-delay-ms", "25"]);
+    let sim = Sim::tcp(&["--quiet", "--reply-delay-ms", "10"]);
     let at = sim.at.clone();
-    let csv = csv_table(3_000, 8, 13);
+    let csv = csv_table(1_000, 8, 13);
     let path = temp("resume.csv", csv.as_bytes());
     let p = path.to_str().unwrap().to_string();
     let child = std::process::Command::new(env!("CARGO_BIN_EXE_iai"))
-        .args(["table", "write", &p, "--tcp", &at])
+        .args([
+            "table",
+            "write",
+            &p,
+            "--tcp",
+            &at,
+            "--duplicate-window-ms",
+            "200",
+        ])
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_millis(1_500));
+    std::thread::sleep(Duration::from_millis(1_000));
     // SAFETY: signalling our own child.
     unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
     let out = child.wait_with_output().unwrap();
     assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
     assert!(stderr(&out).contains("--resume"), "{}", stderr(&out));
     let state = std::fs::read_to_string(format!("{p}.iai-state")).unwrap();
-    let out = iai(&["table", "write", &p, "--tcp", &at, "--resume"]);
+    let out = iai(&[
+        "table",
+        "write",
+        &p,
+        "--tcp",
+        &at,
+        "--resume",
+        "--duplicate-window-ms",
+        "200",
+    ]);
     assert!(out.status.success(), "{}", stderr(&out));
     let e = stderr(&out);
     let after: u32 = e
@@ -140,10 +165,19 @@ fn an_interrupted_write_resumes_after_the_last_confirmed_record() {
         .and_then(|r| r.split_whitespace().next())
         .and_then(|n| n.parse().ok())
         .unwrap_or_else(|| panic!("{e}"));
-    assert!(after > 0 && after < 3_000, "{e}\n{state}");
+    assert!(after > 0 && after < 1_000, "{e}\n{state}");
     assert!(!std::path::Path::new(&format!("{p}.iai-state")).exists());
     let out = iai(&[
-        "table", "read", "--first", "1", "--count", "3000", "--tcp", &at,
+        "table",
+        "read",
+        "--first",
+        "1",
+        "--count",
+        "1000",
+        "--tcp",
+        &at,
+        "--duplicate-window-ms",
+        "200",
     ]);
     assert_eq!(stdout(&out), csv);
     sim.stop();

@@ -4,6 +4,8 @@
 //! follow the pattern in ascending axis order; that order is **inferred**
 //! from the bit numbering (neither manual states it outright).
 
+use crate::error::{Error, Result};
+
 /// The largest number of axes a controller has.
 pub const MAX_AXES: usize = 8;
 
@@ -49,6 +51,13 @@ impl AxisPattern {
     pub fn from_axes(axes: &[u8]) -> Option<Self> {
         axes.iter().try_fold(AxisPattern(0), |p, &a| p.with(a))
     }
+    /// The pattern of these axis numbers (1..=8, any order, repeats
+    /// allowed); [`Error::InvalidAxis`] for one out of range.
+    pub fn of(axes: &[u8]) -> Result<Self> {
+        axes.iter().try_fold(AxisPattern(0), |p, &a| {
+            p.with(a).ok_or(Error::InvalidAxis { axis: a })
+        })
+    }
     /// This pattern plus axis `axis` (1..=8); `None` if out of range.
     pub const fn with(self, axis: u8) -> Option<Self> {
         if axis >= 1 && axis <= 8 {
@@ -73,6 +82,38 @@ impl AxisPattern {
     pub fn iter(self) -> impl Iterator<Item = u8> + Clone {
         (1u8..=8).filter(move |&a| self.contains(a))
     }
+}
+
+/// The pattern and the per-axis values of `(axis, value)` pairs, in
+/// ascending axis order whatever order the pairs come in: the one way the
+/// typed commands and records build their per-axis groups, so that the
+/// pattern and the number of values always agree.
+///
+/// An axis outside 1..=8, or named twice, is [`Error::InvalidAxis`].
+///
+/// ```
+/// use iai_protocol_b::axis::{per_axis_values, AxisPattern};
+/// let (p, v) = per_axis_values(&[(4, 40), (1, 10), (2, 20)]).unwrap();
+/// assert_eq!(p, AxisPattern::from_bits(0x0B));
+/// assert_eq!(v.as_slice(), &[10, 20, 40]);
+/// assert!(per_axis_values(&[(1, 0), (1, 0)]).is_err());
+/// assert!(per_axis_values(&[(9, 0)]).is_err());
+/// ```
+pub fn per_axis_values<T: Copy>(pairs: &[(u8, T)]) -> Result<(AxisPattern, PerAxis<T>)> {
+    let mut pattern = AxisPattern::NONE;
+    for &(axis, _) in pairs {
+        if pattern.contains(axis) {
+            return Err(Error::InvalidAxis { axis });
+        }
+        pattern = pattern.with(axis).ok_or(Error::InvalidAxis { axis })?;
+    }
+    let mut values = PerAxis::new();
+    for axis in pattern.iter() {
+        if let Some(&(_, v)) = pairs.iter().find(|(a, _)| *a == axis) {
+            values.push(v).map_err(|_| Error::InvalidAxis { axis })?;
+        }
+    }
+    Ok((pattern, values))
 }
 
 impl From<u8> for AxisPattern {

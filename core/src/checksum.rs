@@ -11,7 +11,7 @@
 //! assert_eq!(Checksum::of(b"!99209001005"), 0x54);
 //! ```
 
-use crate::frame::Header;
+use crate::header::Header;
 
 /// A running checksum: the low byte of the sum of the bytes fed so far.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]

@@ -14,6 +14,16 @@
 //! over-long frame are each reported once, with a typed [`Error`]; the
 //! bytes are dropped and the next valid frame decodes.
 //!
+//! Inside a text field every byte is text, header bytes and CR LF
+//! included, and a cut 216H reply can announce up to 255 characters: its
+//! "text" may swallow the frames that follow it. So when a frame that had
+//! a text field fails, the decoder does not drop all of it: it decodes its
+//! bytes again from the first header byte after its start, and the valid
+//! frames among them come out as if nothing had happened. Those bytes are
+//! replayed by the following calls, before any new input: call
+//! [`FrameDecoder::decode`] until it answers [`Event::NeedMore`], even with
+//! an empty input.
+//!
 //! ```
 //! use iai_protocol_b::decoder::{Event, FrameDecoder};
 //! let mut dec: FrameDecoder = FrameDecoder::new();
@@ -38,10 +48,11 @@
 use crate::checksum::BypassPolicy;
 use crate::error::Error;
 use crate::frame::{self, Envelope, Frame, Header, ENVELOPE_LEN};
+use crate::limits;
 
-/// Default capacity: the largest frame a TTA receives (2,051 bytes; it
-/// sends at most 2,048).
-pub const DEFAULT_CAPACITY: usize = 2051;
+/// Default capacity: the largest frame a controller sends or receives
+/// ([`limits::LARGEST_FRAME`], the TTA's 2,051-byte receive buffer).
+pub const DEFAULT_CAPACITY: usize = limits::LARGEST_FRAME;
 
 /// What one step of decoding produced.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -90,7 +101,7 @@ enum State {
 }
 
 /// Text fields are located by the time this many bytes are buffered.
-const TEXT_PROBE_MAX: usize = crate::message::TEXT_SPAN_KNOWN_BY;
+const TEXT_PROBE_MAX: usize = crate::catalogue::TEXT_KNOWN_BY;
 
 /// Internal result of one byte, free of borrows.
 enum Step {
@@ -110,6 +121,10 @@ pub struct FrameDecoder<const N: usize = DEFAULT_CAPACITY> {
     text: Option<(usize, usize)>,
     /// Envelope of the frame last returned (valid while `state == Done`).
     last: Option<Envelope>,
+    /// Bytes of a failed text frame still to decode again:
+    /// `buf[replay_pos..replay_len]`.
+    replay_pos: usize,
+    replay_len: usize,
     stats: DecoderStats,
 }
 
@@ -134,6 +149,8 @@ impl<const N: usize> FrameDecoder<N> {
             policy,
             text: None,
             last: None,
+            replay_pos: 0,
+            replay_len: 0,
             stats: DecoderStats {
                 frames: 0,
                 errors: 0,
@@ -162,12 +179,14 @@ impl<const N: usize> FrameDecoder<N> {
         self.stats
     }
 
-    /// Bytes of the frame in progress.
+    /// Bytes held: the frame in progress and bytes waiting to be decoded
+    /// again after a failed text frame.
     pub fn pending(&self) -> usize {
-        match self.state {
+        let frame = match self.state {
             State::Done | State::Hunting => 0,
             _ => self.len,
-        }
+        };
+        frame + self.replay_len.saturating_sub(self.replay_pos)
     }
 
     /// The frame returned by the last call, until the next byte is pushed.
@@ -179,33 +198,71 @@ impl<const N: usize> FrameDecoder<N> {
         self.last.map(|env| Frame::from_parts(bytes, env))
     }
 
-    /// Drops any partial frame (counted as discarded) and starts hunting.
+    /// Drops any partial frame and bytes waiting to be decoded again
+    /// (counted as discarded) and starts hunting.
     pub fn reset(&mut self) {
         self.discard(self.pending());
         self.len = 0;
+        self.replay_pos = 0;
+        self.replay_len = 0;
         self.state = State::Hunting;
     }
 
-    /// Pushes one byte.
+    /// Pushes one byte. If bytes of a failed text frame are waiting to be
+    /// decoded again, `byte` joins them and they come first; call
+    /// `decode(&[])` until [`Event::NeedMore`] to drain them.
     pub fn push(&mut self, byte: u8) -> Event<'_> {
-        match self.step(byte) {
+        let outcome = if self.replay_pos < self.replay_len {
+            match self.buf.get_mut(self.replay_len) {
+                Some(slot) => {
+                    *slot = byte;
+                    self.replay_len += 1;
+                }
+                // Cannot happen: a replayed region is shorter than the buffer.
+                None => self.discard(1),
+            }
+            self.replay()
+        } else {
+            self.step(byte)
+        };
+        match outcome {
             Step::More => Event::NeedMore,
             Step::Frame(env) => self.frame_event(env),
             Step::Error(e) => Event::Error(e),
         }
     }
 
+    /// Steps the bytes waiting to be decoded again until an event.
+    fn replay(&mut self) -> Step {
+        while self.replay_pos < self.replay_len {
+            let Some(&b) = self.buf.get(self.replay_pos) else {
+                break;
+            };
+            self.replay_pos += 1;
+            let outcome = self.step(b);
+            if !matches!(outcome, Step::More) {
+                return outcome;
+            }
+        }
+        self.replay_pos = 0;
+        self.replay_len = 0;
+        Step::More
+    }
+
     /// Consumes bytes from `input` until a frame or an error is ready or
     /// the input is used up. Call again with the rest of the input until
-    /// it answers [`Event::NeedMore`].
+    /// it answers [`Event::NeedMore`] (bytes being decoded again after a
+    /// failed text frame come out before new input, with `consumed` 0).
     pub fn decode(&mut self, input: &[u8]) -> Decoded<'_> {
         let mut consumed = 0;
-        let mut outcome = Step::More;
-        for &b in input {
-            consumed += 1;
-            outcome = self.step(b);
-            if !matches!(outcome, Step::More) {
-                break;
+        let mut outcome = self.replay();
+        if matches!(outcome, Step::More) {
+            for &b in input {
+                consumed += 1;
+                outcome = self.step(b);
+                if !matches!(outcome, Step::More) {
+                    break;
+                }
             }
         }
         let event = match outcome {
@@ -232,6 +289,35 @@ impl<const N: usize> FrameDecoder<N> {
         Step::Error(e)
     }
 
+    /// The frame in `buf[..len]` failed. If it had a text field and a header
+    /// byte follows its start, sets its bytes from there (and `extra`, the
+    /// byte that broke it, if it was not stored) up to be decoded again,
+    /// ahead of any bytes still waiting; `true` if it did.
+    fn recover(&mut self, e: Error, extra: Option<u8>) -> Option<Step> {
+        self.text?;
+        let frame = self.buf.get(1..self.len)?;
+        let p = 1 + frame.iter().position(|&b| Header::from_byte(b).is_some())?;
+        let kept = self.len - p;
+        // Waiting bytes follow the failed frame's: move them up first.
+        let waiting = self.replay_len.saturating_sub(self.replay_pos);
+        let extra_len = usize::from(extra.is_some());
+        let total = kept + extra_len + waiting;
+        if total > N || (waiting > 0 && self.replay_pos < self.len) {
+            return None;
+        }
+        self.buf
+            .copy_within(self.replay_pos..self.replay_len, kept + extra_len);
+        self.buf.copy_within(p..self.len, 0);
+        if let (Some(x), Some(slot)) = (extra, self.buf.get_mut(kept)) {
+            *slot = x;
+        }
+        self.replay_pos = 0;
+        self.replay_len = total;
+        self.len = 0;
+        self.state = State::Hunting;
+        Some(self.fail(e, p))
+    }
+
     fn start(&mut self, byte: u8) {
         if let Some(slot) = self.buf.first_mut() {
             *slot = byte;
@@ -255,7 +341,7 @@ impl<const N: usize> FrameDecoder<N> {
                 if self.text.is_none() && (ENVELOPE_LEN..=TEXT_PROBE_MAX).contains(&self.len) {
                     let head = self.buf.first().copied().and_then(Header::from_byte);
                     let prefix = self.buf.get(..self.len).unwrap_or(&[]);
-                    self.text = head.and_then(|h| crate::message::text_span(h, prefix));
+                    self.text = head.and_then(|h| frame::text_span(h, prefix));
                 }
                 true
             }
@@ -284,10 +370,17 @@ impl<const N: usize> FrameDecoder<N> {
                     .is_some_and(|(s, e)| self.len >= s && self.len < e);
                 if is_header && !in_text {
                     let cut = self.len;
+                    let e = Error::Truncated { len: cut };
+                    if let Some(step) = self.recover(e, Some(byte)) {
+                        return step;
+                    }
                     self.start(byte);
-                    return self.fail(Error::Truncated { len: cut }, cut);
+                    return self.fail(e, cut);
                 }
                 if byte == b'\n' && !in_text {
+                    if let Some(step) = self.recover(Error::MissingCarriageReturn, Some(byte)) {
+                        return step;
+                    }
                     let dropped = self.len + 1;
                     self.state = State::Hunting;
                     return self.fail(Error::MissingCarriageReturn, dropped);
@@ -311,18 +404,27 @@ impl<const N: usize> FrameDecoder<N> {
                             Step::Frame(env)
                         }
                         Err(e) => {
+                            if let Some(step) = self.recover(e, None) {
+                                return step;
+                            }
                             self.state = State::Hunting;
                             self.fail(e, self.len)
                         }
                     }
-                } else if is_header {
-                    let dropped = self.len;
-                    self.start(byte);
-                    self.fail(Error::MissingLineFeed { byte }, dropped)
                 } else {
-                    let dropped = self.len + 1;
-                    self.state = State::Hunting;
-                    self.fail(Error::MissingLineFeed { byte }, dropped)
+                    let e = Error::MissingLineFeed { byte };
+                    if let Some(step) = self.recover(e, Some(byte)) {
+                        return step;
+                    }
+                    if is_header {
+                        let dropped = self.len;
+                        self.start(byte);
+                        self.fail(e, dropped)
+                    } else {
+                        let dropped = self.len + 1;
+                        self.state = State::Hunting;
+                        self.fail(e, dropped)
+                    }
                 }
             }
         }
@@ -332,9 +434,121 @@ impl<const N: usize> FrameDecoder<N> {
         if self.store(byte) {
             Step::More
         } else {
+            let e = Error::FrameTooLong { limit: N };
+            if let Some(step) = self.recover(e, Some(byte)) {
+                return step;
+            }
             let dropped = self.len + 1;
             self.state = State::Hunting;
-            self.fail(Error::FrameTooLong { limit: N }, dropped)
+            self.fail(e, dropped)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every event of `input` fed in one piece, as `(frame bytes | error)`.
+    fn events<const N: usize>(
+        dec: &mut FrameDecoder<N>,
+        mut input: &[u8],
+    ) -> Vec<Result<Vec<u8>, Error>> {
+        let mut out = Vec::new();
+        loop {
+            let d = dec.decode(input);
+            input = &input[d.consumed..];
+            match d.event {
+                Event::NeedMore => return out,
+                Event::Frame(f) => out.push(Ok(f.as_bytes().to_vec())),
+                Event::Error(e) => out.push(Err(e)),
+            }
+        }
+    }
+
+    extern crate std;
+    use std::vec::Vec;
+
+    const SERVO_REPLY: &[u8] = b"#992322C\r\n";
+
+    #[test]
+    fn golden_frame_after_noise() {
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        assert_eq!(
+            events(&mut dec, b"xx#992322C\r\n"),
+            [Ok(SERVO_REPLY.to_vec())]
+        );
+        assert_eq!(dec.stats().discarded_bytes, 2);
+        assert_eq!(dec.stats().frames, 1);
+    }
+
+    #[test]
+    fn a_cut_216h_reply_announcing_255_characters_does_not_swallow_what_follows() {
+        // A 216H reply cut at 95 bytes whose message count is FF: its "text"
+        // would run over the next 255 bytes, 21 valid frames among them.
+        let mut cut = b"#99216".to_vec();
+        cut.extend_from_slice(&[b'0'; 82]);
+        cut.extend_from_slice(b"FF");
+        cut.extend_from_slice(b"ABCDE");
+        assert_eq!(cut.len(), 95);
+        // 26 replies: the text span (90..345) takes the first 25, and the
+        // 26th's header, just after it, shows the 216H frame was cut.
+        let mut input = cut.clone();
+        for _ in 0..26 {
+            input.extend_from_slice(SERVO_REPLY);
+        }
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let got = events(&mut dec, &input);
+        assert_eq!(got.first(), Some(&Err(Error::Truncated { len: 345 })));
+        let frames: Vec<_> = got.iter().filter(|e| e.is_ok()).collect();
+        assert_eq!(frames.len(), 26, "{got:?}");
+        assert!(frames.iter().all(|f| f.as_deref() == Ok(SERVO_REPLY)));
+        // Every byte is accounted for: in a frame, discarded, or held.
+        let s = dec.stats();
+        assert_eq!(s.discarded_bytes, 95);
+        assert_eq!(dec.pending(), 0);
+    }
+
+    #[test]
+    fn the_same_stream_byte_by_byte_gives_the_same_frames() {
+        let mut input = b"#99216".to_vec();
+        input.extend_from_slice(&[b'0'; 82]);
+        input.extend_from_slice(b"0A");
+        input.extend_from_slice(SERVO_REPLY);
+        input.extend_from_slice(b"!99215\r\n");
+        input.extend_from_slice(SERVO_REPLY);
+        let mut whole: FrameDecoder = FrameDecoder::new();
+        let expected = events(&mut whole, &input);
+        let mut bytewise: FrameDecoder = FrameDecoder::new();
+        let mut got = Vec::new();
+        for &b in &input {
+            match bytewise.push(b) {
+                Event::NeedMore => {}
+                Event::Frame(f) => got.push(Ok(f.as_bytes().to_vec())),
+                Event::Error(e) => got.push(Err(e)),
+            }
+            got.extend(events(&mut bytewise, &[]));
+        }
+        assert_eq!(got, expected);
+        let servo = Ok(SERVO_REPLY.to_vec());
+        assert_eq!(
+            expected,
+            [
+                Err(Error::Truncated { len: 100 }),
+                servo.clone(),
+                Err(Error::FrameTooShort { len: 8 }),
+                servo
+            ]
+        );
+    }
+
+    #[test]
+    fn a_bad_200h_does_not_take_the_next_frame_with_it() {
+        // The test string holds a header byte and the frame's SC is wrong;
+        // the valid reply inside it must still come out.
+        let input = b"!99200AB#992322C\r\n";
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let got = events(&mut dec, input);
+        assert!(got.contains(&Ok(SERVO_REPLY.to_vec())), "{got:?}");
     }
 }

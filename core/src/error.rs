@@ -4,7 +4,7 @@
 //! large, and says exactly what was wrong and, where it helps, at which byte
 //! offset of the frame (counted from the header byte, 0-based).
 
-use crate::frame::Header;
+use crate::header::Header;
 
 /// What went wrong while framing, parsing or emitting.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -126,6 +126,11 @@ pub enum Error {
     },
     /// The output buffer is too small for the frame being emitted.
     BufferTooSmall,
+    /// An axis number outside 1..=8, or named twice.
+    InvalidAxis {
+        /// The axis number.
+        axis: u8,
+    },
     /// The message is not available on the selected controller profile.
     NotSupportedByProfile {
         /// The message ID.
@@ -181,6 +186,9 @@ impl core::fmt::Display for Error {
             }
             Error::CountTooLarge { count, max } => write!(f, "count {count} exceeds maximum {max}"),
             Error::BufferTooSmall => f.write_str("output buffer too small"),
+            Error::InvalidAxis { axis } => {
+                write!(f, "axis {axis} is outside 1..=8 or named twice")
+            }
             Error::NotSupportedByProfile { id } => {
                 write!(
                     f,
@@ -192,6 +200,16 @@ impl core::fmt::Display for Error {
 }
 
 impl core::error::Error for Error {}
+
+/// Error codes (`&` + 3 hex digits) that a protocol bridge between a host
+/// and a controller sends on its own behalf: B00H to B1FH.
+///
+/// The controllers' own code list is in neither protocol document (TTA
+/// p. 15 defers to the controller's manual; 2003 p. 13 only says the number
+/// identifies the cause). That no controller uses this range is an
+/// **assumption**. A client never asks a controller for the 216H detail of
+/// a code in this range: the controller did not raise it.
+pub const BRIDGE_CODES: core::ops::RangeInclusive<u16> = 0xB00..=0xB1F;
 
 /// Result alias used throughout the crate.
 pub type Result<T, E = Error> = core::result::Result<T, E>;

@@ -1,108 +1,629 @@
-//! One command and its reply: when to (re)send, when to give up.
+//! One command and its reply: the timeout-and-retry rules of chapter 5 of
+//! the 2003 specification (2003 p. 62; the TTA's own chapter is lost and
+//! the same rules are assumed), and the one reply matcher of the crate.
 //!
-//! Shared by the [transfer engine](crate::transfer) and the
-//! [read-back engine](crate::readback). The rules are those of the
-//! 2003 X-SEL specification, chapter 5 (p. 62; the TTA's own chapter is
-//! lost and the same rules are assumed): a reply must arrive within the
-//! timeout after the command was completely sent, otherwise the command is
-//! sent again, up to a limit of sends.
+//! Every engine ([`crate::client`], [`crate::transfer`],
+//! [`crate::readback`], a bridge's pass-through) runs its commands through
+//! an [`Exchange`]:
+//!
+//! - **Matching** ([`judge`]): a frame counts as the reply only if it has
+//!   the normal- or error-response format and a correct SC (the decoders
+//!   guarantee both), carries the command's station, and, for a normal
+//!   response, the command's message ID (an error response has none). The
+//!   owner adds what only it can check (the record count of a 26DH reply,
+//!   the window of a 21FH reply) as `content_ok`.
+//! - **Timing**: the reply must be complete within `timeout_ms` (3 s) after
+//!   the command was *completely sent* ([`Exchange::sent`]); after a reply
+//!   the next command waits `turnaround_ms` (1 ms, 2003 p. 8). On a
+//!   millisecond tick "at least 1 ms" means two ticks: a reply completed
+//!   late in tick `t` and a send early in tick `t + 1` can be only
+//!   microseconds apart.
+//! - **Retries**: after a timeout the command is sent again, up to
+//!   `max_sends` sends in all (the spec allows 2 or 3 re-sends: 3 or 4
+//!   sends). A command the catalogue marks [`Resend::Unsafe`] is sent
+//!   once unless the caller opts in, and a timeout then means
+//!   [`Finish::OutcomeUnknown`]: it may have run.
+//! - **Error responses** are not re-sent: the spec asks the host to take
+//!   appropriate action (2003 pp. 13, 66), not to repeat.
+//! - **25BH** has no normal response: the exchange waits out the timeout
+//!   for an error response, then reports [`Finish::NoReplyExpected`] and
+//!   holds the next command until the controller is ready again (about
+//!   10 s after the reset was sent, 2003 p. 50).
+//! - **Late replies**: the protocol has no sequence numbers. A reply to an
+//!   earlier send of the same command counts for it (once: the command is
+//!   then finished). Replies that may still come after a command finished
+//!   (one per extra send; one per send after giving up) are *stale*: with
+//!   [`Quarantine::Wait`] the next command is held until no stale reply
+//!   can arrive any more (`timeout_ms + late_window_ms` after the last
+//!   send), and whatever arrives meanwhile is discarded. With
+//!   [`Quarantine::ByContent`] the owner's `content_ok` must make stale
+//!   replies impossible to accept (the transfer engine gives consecutive
+//!   frames different record counts).
 
-/// `now` is at or after `at` on a wrapping millisecond clock.
-pub(crate) fn reached(now: u32, at: u32) -> bool {
-    now.wrapping_sub(at) < 0x8000_0000
+use crate::catalogue::{MessageInfo, Reply, Resend};
+use crate::clock::{later, reached};
+use crate::frame::{Frame, Header, Station};
+
+/// How a frame relates to the command whose reply is awaited.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Verdict {
+    /// A normal response from the station with the command's ID.
+    Reply,
+    /// An error response from the station, with its code.
+    ErrorReply(u16),
+    /// Anything else: another station, another ID, a command.
+    Foreign,
+}
+
+/// Chapter 5's reply conditions for a frame from `station` of kind
+/// `header` carrying `code` (message ID, or error code for `&`), as the
+/// answer to command `id` sent to `expected`. The frame's format and SC are
+/// the decoder's job; this checks conditions 3 (station) and 4 (ID).
+///
+/// ```
+/// use iai_protocol_b::exchange::{judge, Verdict};
+/// use iai_protocol_b::frame::{Header, Station};
+/// let s = Station(0x99);
+/// assert_eq!(judge(s, 0x212, Header::Response, s, 0x212), Verdict::Reply);
+/// assert_eq!(judge(s, 0x212, Header::Response, s, 0x215), Verdict::Foreign);
+/// assert_eq!(judge(s, 0x212, Header::Error, s, 0xC74), Verdict::ErrorReply(0xC74));
+/// assert_eq!(judge(s, 0x212, Header::Response, Station(0x01), 0x212), Verdict::Foreign);
+/// ```
+pub const fn judge(
+    expected: Station,
+    id: u16,
+    header: Header,
+    station: Station,
+    code: u16,
+) -> Verdict {
+    if station.0 != expected.0 {
+        return Verdict::Foreign;
+    }
+    match header {
+        Header::Response if code == id => Verdict::Reply,
+        Header::Error => Verdict::ErrorReply(code),
+        _ => Verdict::Foreign,
+    }
+}
+
+/// [`judge`] for a checked frame.
+pub fn judge_frame(expected: Station, id: u16, frame: &Frame<'_>) -> Verdict {
+    judge(expected, id, frame.header(), frame.station(), frame.code())
+}
+
+/// How replies that may still arrive after a command finished are kept
+/// from being taken for the next command's reply.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Quarantine {
+    /// Hold the next command until no stale reply can arrive any more.
+    Wait,
+    /// Send at once; the owner's `content_ok` rejects stale replies.
+    ByContent,
+}
+
+/// The chapter-5 settings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ExchangeConfig {
+    /// Station addressed.
+    pub station: Station,
+    /// Time a reply may take after the command was completely sent, ms
+    /// (3,000, 2003 p. 62).
+    pub timeout_ms: u32,
+    /// Sends of one command before giving up: 3 or 4 per the spec (2 or 3
+    /// re-sends); 0 is read as 1.
+    pub max_sends: u8,
+    /// Pause after a reply before the next command, ms (at least 1, 2003
+    /// p. 8); one more tick is added so that the pause holds on a
+    /// millisecond tick.
+    pub turnaround_ms: u32,
+    /// How much later than its timeout a reply may still arrive, ms. The
+    /// spec allows none; links with converters and slow controllers do.
+    pub late_window_ms: u32,
+    /// How long after a reply a duplicate of it may arrive (an echoing
+    /// converter), ms; 0 if the link never duplicates. With
+    /// [`Quarantine::Wait`] every command waits this long after the last
+    /// reply.
+    pub duplicate_window_ms: u32,
+    /// Resend commands the catalogue marks [`Resend::Unsafe`] after a
+    /// timeout (a relative move may then run twice).
+    pub resend_unsafe: bool,
+}
+
+impl ExchangeConfig {
+    /// The spec's settings for `station`: 3 s timeout, 3 sends, 1 ms
+    /// turnaround, late replies guarded for another 3 s, no duplicates
+    /// expected, unsafe commands sent once.
+    pub const fn new(station: Station) -> Self {
+        ExchangeConfig {
+            station,
+            timeout_ms: 3_000,
+            max_sends: 3,
+            turnaround_ms: 1,
+            late_window_ms: 3_000,
+            duplicate_window_ms: 0,
+            resend_unsafe: false,
+        }
+    }
+}
+
+/// How an exchange ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Finish {
+    /// The normal response came (the owner holds it).
+    Replied,
+    /// An error response came, with this code; not re-sent.
+    ErrorReply(u16),
+    /// No valid reply after this many sends of a command that is safe to
+    /// repeat: it may or may not have run.
+    TimedOut {
+        /// Sends made.
+        sends: u8,
+    },
+    /// No valid reply to a command that is unsafe to repeat: it may have
+    /// run (possibly more than once, if resending was allowed).
+    OutcomeUnknown {
+        /// Sends made.
+        sends: u8,
+    },
+    /// A command without normal response (25BH) was sent and no error
+    /// response came within the timeout.
+    NoReplyExpected,
+}
+
+/// What the exchange needs now.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Due {
+    /// No command.
+    Idle,
+    /// Transmit the command; `fresh` on the first poll of each send.
+    Transmit {
+        /// First poll of this send (count it, reset the reply decoder).
+        fresh: bool,
+    },
+    /// Nothing to do before this tick (feed received bytes meanwhile).
+    WaitUntil(u32),
+    /// The exchange is over.
+    Done(Finish),
+}
+
+/// What a received frame did to the exchange.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Offer {
+    /// It is the reply: the exchange finished with [`Finish::Replied`].
+    Accepted,
+    /// It is an error response to the command: finished with
+    /// [`Finish::ErrorReply`].
+    Rejected(u16),
+    /// Station and ID match but the owner's content check failed (a 26DH
+    /// count other than the records sent): not the reply.
+    Mismatch,
+    /// A reply (or error reply) while none is awaited: before the command
+    /// was completely sent, after the exchange finished, or in quarantine.
+    Stale,
+    /// Not for this command at all.
+    Foreign,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 enum Phase {
     Idle,
-    Send { not_before: u32 },
+    Ready,
     Sending,
     Await { deadline: u32 },
+    Finished(Finish),
 }
 
-/// What the exchange needs now.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Due {
-    /// Nothing outstanding.
-    Idle,
-    /// Transmit the command; `fresh` on the first poll of each send.
-    Transmit { fresh: bool },
-    /// Nothing to do before this tick.
-    WaitUntil(u32),
-    /// The reply did not come in time; the exchange is idle.
-    TimedOut,
-}
-
-/// State of one command/reply exchange.
+/// The state of one command/reply exchange (and of the stale replies the
+/// previous ones may still produce).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub(crate) struct Exchange {
+pub struct Exchange {
+    cfg: ExchangeConfig,
+    quarantine: Quarantine,
+    id: u16,
+    resend: Resend,
+    reply: Reply,
     phase: Phase,
-    tries: u8,
+    sends: u8,
+    last_sent: u32,
+    /// Earliest tick of the next send (turnaround, reset readiness).
+    not_before: u32,
+    /// Replies of finished commands that may still arrive, and until when.
+    stale: u8,
+    stale_until: u32,
+    /// A fault was seen during the current command (timeout, resend,
+    /// mismatch, stale frame): the transfer engine's "after a fault".
+    faulted: bool,
 }
 
 impl Exchange {
-    pub(crate) const fn new() -> Self {
+    /// An idle exchange.
+    pub const fn new(cfg: ExchangeConfig, quarantine: Quarantine) -> Self {
         Exchange {
+            cfg,
+            quarantine,
+            id: 0,
+            resend: Resend::Safe,
+            reply: Reply::Normal,
             phase: Phase::Idle,
-            tries: 0,
+            sends: 0,
+            last_sent: 0,
+            not_before: 0,
+            stale: 0,
+            stale_until: 0,
+            faulted: false,
         }
     }
 
-    /// A new command is ready: send it from tick `not_before` on.
-    pub(crate) fn start(&mut self, not_before: u32) {
-        self.tries = 0;
-        self.phase = Phase::Send { not_before };
+    /// The settings.
+    pub const fn config(&self) -> &ExchangeConfig {
+        &self.cfg
     }
 
-    pub(crate) fn poll(&mut self, now: u32) -> Due {
+    /// Changes the settings (between commands).
+    pub fn set_config(&mut self, cfg: ExchangeConfig) {
+        self.cfg = cfg;
+    }
+
+    /// Begins a command described by `info`: its first send is due from
+    /// `now`, after the turnaround, a pending reset and (with
+    /// [`Quarantine::Wait`]) any stale replies.
+    pub fn start(&mut self, info: &MessageInfo, now: u32) {
+        self.start_raw(info.id, info.resend, info.reply, now);
+    }
+
+    /// [`Exchange::start`] for a command outside the catalogue (a bridge
+    /// passing through what it does not know): its resend safety and reply
+    /// kind are the caller's statement.
+    pub fn start_raw(&mut self, id: u16, resend: Resend, reply: Reply, now: u32) {
+        self.id = id;
+        self.resend = resend;
+        self.reply = reply;
+        self.sends = 0;
+        self.faulted = false;
+        self.not_before = later(self.not_before, now);
+        if self.quarantine == Quarantine::Wait && self.stale > 0 {
+            self.not_before = later(self.not_before, self.stale_until);
+        }
+        self.phase = Phase::Ready;
+    }
+
+    /// The ID of the current (or last) command.
+    pub const fn id(&self) -> u16 {
+        self.id
+    }
+
+    /// Sends of the current command so far.
+    pub const fn sends(&self) -> u8 {
+        self.sends
+    }
+
+    /// Whether something abnormal happened during the current command: a
+    /// timeout, a resend, a reply with the wrong content or a stale one.
+    pub const fn faulted(&self) -> bool {
+        self.faulted
+    }
+
+    /// Whether a reply is awaited now (the command was completely sent).
+    pub const fn awaiting(&self) -> bool {
+        matches!(self.phase, Phase::Await { .. })
+    }
+
+    /// Whether a command is in progress (not idle, not finished).
+    pub const fn busy(&self) -> bool {
+        matches!(
+            self.phase,
+            Phase::Ready | Phase::Sending | Phase::Await { .. }
+        )
+    }
+
+    /// Sends this command may take: 1 for an unsafe one unless allowed.
+    fn send_limit(&self) -> u8 {
+        let max = self.cfg.max_sends.max(1);
+        match (self.resend, self.reply) {
+            (_, Reply::None { .. }) => 1,
+            (Resend::Unsafe, _) if !self.cfg.resend_unsafe => 1,
+            _ => max,
+        }
+    }
+
+    /// Decides what is due at tick `now`.
+    pub fn poll(&mut self, now: u32) -> Due {
         match self.phase {
             Phase::Idle => Due::Idle,
-            Phase::Send { not_before } if !reached(now, not_before) => Due::WaitUntil(not_before),
-            Phase::Send { .. } => {
-                self.tries = self.tries.saturating_add(1);
+            Phase::Finished(f) => Due::Done(f),
+            Phase::Ready if !reached(now, self.not_before) => Due::WaitUntil(self.not_before),
+            Phase::Ready => {
+                self.sends = self.sends.saturating_add(1);
                 self.phase = Phase::Sending;
                 Due::Transmit { fresh: true }
             }
             Phase::Sending => Due::Transmit { fresh: false },
             Phase::Await { deadline } if !reached(now, deadline) => Due::WaitUntil(deadline),
-            Phase::Await { .. } => {
-                self.phase = Phase::Idle;
-                Due::TimedOut
+            Phase::Await { .. } => self.timed_out(now),
+        }
+    }
+
+    fn timed_out(&mut self, now: u32) -> Due {
+        if let Reply::None { .. } = self.reply {
+            return self.finish(Finish::NoReplyExpected, now, 0);
+        }
+        self.faulted = true;
+        if self.sends < self.send_limit() {
+            self.phase = Phase::Ready;
+            self.not_before = now;
+            return self.poll(now);
+        }
+        let f = match self.resend {
+            Resend::Safe => Finish::TimedOut { sends: self.sends },
+            Resend::Unsafe => Finish::OutcomeUnknown { sends: self.sends },
+        };
+        let pending = self.sends;
+        self.finish(f, now, pending)
+    }
+
+    /// The command was completely transmitted at tick `now`: the timeout
+    /// starts.
+    pub fn sent(&mut self, now: u32) {
+        if self.phase == Phase::Sending {
+            self.last_sent = now;
+            self.phase = Phase::Await {
+                deadline: now.wrapping_add(self.cfg.timeout_ms),
+            };
+            if let Reply::None { ready_after_ms } = self.reply {
+                // The controller restarts: nothing before it is ready again.
+                self.not_before = now.wrapping_add(ready_after_ms);
             }
         }
     }
 
-    /// The command was completely transmitted at `now`.
-    pub(crate) fn sent(&mut self, now: u32, timeout_ms: u32) {
-        if self.phase == Phase::Sending {
-            self.phase = Phase::Await {
-                deadline: now.wrapping_add(timeout_ms),
-            };
+    /// A checked frame from the controller arrived at `now`. `content_ok`
+    /// is the owner's check of a normal response's body (always `true` if
+    /// it has none).
+    pub fn offer(&mut self, frame: &Frame<'_>, content_ok: bool, now: u32) -> Offer {
+        self.offer_head(
+            frame.header(),
+            frame.station(),
+            frame.code(),
+            content_ok,
+            now,
+        )
+    }
+
+    /// [`Exchange::offer`] for a frame known by its envelope (a frame
+    /// checked record by record by a stream decoder).
+    pub fn offer_head(
+        &mut self,
+        header: Header,
+        station: Station,
+        code: u16,
+        content_ok: bool,
+        now: u32,
+    ) -> Offer {
+        let verdict = judge(self.cfg.station, self.id, header, station, code);
+        if verdict == Verdict::Foreign {
+            return Offer::Foreign;
+        }
+        if !self.awaiting() {
+            if self.busy() {
+                self.faulted = true;
+            }
+            return Offer::Stale;
+        }
+        match verdict {
+            Verdict::Reply if content_ok => {
+                let pending = self.sends.saturating_sub(1);
+                self.finish(Finish::Replied, now, pending);
+                Offer::Accepted
+            }
+            Verdict::Reply => {
+                self.faulted = true;
+                Offer::Mismatch
+            }
+            Verdict::ErrorReply(code) => {
+                let pending = self.sends.saturating_sub(1);
+                self.finish(Finish::ErrorReply(code), now, pending);
+                Offer::Rejected(code)
+            }
+            Verdict::Foreign => Offer::Foreign,
         }
     }
 
-    /// Whether a reply is awaited.
-    pub(crate) fn awaiting(&self) -> bool {
-        matches!(self.phase, Phase::Await { .. })
-    }
-
-    /// Sends again from `at` if fewer than `max_tries` sends were made;
-    /// `false` (and idle) otherwise.
-    pub(crate) fn retry(&mut self, at: u32, max_tries: u8) -> bool {
-        if self.tries < max_tries {
-            self.phase = Phase::Send { not_before: at };
-            true
-        } else {
-            self.phase = Phase::Idle;
-            false
+    /// Ends the command; `pending` replies may still come.
+    fn finish(&mut self, f: Finish, now: u32, pending: u8) -> Due {
+        self.phase = Phase::Finished(f);
+        // More than one send: the replies to the others may still come.
+        self.faulted |= pending > 0;
+        let mut until = now;
+        let mut stale = 0;
+        if pending > 0 {
+            stale = pending;
+            until = self
+                .last_sent
+                .wrapping_add(self.cfg.timeout_ms)
+                .wrapping_add(self.cfg.late_window_ms);
         }
+        if matches!(f, Finish::Replied | Finish::ErrorReply(_)) {
+            if self.cfg.duplicate_window_ms > 0 {
+                stale = stale.saturating_add(1);
+                until = later(until, now.wrapping_add(self.cfg.duplicate_window_ms));
+            }
+            let turnaround = now.wrapping_add(self.cfg.turnaround_ms).wrapping_add(1);
+            self.not_before = later(self.not_before, turnaround);
+        }
+        // Stale replies of older commands are still possible until their
+        // own window closes.
+        if self.stale > 0 && !reached(now, self.stale_until) {
+            stale = stale.saturating_add(self.stale);
+            until = later(until, self.stale_until);
+        }
+        self.stale = stale;
+        self.stale_until = until;
+        Due::Done(f)
     }
 
-    /// The reply came: the exchange is over.
-    pub(crate) fn finish(&mut self) {
+    /// Forgets the current command (its replies become stale).
+    pub fn abandon(&mut self, now: u32) {
+        if self.busy() {
+            let pending = self.sends;
+            self.finish(Finish::TimedOut { sends: pending }, now, pending);
+        }
         self.phase = Phase::Idle;
-        self.tries = 0;
+    }
+
+    /// Whether stale replies may still arrive at `now`.
+    pub fn stale_possible(&self, now: u32) -> bool {
+        self.stale > 0 && !reached(now, self.stale_until)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::catalogue;
+    use crate::checksum::BypassPolicy;
+
+    const S: Station = Station(0x99);
+
+    fn frame(bytes: &[u8]) -> Frame<'_> {
+        Frame::new_checked(bytes, BypassPolicy::Reject).unwrap()
+    }
+
+    fn exchange() -> Exchange {
+        Exchange::new(ExchangeConfig::new(S), Quarantine::Wait)
+    }
+
+    #[test]
+    fn a_reply_counts_only_after_the_command_was_sent() {
+        let mut x = exchange();
+        x.start(&catalogue::SYSTEM_STATUS_QUERY, 0);
+        assert_eq!(x.poll(0), Due::Transmit { fresh: true });
+        assert_eq!(x.poll(0), Due::Transmit { fresh: false });
+        let f = frame(b"#99215000000000000000FD\r\n");
+        // Before `sent`: stale, not the reply.
+        assert_eq!(x.offer(&f, true, 0), Offer::Stale);
+        x.sent(10);
+        assert_eq!(x.poll(11), Due::WaitUntil(3_010));
+        assert_eq!(x.offer(&f, true, 12), Offer::Accepted);
+        assert_eq!(x.poll(12), Due::Done(Finish::Replied));
+    }
+
+    #[test]
+    fn timeout_runs_from_the_end_of_transmission_and_resends_up_to_the_limit() {
+        let mut x = exchange();
+        x.start(&catalogue::AXIS_STATUS_QUERY, 0);
+        assert_eq!(x.poll(0), Due::Transmit { fresh: true });
+        // A slow line: each send takes 2 s to transmit.
+        let mut end = 2_000;
+        for send in 1..=3u8 {
+            assert_eq!(x.sends(), send);
+            x.sent(end);
+            assert_eq!(x.poll(end + 2_999), Due::WaitUntil(end + 3_000));
+            let due = x.poll(end + 3_000);
+            if send < 3 {
+                assert_eq!(due, Due::Transmit { fresh: true });
+                end += 5_000;
+            } else {
+                assert_eq!(due, Due::Done(Finish::TimedOut { sends: 3 }));
+            }
+        }
+        assert!(x.faulted());
+    }
+
+    #[test]
+    fn an_unsafe_command_is_sent_once_and_its_timeout_is_an_unknown_outcome() {
+        let mut x = exchange();
+        x.start(&catalogue::RELATIVE_MOVE, 0);
+        assert_eq!(x.poll(0), Due::Transmit { fresh: true });
+        x.sent(5);
+        assert_eq!(
+            x.poll(3_005),
+            Due::Done(Finish::OutcomeUnknown { sends: 1 })
+        );
+        // Opting in allows the resends.
+        let mut cfg = ExchangeConfig::new(S);
+        cfg.resend_unsafe = true;
+        let mut x = Exchange::new(cfg, Quarantine::Wait);
+        x.start(&catalogue::RELATIVE_MOVE, 0);
+        x.poll(0);
+        x.sent(5);
+        assert_eq!(x.poll(3_005), Due::Transmit { fresh: true });
+    }
+
+    #[test]
+    fn an_error_reply_finishes_without_a_resend() {
+        let mut x = exchange();
+        x.start(&catalogue::ABSOLUTE_MOVE, 0);
+        x.poll(0);
+        x.sent(1);
+        let f = frame(b"&99C7446\r\n");
+        assert_eq!(x.offer(&f, true, 2), Offer::Rejected(0xC74));
+        assert_eq!(x.poll(3), Due::Done(Finish::ErrorReply(0xC74)));
+        assert_eq!(x.sends(), 1);
+    }
+
+    #[test]
+    fn after_a_resend_the_next_command_waits_until_no_stale_reply_can_come() {
+        let mut x = exchange();
+        x.start(&catalogue::AXIS_STATUS_QUERY, 0);
+        x.poll(0);
+        x.sent(0);
+        assert_eq!(x.poll(3_000), Due::Transmit { fresh: true });
+        x.sent(3_010);
+        // The late reply to the first send arrives: taken once.
+        let f = frame(b"#992122A\r\n");
+        assert_eq!(x.offer(&f, true, 3_020), Offer::Accepted);
+        // The reply to the second send may still come until 3,010 + 3,000 + 3,000.
+        assert!(x.stale_possible(9_009));
+        assert!(!x.stale_possible(9_010));
+        x.start(&catalogue::AXIS_STATUS_QUERY, 3_021);
+        assert_eq!(x.poll(3_021), Due::WaitUntil(9_010));
+        // It arrives meanwhile: stale, never the next command's reply.
+        assert_eq!(x.offer(&f, true, 3_500), Offer::Stale);
+        assert_eq!(x.poll(9_010), Due::Transmit { fresh: true });
+    }
+
+    #[test]
+    fn the_turnaround_is_two_ticks() {
+        let mut x = exchange();
+        x.start(&catalogue::SERVO_ON_OFF, 0);
+        x.poll(0);
+        x.sent(0);
+        assert_eq!(x.offer(&frame(b"#992322C\r\n"), true, 7), Offer::Accepted);
+        x.start(&catalogue::SERVO_ON_OFF, 7);
+        assert_eq!(x.poll(8), Due::WaitUntil(9));
+        assert_eq!(x.poll(9), Due::Transmit { fresh: true });
+    }
+
+    #[test]
+    fn software_reset_waits_for_an_error_reply_then_holds_the_line_10_s() {
+        let mut x = exchange();
+        x.start(&catalogue::SOFTWARE_RESET, 0);
+        x.poll(0);
+        x.sent(100);
+        assert_eq!(x.poll(3_100), Due::Done(Finish::NoReplyExpected));
+        assert_eq!(x.sends(), 1);
+        x.start(&catalogue::SYSTEM_STATUS_QUERY, 3_100);
+        assert_eq!(x.poll(3_100), Due::WaitUntil(10_100));
+    }
+
+    #[test]
+    fn wrong_station_or_id_is_foreign_and_wrong_content_is_a_mismatch() {
+        let mut x = exchange();
+        x.start(&catalogue::SERVO_ON_OFF, 0);
+        x.poll(0);
+        x.sent(0);
+        assert_eq!(x.offer(&frame(b"#012321B\r\n"), true, 1), Offer::Foreign);
+        assert_eq!(x.offer(&frame(b"#992332D\r\n"), true, 1), Offer::Foreign);
+        assert_eq!(x.offer(&frame(b"#992322C\r\n"), false, 1), Offer::Mismatch);
+        assert!(x.awaiting());
+        assert!(x.faulted());
     }
 }

@@ -10,12 +10,17 @@
 //! message ID. `%` is accepted as an error header too: the 2003 appendix
 //! (p. 65) names it, while every table uses `&`; `&` is what the core sends.
 //!
+//! Body bytes are hex digits except inside the raw-text field of the two
+//! messages that have one (200H, 216H response): the catalogue's
+//! [`text_span`] says where.
+//!
 //! # Panic freedom
 //! [`Frame::new_checked`] validates the envelope once; every accessor after
 //! that is infallible and uses no indexing that could panic. Emitting writes
 //! into a caller's buffer and reports [`Error::BufferTooSmall`] instead of
 //! overrunning it.
 
+pub use crate::catalogue::text_span;
 use crate::checksum::{BypassPolicy, Checksum, ChecksumField, ChecksumMode};
 use crate::error::{Error, Result};
 use crate::field::{hex_digit, hex_value, FieldSpec, Reader, Writer};
@@ -27,53 +32,7 @@ pub const TRAILER_LEN: usize = 4;
 /// The shortest frame: a response without data, or an error response.
 pub const MIN_FRAME_LEN: usize = ENVELOPE_LEN + TRAILER_LEN;
 
-/// The kind of frame, from its first byte.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Header {
-    /// `!`: a command from the host.
-    Command,
-    /// `#`: a normal response from the controller.
-    Response,
-    /// `&` (or `%`): an error response from the controller.
-    Error,
-}
-
-impl Header {
-    /// The kind a header byte starts, if any.
-    pub const fn from_byte(byte: u8) -> Option<Header> {
-        match byte {
-            b'!' => Some(Header::Command),
-            b'#' => Some(Header::Response),
-            b'&' | b'%' => Some(Header::Error),
-            _ => None,
-        }
-    }
-    /// The byte the core sends for this kind.
-    pub const fn byte(self) -> u8 {
-        match self {
-            Header::Command => b'!',
-            Header::Response => b'#',
-            Header::Error => b'&',
-        }
-    }
-}
-
-/// A station code (I/O parameter No. 91; `99` is the usual value).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Station(pub u8);
-
-impl Default for Station {
-    fn default() -> Self {
-        Station(0x99)
-    }
-}
-
-/// A message ID (3 hex digits), e.g. `MessageId(0x26D)`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct MessageId(pub u16);
+pub use crate::header::{Header, MessageId, Station};
 
 fn hex_pair(bytes: &[u8], at: usize) -> Result<u8> {
     let mut v = 0u8;
@@ -97,7 +56,7 @@ fn hex_triple(bytes: &[u8], at: usize) -> Result<u16> {
 
 /// Checks a complete frame (header through LF) and returns the fields of
 /// its envelope. Body bytes are checked to be hex digits except inside the
-/// message's text span (see [`crate::message::text_span`]).
+/// message's text span (see [`text_span`]).
 pub(crate) fn validate(bytes: &[u8], policy: BypassPolicy) -> Result<Envelope> {
     let len = bytes.len();
     if len < MIN_FRAME_LEN {
@@ -114,7 +73,7 @@ pub(crate) fn validate(bytes: &[u8], policy: BypassPolicy) -> Result<Envelope> {
         _ => return Err(Error::MissingCarriageReturn),
     }
     let body = bytes.get(ENVELOPE_LEN..sc_at).unwrap_or(&[]);
-    let text = crate::message::text_span(header, bytes);
+    let text = text_span(header, bytes);
     // A text field must end before SC (the decoder would read on as text).
     if text.is_some_and(|(_, e)| e > sc_at) {
         return Err(Error::BodyTooShort { offset: sc_at });

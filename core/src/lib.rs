@@ -50,14 +50,20 @@
 )]
 
 pub mod axis;
+pub mod catalogue;
 pub mod checksum;
+pub mod client;
+pub mod clock;
+pub mod codec;
 pub mod decoder;
 pub mod error;
-mod exchange;
+pub mod exchange;
 pub mod field;
 pub mod frame;
 pub mod guide;
+pub mod header;
 pub mod io;
+pub mod limits;
 pub mod message;
 pub mod position;
 pub mod profile;

@@ -15,15 +15,12 @@
 //! assert!(!Profile::XSEL_2003.supports(0x26D));
 //! ```
 
+use crate::catalogue::{self, Families, Generation};
 use crate::error::{Error, Result};
 use crate::frame::{Station, MIN_FRAME_LEN};
-use crate::message::{message_name, Command, Response, WordOrder};
+use crate::limits;
+use crate::message::{Command, Response, WordOrder};
 use crate::position::RecordLayout;
-
-/// Messages documented only in the TTA manual (`layout_source = "tta"`).
-pub const TTA_ONLY: &[u16] = &[
-    0x21F, 0x22D, 0x26B, 0x26D, 0x271, 0x290, 0x291, 0x2A3, 0x2A4,
-];
 
 /// The limits of one kind of controller.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -32,41 +29,71 @@ pub struct Profile {
     name: &'static str,
     max_command_frame: usize,
     max_response_frame: usize,
-    tta_messages: bool,
+    generation: Generation,
+    families: Families,
     max_unit_type: u8,
     max_error_detail_type: u8,
     real_word_order: Option<WordOrder>,
 }
 
 impl Profile {
-    /// TTA, and the controllers with the same buffers (X-SEL
-    /// P/Q/PCT/QCT/PX/QX/R/S/RX/SX/RXD/SXD, SSEL, ASEL, PSEL): command
-    /// frames up to 2051 bytes, responses up to 2048; every catalogued
-    /// message; 201H unit type 3 and 216H type 5 allowed. The real-variable
-    /// word order is a controller setting: choose it with
-    /// [`Profile::with_real_word_order`].
+    /// TTA, and the Cartesian controllers with the same buffers (X-SEL
+    /// P/Q/PCT/QCT/PX/QX/R/S/RX/SX/RXD/SXD, SSEL, ASEL, PSEL; TTA p. 15):
+    /// command frames up to 2051 bytes, responses up to 2048; every
+    /// Cartesian message of the catalogue, the TTA generation's included;
+    /// 201H unit type 3 and 216H type 5 allowed. The real-variable word
+    /// order is a controller setting: choose it with
+    /// [`Profile::with_real_word_order`]. For an IX SCARA controller of
+    /// this generation use `Profile::TTA.with_families(Families::SCARA)`.
     pub const TTA: Profile = Profile {
         name: "TTA",
-        max_command_frame: 2051,
-        max_response_frame: 2048,
-        tta_messages: true,
+        max_command_frame: limits::TTA.command,
+        max_response_frame: limits::TTA.response,
+        generation: Generation::Tta,
+        families: Families::CARTESIAN,
         max_unit_type: 3,
         max_error_detail_type: 5,
         real_word_order: None,
     };
 
-    /// X-SEL of the 2003 specification (and X-SEL J/K/KE/KT/KET/JX/KX/KTX,
-    /// TT): command frames up to 1023 bytes, responses up to 1024; no
-    /// TTA-only messages; 201H unit types 0–2 and 216H types 0–4 only.
+    /// Cartesian X-SEL of the 2003 specification (and X-SEL
+    /// J/K/KE/KT/KET/JX/KX/KTX, TT): command frames up to 1023 bytes,
+    /// responses up to 1024 (2003 p. 14); messages of that generation only;
+    /// 201H unit types 0–2 and 216H types 0–4 only.
     pub const XSEL_2003: Profile = Profile {
         name: "X-SEL 2003",
-        max_command_frame: 1023,
-        max_response_frame: 1024,
-        tta_messages: false,
+        max_command_frame: limits::XSEL_2003.command,
+        max_response_frame: limits::XSEL_2003.response,
+        generation: Generation::Xsel2003,
+        families: Families::CARTESIAN,
         max_unit_type: 2,
         max_error_detail_type: 4,
         real_word_order: None,
     };
+
+    /// IX SCARA X-SEL of the 2003 specification: as [`Profile::XSEL_2003`]
+    /// with the SCARA message set (2A0H–2A2H, 2D4H–2D6H instead of 212H,
+    /// 233H–235H, 237H, 262H; 2003 pp. 11–12).
+    pub const XSEL_2003_SCARA: Profile = Profile::XSEL_2003
+        .with_name("X-SEL 2003 IX SCARA")
+        .with_families(Families::SCARA);
+
+    /// This profile for controllers of these families.
+    pub const fn with_families(mut self, families: Families) -> Profile {
+        self.families = families;
+        self
+    }
+
+    /// This profile under another name (for logs).
+    pub const fn with_name(mut self, name: &'static str) -> Profile {
+        self.name = name;
+        self
+    }
+
+    /// The controller families this profile stands for.
+    pub const fn families(self) -> Families {
+        self.families
+    }
 
     /// This profile with the real-variable word order set (from the
     /// controller's "Other parameter No. 46" or firmware version).
@@ -99,9 +126,11 @@ impl Profile {
         self.max_response_frame
     }
 
-    /// Whether the controller knows message `id`.
+    /// Whether the controller knows message `id`: the catalogue has it,
+    /// for one of this profile's families, from this generation or before.
     pub fn supports(self, id: u16) -> bool {
-        message_name(id).is_some() && (self.tta_messages || !TTA_ONLY.contains(&id))
+        catalogue::lookup(id)
+            .is_some_and(|m| m.since <= self.generation && m.families.intersects(self.families))
     }
 
     /// The most position records of `axes` effective axes that fit one

@@ -1,36 +1,57 @@
-//! Reading a position table back in chunks with the position queries
-//! (21FH, 22DH; 209H for 3-digit tables) to compare it with what was
-//! written.
+//! Reading a position table back, window by window, with the position
+//! queries (21FH, 22DH; 209H for 3-digit tables).
 //!
-//! Each query asks for a window of position numbers; the controller
-//! returns the defined records in that window. The window is sized so that
-//! the reply always fits the controller's transmit buffer (at 8 axes a
-//! 21FH reply holds 24 records in 2,048 bytes), so a short reply means
-//! "fewer defined records", never "cut off". Timeouts and retries follow
-//! the same rules as the [transfer engine](crate::transfer).
+//! Each query asks for a window of position numbers; the controller returns
+//! the defined records in it. The window is sized so that the reply always
+//! fits the controller's transmit buffer (24 records of 8 axes in a 2,048-
+//! byte 21FH reply), so a short reply means "fewer defined records", never
+//! "cut off". Queries and replies go through the crate's one reply matcher
+//! ([`crate::exchange`]): a reply counts only when its SC, station and ID
+//! check out, it holds no more records than asked and every record lies in
+//! the window, and it came after the query was completely sent.
+//!
+//! # Late and duplicated replies
+//! A reply holding records belongs to one window only (windows do not
+//! overlap), so a late one can never pass for another. After a timeout and
+//! resend, the next query waits until the replies still owed can no longer
+//! arrive (`timeout_ms + late_window_ms` after the last send), dropping
+//! what comes meanwhile. An *empty* reply is the same for every window:
+//!
+//! - once this read-back has seen a late or duplicated reply, a query that
+//!   follows an empty reply of the same message waits out
+//!   `duplicate_window_ms` after it, so that its duplicate cannot pass for
+//!   the next window's answer (a clean line never waits);
+//! - if a reply holding records arrives for a window already answered
+//!   empty (its duplicate came first), that window is read again and its
+//!   records delivered then, marked [`ReplyRecords::reread`].
+//!
+//! Left unguarded: the very first duplicate on a line arriving while the
+//! next window's query *and* its reply were both lost. Where reading back
+//! verifies a write ([`crate::transfer::Verify`]), such a window reads as
+//! missing records and is rewritten, never as a false success.
 //!
 //! RAM: the reply decoder (`N` bytes, default 2,048, the TTA's transmit
-//! limit), a 24-byte query and counters.
+//! limit), a 24-byte query, a few remembered windows and counters.
 
+use crate::catalogue;
 use crate::checksum::{BypassPolicy, ChecksumMode};
+use crate::client::Received;
+use crate::clock::{later, reached};
 use crate::decoder::{Event, FrameDecoder};
-use crate::error::Error;
-use crate::exchange::{Due, Exchange};
-use crate::field::{FieldSpec, Reader, Writer};
+use crate::error::{Error, BRIDGE_CODES};
+use crate::exchange::{Due, Exchange, ExchangeConfig, Finish, Offer, Quarantine};
+use crate::field::{Reader, Writer};
 use crate::frame::{emit_envelope, emit_trailer, Frame, Header, Station};
-use crate::position::PositionRecord;
-use crate::stream::PositionStream;
+use crate::limits;
+use crate::position::{PositionRecord, PositionStream};
 use crate::transfer::TransferError;
-
-/// Default reply buffer: the largest response a TTA sends.
-pub const TTA_MAX_RESPONSE: usize = 2048;
 
 /// Settings of a read-back.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ReadBackConfig {
-    /// Station addressed.
-    pub station: Station,
+    /// Station, timeout, sends, turnaround, late and duplicate windows.
+    pub exchange: ExchangeConfig,
     /// The query's response layout: [`PositionStream::QUERY_2_RESPONSE`]
     /// (21FH), `QUERY_3_RESPONSE` (22DH) or `QUERY_RESPONSE` (209H).
     pub stream: PositionStream,
@@ -40,34 +61,26 @@ pub struct ReadBackConfig {
     pub last: u16,
     /// Largest response frame the controller sends (TTA 2,048).
     pub max_response: usize,
-    /// Reply timeout, ms.
-    pub timeout_ms: u32,
-    /// Sends per query before giving up.
-    pub max_tries: u8,
-    /// Pause after a reply before the next query, ms.
-    pub turnaround_ms: u32,
 }
 
 impl ReadBackConfig {
-    /// 21FH from a TTA: positions `first..=last`, 3 s timeout, 3 tries.
+    /// 21FH from a TTA: positions `first..=last`, 3 s timeout, 3 sends,
+    /// late replies guarded for 3 s after their timeout, duplicates for 3 s.
     pub const fn tta(station: Station, first: u16, last: u16) -> Self {
+        let mut exchange = ExchangeConfig::new(station);
+        exchange.duplicate_window_ms = exchange.timeout_ms;
         ReadBackConfig {
-            station,
+            exchange,
             stream: PositionStream::QUERY_2_RESPONSE,
             first,
             last,
-            max_response: TTA_MAX_RESPONSE,
-            timeout_ms: 3000,
-            max_tries: 3,
-            turnaround_ms: 1,
+            max_response: limits::TTA.response,
         }
     }
 
     /// Positions asked per query: as many 8-axis records as fit a reply.
-    pub fn window(&self) -> u16 {
-        let room = self.max_response.saturating_sub(self.stream.overhead());
-        let per = room / self.stream.layout.record_len(crate::axis::MAX_AXES);
-        u16::try_from(per.max(1)).unwrap_or(u16::MAX)
+    pub const fn window(&self) -> u16 {
+        self.stream.window(self.max_response)
     }
 }
 
@@ -77,13 +90,21 @@ impl ReadBackConfig {
 pub struct ReadBackStats {
     /// Queries answered.
     pub queries: u32,
-    /// Records received.
+    /// Records received (and delivered).
     pub records: u32,
-    /// Queries sent again.
+    /// Queries sent again after a timeout.
     pub retries: u32,
     /// Timeouts.
     pub timeouts: u32,
-    /// Frames that were not the reply awaited, and broken frames.
+    /// Replies that came when none was awaited, or for another window.
+    pub stale_replies: u32,
+    /// Windows read again because a reply holding records came after the
+    /// window had been answered empty.
+    pub rereads: u32,
+    /// Queries held back so that a duplicated empty reply could not pass
+    /// for their answer.
+    pub guarded_queries: u32,
+    /// Frames that were no reply to a query, and broken frames.
     pub ignored: u32,
 }
 
@@ -94,21 +115,40 @@ pub enum ReadStep<'a> {
     Transmit(&'a [u8]),
     /// Feed received bytes to [`ReadBack::received`]; poll again by this tick.
     WaitUntil(u32),
-    /// The records of one reply, in order. Poll again to go on.
+    /// The records of one window, in order. Poll again to go on.
     Records(ReplyRecords<'a>),
     /// Every window was read.
     Complete(ReadBackStats),
-    /// The controller did not answer (or kept answering with an error).
+    /// The controller did not answer (or answered with an error).
     Failed(TransferError),
 }
 
-/// The records of one reply, decoded on demand (they were checked when
+/// The records of one window, decoded on demand (they were checked when
 /// the reply arrived).
 #[derive(Debug, Clone)]
 pub struct ReplyRecords<'a> {
     r: Reader<'a>,
     left: u16,
     stream: PositionStream,
+    head: u16,
+    asked: u16,
+    reread: bool,
+}
+
+impl ReplyRecords<'_> {
+    /// The first position of the window.
+    pub const fn head(&self) -> u16 {
+        self.head
+    }
+    /// The number of positions the window spans.
+    pub const fn asked(&self) -> u16 {
+        self.asked
+    }
+    /// Whether this window was read before and answered empty by what
+    /// turned out to be a duplicate: its records come out of order.
+    pub const fn reread(&self) -> bool {
+        self.reread
+    }
 }
 
 impl Iterator for ReplyRecords<'_> {
@@ -122,26 +162,71 @@ impl Iterator for ReplyRecords<'_> {
     }
 }
 
+/// What one call of [`ReadBack::received`] found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ReadEvent {
+    /// All bytes used; nothing complete.
+    NeedMore,
+    /// The window's reply came (its records follow from `poll`).
+    Answered {
+        /// Records in it.
+        records: u16,
+    },
+    /// An error response to the query.
+    Rejected {
+        /// Its code.
+        code: u16,
+    },
+    /// A reply that came when none was awaited, or for another window.
+    Stale,
+    /// A valid frame that is no reply to the query.
+    Foreign,
+    /// A broken frame or noise was dropped.
+    Broken(Error),
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum State {
     Query { not_before: u32 },
     Exchange,
-    Deliver { next: u32 },
+    Deliver,
     Complete,
     Failed(TransferError),
 }
 
+/// A window answered empty, remembered while a duplicate of another empty
+/// reply could still have stood in for its answer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct EmptyWindow {
+    head: u32,
+    asked: u16,
+    until: u32,
+}
+
 /// Reads positions `first..=last` back, window by window.
-pub struct ReadBack<const N: usize = TTA_MAX_RESPONSE> {
+pub struct ReadBack<const N: usize = { limits::TTA.response }> {
     cfg: ReadBackConfig,
     /// Next window start; `u32` so that it can pass 0xFFFF.
     head: u32,
+    /// The window in flight.
+    current_head: u32,
     asked: u16,
+    /// Whether the window in flight is a re-read.
+    rereading: bool,
     query: [u8; 24],
     query_len: usize,
     exchange: Exchange,
     replies: FrameDecoder<N>,
     state: State,
+    /// Windows answered empty within the duplicate window.
+    empties: heapless::Deque<EmptyWindow, 8>,
+    /// Windows to read again.
+    rereads: heapless::Deque<(u32, u16), 4>,
+    /// When the last empty reply came (for the duplicate guard).
+    last_empty: Option<u32>,
+    /// A late or duplicated reply was seen on this line.
+    duplicates_seen: bool,
     stats: ReadBackStats,
 }
 
@@ -151,12 +236,18 @@ impl<const N: usize> ReadBack<N> {
         ReadBack {
             cfg,
             head: u32::from(cfg.first),
+            current_head: u32::from(cfg.first),
             asked: 0,
+            rereading: false,
             query: [0; 24],
             query_len: 0,
-            exchange: Exchange::new(),
+            exchange: Exchange::new(cfg.exchange, Quarantine::Wait),
             replies: FrameDecoder::with_policy(BypassPolicy::Reject),
             state: State::Query { not_before: 0 },
+            empties: heapless::Deque::new(),
+            rereads: heapless::Deque::new(),
+            last_empty: None,
+            duplicates_seen: false,
             stats: ReadBackStats::default(),
         }
     }
@@ -171,37 +262,74 @@ impl<const N: usize> ReadBack<N> {
         loop {
             match self.state {
                 State::Query { not_before } => {
-                    if self.head > u32::from(self.cfg.last) {
+                    let reread = self.rereads.pop_front();
+                    if reread.is_none() && self.head > u32::from(self.cfg.last) {
                         self.state = State::Complete;
                         continue;
                     }
-                    if let Err(e) = self.build_query() {
+                    if let Err(e) = self.build_query(reread) {
                         self.state = State::Failed(TransferError::Config(e));
                         continue;
                     }
-                    self.exchange.start(not_before);
+                    let mut at = not_before;
+                    if let (true, Some(t)) = (self.duplicates_seen, self.last_empty) {
+                        let clear = t.wrapping_add(self.cfg.exchange.duplicate_window_ms);
+                        if !reached(now, clear) && !reached(at, clear) {
+                            self.stats.guarded_queries += 1;
+                            at = later(at, clear);
+                        }
+                    }
+                    match catalogue::lookup(self.cfg.stream.id) {
+                        Some(info) => self.exchange.start(info, at),
+                        None => {
+                            let id = self.cfg.stream.id;
+                            self.state =
+                                State::Failed(TransferError::Config(Error::UnknownMessageId {
+                                    id,
+                                }));
+                            continue;
+                        }
+                    }
                     self.state = State::Exchange;
                 }
                 State::Exchange => match self.exchange.poll(now) {
                     Due::Transmit { fresh } => {
                         if fresh {
                             self.replies.reset();
+                            if self.exchange.sends() > 1 {
+                                self.stats.retries += 1;
+                                self.stats.timeouts += 1;
+                            }
                         }
                         return ReadStep::Transmit(self.query.get(..self.query_len).unwrap_or(&[]));
                     }
                     Due::WaitUntil(t) => return ReadStep::WaitUntil(t),
-                    Due::TimedOut => {
-                        self.stats.timeouts += 1;
-                        self.retry_or_fail(now, TransferError::Timeout);
+                    Due::Done(Finish::Replied) => self.state = State::Deliver,
+                    Due::Done(Finish::ErrorReply(code)) => {
+                        let e = if BRIDGE_CODES.contains(&code) {
+                            TransferError::Bridge { code }
+                        } else {
+                            TransferError::Controller { code }
+                        };
+                        self.state = State::Failed(e);
                     }
-                    Due::Idle => self.state = State::Failed(TransferError::Timeout),
+                    Due::Done(_) | Due::Idle => {
+                        self.stats.timeouts += 1;
+                        self.state = State::Failed(TransferError::Timeout);
+                    }
                 },
-                State::Deliver { next } => {
+                State::Deliver => {
                     // Deliver once; the next poll moves on.
+                    let turnaround = now.wrapping_add(self.cfg.exchange.turnaround_ms + 1);
                     self.state = State::Query {
-                        not_before: now.wrapping_add(self.cfg.turnaround_ms),
+                        not_before: turnaround,
                     };
-                    self.head = next;
+                    let window_head = self.current_head;
+                    let asked = self.asked;
+                    let reread = self.rereading;
+                    if !reread {
+                        self.head += u32::from(asked);
+                    }
                     let stream = self.cfg.stream;
                     // The reply was checked on arrival; an empty list if it vanished.
                     let (r, left) = match self.replies.last_frame() {
@@ -212,7 +340,14 @@ impl<const N: usize> ReadBack<N> {
                         }
                         None => (Reader::new(&[], 0), 0),
                     };
-                    return ReadStep::Records(ReplyRecords { r, left, stream });
+                    return ReadStep::Records(ReplyRecords {
+                        r,
+                        left,
+                        stream,
+                        head: window_head as u16,
+                        asked,
+                        reread,
+                    });
                 }
                 State::Complete => return ReadStep::Complete(self.stats),
                 State::Failed(e) => return ReadStep::Failed(e),
@@ -222,102 +357,225 @@ impl<const N: usize> ReadBack<N> {
 
     /// The query was completely transmitted at `now`.
     pub fn sent(&mut self, now: u32) {
-        self.exchange.sent(now, self.cfg.timeout_ms);
+        self.exchange.sent(now);
     }
 
-    /// Bytes received at `now`. Stops at the awaited reply, so that its
-    /// records stay readable until the next `poll`; returns the bytes used.
-    pub fn received(&mut self, bytes: &[u8], now: u32) -> usize {
-        let mut used = 0;
-        while used < bytes.len() {
-            if !(self.state == State::Exchange && self.exchange.awaiting()) {
+    /// After [`ReadStep::Failed`]: ask the same window again, with a fresh
+    /// count of sends.
+    pub fn resume(&mut self, now: u32) {
+        if let State::Failed(e) = self.state {
+            if !matches!(e, TransferError::Config(_)) {
+                if self.rereading {
+                    let _ = self.rereads.push_front((self.current_head, self.asked));
+                }
+                self.state = State::Query { not_before: now };
+            }
+        }
+    }
+
+    /// Bytes received at `now`. Returns at the first event; on
+    /// [`ReadEvent::Answered`] the reply stays readable until the next
+    /// `poll` delivers it, so feed the rest of the input after that poll.
+    pub fn received(&mut self, bytes: &[u8], now: u32) -> Received<ReadEvent> {
+        if self.state == State::Deliver {
+            // The reply is held for delivery: take nothing more yet.
+            return Received {
+                consumed: 0,
+                event: ReadEvent::NeedMore,
+            };
+        }
+        let window = (self.current_head, self.asked);
+        let d = self.replies.decode(bytes);
+        let seen = match d.event {
+            Event::NeedMore => Err(None),
+            Event::Error(e) => Err(Some(e)),
+            Event::Frame(f) => Ok(Seen::of(&self.cfg, window, &f)),
+        };
+        let consumed = d.consumed;
+        let event = match seen {
+            Err(None) => ReadEvent::NeedMore,
+            Err(Some(e)) => {
                 self.stats.ignored += 1;
-                return bytes.len();
+                ReadEvent::Broken(e)
             }
-            let d = self.replies.decode(bytes.get(used..).unwrap_or(&[]));
-            used += d.consumed;
-            match d.event {
-                Event::NeedMore => break,
-                Event::Error(_) => self.stats.ignored += 1,
-                Event::Frame(f) => match check_reply(&self.cfg, self.head, self.asked, &f) {
-                    Reply::Records { count, next } => {
-                        self.stats.queries += 1;
-                        self.stats.records += u32::from(count);
-                        self.exchange.finish();
-                        self.state = State::Deliver { next };
-                        return used;
-                    }
-                    Reply::Error(code) => {
-                        self.retry_or_fail(now, TransferError::ErrorResponse { code });
-                    }
-                    Reply::NotOurs => self.stats.ignored += 1,
-                },
-            }
-        }
-        used
+            Ok(seen) => self.frame(seen, window, now),
+        };
+        Received { consumed, event }
     }
 
-    fn retry_or_fail(&mut self, at: u32, why: TransferError) {
-        if self
-            .exchange
-            .retry(at.wrapping_add(self.cfg.turnaround_ms), self.cfg.max_tries)
+    fn frame(&mut self, seen: Seen, window: (u32, u16), now: u32) -> ReadEvent {
+        let offer = if self.state == State::Exchange {
+            self.exchange.offer_head(
+                seen.header,
+                seen.station,
+                seen.code,
+                seen.check.is_some(),
+                now,
+            )
+        } else if crate::exchange::judge(
+            self.cfg.exchange.station,
+            self.cfg.stream.id,
+            seen.header,
+            seen.station,
+            seen.code,
+        ) == crate::exchange::Verdict::Foreign
         {
-            self.stats.retries += 1;
+            Offer::Foreign
         } else {
-            self.state = State::Failed(why);
+            Offer::Stale
+        };
+        match offer {
+            Offer::Accepted => {
+                let records = seen.check.unwrap_or(0);
+                self.stats.queries += 1;
+                self.stats.records += u32::from(records);
+                self.empties.retain_mut(|e| !reached(now, e.until));
+                if records == 0 {
+                    self.last_empty = Some(now);
+                    let until = now.wrapping_add(self.cfg.exchange.duplicate_window_ms);
+                    if self.empties.is_full() {
+                        self.empties.pop_front();
+                    }
+                    let _ = self.empties.push_back(EmptyWindow {
+                        head: window.0,
+                        asked: window.1,
+                        until,
+                    });
+                }
+                ReadEvent::Answered { records }
+            }
+            Offer::Rejected(code) => ReadEvent::Rejected { code },
+            Offer::Mismatch | Offer::Stale => {
+                self.stats.stale_replies += 1;
+                self.duplicates_seen = true;
+                if let Some(n) = seen.first_record {
+                    self.reopen(n, now);
+                }
+                ReadEvent::Stale
+            }
+            Offer::Foreign => {
+                self.stats.ignored += 1;
+                ReadEvent::Foreign
+            }
         }
     }
 
-    fn build_query(&mut self) -> Result<(), Error> {
-        let cfg = self.cfg;
-        let left = u32::from(cfg.last) + 1 - self.head;
-        self.asked = u16::try_from(left.min(u32::from(cfg.window()))).unwrap_or(1);
-        let width = cfg.stream.count_width;
-        let mut w = Writer::new(&mut self.query);
-        emit_envelope(&mut w, Header::Command, cfg.station, cfg.stream.id)?;
-        if cfg.stream.reserved {
-            w.put(b"00")?;
+    /// A reply that is not the awaited one holds a record of a window that
+    /// was answered empty: that answer was a duplicate; read it again.
+    fn reopen(&mut self, number: u16, now: u32) {
+        let n = u32::from(number);
+        let hit = self
+            .empties
+            .iter()
+            .position(|e| !reached(now, e.until) && n >= e.head && n < e.head + u32::from(e.asked));
+        let Some(i) = hit else { return };
+        let mut kept = heapless::Deque::new();
+        for (j, w) in self.empties.iter().enumerate() {
+            if j == i {
+                // Reopened once: one surplus reply, one re-read.
+                if self.rereads.push_back((w.head, w.asked)).is_ok() {
+                    self.stats.rereads += 1;
+                }
+            } else {
+                let _ = kept.push_back(*w);
+            }
         }
-        w.unsigned(FieldSpec::hex(width), u64::from(self.head))?;
-        w.unsigned(FieldSpec::hex(width), u64::from(self.asked))?;
+        self.empties = kept;
+    }
+
+    /// Feeds all of `bytes` until the window's reply is complete or the
+    /// bytes run out; returns the bytes used (the rest follow the reply).
+    pub fn received_all(&mut self, bytes: &[u8], now: u32) -> usize {
+        let mut used = 0;
+        loop {
+            let r = self.received(bytes.get(used..).unwrap_or(&[]), now);
+            used += r.consumed;
+            match r.event {
+                ReadEvent::NeedMore | ReadEvent::Answered { .. } => return used,
+                _ => {}
+            }
+        }
+    }
+
+    fn build_query(&mut self, reread: Option<(u32, u16)>) -> Result<(), Error> {
+        let cfg = self.cfg;
+        let (head, asked) = match reread {
+            Some(w) => w,
+            None => {
+                let left = u32::from(cfg.last) + 1 - self.head;
+                (self.head, left.min(u32::from(cfg.window())) as u16)
+            }
+        };
+        self.rereading = reread.is_some();
+        self.current_head = head;
+        self.asked = asked.max(1);
+        let mut w = Writer::new(&mut self.query);
+        emit_envelope(&mut w, Header::Command, cfg.exchange.station, cfg.stream.id)?;
+        let head16 = u16::try_from(head).map_err(|_| Error::ValueOutOfRange { offset: 6 })?;
+        cfg.stream.write_query(&mut w, head16, self.asked)?;
         emit_trailer(&mut w, ChecksumMode::Compute)?;
         self.query_len = w.len();
         Ok(())
     }
 }
 
-enum Reply {
-    Records { count: u16, next: u32 },
-    Error(u16),
-    NotOurs,
+/// What [`ReadBack`] needs of a frame after the decoder moves on.
+#[derive(Debug, Clone, Copy)]
+struct Seen {
+    header: Header,
+    station: Station,
+    code: u16,
+    /// Records, if it is a valid reply to the window in flight.
+    check: Option<u16>,
+    /// The first record's position, if it is a reply holding records.
+    first_record: Option<u16>,
 }
 
-/// Checks a frame as the reply to the query of window `head..head+asked`.
-fn check_reply(cfg: &ReadBackConfig, head: u32, asked: u16, f: &Frame<'_>) -> Reply {
-    if f.station() != cfg.station {
-        return Reply::NotOurs;
+impl Seen {
+    fn of(cfg: &ReadBackConfig, window: (u32, u16), f: &Frame<'_>) -> Self {
+        let first_record = (f.header() == Header::Response && f.code() == cfg.stream.id)
+            .then(|| {
+                let mut r = f.reader();
+                let (_, count) = cfg.stream.read_prefix(&mut r).ok()?;
+                if count == 0 {
+                    return None;
+                }
+                cfg.stream
+                    .layout
+                    .read_record(&mut r)
+                    .ok()
+                    .map(|rec| rec.number)
+            })
+            .flatten();
+        Seen {
+            header: f.header(),
+            station: f.station(),
+            code: f.code(),
+            check: check_reply(cfg, window, f),
+            first_record,
+        }
     }
-    match f.header() {
-        Header::Error => return Reply::Error(f.code()),
-        Header::Response if f.code() == cfg.stream.id => {}
-        _ => return Reply::NotOurs,
+}
+
+/// Checks a frame as the reply to the query of window `(head, asked)`:
+/// the number of records if it is one.
+fn check_reply(cfg: &ReadBackConfig, (head, asked): (u32, u16), f: &Frame<'_>) -> Option<u16> {
+    if f.header() != Header::Response || f.code() != cfg.stream.id {
+        return None;
     }
     let mut r = f.reader();
-    let Ok((_, count)) = cfg.stream.read_prefix(&mut r) else {
-        return Reply::NotOurs;
-    };
+    let (_, count) = cfg.stream.read_prefix(&mut r).ok()?;
     if count > asked {
-        return Reply::NotOurs;
+        return None;
     }
     let end = head + u32::from(asked);
     for _ in 0..count {
-        match cfg.stream.layout.read_record(&mut r) {
-            Ok(rec) if u32::from(rec.number) >= head && u32::from(rec.number) < end => {}
-            _ => return Reply::NotOurs,
+        let rec = cfg.stream.layout.read_record(&mut r).ok()?;
+        let n = u32::from(rec.number);
+        if n < head || n >= end {
+            return None;
         }
     }
-    if r.finish().is_err() {
-        return Reply::NotOurs;
-    }
-    Reply::Records { count, next: end }
+    r.finish().ok()?;
+    Some(count)
 }

@@ -9,9 +9,9 @@
 //! 84 bytes, rounded up) plus a few counters.
 //!
 //! Every message with a run of position records has a [`PositionStream`]
-//! descriptor: the writes 244H, 245H, 26DH, 290H, 291H (commands; their
-//! response repeats the same prefix with the number written) and the
-//! queries' responses 209H, 21FH, 22DH.
+//! descriptor (in [`crate::position`], the one place their layouts are
+//! written): the writes 244H, 245H, 26DH, 290H, 291H and the queries'
+//! responses 209H, 21FH, 22DH.
 //!
 //! ```
 //! use iai_protocol_b::stream::{PositionStream, PositionStreamEncoder};
@@ -32,183 +32,19 @@
 //! assert_eq!(&out[..n], &b"!9926D0001000103001E001E0064000186A0FFFF9C6438\r\n"[..]);
 //! ```
 
+pub use crate::position::PositionStream;
+
 use crate::checksum::{BypassPolicy, Checksum};
 use crate::error::{Error, Result};
 use crate::field::{hex_digit, hex_value, FieldSpec, Reader, Writer};
-use crate::frame::{emit_envelope, Frame, Header, Station, ENVELOPE_LEN};
+use crate::frame::{emit_envelope, Header, Station, ENVELOPE_LEN};
 use crate::io::IoError;
-use crate::position::{PositionRecord, RecordLayout};
+use crate::position::PositionRecord;
 
 /// Staging buffer size of the streaming encoder and decoder: the longest
 /// record (4 + 2 + 12 + 8 × 8 + 2 = 84 bytes) or the longest envelope and
 /// prefix (16 bytes), rounded up.
 pub const STAGE_LEN: usize = 88;
-
-/// The shape of a message whose body is a prefix and a run of position
-/// records: `[00] [start] count record…`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct PositionStream {
-    /// Message ID.
-    pub id: u16,
-    /// Frame kind that carries the records (command for writes, response for queries).
-    pub header: Header,
-    /// Whether the body starts with the reserved `00`.
-    pub reserved: bool,
-    /// Width of the start-number field; 0 when records carry their own numbers.
-    pub start_width: u8,
-    /// Width of the record-count field.
-    pub count_width: u8,
-    /// Largest record count the format allows.
-    pub max_records: u16,
-    /// Layout of one record.
-    pub layout: RecordLayout,
-}
-
-impl PositionStream {
-    /// 26DH Change Position Data Continuous Write 2.
-    pub const CHANGE_2: Self = Self::write(0x26D, false, 0, 4, 20_000, RecordLayout::NUMBER_4);
-    /// 245H Change Position Data Continuous Write (3-digit numbers).
-    pub const CHANGE: Self = Self::write(0x245, false, 0, 3, 3_000, RecordLayout::NUMBER_3);
-    /// 244H Position Data Range-Specification Continuous Write.
-    pub const RANGE: Self = Self::write(0x244, false, 3, 3, 3_000, RecordLayout::RANGE);
-    /// 290H Position Data Range-Specification Continuous Write 3 (catalogue status: partial).
-    pub const RANGE_3: Self = Self::write(0x290, true, 4, 4, 20_000, RecordLayout::RANGE_EXTENDED);
-    /// 291H Change Position Data Continuous Write 3 (catalogue status: partial;
-    /// the field order is the catalogue's reading of an inconsistent table).
-    pub const CHANGE_3: Self =
-        Self::write(0x291, true, 0, 4, 20_000, RecordLayout::NUMBER_4_EXTENDED);
-    /// 209H Effective Position Data Query, response.
-    pub const QUERY_RESPONSE: Self = Self::query(0x209, false, 3, 3_000, RecordLayout::NUMBER_3);
-    /// 21FH Effective Position Data Query 2, response.
-    pub const QUERY_2_RESPONSE: Self = Self::query(0x21F, false, 4, 20_000, RecordLayout::NUMBER_4);
-    /// 22DH Effective Position Data Query 3, response.
-    pub const QUERY_3_RESPONSE: Self =
-        Self::query(0x22D, true, 4, 20_000, RecordLayout::NUMBER_4_EXTENDED);
-
-    /// Every known position stream.
-    pub const ALL: [Self; 8] = [
-        Self::CHANGE_2,
-        Self::CHANGE,
-        Self::RANGE,
-        Self::RANGE_3,
-        Self::CHANGE_3,
-        Self::QUERY_RESPONSE,
-        Self::QUERY_2_RESPONSE,
-        Self::QUERY_3_RESPONSE,
-    ];
-
-    const fn write(
-        id: u16,
-        reserved: bool,
-        start: u8,
-        count: u8,
-        max: u16,
-        layout: RecordLayout,
-    ) -> Self {
-        PositionStream {
-            id,
-            header: Header::Command,
-            reserved,
-            start_width: start,
-            count_width: count,
-            max_records: max,
-            layout,
-        }
-    }
-
-    const fn query(id: u16, reserved: bool, count: u8, max: u16, layout: RecordLayout) -> Self {
-        PositionStream {
-            id,
-            header: Header::Response,
-            reserved,
-            start_width: 0,
-            count_width: count,
-            max_records: max,
-            layout,
-        }
-    }
-
-    /// The stream carried by frames of this kind and ID, if any.
-    pub fn find(header: Header, id: u16) -> Option<Self> {
-        Self::ALL
-            .into_iter()
-            .find(|s| s.header == header && s.id == id)
-    }
-
-    /// Bytes of the body before the first record.
-    pub const fn prefix_len(&self) -> usize {
-        (if self.reserved { 2 } else { 0 }) + self.start_width as usize + self.count_width as usize
-    }
-
-    /// Bytes of a frame without records (envelope, prefix, SC, CR, LF).
-    pub const fn overhead(&self) -> usize {
-        ENVELOPE_LEN + self.prefix_len() + 4
-    }
-
-    /// Writes the prefix: `[00] [start] count`.
-    pub fn write_prefix(&self, w: &mut Writer<'_>, start: u16, count: u16) -> Result<()> {
-        if count > self.max_records {
-            return Err(Error::CountTooLarge {
-                count: usize::from(count),
-                max: usize::from(self.max_records),
-            });
-        }
-        if self.reserved {
-            w.put(b"00")?;
-        }
-        if self.start_width > 0 {
-            w.unsigned(FieldSpec::hex(self.start_width), u64::from(start))?;
-        }
-        w.unsigned(FieldSpec::hex(self.count_width), u64::from(count))
-    }
-
-    /// Reads the prefix; returns `(start, count)` (start 0 when absent).
-    pub fn read_prefix(&self, r: &mut Reader<'_>) -> Result<(u16, u16)> {
-        if self.reserved {
-            let at = r.offset();
-            if r.take(2)? != b"00" {
-                return Err(Error::InvalidFixedField { offset: at });
-            }
-        }
-        let start = if self.start_width > 0 {
-            r.unsigned(FieldSpec::hex(self.start_width))? as u16
-        } else {
-            0
-        };
-        let at = r.offset();
-        let count = r.unsigned(FieldSpec::hex(self.count_width))?;
-        let count = u16::try_from(count).map_err(|_| Error::ValueOutOfRange { offset: at })?;
-        if count > self.max_records {
-            return Err(Error::CountTooLarge {
-                count: usize::from(count),
-                max: usize::from(self.max_records),
-            });
-        }
-        Ok((start, count))
-    }
-
-    /// Parses the normal response to a position write: the same prefix,
-    /// carrying the number of records written. Returns `(start, count)`.
-    pub fn parse_reply(&self, frame: &Frame<'_>) -> Result<(u16, u16)> {
-        if frame.header() != Header::Response {
-            return Err(Error::UnexpectedHeader {
-                expected: Header::Response,
-                found: frame.header(),
-            });
-        }
-        if frame.code() != self.id {
-            return Err(Error::UnexpectedMessageId {
-                expected: self.id,
-                found: frame.code(),
-            });
-        }
-        let mut r = frame.reader();
-        let v = self.read_prefix(&mut r)?;
-        r.finish()?;
-        Ok(v)
-    }
-}
 
 /// A staging buffer and its read position.
 #[derive(Debug, Clone)]

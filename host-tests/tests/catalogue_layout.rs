@@ -15,11 +15,9 @@
 mod common;
 
 use common::*;
+use iai_protocol_b::catalogue::{self, Generation, Status};
 use iai_protocol_b::frame::Station;
-use iai_protocol_b::message::{
-    decode_any, has_normal_response, message_name, message_status, AnyMessage, ErrorResponse,
-    Fields, Status, MESSAGE_IDS,
-};
+use iai_protocol_b::message::{decode_any, AnyMessage, ErrorResponse, Fields};
 
 fn decode_and_record(bytes: &[u8]) -> (Recorder, Vec<u8>) {
     let frame = check(bytes);
@@ -106,7 +104,7 @@ fn every_layout_matches_the_catalogue() {
 }
 
 #[test]
-fn catalogue_ids_names_and_status() {
+fn catalogue_ids_names_status_generation_and_replies() {
     let cat = catalogue();
     let ids: Vec<u16> = cat
         .message
@@ -114,13 +112,15 @@ fn catalogue_ids_names_and_status() {
         .filter(|m| m.id != "ERR")
         .map(Msg::code)
         .collect();
-    assert_eq!(ids, MESSAGE_IDS);
+    let core_ids: Vec<u16> = catalogue::ALL.iter().map(|m| m.id).collect();
+    assert_eq!(ids, core_ids);
     for m in cat.message.iter().filter(|m| m.id != "ERR") {
-        let name = message_name(m.code()).unwrap();
+        let info = catalogue::lookup(m.code()).unwrap();
         assert!(
-            m.name.starts_with(name),
-            "{}: {name:?} vs {:?}",
+            m.name.starts_with(info.name),
+            "{}: {:?} vs {:?}",
             m.id,
+            info.name,
             m.name
         );
         let status = if m.status == "partial" {
@@ -128,15 +128,22 @@ fn catalogue_ids_names_and_status() {
         } else {
             Status::Complete
         };
-        assert_eq!(message_status(m.code()), Some(status), "{}", m.id);
+        assert_eq!(info.status, status, "{}", m.id);
         assert_eq!(
-            has_normal_response(m.code()),
+            info.has_normal_response(),
             m.has_normal_response.unwrap_or(true),
             "{}",
             m.id
         );
+        // Messages laid out from TTA pages only are the TTA generation's.
+        let generation = if m.layout_source == "tta" {
+            Generation::Tta
+        } else {
+            Generation::Xsel2003
+        };
+        assert_eq!(info.since, generation, "{}", m.id);
     }
-    assert_eq!(message_name(0x217), None);
+    assert_eq!(catalogue::lookup(0x217), None);
 }
 
 #[test]

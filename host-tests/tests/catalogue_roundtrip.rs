@@ -12,7 +12,7 @@ use iai_protocol_b::message::{
     decode_any, AnyMessage, ChangePositionData, ChangePositionData2, ChangePositionData3, Command,
     ErrorDetailQuery, Fields, Message, RangeWritePositionData, RangeWritePositionData2, RealValue,
     RealVariableChange, RealWire, Repeated, Reserved, StringVariableChange, TestCall, VersionQuery,
-    WordOrder, MESSAGE_IDS,
+    WordOrder,
 };
 use iai_protocol_b::position::{PositionRecord, RecordLayout};
 use iai_protocol_b::profile::Profile;
@@ -528,7 +528,7 @@ fn fixture_frames_decode_to_the_tabled_values() {
         fixtures().len()
     );
     // One fixture per message and direction (25BH has no normal response).
-    for &id in MESSAGE_IDS {
+    for id in iai_protocol_b::catalogue::ALL.iter().map(|m| m.id) {
         assert!(
             seen.contains(&(b'!', id)),
             "no command fixture for {id:03X}H"
@@ -834,10 +834,26 @@ fn profile_differences() {
         if m.id == "ERR" {
             continue;
         }
-        assert!(Profile::TTA.supports(m.code()));
+        // The 2003 message list (pp. 11-12): Cartesian-only and SCARA-only IDs.
+        let cartesian_only = [0x212, 0x233, 0x234, 0x235, 0x237, 0x262, 0x26B];
+        let scara_only = [0x2A0, 0x2A1, 0x2A2, 0x2A3, 0x2A4, 0x2D4, 0x2D5, 0x2D6];
+        let id = m.code();
+        let tta_generation = m.layout_source == "tta";
         assert_eq!(
-            Profile::XSEL_2003.supports(m.code()),
-            m.layout_source != "tta",
+            Profile::TTA.supports(id),
+            !scara_only.contains(&id),
+            "{}",
+            m.id
+        );
+        assert_eq!(
+            Profile::XSEL_2003.supports(id),
+            !tta_generation && !scara_only.contains(&id),
+            "{}",
+            m.id
+        );
+        assert_eq!(
+            Profile::XSEL_2003_SCARA.supports(id),
+            !tta_generation && !cartesian_only.contains(&id),
             "{}",
             m.id
         );

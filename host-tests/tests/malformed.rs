@@ -160,13 +160,15 @@ fn stream_cases() -> Vec<Case> {
         case("truncated frame followed by a valid one", b"#99212021C000#992322C\r\n", vec![er(Truncated { len: 13 }), fr(b"#992322C\r\n")]),
         case("only a header at the end of the input", b"!", vec![er(Truncated { len: 1 })]),
         // A 200H cut inside its 10-character text: the next frame's first
-        // bytes are read as text, so that frame is lost with it.
-        case("200H cut inside its text swallows the next frame", b"!99200ABC#992322C\r\n", vec![er(BodyTooShort { offset: 15 })]),
+        // bytes are read as text; when the 200H fails they are decoded
+        // again, and that frame survives.
+        case("200H cut inside its text keeps the next frame", b"!99200ABC#992322C\r\n", vec![er(BodyTooShort { offset: 15 }), fr(b"#992322C\r\n")]),
         // A 216H reply whose count promises more text than it carries: the
-        // text runs over the next frame, which is lost with it.
-        case("216H message count overstated swallows the next frame",
+        // text runs over the next frame, which is decoded again when the
+        // 216H fails, and survives.
+        case("216H message count overstated keeps the next frame",
             cat(&[&sealed(&cat(&[&DETAIL[..88], b"10ABCD"])), b"#992322C\r\n"]),
-            vec![er(BodyTooShort { offset: 104 })]),
+            vec![er(BodyTooShort { offset: 104 }), fr(b"#992322C\r\n")]),
         // ---- noise -------------------------------------------------------
         case("noise inside the ID", b"#9923xx22C\r\n", vec![er(InvalidHexDigit { offset: 5, byte: b'x' })]),
         case("binary noise without header bytes", (0x80..=0xFFu8).collect::<Vec<u8>>(), vec![]),

@@ -114,7 +114,7 @@ fn the_core_allocates_nothing() {
     let mut now = 0u32;
     let stats = loop {
         let reply = sim.take_output(now);
-        core_call(|| t.received(&reply, now));
+        core_call(|| t.received_all(&reply, now));
         let mut out = Vec::new();
         let step = core_call(|| match t.poll(now) {
             Step::Transmit(b) => {
@@ -136,12 +136,54 @@ fn the_core_allocates_nothing() {
             Some(Ok(s)) => break s,
         }
     };
-    assert_eq!(stats.records_confirmed, 2_000);
+    assert_eq!(stats.stats.records_confirmed, 2_000);
+    assert_eq!(stats.stats.records_verified, 2_000);
+
+    // The request engine: a 212H and its typed reply.
+    let mut client: iai_protocol_b::client::Client = core_call(|| {
+        iai_protocol_b::client::Client::new(iai_protocol_b::client::ClientConfig::new(Station(
+            0x99,
+        )))
+    });
+    let q = iai_protocol_b::message::AxisStatusQuery::of(&[1, 2]).unwrap();
+    let mut now = 0u32;
+    core_call(|| client.start(&q, now)).unwrap();
+    let outcome = loop {
+        let reply = sim.take_output(now);
+        core_call(|| client.received_all(&reply, now));
+        let mut out = Vec::new();
+        let step = core_call(|| match client.poll(now) {
+            iai_protocol_b::client::ClientStep::Transmit(b) => {
+                COUNTING.with(|c| c.set(false));
+                out.extend_from_slice(b);
+                None
+            }
+            iai_protocol_b::client::ClientStep::WaitUntil(d) => Some(Err(d)),
+            iai_protocol_b::client::ClientStep::Done(r) => Some(Ok(r)),
+            other => panic!("{other:?}"),
+        });
+        match step {
+            None => {
+                sim.receive(&out, now);
+                core_call(|| client.sent(now));
+            }
+            Some(Err(d)) => now = sim.next_output_at().map_or(d, |r| r.min(d)).max(now + 1),
+            Some(Ok(r)) => break r,
+        }
+    };
+    assert!(outcome.is_ok());
+    let status = core_call(|| {
+        client
+            .response::<iai_protocol_b::message::AxisStatusQuery>()
+            .map(|r| r.axes.len())
+    });
+    assert_eq!(status, Ok(2));
 
     assert_eq!(allocations() - before, 0, "the core allocated");
     println!(
         "RAM (size_of): FrameDecoder<2051> {} B, PositionStreamEncoder {} B (+ its source), \
-         PositionStreamDecoder {} B, Transfer<_, 2051> {} B (+ its source), ReadBack<2048> {} B",
+         PositionStreamDecoder {} B, Transfer<_, 2051> {} B (+ its source), ReadBack<2048> {} B, \
+         Client<2051, 2048> {} B, Client<64, 128> {} B",
         std::mem::size_of::<FrameDecoder>(),
         std::mem::size_of::<
             PositionStreamEncoder<std::iter::Empty<iai_protocol_b::position::PositionRecord>>,
@@ -149,5 +191,7 @@ fn the_core_allocates_nothing() {
         std::mem::size_of::<PositionStreamDecoder>(),
         std::mem::size_of::<Transfer<std::iter::Empty<iai_protocol_b::position::PositionRecord>>>(),
         std::mem::size_of::<iai_protocol_b::readback::ReadBack>(),
+        std::mem::size_of::<iai_protocol_b::client::Client>(),
+        std::mem::size_of::<iai_protocol_b::client::Client<64, 128>>(),
     );
 }

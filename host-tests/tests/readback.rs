@@ -6,7 +6,7 @@ use host_tests::sim::{Faults, Simulator};
 use host_tests::table::table;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
-use iai_protocol_b::readback::{ReadBack, ReadBackConfig, ReadBackStats, ReadStep};
+use iai_protocol_b::readback::{ReadBack, ReadBackConfig, ReadBackStats};
 use iai_protocol_b::transfer::{Transfer, TransferConfig, TransferError};
 
 const ST: Station = Station(0x99);
@@ -16,29 +16,8 @@ fn read_back(
     rb: &mut ReadBack,
     sim: &mut Simulator,
 ) -> (Vec<PositionRecord>, Result<ReadBackStats, TransferError>) {
-    let mut now = 0u32;
-    let mut got = Vec::new();
-    let mut pending: Vec<u8> = Vec::new();
-    loop {
-        pending.extend(sim.take_output(now));
-        if !pending.is_empty() {
-            let used = rb.received(&pending, now);
-            pending.drain(..used);
-        }
-        match rb.poll(now) {
-            ReadStep::Transmit(q) => {
-                let q = q.to_vec();
-                sim.receive(&q, now);
-                rb.sent(now);
-            }
-            ReadStep::WaitUntil(t) => {
-                now = sim.next_output_at().map_or(t, |r| r.min(t)).max(now + 1)
-            }
-            ReadStep::Records(recs) => got.extend(recs),
-            ReadStep::Complete(s) => return (got, Ok(s)),
-            ReadStep::Failed(e) => return (got, Err(e)),
-        }
-    }
+    let r = host_tests::link::read_back(rb, sim);
+    (r.records, r.result)
 }
 
 #[test]

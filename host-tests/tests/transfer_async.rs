@@ -11,8 +11,9 @@ use std::task::{Context, Poll, Waker};
 
 use host_tests::sim::{Faults, Simulator};
 use host_tests::table::table;
+use iai_protocol_b::clock::AsyncClock;
 use iai_protocol_b::frame::Station;
-use iai_protocol_b::transfer::{AsyncClock, Transfer, TransferConfig};
+use iai_protocol_b::transfer::{Guarantee, Transfer, TransferConfig};
 
 struct SimUart {
     sim: Simulator,
@@ -84,13 +85,14 @@ fn async_transfer_with_faults_writes_the_whole_table() {
     };
     let mut clock = VirtualClock(now);
     let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(Station(0x99)), table(5_000, 8, 8));
-    // A chunk can fail three times in a row under this fault mix: the
-    // documented answer is to resume, which sends the same chunk again.
+    // A chunk can fail three times in a row under this fault mix, and an
+    // error reply stops the transfer: the documented answer is to resume,
+    // which sends the same chunk again.
     let mut resumes = 0;
-    let stats = loop {
+    let report = loop {
         match block_on(t.run_async(&mut uart, &mut clock, 10)) {
-            Ok(stats) => break stats,
-            Err(e) if resumes < 10 => {
+            Ok(report) => break report,
+            Err(e) if resumes < 200 => {
                 println!("resuming after {e:?}");
                 resumes += 1;
                 t.resume(clock.now_ms());
@@ -98,8 +100,9 @@ fn async_transfer_with_faults_writes_the_whole_table() {
             Err(e) => panic!("{e:?}"),
         }
     };
-    assert_eq!(stats.records_confirmed, 5_000);
-    assert!(stats.retries > 0);
+    assert_eq!(report.guarantee, Guarantee::Verified);
+    assert_eq!(report.stats.records_confirmed, 5_000);
+    assert!(report.stats.retries > 0);
     let expected: std::collections::BTreeMap<_, _> =
         table(5_000, 8, 8).map(|r| (r.number, r)).collect();
     assert!(uart.sim.table == expected);

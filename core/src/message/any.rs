@@ -1,9 +1,9 @@
 //! Decoding any frame into its typed message.
 //!
-//! The catalogue below is the one list of message IDs with their command and
-//! response types; the [`Command`] and [`Response`] enums, [`decode_any`],
-//! [`message_name`], [`message_status`] and [`has_normal_response`] are all
-//! generated from it.
+//! The table below binds each [`crate::catalogue`] entry to its command and
+//! response types; the [`Message`] and [`Request`] implementations, the
+//! [`Command`] and [`Response`] enums and [`decode_any`] are generated from
+//! it. It names catalogue entries, never raw IDs.
 //!
 //! ```
 //! use iai_protocol_b::checksum::BypassPolicy;
@@ -15,36 +15,13 @@
 //! assert_eq!(decoded.frame.as_bytes(), b"#992322C\r\n");
 //! ```
 
-use super::codec::{Fields, Visitor};
 use super::declarations::*;
-use super::Message;
+use super::{Message, Request};
+use crate::catalogue::{self, MessageInfo};
 use crate::checksum::ChecksumMode;
+use crate::codec::{Fields, Visitor};
 use crate::error::{Error, Result};
 use crate::frame::{emit_frame, Frame, Header, Station};
-
-/// How completely the sources document a message (`status` in `messages.toml`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Status {
-    /// Every field of both directions is documented.
-    Complete,
-    /// Some rows are missing or contradictory; the declared layout is the
-    /// catalogue's chosen reading (see the type's documentation).
-    Partial,
-}
-
-/// Facts about a command that are not part of its layout.
-pub trait CommandInfo {
-    /// Message ID.
-    const ID: u16;
-    /// Catalogue name.
-    const NAME: &'static str;
-    /// `false` only for 25BH (software reset): the controller never sends a
-    /// normal response, so a host must not wait for or retry one.
-    const HAS_NORMAL_RESPONSE: bool;
-    /// Documentation status of the message.
-    const STATUS: Status;
-}
 
 /// The error response: `&` + station + 3-digit error code, no message ID
 /// and no data. The code's meaning is in the controller's manual, not in
@@ -91,72 +68,78 @@ impl ErrorResponse {
     }
 }
 
-macro_rules! yes {
-    ($t:ident) => {
-        true
-    };
+/// 25BH's "response": the controller sends no normal response to a
+/// software reset (2003 p. 50). [`Request::Response`] of
+/// [`SoftwareReset`]; parsing or emitting one always fails with
+/// [`Error::UnknownMessageId`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct NoNormalResponse;
+
+impl<'r> super::Wire<'r> for NoNormalResponse {
+    fn read(_: &mut crate::field::Reader<'r>) -> Result<Self> {
+        Err(Error::UnknownMessageId {
+            id: catalogue::SOFTWARE_RESET.id,
+        })
+    }
+    fn write(&self, _: &mut crate::field::Writer<'_>) -> Result<()> {
+        Err(Error::UnknownMessageId {
+            id: catalogue::SOFTWARE_RESET.id,
+        })
+    }
+    fn wire_len(&self) -> usize {
+        0
+    }
 }
 
-macro_rules! catalogue {
+impl<'r> Message<'r> for NoNormalResponse {
+    const INFO: &'static MessageInfo = &catalogue::SOFTWARE_RESET;
+    const HEADER: Header = Header::Response;
+}
+
+macro_rules! bind {
     ( $(
-        ($id:literal, $name:literal, $status:ident,
-         $cmd:ident $(<$cl:lifetime>)?, $( $resp:ident $(<$rl:lifetime>)? )? $(-)?)
+        ($info:ident, $cmd:ident $(<$cl:lifetime>)?, $resp:ident $(<$rl:lifetime>)?)
     ),* $(,)? ) => {
-        /// Every message ID of the catalogue, ascending.
-        pub const MESSAGE_IDS: &[u16] = &[ $( $id ),* ];
-
-        /// The catalogue name of a message ID.
-        pub const fn message_name(id: u16) -> Option<&'static str> {
-            match id { $( $id => Some($name), )* _ => None }
-        }
-
-        /// The documentation status of a message ID.
-        pub const fn message_status(id: u16) -> Option<Status> {
-            match id { $( $id => Some(Status::$status), )* _ => None }
-        }
-
-        /// Whether the controller answers command `id` with a normal
-        /// response (`false` for 25BH and for unknown IDs).
-        pub const fn has_normal_response(id: u16) -> bool {
-            match id { $( $id => false $( || yes!($resp) )?, )* _ => false }
-        }
-
         $(
-            impl<'a> CommandInfo for $cmd $(<$cl>)? {
-                const ID: u16 = $id;
-                const NAME: &'static str = $name;
-                const HAS_NORMAL_RESPONSE: bool = false $( || yes!($resp) )?;
-                const STATUS: Status = Status::$status;
+            impl<'a> Message<'a> for $cmd $(<$cl>)? {
+                const INFO: &'static MessageInfo = &catalogue::$info;
+                const HEADER: Header = Header::Command;
+            }
+            impl<'a> Request<'a> for $cmd $(<$cl>)? {
+                type Response<'r> = $resp $(<$rl>)?;
             }
         )*
+        bind!(@responses $( $info, $resp $(<$rl>)?; )*);
 
         /// Any typed command.
         #[derive(Debug, Clone, PartialEq, Eq)]
         #[cfg_attr(feature = "defmt", derive(defmt::Format))]
         pub enum Command<'a> { $(
-            #[doc = concat!("Command ", stringify!($id), " (", $name, ").")]
+            #[doc = concat!("Command ", stringify!($cmd), ".")]
             $cmd($cmd $(<$cl>)?),
         )* }
-
-        /// Any typed normal response.
-        #[derive(Debug, Clone, PartialEq, Eq)]
-        #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-        pub enum Response<'a> { $( $(
-            #[doc = concat!("Normal response to ", stringify!($id), " (", $name, ").")]
-            $resp($resp $(<$rl>)?),
-        )? )* }
 
         impl<'a> Command<'a> {
             /// Parses a checked `!` frame as the command its ID names.
             pub fn parse(frame: &Frame<'a>) -> Result<Self> {
                 match frame.code() {
-                    $( $id => <$cmd $(<$cl>)? as Message<'a>>::parse(frame).map(Command::$cmd), )*
+                    $( id if id == catalogue::$info.id =>
+                        <$cmd $(<$cl>)? as Message<'a>>::parse(frame).map(Command::$cmd), )*
                     id => Err(Error::UnknownMessageId { id }),
                 }
             }
+            /// The catalogue entry.
+            pub fn info(&self) -> &'static MessageInfo {
+                match self { $( Command::$cmd(_) => &catalogue::$info, )* }
+            }
             /// The message ID.
             pub fn id(&self) -> u16 {
-                match self { $( Command::$cmd(_) => $id, )* }
+                self.info().id
+            }
+            /// Length of the frame [`Command::emit`] writes.
+            pub fn emit_len(&self) -> usize {
+                match self { $( Command::$cmd(m) => m.emit_len(), )* }
             }
             /// Emits the whole frame (computed checksum); returns its length.
             pub fn emit(&self, station: Station, buf: &mut [u8]) -> Result<usize> {
@@ -174,18 +157,64 @@ macro_rules! catalogue {
             }
         }
 
-        impl<'a> Response<'a> {
+        impl Command<'static> {
+            /// Command `id` with every field at its default (zeros, empty
+            /// groups). `None` for IDs outside the catalogue.
+            pub fn default_for(id: u16) -> Option<Self> {
+                match id {
+                    $( id if id == catalogue::$info.id => Some(Command::$cmd(<$cmd>::default())), )*
+                    _ => None,
+                }
+            }
+        }
+    };
+    (@responses $( $info:ident, $resp:ident $(<$rl:lifetime>)?; )*) => {
+        bind!(@normal [] $( $info, $resp $(<$rl>)?; )*);
+    };
+    // Collects every response type but 25BH's, which has none.
+    (@normal [$($acc:tt)*] SOFTWARE_RESET, NoNormalResponse; $($rest:tt)*) => {
+        bind!(@normal [$($acc)*] $($rest)*);
+    };
+    (@normal [$($acc:tt)*] $info:ident, $resp:ident $(<$rl:lifetime>)?; $($rest:tt)*) => {
+        bind!(@normal [$($acc)* ($info, $resp $(<$rl>)?)] $($rest)*);
+    };
+    (@normal [$( ($info:ident, $resp:ident $(<$rl:lifetime>)?) )*]) => {
+        $(
+            impl<'r> Message<'r> for $resp $(<$rl>)? {
+                const INFO: &'static MessageInfo = &catalogue::$info;
+                const HEADER: Header = Header::Response;
+            }
+        )*
+
+        /// Any typed normal response.
+        #[derive(Debug, Clone, PartialEq, Eq)]
+        #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+        pub enum Response<'r> { $(
+            #[doc = concat!("Response ", stringify!($resp), ".")]
+            $resp($resp $(<$rl>)?),
+        )* }
+
+        impl<'r> Response<'r> {
             /// Parses a checked `#` frame as the response its ID names.
             /// 25BH has no normal response: [`Error::UnknownMessageId`].
-            pub fn parse(frame: &Frame<'a>) -> Result<Self> {
+            pub fn parse(frame: &Frame<'r>) -> Result<Self> {
                 match frame.code() {
-                    $( $( $id => <$resp $(<$rl>)? as Message<'a>>::parse(frame).map(Response::$resp), )? )*
+                    $( id if id == catalogue::$info.id =>
+                        <$resp $(<$rl>)? as Message<'r>>::parse(frame).map(Response::$resp), )*
                     id => Err(Error::UnknownMessageId { id }),
                 }
             }
+            /// The catalogue entry.
+            pub fn info(&self) -> &'static MessageInfo {
+                match self { $( Response::$resp(_) => &catalogue::$info, )* }
+            }
             /// The message ID.
             pub fn id(&self) -> u16 {
-                match self { $( $( Response::$resp(_) => $id, )? )* }
+                self.info().id
+            }
+            /// Length of the frame [`Response::emit`] writes.
+            pub fn emit_len(&self) -> usize {
+                match self { $( Response::$resp(m) => m.emit_len(), )* }
             }
             /// Emits the whole frame (computed checksum); returns its length.
             pub fn emit(&self, station: Station, buf: &mut [u8]) -> Result<usize> {
@@ -193,18 +222,7 @@ macro_rules! catalogue {
             }
             /// Emits the whole frame with the given checksum mode.
             pub fn emit_with(&self, station: Station, mode: ChecksumMode, buf: &mut [u8]) -> Result<usize> {
-                match self { $( $( Response::$resp(m) => m.emit_with(station, mode, buf), )? )* }
-            }
-        }
-
-        impl Command<'static> {
-            /// Command `id` with every field at its default (zeros, empty
-            /// groups). `None` for unknown IDs.
-            pub fn default_for(id: u16) -> Option<Self> {
-                match id {
-                    $( $id => Some(Command::$cmd(<$cmd>::default())), )*
-                    _ => None,
-                }
+                match self { $( Response::$resp(m) => m.emit_with(station, mode, buf), )* }
             }
         }
 
@@ -214,7 +232,7 @@ macro_rules! catalogue {
             /// `None` for 25BH (no normal response) and unknown IDs.
             pub fn default_for(id: u16) -> Option<Self> {
                 match id {
-                    $( $( $id => Some(Response::$resp(<$resp>::default())), )? )*
+                    $( id if id == catalogue::$info.id => Some(Response::$resp(<$resp>::default())), )*
                     _ => None,
                 }
             }
@@ -222,87 +240,67 @@ macro_rules! catalogue {
 
         impl Fields for Response<'_> {
             fn fields(&self, v: &mut dyn Visitor) {
-                match self { $( $( Response::$resp(m) => m.fields(v), )? )* }
+                match self { $( Response::$resp(m) => m.fields(v), )* }
             }
         }
     };
 }
 
-catalogue! {
-    (0x200, "Test Call", Complete, TestCall, TestCallResponse),
-    (0x201, "Version Code Query", Complete, VersionQuery, VersionResponse),
-    (0x208, "Number of Effective Position Data Query", Complete,
-        EffectivePositionCountQuery, EffectivePositionCountResponse),
-    (0x209, "Effective Position Data Query", Complete,
-        EffectivePositionQuery, EffectivePositionResponse<'a>),
-    (0x20B, "Input Port Query", Complete, InputPortQuery, InputPortResponse<'a>),
-    (0x20C, "Output Port Query", Complete, OutputPortQuery, OutputPortResponse<'a>),
-    (0x20D, "Flag Query", Complete, FlagQuery, FlagResponse<'a>),
-    (0x20E, "Integer Variable Query", Complete, IntegerVariableQuery, IntegerVariableResponse<'a>),
-    (0x20F, "Real Variable Query", Complete, RealVariableQuery, RealVariableResponse<'a>),
-    (0x210, "String Variable Query", Complete, StringVariableQuery, StringVariableResponse<'a>),
-    (0x212, "Axis Status Query", Complete, AxisStatusQuery, AxisStatusResponse),
-    (0x213, "Program Status Query", Complete, ProgramStatusQuery, ProgramStatusResponse),
-    (0x215, "System Status Query", Complete, SystemStatusQuery, SystemStatusResponse),
-    (0x216, "Error Detail Information Query", Complete, ErrorDetailQuery, ErrorDetailResponse<'a>),
-    (0x21F, "Effective Position Data Query 2", Complete,
-        EffectivePositionQuery2, EffectivePositionResponse2<'a>),
-    (0x22D, "Effective Position Data Query 3", Complete,
-        EffectivePositionQuery3, EffectivePositionResponse3<'a>),
-    (0x232, "Servo ON/OFF", Complete, ServoOnOff, ServoOnOffResponse),
-    (0x233, "Home Return", Complete, HomeReturn, HomeReturnResponse),
-    (0x234, "Absolute-Coordinate Specification Movement", Complete, AbsoluteMove, AbsoluteMoveResponse),
-    (0x235, "Relative-Coordinate Specification Movement", Complete, RelativeMove, RelativeMoveResponse),
-    (0x236, "Jogging/Inching", Complete, JogInch, JogInchResponse),
-    (0x237, "Position-Number Specification Movement", Complete,
-        PositionNumberMove, PositionNumberMoveResponse),
-    (0x238, "Operation Stop & Cancel", Complete, OperationStop, OperationStopResponse),
-    (0x244, "Position Data Range-Specification Continuous Write", Complete,
-        RangeWritePositionData<'a>, RangeWritePositionDataResponse),
-    (0x245, "Change Position Data Continuous Write", Complete,
-        ChangePositionData<'a>, ChangePositionDataResponse),
-    (0x246, "Position Data Clear", Complete, ClearPositionData, ClearPositionDataResponse),
-    (0x24A, "Output Port Status Change", Complete, OutputPortChange, OutputPortChangeResponse),
-    (0x24B, "Flag Status Change", Complete, FlagChange, FlagChangeResponse),
-    (0x24C, "Integer Variable Change", Complete,
-        IntegerVariableChange<'a>, IntegerVariableChangeResponse),
-    (0x24D, "Real Variable Change", Complete, RealVariableChange<'a>, RealVariableChangeResponse),
-    (0x24E, "String Variable Change", Complete,
-        StringVariableChange<'a>, StringVariableChangeResponse),
-    (0x252, "Alarm Reset", Complete, AlarmReset, AlarmResetResponse),
-    (0x253, "Program Run", Complete, ProgramRun, ProgramRunResponse),
-    (0x254, "Program End", Complete, ProgramEnd, ProgramEndResponse),
-    (0x255, "Program Pause", Complete, ProgramPause, ProgramPauseResponse),
-    (0x256, "Program One-Step Run", Complete, ProgramStep, ProgramStepResponse),
-    (0x257, "Program Resume", Complete, ProgramResume, ProgramResumeResponse),
-    (0x25B, "Software Reset", Complete, SoftwareReset, -),
-    (0x25C, "Drive-Source Recovery Request", Complete, DriveSourceRecovery, DriveSourceRecoveryResponse),
-    (0x25E, "Operation Pause Cancellation Request", Complete, PauseCancel, PauseCancelResponse),
-    (0x262, "Speed Change", Complete, SpeedChange, SpeedChangeResponse),
-    (0x26B, "Position-Number Specification Movement 2", Complete,
-        PositionNumberMove2, PositionNumberMove2Response),
-    (0x26D, "Change Position Data Continuous Write 2", Complete,
-        ChangePositionData2<'a>, ChangePositionData2Response),
-    (0x271, "Controller Function Specification 2", Complete,
-        ControllerFunction2, ControllerFunction2Response),
-    (0x290, "Position Data Range-Specification Continuous Write 3", Partial,
-        RangeWritePositionData2<'a>, RangeWritePositionData2Response),
-    (0x291, "Change Position Data Continuous Write 3", Partial,
-        ChangePositionData3<'a>, ChangePositionData3Response),
-    (0x2A0, "Coordinate System Definition Data Range-Specification Continuous Query", Complete,
-        CoordinateSystemQuery, CoordinateSystemResponse<'a>),
-    (0x2A1, "SCARA Axis Status Query", Complete, ScaraAxisStatusQuery, ScaraAxisStatusResponse),
-    (0x2A2, "Simple-Interference-Check-Zone Definition Data Range-Specification Continuous Query", Complete,
-        InterferenceZoneQuery, InterferenceZoneResponse<'a>),
-    (0x2A3, "SCARA Axis Status Query 2", Partial, ScaraAxisStatusQuery2, ScaraAxisStatusResponse2),
-    (0x2A4, "Coordinate System Definition Data Range-Specification Continuous Query 2", Complete,
-        CoordinateSystemQuery2, CoordinateSystemResponse2<'a>),
-    (0x2D4, "SCARA Absolute-Coordinate Specification Movement", Complete,
-        ScaraAbsoluteMove, ScaraAbsoluteMoveResponse),
-    (0x2D5, "SCARA Relative-Coordinate Specification Movement", Complete,
-        ScaraRelativeMove, ScaraRelativeMoveResponse),
-    (0x2D6, "SCARA Position-Number Specification Movement", Complete,
-        ScaraPositionNumberMove, ScaraPositionNumberMoveResponse),
+bind! {
+    (TEST_CALL, TestCall, TestCallResponse),
+    (VERSION_QUERY, VersionQuery, VersionResponse),
+    (EFFECTIVE_POSITION_COUNT_QUERY, EffectivePositionCountQuery, EffectivePositionCountResponse),
+    (EFFECTIVE_POSITION_QUERY, EffectivePositionQuery, EffectivePositionResponse<'r>),
+    (INPUT_PORT_QUERY, InputPortQuery, InputPortResponse<'r>),
+    (OUTPUT_PORT_QUERY, OutputPortQuery, OutputPortResponse<'r>),
+    (FLAG_QUERY, FlagQuery, FlagResponse<'r>),
+    (INTEGER_VARIABLE_QUERY, IntegerVariableQuery, IntegerVariableResponse<'r>),
+    (REAL_VARIABLE_QUERY, RealVariableQuery, RealVariableResponse<'r>),
+    (STRING_VARIABLE_QUERY, StringVariableQuery, StringVariableResponse<'r>),
+    (AXIS_STATUS_QUERY, AxisStatusQuery, AxisStatusResponse),
+    (PROGRAM_STATUS_QUERY, ProgramStatusQuery, ProgramStatusResponse),
+    (SYSTEM_STATUS_QUERY, SystemStatusQuery, SystemStatusResponse),
+    (ERROR_DETAIL_QUERY, ErrorDetailQuery, ErrorDetailResponse<'r>),
+    (EFFECTIVE_POSITION_QUERY_2, EffectivePositionQuery2, EffectivePositionResponse2<'r>),
+    (EFFECTIVE_POSITION_QUERY_3, EffectivePositionQuery3, EffectivePositionResponse3<'r>),
+    (SERVO_ON_OFF, ServoOnOff, ServoOnOffResponse),
+    (HOME_RETURN, HomeReturn, HomeReturnResponse),
+    (ABSOLUTE_MOVE, AbsoluteMove, AbsoluteMoveResponse),
+    (RELATIVE_MOVE, RelativeMove, RelativeMoveResponse),
+    (JOG_INCH, JogInch, JogInchResponse),
+    (POSITION_NUMBER_MOVE, PositionNumberMove, PositionNumberMoveResponse),
+    (OPERATION_STOP, OperationStop, OperationStopResponse),
+    (RANGE_WRITE_POSITION_DATA, RangeWritePositionData<'a>, RangeWritePositionDataResponse),
+    (CHANGE_POSITION_DATA, ChangePositionData<'a>, ChangePositionDataResponse),
+    (CLEAR_POSITION_DATA, ClearPositionData, ClearPositionDataResponse),
+    (OUTPUT_PORT_CHANGE, OutputPortChange, OutputPortChangeResponse),
+    (FLAG_CHANGE, FlagChange, FlagChangeResponse),
+    (INTEGER_VARIABLE_CHANGE, IntegerVariableChange<'a>, IntegerVariableChangeResponse),
+    (REAL_VARIABLE_CHANGE, RealVariableChange<'a>, RealVariableChangeResponse),
+    (STRING_VARIABLE_CHANGE, StringVariableChange<'a>, StringVariableChangeResponse),
+    (ALARM_RESET, AlarmReset, AlarmResetResponse),
+    (PROGRAM_RUN, ProgramRun, ProgramRunResponse),
+    (PROGRAM_END, ProgramEnd, ProgramEndResponse),
+    (PROGRAM_PAUSE, ProgramPause, ProgramPauseResponse),
+    (PROGRAM_STEP, ProgramStep, ProgramStepResponse),
+    (PROGRAM_RESUME, ProgramResume, ProgramResumeResponse),
+    (SOFTWARE_RESET, SoftwareReset, NoNormalResponse),
+    (DRIVE_SOURCE_RECOVERY, DriveSourceRecovery, DriveSourceRecoveryResponse),
+    (PAUSE_CANCEL, PauseCancel, PauseCancelResponse),
+    (SPEED_CHANGE, SpeedChange, SpeedChangeResponse),
+    (POSITION_NUMBER_MOVE_2, PositionNumberMove2, PositionNumberMove2Response),
+    (CHANGE_POSITION_DATA_2, ChangePositionData2<'a>, ChangePositionData2Response),
+    (CONTROLLER_FUNCTION_2, ControllerFunction2, ControllerFunction2Response),
+    (RANGE_WRITE_POSITION_DATA_3, RangeWritePositionData2<'a>, RangeWritePositionData2Response),
+    (CHANGE_POSITION_DATA_3, ChangePositionData3<'a>, ChangePositionData3Response),
+    (COORDINATE_SYSTEM_QUERY, CoordinateSystemQuery, CoordinateSystemResponse<'r>),
+    (SCARA_AXIS_STATUS_QUERY, ScaraAxisStatusQuery, ScaraAxisStatusResponse),
+    (INTERFERENCE_ZONE_QUERY, InterferenceZoneQuery, InterferenceZoneResponse<'r>),
+    (SCARA_AXIS_STATUS_QUERY_2, ScaraAxisStatusQuery2, ScaraAxisStatusResponse2),
+    (COORDINATE_SYSTEM_QUERY_2, CoordinateSystemQuery2, CoordinateSystemResponse2<'r>),
+    (SCARA_ABSOLUTE_MOVE, ScaraAbsoluteMove, ScaraAbsoluteMoveResponse),
+    (SCARA_RELATIVE_MOVE, ScaraRelativeMove, ScaraRelativeMoveResponse),
+    (SCARA_POSITION_NUMBER_MOVE, ScaraPositionNumberMove, ScaraPositionNumberMoveResponse),
 }
 
 /// A typed command, normal response or error response.
@@ -326,7 +324,7 @@ impl Fields for AnyMessage<'_> {
                 "error_code",
                 "",
                 crate::field::FieldSpec::hex(3),
-                super::codec::Value::Unsigned(e.code.into()),
+                crate::codec::Value::Unsigned(e.code.into()),
             ),
         }
     }

@@ -16,16 +16,17 @@
 //! Layouts marked **inferred** below are readings the sources do not state
 //! outright; `messages.toml` has the reasoning.
 
-use super::codec::*;
 use super::wire;
-use crate::axis::{AxisPattern, PerAxis};
+use crate::axis::{per_axis_values, AxisPattern, PerAxis};
+use crate::codec::*;
+use crate::error::Result;
 use crate::field::FieldSpec;
-use crate::position::{PositionRecord, RecordLayout};
+use crate::position::{PositionRecord, PositionStream, RecordLayout, RESERVED};
 
 /// Declares responses that carry no data (the bare 10-byte envelope).
 macro_rules! bare_responses {
-    ($( $(#[$m:meta])* $name:ident = $id:literal; )*) => {
-        $( wire! { $(#[$m])* [response $id] pub struct $name {} } )*
+    ($( $(#[$m:meta])* $name:ident; )*) => {
+        $( wire! { $(#[$m])* pub struct $name {} } )*
     };
 }
 
@@ -42,11 +43,6 @@ const fn text(w: u8) -> FieldSpec {
     FieldSpec::text(w)
 }
 
-/// Frame offsets of the 200H test string.
-pub(crate) const TEST_STRING_SPAN: (usize, usize) = (6, 16);
-/// Frame offset of the first character of the 216H response's message.
-pub(crate) const ERROR_DETAIL_MESSAGE_AT: usize = 90;
-
 // ---------------------------------------------------------------- 200H
 
 wire! {
@@ -54,7 +50,6 @@ wire! {
     ///
     /// Carried raw, not hex-coded. Keep them printable: CR LF inside would
     /// end the frame early (the manuals say "any 10 characters").
-    [command 0x200]
     pub struct TestCall {
         /// The 10 characters.
         pub test_string: [u8; 10] = text(10),
@@ -63,7 +58,6 @@ wire! {
 
 wire! {
     /// 200H response: the 10 characters echoed.
-    [response 0x200]
     pub struct TestCallResponse {
         /// The echoed characters.
         pub test_string: [u8; 10] = text(10),
@@ -74,7 +68,6 @@ wire! {
 
 wire! {
     /// 212H Axis Status Query.
-    [command 0x212]
     pub struct AxisStatusQuery {
         /// Axes to report.
         pub query_axis_pattern: AxisPattern = hex(2),
@@ -101,7 +94,6 @@ wire! {
 
 wire! {
     /// 212H response: one status block per axis of the pattern, ascending.
-    [response 0x212]
     pub struct AxisStatusResponse {
         /// Axes reported.
         pub axis_pattern: AxisPattern = hex(2),
@@ -114,13 +106,11 @@ wire! {
 
 wire! {
     /// 215H System Status Query (no data).
-    [command 0x215]
     pub struct SystemStatusQuery {}
 }
 
 wire! {
     /// 215H response.
-    [response 0x215]
     pub struct SystemStatusResponse {
         /// System mode (manual p. 30): 0 indeterminable, 1 AUTO, 2 MANUAL,
         /// 3 and 4 update modes.
@@ -143,24 +133,81 @@ wire! {
 // ---------------------------------------------------------------- 216H
 
 wire! {
-    /// 216H Error Detail Information Query.
-    [command 0x216]
+    /// 216H Error Detail Information Query (TTA pp. 32–33, 2003 p. 31).
+    ///
+    /// The record number is used by type 5 only and must be 0 otherwise;
+    /// `type_2` is unused by type 5 and sent as `00` (**inferred**: the
+    /// manual says "not used", not what to send). Both rules are checked
+    /// when parsing and emitting ([`Error::ValueOutOfRange`] at the field).
     pub struct ErrorDetailQuery {
         /// 0 system, 1 axis, 2 program, 3 error-list record,
-        /// 5 error-list record with extended count (TTA only).
+        /// 5 error-list record with extended count (TTA only; the 2003
+        /// spec knows 0–4, see [`crate::profile`]).
         pub type_1: u8 = hex(1),
         /// Meaning depends on `type_1` (system: 0 critical / 1 latest; axis
-        /// number; program number; list record number).
-        pub type_2: u8 = hex(2),
-        /// Record number for type 5, otherwise 0 ("error number" in the 2003 spec).
-        pub record_number: u16 = hex(3),
+        /// number; program number; list record number); 0 for type 5.
+        pub type_2: u8 = zero_unless(hex(2), type_1, |t| t != 5),
+        /// Record number for type 5, otherwise 0 ("error number" in the
+        /// 2003 spec, which has no type 5).
+        pub record_number: u16 = zero_unless(hex(3), type_1, |t| t == 5),
+    }
+}
+
+impl ErrorDetailQuery {
+    /// The most serious system error (type 0, `00`).
+    pub const fn critical_system_error() -> Self {
+        ErrorDetailQuery {
+            type_1: 0,
+            type_2: 0,
+            record_number: 0,
+        }
+    }
+    /// The latest system error (type 0, `01`).
+    pub const fn latest_system_error() -> Self {
+        ErrorDetailQuery {
+            type_1: 0,
+            type_2: 1,
+            record_number: 0,
+        }
+    }
+    /// The error of axis `axis` (type 1).
+    pub const fn axis(axis: u8) -> Self {
+        ErrorDetailQuery {
+            type_1: 1,
+            type_2: axis,
+            record_number: 0,
+        }
+    }
+    /// The error of program `program` (type 2).
+    pub const fn program(program: u8) -> Self {
+        ErrorDetailQuery {
+            type_1: 2,
+            type_2: program,
+            record_number: 0,
+        }
+    }
+    /// Record `record` (from 1) of the error list (type 3).
+    pub const fn list_record(record: u8) -> Self {
+        ErrorDetailQuery {
+            type_1: 3,
+            type_2: record,
+            record_number: 0,
+        }
+    }
+    /// Record `record` (from 1) of the error list with the extended record
+    /// count (type 5, TTA generation only).
+    pub const fn list_record_extended(record: u16) -> Self {
+        ErrorDetailQuery {
+            type_1: 5,
+            type_2: 0,
+            record_number: record,
+        }
     }
 }
 
 wire! {
     /// 216H response: error number, eight detail words, seven decimal
     /// reserved fields and a message string (always empty on the TTA).
-    [response 0x216]
     pub struct ErrorDetailResponse<'a> {
         /// Error number.
         pub error_number: u16 = hex(3),
@@ -202,26 +249,25 @@ wire! {
 
 // ---------------------------------------------------------------- 26DH
 
-/// The records of a 26DH command.
-pub type PositionRecords4<'a> = Repeated<'a, PositionRecord, RecordLayout>;
+/// Position records as used by every position-table message; their
+/// layouts are the [`PositionStream`] descriptors'.
+pub type PositionRecords<'a> = Repeated<'a, PositionRecord, RecordLayout>;
 
 wire! {
     /// 26DH Change Position Data Continuous Write 2: records, each naming
     /// its own position number (4 digits). Up to 20,000 records by format;
     /// the controller's buffer is the real limit (see [`crate::profile`]).
-    [command 0x26D]
     pub struct ChangePositionData2<'a> {
         /// The records; the count field (4 hex digits) is written from its length.
-        pub records: PositionRecords4<'a> = counted(hex(4), 20_000, RecordLayout::NUMBER_4),
+        pub records: PositionRecords<'a> = PositionStream::CHANGE_2.records(),
     }
 }
 
 wire! {
     /// 26DH response: how many positions were written.
-    [response 0x26D]
     pub struct ChangePositionData2Response {
         /// Number of positions written.
-        pub number_of_changed_positions: u16 = hex(4),
+        pub number_of_changed_positions: u16 = PositionStream::CHANGE_2.count_field(),
     }
 }
 
@@ -229,7 +275,6 @@ wire! {
 
 wire! {
     /// 201H Version Code Query.
-    [command 0x201]
     pub struct VersionQuery {
         /// 0 main CPU application, 1 main CPU core, 2 driver CPU, 3 mounted
         /// SIO (3 is TTA-only; see [`crate::profile`]).
@@ -242,7 +287,6 @@ wire! {
 wire! {
     /// 201H response: the echoed unit, its codes, version and build time
     /// (every part of the date is hex: year 2024 is `07E8`).
-    [response 0x201]
     pub struct VersionResponse {
         /// Echo of the command's unit type.
         pub unit_type: u8 = hex(2),
@@ -271,13 +315,11 @@ wire! {
 
 wire! {
     /// 208H Number of Effective Position Data Query (no data).
-    [command 0x208]
     pub struct EffectivePositionCountQuery {}
 }
 
 wire! {
     /// 208H response.
-    [response 0x208]
     pub struct EffectivePositionCountResponse {
         /// Defined (non-empty) records of the position table (3 digits).
         pub number_of_effective_positions: u16 = hex(3),
@@ -286,121 +328,106 @@ wire! {
 
 // ---------------------------------------------------------------- position table
 
-/// Position records as used by every position-table message.
-pub type PositionRecords<'a> = Repeated<'a, PositionRecord, RecordLayout>;
-
 wire! {
     /// 209H Effective Position Data Query (3-digit numbering).
-    [command 0x209]
     pub struct EffectivePositionQuery {
         /// First position number of the window.
-        pub query_head_position_number: u16 = hex(3),
+        pub query_head_position_number: u16 = PositionStream::QUERY_RESPONSE.count_field(),
         /// Window length (the controller's send buffer limits the answer).
-        pub number_of_query_records: u16 = hex(3),
+        pub number_of_query_records: u16 = PositionStream::QUERY_RESPONSE.count_field(),
     }
 }
 
 wire! {
     /// 209H response: the defined records in the window (possibly fewer
     /// than asked), each with its 3-digit position number.
-    [response 0x209]
     pub struct EffectivePositionResponse<'a> {
         /// The records; count field 3 hex digits, at most 3000.
-        pub records: PositionRecords<'a> = counted(hex(3), 3000, RecordLayout::NUMBER_3),
+        pub records: PositionRecords<'a> = PositionStream::QUERY_RESPONSE.records(),
     }
 }
 
 wire! {
     /// 21FH Effective Position Data Query 2 (4-digit numbering, TTA only).
-    [command 0x21F]
     pub struct EffectivePositionQuery2 {
         /// First position number of the window.
-        pub query_head_position_number: u16 = hex(4),
+        pub query_head_position_number: u16 = PositionStream::QUERY_2_RESPONSE.count_field(),
         /// Window length.
-        pub number_of_query_records: u16 = hex(4),
+        pub number_of_query_records: u16 = PositionStream::QUERY_2_RESPONSE.count_field(),
     }
 }
 
 wire! {
     /// 21FH response. The manual prints "max 2000 records" but its own
     /// arithmetic gives 20,000, which is used here.
-    [response 0x21F]
     pub struct EffectivePositionResponse2<'a> {
         /// The records; count field 4 hex digits.
-        pub records: PositionRecords<'a> = counted(hex(4), 20_000, RecordLayout::NUMBER_4),
+        pub records: PositionRecords<'a> = PositionStream::QUERY_2_RESPONSE.records(),
     }
 }
 
 wire! {
     /// 22DH Effective Position Data Query 3 (with extended data, TTA only).
-    [command 0x22D]
     pub struct EffectivePositionQuery3 {
         /// Reserved, always `00`.
-        pub reserved: Reserved = Fixed(b"00"),
+        pub reserved: Reserved = RESERVED,
         /// First position number of the window.
-        pub query_head_position_number: u16 = hex(4),
+        pub query_head_position_number: u16 = PositionStream::QUERY_3_RESPONSE.count_field(),
         /// Window length.
-        pub number_of_query_records: u16 = hex(4),
+        pub number_of_query_records: u16 = PositionStream::QUERY_3_RESPONSE.count_field(),
     }
 }
 
 wire! {
     /// 22DH response: records with a trailing extended-data byte.
-    [response 0x22D]
     pub struct EffectivePositionResponse3<'a> {
         /// Reserved, always `00`.
-        pub reserved: Reserved = Fixed(b"00"),
+        pub reserved: Reserved = RESERVED,
         /// The records; count field 4 hex digits.
-        pub records: PositionRecords<'a> =
-            counted(hex(4), 20_000, RecordLayout::NUMBER_4_EXTENDED),
+        pub records: PositionRecords<'a> = PositionStream::QUERY_3_RESPONSE.records(),
     }
 }
 
 wire! {
     /// 244H Position Data Range-Specification Continuous Write: records
     /// without numbers, written to consecutive positions from a start.
-    [command 0x244]
     pub struct RangeWritePositionData<'a> {
         /// First position written.
-        pub change_start_position_number: u16 = hex(3),
+        pub change_start_position_number: u16 = PositionStream::RANGE.start_field(),
         /// The records (their `number` is not sent); count 3 hex digits.
-        pub records: PositionRecords<'a> = counted(hex(3), 3000, RecordLayout::RANGE),
+        pub records: PositionRecords<'a> = PositionStream::RANGE.records(),
     }
 }
 
 wire! {
     /// 244H response.
-    [response 0x244]
     pub struct RangeWritePositionDataResponse {
         /// Echo of the start position.
-        pub change_start_position_number: u16 = hex(3),
+        pub change_start_position_number: u16 = PositionStream::RANGE.start_field(),
         /// Positions written.
-        pub number_of_changed_positions: u16 = hex(3),
+        pub number_of_changed_positions: u16 = PositionStream::RANGE.count_field(),
     }
 }
 
 wire! {
     /// 245H Change Position Data Continuous Write: records naming their own
     /// 3-digit position numbers.
-    [command 0x245]
     pub struct ChangePositionData<'a> {
         /// The records; count 3 hex digits.
-        pub records: PositionRecords<'a> = counted(hex(3), 3000, RecordLayout::NUMBER_3),
+        pub records: PositionRecords<'a> = PositionStream::CHANGE.records(),
     }
 }
 
 wire! {
     /// 245H response.
-    [response 0x245]
     pub struct ChangePositionDataResponse {
         /// Positions written.
-        pub number_of_changed_positions: u16 = hex(3),
+        pub number_of_changed_positions: u16 = PositionStream::CHANGE.count_field(),
     }
 }
 
 wire! {
     /// 246H Position Data Clear.
-    [command 0x246]
     pub struct ClearPositionData {
         /// First position cleared.
         pub clear_start_position_number: u16 = hex(3),
@@ -417,28 +444,25 @@ wire! {
     /// Status **partial**: the manual page breaks off inside the response
     /// table, so the response's end (checksum, CR LF right after the count)
     /// is assumed, and its two swapped format strings were resolved by size.
-    [command 0x290]
     pub struct RangeWritePositionData2<'a> {
         /// Reserved, always `00`.
-        pub reserved: Reserved = Fixed(b"00"),
+        pub reserved: Reserved = RESERVED,
         /// First position written.
-        pub change_start_position_number: u16 = hex(4),
+        pub change_start_position_number: u16 = PositionStream::RANGE_3.start_field(),
         /// The records; count 4 hex digits.
-        pub records: PositionRecords<'a> =
-            counted(hex(4), 20_000, RecordLayout::RANGE_EXTENDED),
+        pub records: PositionRecords<'a> = PositionStream::RANGE_3.records(),
     }
 }
 
 wire! {
     /// 290H response (end of frame assumed standard, see the command).
-    [response 0x290]
     pub struct RangeWritePositionData2Response {
         /// Reserved, always `00`.
-        pub reserved: Reserved = Fixed(b"00"),
+        pub reserved: Reserved = RESERVED,
         /// Echo of the start position.
-        pub change_start_position_number: u16 = hex(4),
+        pub change_start_position_number: u16 = PositionStream::RANGE_3.start_field(),
         /// Positions written.
-        pub number_of_changed_positions: u16 = hex(4),
+        pub number_of_changed_positions: u16 = PositionStream::RANGE_3.count_field(),
     }
 }
 
@@ -452,24 +476,21 @@ wire! {
     /// number and a trailing extended-data byte. The printed alternative
     /// (start number before the count, records without numbers) is not
     /// supported: such a frame fails to parse. Verify on hardware.
-    [command 0x291]
     pub struct ChangePositionData3<'a> {
         /// Reserved, always `00`.
-        pub reserved: Reserved = Fixed(b"00"),
+        pub reserved: Reserved = RESERVED,
         /// The records; count 4 hex digits.
-        pub records: PositionRecords<'a> =
-            counted(hex(4), 20_000, RecordLayout::NUMBER_4_EXTENDED),
+        pub records: PositionRecords<'a> = PositionStream::CHANGE_3.records(),
     }
 }
 
 wire! {
     /// 291H response.
-    [response 0x291]
     pub struct ChangePositionData3Response {
         /// Reserved, always `00`.
-        pub reserved: Reserved = Fixed(b"00"),
+        pub reserved: Reserved = RESERVED,
         /// Positions written.
-        pub number_of_changed_positions: u16 = hex(4),
+        pub number_of_changed_positions: u16 = PositionStream::CHANGE_3.count_field(),
     }
 }
 
@@ -481,7 +502,6 @@ pub type BitBytes<'a> = Repeated<'a, u8, FieldSpec>;
 
 wire! {
     /// 20BH Input Port Query.
-    [command 0x20B]
     pub struct InputPortQuery {
         /// First port: a category head number plus a multiple of 8.
         pub query_start_port_number: u16 = hex(4),
@@ -494,7 +514,6 @@ wire! {
     /// 20BH response. The count field holds a number of *ports*; one byte
     /// follows per 8 ports. The catalogue does not say how other counts
     /// round, so a count that is not a multiple of 8 is refused.
-    [response 0x20B]
     pub struct InputPortResponse<'a> {
         /// First port reported.
         pub response_start_port_number: u16 = hex(4),
@@ -505,7 +524,6 @@ wire! {
 
 wire! {
     /// 20CH Output Port Query.
-    [command 0x20C]
     pub struct OutputPortQuery {
         /// First port: a category head number plus a multiple of 8.
         pub query_start_port_number: u16 = hex(4),
@@ -516,7 +534,6 @@ wire! {
 
 wire! {
     /// 20CH response, laid out as 20BH's.
-    [response 0x20C]
     pub struct OutputPortResponse<'a> {
         /// First port reported.
         pub response_start_port_number: u16 = hex(4),
@@ -527,7 +544,6 @@ wire! {
 
 wire! {
     /// 20DH Flag Query.
-    [command 0x20D]
     pub struct FlagQuery {
         /// Program number; `00` = global flags.
         pub program_number: u8 = hex(2),
@@ -540,7 +556,6 @@ wire! {
 
 wire! {
     /// 20DH response: flags 8 per byte, counted like 20BH's ports.
-    [response 0x20D]
     pub struct FlagResponse<'a> {
         /// Echo of the program number.
         pub program_number: u8 = hex(2),
@@ -553,7 +568,6 @@ wire! {
 
 wire! {
     /// 24AH Output Port Status Change.
-    [command 0x24A]
     pub struct OutputPortChange {
         /// The port.
         pub output_port_number: u16 = hex(4),
@@ -564,7 +578,6 @@ wire! {
 
 wire! {
     /// 24BH Flag Status Change.
-    [command 0x24B]
     pub struct FlagChange {
         /// Program number; `00` = global flags.
         pub program_number: u8 = hex(2),
@@ -586,7 +599,6 @@ pub type CharCodes<'a> = Repeated<'a, u8, FieldSpec>;
 
 wire! {
     /// 20EH Integer Variable Query.
-    [command 0x20E]
     pub struct IntegerVariableQuery {
         /// Program number (0 = global variables).
         pub program_number: u8 = hex(2),
@@ -599,7 +611,6 @@ wire! {
 
 wire! {
     /// 20EH response.
-    [response 0x20E]
     pub struct IntegerVariableResponse<'a> {
         /// Echo of the program number.
         pub program_number: u8 = hex(2),
@@ -612,7 +623,6 @@ wire! {
 
 wire! {
     /// 20FH Real Variable Query.
-    [command 0x20F]
     pub struct RealVariableQuery {
         /// Program number (0 = global variables).
         pub program_number: u8 = hex(2),
@@ -626,7 +636,6 @@ wire! {
 wire! {
     /// 20FH response: doubles as 16 hex digits each, in the controller's
     /// configured [`WordOrder`] (apply it with [`RealWire::value`]).
-    [response 0x20F]
     pub struct RealVariableResponse<'a> {
         /// Echo of the program number.
         pub program_number: u8 = hex(2),
@@ -640,7 +649,6 @@ wire! {
 
 wire! {
     /// 210H String Variable Query.
-    [command 0x210]
     pub struct StringVariableQuery {
         /// Program number (0 = global variables).
         pub program_number: u8 = hex(2),
@@ -653,7 +661,6 @@ wire! {
 
 wire! {
     /// 210H response: one character per variable, as its 2-digit code.
-    [response 0x210]
     pub struct StringVariableResponse<'a> {
         /// Echo of the program number.
         pub program_number: u8 = hex(2),
@@ -666,7 +673,6 @@ wire! {
 
 wire! {
     /// 24CH Integer Variable Change.
-    [command 0x24C]
     pub struct IntegerVariableChange<'a> {
         /// Program number (0 = global variables).
         pub program_number: u8 = hex(2),
@@ -679,7 +685,6 @@ wire! {
 
 wire! {
     /// 24CH response.
-    [response 0x24C]
     pub struct IntegerVariableChangeResponse {
         /// Echo of the program number.
         pub program_number: u8 = hex(2),
@@ -694,7 +699,6 @@ wire! {
     /// 24DH Real Variable Change. The manuals show only the plain digit
     /// order here; applying the controller's 20FH word order to writes too
     /// is **inferred** (check by writing and reading back one value).
-    [command 0x24D]
     pub struct RealVariableChange<'a> {
         /// Program number (0 = global variables).
         pub program_number: u8 = hex(2),
@@ -708,7 +712,6 @@ wire! {
 
 wire! {
     /// 24DH response.
-    [response 0x24D]
     pub struct RealVariableChangeResponse {
         /// Echo of the program number.
         pub program_number: u8 = hex(2),
@@ -721,7 +724,6 @@ wire! {
 
 wire! {
     /// 24EH String Variable Change: one character per variable.
-    [command 0x24E]
     pub struct StringVariableChange<'a> {
         /// Program number (0 = global variables).
         pub program_number: u8 = hex(2),
@@ -736,7 +738,6 @@ wire! {
 
 wire! {
     /// 213H Program Status Query.
-    [command 0x213]
     pub struct ProgramStatusQuery {
         /// Program number.
         pub program_number: u8 = hex(2),
@@ -745,7 +746,6 @@ wire! {
 
 wire! {
     /// 213H response.
-    [response 0x213]
     pub struct ProgramStatusResponse {
         /// Echo of the program number.
         pub program_number: u8 = hex(2),
@@ -764,7 +764,6 @@ wire! {
 
 wire! {
     /// 232H Servo ON/OFF.
-    [command 0x232]
     pub struct ServoOnOff {
         /// Axes concerned.
         pub axis_pattern: AxisPattern = hex(2),
@@ -775,7 +774,6 @@ wire! {
 
 wire! {
     /// 233H Home Return.
-    [command 0x233]
     pub struct HomeReturn {
         /// Axes to home.
         pub axis_pattern: AxisPattern = hex(2),
@@ -788,7 +786,6 @@ wire! {
 
 wire! {
     /// 234H Absolute-Coordinate Specification Movement.
-    [command 0x234]
     pub struct AbsoluteMove {
         /// Axes to move.
         pub axis_pattern: AxisPattern = hex(2),
@@ -805,7 +802,6 @@ wire! {
 
 wire! {
     /// 235H Relative-Coordinate Specification Movement.
-    [command 0x235]
     pub struct RelativeMove {
         /// Axes to move.
         pub axis_pattern: AxisPattern = hex(2),
@@ -821,27 +817,56 @@ wire! {
 }
 
 wire! {
-    /// 236H Jogging/Inching.
-    [command 0x236]
+    /// 236H Jogging/Inching (TTA p. 41, 2003 p. 37). On SCARA only one
+    /// axis may be named, and only while no servo axis is moving.
     pub struct JogInch {
         /// Axes to move.
         pub axis_pattern: AxisPattern = hex(2),
-        /// Acceleration.
+        /// Acceleration (0 = parameter; SCARA each-axis: %).
         pub acceleration: u16 = hex(4) => "0.01G",
-        /// Deceleration.
+        /// Deceleration (0 = parameter; SCARA each-axis: %).
         pub deceleration: u16 = hex(4) => "0.01G",
-        /// Speed.
+        /// Speed (0 = parameter; SCARA each-axis: %).
         pub speed: u16 = hex(4) => "mm/s",
         /// Inching distance, a magnitude (unsigned; 0 = jog).
         pub inching_distance: u32 = hex(8) => "0.001mm",
-        /// Direction / start-stop code (manual p. 41).
+        /// Bit 0: direction ([`JogInch::POSITIVE`] or
+        /// [`JogInch::NEGATIVE`]); bits 1–2: coordinate system, SCARA only
+        /// (`JogInch::BASE`, `WORK`, `TOOL`, `EACH_AXIS`); bit 3: reserved
+        /// for the system (send 0).
         pub operation_type: u8 = hex(1),
+    }
+}
+
+impl JogInch {
+    /// Bit 0 = 0: towards the negative end of the coordinate axis.
+    pub const NEGATIVE: u8 = 0b0000;
+    /// Bit 0 = 1: towards the positive end of the coordinate axis.
+    pub const POSITIVE: u8 = 0b0001;
+    /// Bits 1–2 = 0 (SCARA): base coordinate system.
+    pub const BASE: u8 = 0 << 1;
+    /// Bits 1–2 = 1 (SCARA): the selected work coordinate system.
+    pub const WORK: u8 = 1 << 1;
+    /// Bits 1–2 = 2 (SCARA): the selected tool coordinate system.
+    pub const TOOL: u8 = 2 << 1;
+    /// Bits 1–2 = 3 (SCARA): each axis on its own.
+    pub const EACH_AXIS: u8 = 3 << 1;
+
+    /// Inching `axis` by `distance` (0.001 mm; 0 jogs instead) in
+    /// `direction` ([`JogInch::POSITIVE`] or [`JogInch::NEGATIVE`], plus a
+    /// coordinate system on SCARA).
+    pub fn inch(axis: u8, distance: u32, direction: u8) -> Result<Self> {
+        Ok(JogInch {
+            axis_pattern: AxisPattern::of(&[axis])?,
+            inching_distance: distance,
+            operation_type: direction & 0b0111,
+            ..Default::default()
+        })
     }
 }
 
 wire! {
     /// 237H Position-Number Specification Movement (3-digit number).
-    [command 0x237]
     pub struct PositionNumberMove {
         /// Axes to move.
         pub axis_pattern: AxisPattern = hex(2),
@@ -858,7 +883,6 @@ wire! {
 
 wire! {
     /// 238H Operation Stop & Cancel.
-    [command 0x238]
     pub struct OperationStop {
         /// Axes to stop.
         pub stop_axis_pattern: AxisPattern = hex(2),
@@ -869,7 +893,6 @@ wire! {
 
 wire! {
     /// 262H Speed Change.
-    [command 0x262]
     pub struct SpeedChange {
         /// Axes concerned.
         pub axis_pattern: AxisPattern = hex(2),
@@ -880,7 +903,6 @@ wire! {
 
 wire! {
     /// 26BH Position-Number Specification Movement 2 (4-digit number, TTA only).
-    [command 0x26B]
     pub struct PositionNumberMove2 {
         /// Axes to move.
         pub axis_pattern: AxisPattern = hex(2),
@@ -899,13 +921,11 @@ wire! {
 
 wire! {
     /// 252H Alarm Reset (no data).
-    [command 0x252]
     pub struct AlarmReset {}
 }
 
 wire! {
     /// 253H Program Run.
-    [command 0x253]
     pub struct ProgramRun {
         /// Program number.
         pub program_number: u8 = hex(2),
@@ -914,7 +934,6 @@ wire! {
 
 wire! {
     /// 254H Program End.
-    [command 0x254]
     pub struct ProgramEnd {
         /// Program number.
         pub program_number: u8 = hex(2),
@@ -923,7 +942,6 @@ wire! {
 
 wire! {
     /// 255H Program Pause.
-    [command 0x255]
     pub struct ProgramPause {
         /// Program number.
         pub program_number: u8 = hex(2),
@@ -932,7 +950,6 @@ wire! {
 
 wire! {
     /// 256H Program One-Step Run.
-    [command 0x256]
     pub struct ProgramStep {
         /// Program number.
         pub program_number: u8 = hex(2),
@@ -941,7 +958,6 @@ wire! {
 
 wire! {
     /// 257H Program Resume.
-    [command 0x257]
     pub struct ProgramResume {
         /// Program number.
         pub program_number: u8 = hex(2),
@@ -952,20 +968,17 @@ wire! {
     /// 25BH Software Reset (no data). The controller sends **no** normal
     /// response (an error response is still possible) and accepts commands
     /// again after about 10 s; see
-    /// [`CommandInfo::HAS_NORMAL_RESPONSE`](crate::message::CommandInfo::HAS_NORMAL_RESPONSE).
-    [command 0x25B]
+    /// [`catalogue::SOFTWARE_RESET`](crate::catalogue::SOFTWARE_RESET).
     pub struct SoftwareReset {}
 }
 
 wire! {
     /// 25CH Drive-Source Recovery Request (no data).
-    [command 0x25C]
     pub struct DriveSourceRecovery {}
 }
 
 wire! {
     /// 25EH Operation Pause Cancellation Request (no data).
-    [command 0x25E]
     pub struct PauseCancel {}
 }
 
@@ -973,7 +986,6 @@ wire! {
     /// 271H Controller Function Specification 2 (TTA only): function word
     /// 9 and seven reserved words that must be `0000`. The words are
     /// cleared by power-off and software reset; send them again afterwards.
-    [command 0x271]
     pub struct ControllerFunction2 {
         /// Function word 9.
         pub function_word_9: u16 = hex(4),
@@ -998,7 +1010,6 @@ wire! {
 
 wire! {
     /// 2A0H Coordinate System Definition Data Range-Specification Continuous Query.
-    [command 0x2A0]
     pub struct CoordinateSystemQuery {
         /// Coordinate-system kind (manual p. 65).
         pub r#type: u8 = hex(1),
@@ -1011,7 +1022,6 @@ wire! {
 
 wire! {
     /// 2A0H response: each record is four signed offsets, X, Y, Z, R.
-    [response 0x2A0]
     pub struct CoordinateSystemResponse<'a> {
         /// Echo of the kind.
         pub r#type: u8 = hex(1),
@@ -1025,7 +1035,6 @@ wire! {
 
 wire! {
     /// 2A1H SCARA Axis Status Query.
-    [command 0x2A1]
     pub struct ScaraAxisStatusQuery {
         /// Axes requested.
         pub query_axis_pattern: AxisPattern = hex(2),
@@ -1037,7 +1046,6 @@ wire! {
 wire! {
     /// 2A1H response: selections, common status, then a 212H-style block
     /// per axis (that block comes from the 2003 spec; the TTA page is lost).
-    [response 0x2A1]
     pub struct ScaraAxisStatusResponse {
         /// Selected work coordinate system.
         pub work_coordinate_selection: u8 = hex(2),
@@ -1076,7 +1084,6 @@ wire! {
 
 wire! {
     /// 2A2H Simple-Interference-Check-Zone Definition Data Range-Specification Continuous Query.
-    [command 0x2A2]
     pub struct InterferenceZoneQuery {
         /// First zone.
         pub query_zone_number: u8 = hex(2),
@@ -1087,7 +1094,6 @@ wire! {
 
 wire! {
     /// 2A2H response (record tail and the 16-record maximum from the 2003 spec).
-    [response 0x2A2]
     pub struct InterferenceZoneResponse<'a> {
         /// First zone reported.
         pub zone_number: u8 = hex(2),
@@ -1098,7 +1104,6 @@ wire! {
 
 wire! {
     /// 2A3H SCARA Axis Status Query 2 (TTA only).
-    [command 0x2A3]
     pub struct ScaraAxisStatusQuery2 {
         /// Axes requested.
         pub query_axis_pattern: AxisPattern = hex(2),
@@ -1114,7 +1119,6 @@ wire! {
     /// axes 5–8 tool selection and common status, the axis pattern and the
     /// rest of each per-axis block are **inferred** from 2A1H. Note the arm
     /// system codes differ from 2A1H (here 0 indeterminable, 1 right, 2 left).
-    [response 0x2A3]
     pub struct ScaraAxisStatusResponse2 {
         /// SCARA axes among the answered axes.
         pub scara_axis_pattern: AxisPattern = hex(2),
@@ -1140,7 +1144,6 @@ wire! {
 wire! {
     /// 2A4H Coordinate System Definition Data Range-Specification Continuous Query 2
     /// (TTA only): 2A0H with axis patterns.
-    [command 0x2A4]
     pub struct CoordinateSystemQuery2 {
         /// Axes requested.
         pub query_axis_pattern: AxisPattern = hex(2),
@@ -1157,7 +1160,6 @@ wire! {
     /// 2A4H response: one offset per axis of the response pattern per
     /// record. The printed offsets ignore the axis-pattern row (copied from
     /// 2A0H); the row is kept and the offsets recomputed (**inferred**).
-    [response 0x2A4]
     pub struct CoordinateSystemResponse2<'a> {
         /// Axes reported.
         pub response_axis_pattern: AxisPattern = hex(2),
@@ -1173,7 +1175,6 @@ wire! {
 
 wire! {
     /// 2D4H SCARA Absolute-Coordinate Specification Movement.
-    [command 0x2D4]
     pub struct ScaraAbsoluteMove {
         /// Axes to move.
         pub axis_pattern: AxisPattern = hex(2),
@@ -1192,7 +1193,6 @@ wire! {
 
 wire! {
     /// 2D5H SCARA Relative-Coordinate Specification Movement.
-    [command 0x2D5]
     pub struct ScaraRelativeMove {
         /// Axes to move.
         pub axis_pattern: AxisPattern = hex(2),
@@ -1211,7 +1211,6 @@ wire! {
 
 wire! {
     /// 2D6H SCARA Position-Number Specification Movement.
-    [command 0x2D6]
     pub struct ScaraPositionNumberMove {
         /// Axes to move.
         pub axis_pattern: AxisPattern = hex(2),
@@ -1228,57 +1227,148 @@ wire! {
     }
 }
 
+// ---------------------------------------------------------------- constructors
+
+/// Builders for the acceleration, deceleration and speed that every
+/// motion command carries (0 = the controller's parameter).
+macro_rules! motion_profile {
+    ($($ty:ident),* $(,)?) => {$(
+        impl $ty {
+            /// With this acceleration (0.01 G, or % on SCARA PTP).
+            pub const fn with_acceleration(mut self, value: u16) -> Self {
+                self.acceleration = value;
+                self
+            }
+            /// With this deceleration (0.01 G, or % on SCARA PTP).
+            pub const fn with_deceleration(mut self, value: u16) -> Self {
+                self.deceleration = value;
+                self
+            }
+            /// With this speed (mm/s, or % on SCARA PTP).
+            pub const fn with_speed(mut self, value: u16) -> Self {
+                self.speed = value;
+                self
+            }
+        }
+    )*};
+}
+
+motion_profile!(
+    AbsoluteMove,
+    RelativeMove,
+    JogInch,
+    PositionNumberMove,
+    PositionNumberMove2,
+    ScaraAbsoluteMove,
+    ScaraRelativeMove,
+    ScaraPositionNumberMove,
+);
+
+/// Constructors of the commands whose per-axis values follow an axis
+/// pattern: built from `(axis, value)` pairs, so the two always agree.
+macro_rules! per_axis_constructor {
+    ($($ty:ident :: $ctor:ident => $values:ident, $what:literal;)*) => {$(
+        impl $ty {
+            #[doc = concat!("A command for the axes of `pairs`, each with its ", $what,
+                " (0.001 mm, 0.001 deg on a rotary axis), in any order; the axis pattern is ",
+                "derived from them. Acceleration, deceleration and speed are 0 (the ",
+                "controller's parameters). An axis outside 1..=8 or named twice is ",
+                "[`Error::InvalidAxis`](crate::Error::InvalidAxis).")]
+            pub fn $ctor(pairs: &[(u8, i32)]) -> Result<Self> {
+                let (axis_pattern, $values) = per_axis_values(pairs)?;
+                Ok($ty { axis_pattern, $values, ..Default::default() })
+            }
+        }
+    )*};
+}
+
+per_axis_constructor! {
+    AbsoluteMove::to => absolute_coordinate, "target coordinate";
+    RelativeMove::by => relative_distance, "distance";
+    ScaraAbsoluteMove::to => absolute_coordinate, "target coordinate";
+    ScaraRelativeMove::by => relative_distance, "distance";
+}
+
+impl AxisStatusQuery {
+    /// The status of these axes (1..=8).
+    pub fn of(axes: &[u8]) -> Result<Self> {
+        Ok(AxisStatusQuery {
+            query_axis_pattern: AxisPattern::of(axes)?,
+        })
+    }
+}
+
+impl ServoOnOff {
+    /// Servo on (`true`) or off for these axes.
+    pub fn new(axes: &[u8], on: bool) -> Result<Self> {
+        Ok(ServoOnOff {
+            axis_pattern: AxisPattern::of(axes)?,
+            operation_type: u8::from(on),
+        })
+    }
+}
+
+impl HomeReturn {
+    /// Home these axes at the parameters' speeds.
+    pub fn of(axes: &[u8]) -> Result<Self> {
+        Ok(HomeReturn {
+            axis_pattern: AxisPattern::of(axes)?,
+            ..Default::default()
+        })
+    }
+}
+
 // ---------------------------------------------------------------- data-less responses
 
 bare_responses! {
     /// 232H response (no data).
-    ServoOnOffResponse = 0x232;
+    ServoOnOffResponse;
     /// 233H response (no data).
-    HomeReturnResponse = 0x233;
+    HomeReturnResponse;
     /// 234H response (no data).
-    AbsoluteMoveResponse = 0x234;
+    AbsoluteMoveResponse;
     /// 235H response (no data).
-    RelativeMoveResponse = 0x235;
+    RelativeMoveResponse;
     /// 236H response (no data).
-    JogInchResponse = 0x236;
+    JogInchResponse;
     /// 237H response (no data).
-    PositionNumberMoveResponse = 0x237;
+    PositionNumberMoveResponse;
     /// 238H response (no data).
-    OperationStopResponse = 0x238;
+    OperationStopResponse;
     /// 246H response (no data).
-    ClearPositionDataResponse = 0x246;
+    ClearPositionDataResponse;
     /// 24AH response (no data).
-    OutputPortChangeResponse = 0x24A;
+    OutputPortChangeResponse;
     /// 24BH response (no data).
-    FlagChangeResponse = 0x24B;
+    FlagChangeResponse;
     /// 24EH response (no data, unlike 24CH/24DH).
-    StringVariableChangeResponse = 0x24E;
+    StringVariableChangeResponse;
     /// 252H response (no data).
-    AlarmResetResponse = 0x252;
+    AlarmResetResponse;
     /// 253H response (no data).
-    ProgramRunResponse = 0x253;
+    ProgramRunResponse;
     /// 254H response (no data).
-    ProgramEndResponse = 0x254;
+    ProgramEndResponse;
     /// 255H response (no data).
-    ProgramPauseResponse = 0x255;
+    ProgramPauseResponse;
     /// 256H response (no data).
-    ProgramStepResponse = 0x256;
+    ProgramStepResponse;
     /// 257H response (no data).
-    ProgramResumeResponse = 0x257;
+    ProgramResumeResponse;
     /// 25CH response (no data).
-    DriveSourceRecoveryResponse = 0x25C;
+    DriveSourceRecoveryResponse;
     /// 25EH response (no data).
-    PauseCancelResponse = 0x25E;
+    PauseCancelResponse;
     /// 262H response (no data).
-    SpeedChangeResponse = 0x262;
+    SpeedChangeResponse;
     /// 26BH response (no data).
-    PositionNumberMove2Response = 0x26B;
+    PositionNumberMove2Response;
     /// 271H response (no data).
-    ControllerFunction2Response = 0x271;
+    ControllerFunction2Response;
     /// 2D4H response (no data).
-    ScaraAbsoluteMoveResponse = 0x2D4;
+    ScaraAbsoluteMoveResponse;
     /// 2D5H response (no data).
-    ScaraRelativeMoveResponse = 0x2D5;
+    ScaraRelativeMoveResponse;
     /// 2D6H response (no data).
-    ScaraPositionNumberMoveResponse = 0x2D6;
+    ScaraPositionNumberMoveResponse;
 }

@@ -1,15 +1,18 @@
 //! Typed messages: each is a short declaration of its fields.
 //!
-//! The generic machinery (field codecs, repeat groups) lives in [`codec`];
+//! The generic machinery (field codecs, repeat groups) lives in [`crate::codec`];
 //! a message is a struct declared with the crate's `wire!` macro, which lists
 //! its fields in wire order, each with its Rust type and its codec. The
-//! macro derives [`Wire`] (read/write of the body) and, for commands and
-//! responses, [`Message`] (parse from / emit to a whole frame). A field may
+//! macro derives [`Wire`] (read, write and length of the body). A field may
 //! end in `=> "unit"`; the macro also derives [`Fields`], which walks the
 //! decoded values with their names, units and wire formats (for inspectors
 //! and for checking the declarations against the catalogue).
 //!
-//! [`decode_any`] turns any checked frame into the matching typed message.
+//! One table binds each [`crate::catalogue`] entry to its command type and
+//! response type: it derives [`Message`] (parse from / emit to a whole
+//! frame) and [`Request`] (which response answers which command), the
+//! [`Command`] and [`Response`] enums and [`decode_any`], which turns any
+//! checked frame into the matching typed message.
 //!
 //! ```
 //! use iai_protocol_b::message::{Message, AxisStatusQuery};
@@ -22,23 +25,29 @@
 //! ```
 
 mod any;
-pub mod codec;
 mod declarations;
 
+pub use crate::codec::*;
 pub use any::*;
-pub use codec::*;
 pub use declarations::*;
 
+use crate::catalogue::MessageInfo;
 use crate::checksum::ChecksumMode;
 use crate::error::{Error, Result};
-use crate::frame::{emit_frame, Frame, Header, Station};
+use crate::frame::{emit_frame, Frame, Header, Station, ENVELOPE_LEN, TRAILER_LEN};
 
-/// A command or response with a fixed message ID and header.
+/// A command or response: a field layout bound to its catalogue entry.
+///
+/// The ID is not written here but taken from the entry
+/// ([`Message::INFO`]), so each ID stands once in the crate, in
+/// [`crate::catalogue`].
 pub trait Message<'a>: Wire<'a> {
-    /// The message ID.
-    const ID: u16;
+    /// The catalogue entry of the message.
+    const INFO: &'static MessageInfo;
     /// `Header::Command` for commands, `Header::Response` for responses.
     const HEADER: Header;
+    /// The message ID.
+    const ID: u16 = Self::INFO.id;
 
     /// Parses a checked frame as this message: header, ID, every field,
     /// and nothing left over.
@@ -61,6 +70,12 @@ pub trait Message<'a>: Wire<'a> {
         Ok(v)
     }
 
+    /// Length of the whole frame [`Message::emit`] writes, header through
+    /// LF: the buffer size it needs.
+    fn emit_len(&self) -> usize {
+        ENVELOPE_LEN + self.wire_len() + TRAILER_LEN
+    }
+
     /// Emits the whole frame into `buf` with a computed checksum; returns
     /// its length.
     fn emit(&self, station: Station, buf: &mut [u8]) -> Result<usize> {
@@ -75,12 +90,25 @@ pub trait Message<'a>: Wire<'a> {
     }
 }
 
+/// A command, with the type of the normal response that answers it.
+///
+/// ```
+/// use iai_protocol_b::message::{AxisStatusQuery, Message, Request};
+/// fn reply_id<'a, R: Request<'a>>() -> u16 {
+///     <R::Response<'static> as Message<'static>>::ID
+/// }
+/// assert_eq!(reply_id::<AxisStatusQuery>(), AxisStatusQuery::ID);
+/// ```
+pub trait Request<'a>: Message<'a> {
+    /// The normal response's type (borrowing the reply frame for `'r`).
+    type Response<'r>: Message<'r>;
+}
+
 /// Declares a struct whose fields are read and written in order, each with
 /// its codec; optionally a command or response with its message ID.
 macro_rules! wire {
     (
         $(#[$sm:meta])*
-        $([$kind:ident $id:literal])?
         pub struct $name:ident <$lt:lifetime> {
             $( $(#[$fm:meta])* $fvis:vis $field:ident : $fty:ty = $codec:expr $(=> $unit:literal)? ),* $(,)?
         }
@@ -89,17 +117,15 @@ macro_rules! wire {
         #[derive(Debug, Clone, Default, PartialEq, Eq)]
         #[cfg_attr(feature = "defmt", derive(defmt::Format))]
         pub struct $name<$lt> { $( $(#[$fm])* $fvis $field: $fty ),* }
-        impl<$lt> $crate::message::Wire<$lt> for $name<$lt> {
+        impl<$lt> $crate::codec::Wire<$lt> for $name<$lt> {
             wire!(@body $lt; $( $field : $fty = $codec ),*);
         }
-        impl<$lt> $crate::message::Fields for $name<$lt> {
+        impl<$lt> $crate::codec::Fields for $name<$lt> {
             wire!(@fields $( $field = $codec $(=> $unit)? ),*);
         }
-        $( wire!(@message $kind $id; $name<$lt>; $lt); )?
     };
     (
         $(#[$sm:meta])*
-        $([$kind:ident $id:literal])?
         pub struct $name:ident {
             $( $(#[$fm:meta])* $fvis:vis $field:ident : $fty:ty = $codec:expr $(=> $unit:literal)? ),* $(,)?
         }
@@ -108,73 +134,41 @@ macro_rules! wire {
         #[derive(Debug, Clone, Default, PartialEq, Eq)]
         #[cfg_attr(feature = "defmt", derive(defmt::Format))]
         pub struct $name { $( $(#[$fm])* $fvis $field: $fty ),* }
-        impl<'r> $crate::message::Wire<'r> for $name {
+        impl<'r> $crate::codec::Wire<'r> for $name {
             wire!(@body 'r; $( $field : $fty = $codec ),*);
         }
-        impl $crate::message::Fields for $name {
+        impl $crate::codec::Fields for $name {
             wire!(@fields $( $field = $codec $(=> $unit)? ),*);
         }
-        $( wire!(@message $kind $id; $name; 'r); )?
     };
     (@body $lt:lifetime; $( $field:ident : $fty:ty = $codec:expr ),*) => {
         #[allow(unused_variables, clippy::redundant_locals)]
         fn read(r: &mut $crate::field::Reader<$lt>) -> $crate::error::Result<Self> {
-            $( let $field: $fty = $crate::message::FieldCodec::read(&$codec, r)?; )*
+            $( let $field: $fty = $crate::codec::FieldCodec::read(&$codec, r)?; )*
             Ok(Self { $( $field ),* })
         }
         #[allow(unused_variables)]
         fn write(&self, w: &mut $crate::field::Writer<'_>) -> $crate::error::Result<()> {
             let Self { $( $field ),* } = self;
-            $( $crate::message::FieldCodec::write(&$codec, $field, w)?; )*
+            $( $crate::codec::FieldCodec::write(&$codec, $field, w)?; )*
             Ok(())
+        }
+        #[allow(unused_variables)]
+        fn wire_len(&self) -> usize {
+            let Self { $( $field ),* } = self;
+            0 $( + $crate::codec::FieldCodec::len(&$codec, $field) )*
         }
     };
     (@fields $( $field:ident = $codec:expr $(=> $unit:literal)? ),*) => {
         #[allow(unused_variables)]
-        fn fields(&self, v: &mut dyn $crate::message::Visitor) {
+        fn fields(&self, v: &mut dyn $crate::codec::Visitor) {
             let Self { $( $field ),* } = self;
-            $( $crate::message::Inspect::inspect(
-                &$codec, $field, $crate::message::strip_raw(stringify!($field)), wire!(@unit $($unit)?), v,
+            $( $crate::codec::Inspect::inspect(
+                &$codec, $field, $crate::codec::strip_raw(stringify!($field)), wire!(@unit $($unit)?), v,
             ); )*
         }
     };
     (@unit) => { "" };
     (@unit $unit:literal) => { $unit };
-    (@message command $id:literal; $ty:ty; $lt:lifetime) => {
-        impl<$lt> $crate::message::Message<$lt> for $ty {
-            const ID: u16 = $id;
-            const HEADER: $crate::frame::Header = $crate::frame::Header::Command;
-        }
-    };
-    (@message response $id:literal; $ty:ty; $lt:lifetime) => {
-        impl<$lt> $crate::message::Message<$lt> for $ty {
-            const ID: u16 = $id;
-            const HEADER: $crate::frame::Header = $crate::frame::Header::Response;
-        }
-    };
 }
 pub(crate) use wire;
-
-/// Frames are scanned for text fields up to this many bytes in.
-pub const TEXT_SPAN_KNOWN_BY: usize = declarations::ERROR_DETAIL_MESSAGE_AT;
-
-/// Frame offsets `[start, end)` of the raw-text field of a frame, if its
-/// message has one, given the frame's first bytes (`prefix`).
-///
-/// Only 200H (test string, both directions) and the 216H response (message
-/// string) carry raw characters; everywhere else every body byte is a hex
-/// digit. Returns `None` while `prefix` is too short to tell.
-pub fn text_span(header: Header, prefix: &[u8]) -> Option<(usize, usize)> {
-    let code = prefix.get(3..6)?;
-    match (header, code) {
-        (Header::Command | Header::Response, b"200") => Some(declarations::TEST_STRING_SPAN),
-        (Header::Response, b"216") => {
-            let at = declarations::ERROR_DETAIL_MESSAGE_AT;
-            let count = prefix.get(at - 2..at)?;
-            let n = crate::field::decode_unsigned(crate::field::FieldSpec::hex(2), count, at - 2)
-                .ok()?;
-            Some((at, at + n as usize))
-        }
-        _ => None,
-    }
-}

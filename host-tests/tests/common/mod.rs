@@ -42,6 +42,27 @@ pub struct Field {
     pub fixed: Option<String>,
     pub group: Option<String>,
     pub source: Option<String>,
+    /// `"FIELD == N"`: must be 0 when that earlier field holds N.
+    pub zero_when: Option<String>,
+    /// `"FIELD == N"`: must be 0 unless that earlier field holds N.
+    pub zero_unless: Option<String>,
+}
+
+impl Field {
+    /// Whether an earlier field (in `scope`) forces this one to 0.
+    pub fn forced_zero(&self, scope: &[(String, u64)]) -> bool {
+        let holds = |rule: &str| {
+            let (name, n) = rule.split_once("==").expect("FIELD == N");
+            let n: u64 = n.trim().parse().expect("a number");
+            scope
+                .iter()
+                .rev()
+                .find(|(f, _)| f == name.trim())
+                .is_some_and(|(_, v)| *v == n)
+        };
+        self.zero_when.as_deref().is_some_and(holds)
+            || self.zero_unless.as_deref().is_some_and(|r| !holds(r))
+    }
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -371,6 +392,8 @@ fn gen_seq(
                     .map(|(_, g)| g.clone());
                 let text = if let Some(lit) = &f.fixed {
                     lit.clone()
+                } else if f.forced_zero(scope) {
+                    "0".repeat(f.width)
                 } else if let Some(g) = &driven {
                     let max = g.max.unwrap_or(8);
                     if g.count_rule.starts_with("popcount:") {

@@ -12,7 +12,9 @@ pub enum Out {
 }
 
 /// Feeds `input` in the given chunk lengths (the last chunk takes the rest)
-/// through `decode`, collecting every event. Checks the `consumed` contract.
+/// through `decode`, collecting every event, then drains what the decoder
+/// still has to decode again. Checks the `consumed` contract: an event
+/// consumes input unless it comes from bytes being decoded again.
 pub fn decode_chunks<const N: usize>(
     dec: &mut FrameDecoder<N>,
     input: &[u8],
@@ -36,14 +38,29 @@ pub fn decode_chunks<const N: usize>(
                 Event::Frame(f) => out.push(Out::Frame(f.as_bytes().to_vec())),
                 Event::Error(e) => out.push(Out::Error(e)),
             }
-            assert!(d.consumed >= 1, "an event without consuming input");
             chunk = &chunk[d.consumed..];
         }
     }
+    out.extend(drain(dec));
     out
 }
 
-/// Feeds `input` one byte at a time through `push`.
+/// The events still held by `dec` (frames a failed text frame had
+/// swallowed), with no new input.
+pub fn drain<const N: usize>(dec: &mut FrameDecoder<N>) -> Vec<Out> {
+    let mut out = Vec::new();
+    loop {
+        let d = dec.decode(&[]);
+        assert_eq!(d.consumed, 0);
+        match d.event {
+            Event::NeedMore => return out,
+            Event::Frame(f) => out.push(Out::Frame(f.as_bytes().to_vec())),
+            Event::Error(e) => out.push(Out::Error(e)),
+        }
+    }
+}
+
+/// Feeds `input` one byte at a time through `push`, draining after each.
 pub fn push_bytes<const N: usize>(dec: &mut FrameDecoder<N>, input: &[u8]) -> Vec<Out> {
     let mut out = Vec::new();
     for &b in input {
@@ -52,6 +69,7 @@ pub fn push_bytes<const N: usize>(dec: &mut FrameDecoder<N>, input: &[u8]) -> Ve
             Event::Frame(f) => out.push(Out::Frame(f.as_bytes().to_vec())),
             Event::Error(e) => out.push(Out::Error(e)),
         }
+        out.extend(drain(dec));
     }
     out
 }

@@ -36,6 +36,8 @@ pub trait Wire<'a>: Sized {
     fn read(r: &mut Reader<'a>) -> Result<Self>;
     /// Writes the fields of `Self` to `w`.
     fn write(&self, w: &mut Writer<'_>) -> Result<()>;
+    /// How many bytes [`Wire::write`] writes.
+    fn wire_len(&self) -> usize;
 }
 
 /// Knows the wire form of values of type `T`.
@@ -44,6 +46,8 @@ pub trait FieldCodec<'a, T> {
     fn read(&self, r: &mut Reader<'a>) -> Result<T>;
     /// Writes one value.
     fn write(&self, value: &T, w: &mut Writer<'_>) -> Result<()>;
+    /// How many bytes [`FieldCodec::write`] writes for `value`.
+    fn len(&self, value: &T) -> usize;
 }
 
 /// Integer-like types carried in one numeric field.
@@ -104,13 +108,16 @@ impl<'a, T: Scalar> FieldCodec<'a, T> for FieldSpec {
             w.unsigned(*self, value.to_unsigned().ok_or(out_of_range)?)
         }
     }
+    fn len(&self, _: &T) -> usize {
+        FieldSpec::len(*self)
+    }
 }
 
 /// A text field of exactly `N` raw characters.
 impl<'a, const N: usize> FieldCodec<'a, [u8; N]> for FieldSpec {
     fn read(&self, r: &mut Reader<'a>) -> Result<[u8; N]> {
         let at = r.offset();
-        if self.radix != Radix::Text || self.len() != N {
+        if self.radix != Radix::Text || FieldSpec::len(*self) != N {
             return Err(Error::ValueOutOfRange { offset: at });
         }
         let mut out = [0u8; N];
@@ -118,10 +125,61 @@ impl<'a, const N: usize> FieldCodec<'a, [u8; N]> for FieldSpec {
         Ok(out)
     }
     fn write(&self, value: &[u8; N], w: &mut Writer<'_>) -> Result<()> {
-        if self.radix != Radix::Text || self.len() != N {
+        if self.radix != Radix::Text || FieldSpec::len(*self) != N {
             return Err(Error::ValueOutOfRange { offset: w.len() });
         }
         w.put(value)
+    }
+    fn len(&self, _: &[u8; N]) -> usize {
+        N
+    }
+}
+
+/// Codec of a numeric field that must hold 0 unless another field allows
+/// a value (216H: the record number is used by type 5 only).
+#[derive(Debug, Clone, Copy)]
+pub struct ZeroUnless {
+    /// The field's wire format.
+    pub spec: FieldSpec,
+    /// Whether a value other than 0 is allowed.
+    pub allowed: bool,
+}
+
+/// A field in `spec`'s format that must be 0 unless `rule(selector)`.
+pub fn zero_unless(
+    spec: FieldSpec,
+    selector: impl core::borrow::Borrow<u8>,
+    rule: fn(u8) -> bool,
+) -> ZeroUnless {
+    ZeroUnless {
+        spec,
+        allowed: rule(*selector.borrow()),
+    }
+}
+
+impl<'a, T: Scalar> FieldCodec<'a, T> for ZeroUnless {
+    fn read(&self, r: &mut Reader<'a>) -> Result<T> {
+        let at = r.offset();
+        let v: T = self.spec.read(r)?;
+        if !self.allowed && v.to_unsigned() != Some(0) {
+            return Err(Error::ValueOutOfRange { offset: at });
+        }
+        Ok(v)
+    }
+    fn write(&self, value: &T, w: &mut Writer<'_>) -> Result<()> {
+        if !self.allowed && value.to_unsigned() != Some(0) {
+            return Err(Error::ValueOutOfRange { offset: w.len() });
+        }
+        self.spec.write(value, w)
+    }
+    fn len(&self, _: &T) -> usize {
+        self.spec.len()
+    }
+}
+
+impl<T: Scalar> Inspect<T> for ZeroUnless {
+    fn inspect(&self, value: &T, name: &'static str, unit: &'static str, v: &mut dyn Visitor) {
+        self.spec.inspect(value, name, unit, v);
     }
 }
 
@@ -147,6 +205,9 @@ impl<'a> FieldCodec<'a, Reserved> for Fixed {
     fn write(&self, _: &Reserved, w: &mut Writer<'_>) -> Result<()> {
         w.put(self.0)
     }
+    fn len(&self, _: &Reserved) -> usize {
+        self.0.len()
+    }
 }
 
 /// Codec of a nested [`Wire`] struct (a record of a repeat group).
@@ -159,6 +220,9 @@ impl<'a, T: Wire<'a>> FieldCodec<'a, T> for Nested {
     }
     fn write(&self, value: &T, w: &mut Writer<'_>) -> Result<()> {
         value.write(w)
+    }
+    fn len(&self, value: &T) -> usize {
+        value.wire_len()
     }
 }
 
@@ -217,6 +281,9 @@ impl<'a, T, C: FieldCodec<'a, T>> FieldCodec<'a, PerAxis<T>> for PerAxisCodec<C>
         }
         value.iter().try_for_each(|v| self.item.write(v, w))
     }
+    fn len(&self, value: &PerAxis<T>) -> usize {
+        value.iter().map(|v| self.item.len(v)).sum()
+    }
 }
 
 /// Codec of exactly `N` items (`fixed:N` groups).
@@ -235,6 +302,9 @@ impl<'a, T: Copy + Default, C: FieldCodec<'a, T>, const N: usize> FieldCodec<'a,
     }
     fn write(&self, value: &[T; N], w: &mut Writer<'_>) -> Result<()> {
         value.iter().try_for_each(|v| self.0.write(v, w))
+    }
+    fn len(&self, value: &[T; N]) -> usize {
+        value.iter().map(|v| self.0.len(v)).sum()
     }
 }
 
@@ -280,6 +350,9 @@ impl<'a, T: Clone, C: FieldCodec<'a, T> + Copy> FieldCodec<'a, Repeated<'a, T, C
         write_count(self.count, self.max, value.len(), w)?;
         value.write_items(&self.item, w)
     }
+    fn len(&self, value: &Repeated<'a, T, C>) -> usize {
+        self.count.len() + value.items_len(&self.item)
+    }
 }
 
 /// Codec of a count field followed by that many raw characters (216H message).
@@ -299,6 +372,9 @@ impl<'a> FieldCodec<'a, &'a [u8]> for CountedText {
     fn write(&self, value: &&'a [u8], w: &mut Writer<'_>) -> Result<()> {
         write_count(self.count, self.max, value.len(), w)?;
         w.put(value)
+    }
+    fn len(&self, value: &&'a [u8]) -> usize {
+        self.count.len() + value.len()
     }
 }
 
@@ -395,6 +471,13 @@ impl<'a, T: Clone, C: FieldCodec<'a, T> + Copy> Repeated<'a, T, C> {
         match self.items {
             Items::Wire { .. } => self.iter().try_for_each(|v| codec.write(&v, w)),
             Items::Slice(items) => items.iter().try_for_each(|v| codec.write(v, w)),
+        }
+    }
+    /// Bytes the items take on the wire.
+    fn items_len(&self, codec: &C) -> usize {
+        match self.items {
+            Items::Wire { .. } => self.iter().map(|v| codec.len(&v)).sum(),
+            Items::Slice(items) => items.iter().map(|v| codec.len(v)).sum(),
         }
     }
 }
@@ -537,7 +620,7 @@ impl<T: Fields> Inspect<T> for Nested {
     }
 }
 
-fn inspect_items<'i, T: 'i, C: Inspect<T>>(
+pub(crate) fn inspect_items<'i, T: 'i, C: Inspect<T>>(
     codec: &C,
     items: impl Iterator<Item = &'i T>,
     name: &'static str,
@@ -637,65 +720,6 @@ impl<'a> Inspect<&'a [u8]> for CountedText {
     }
 }
 
-impl Inspect<crate::position::PositionRecord> for crate::position::RecordLayout {
-    fn inspect(
-        &self,
-        rec: &crate::position::PositionRecord,
-        _: &'static str,
-        _: &'static str,
-        v: &mut dyn Visitor,
-    ) {
-        let word = FieldSpec::hex(4);
-        if self.number_width > 0 {
-            let spec = FieldSpec::hex(self.number_width);
-            v.field(
-                "position_number",
-                "",
-                spec,
-                Value::Unsigned(rec.number.into()),
-            );
-        }
-        let pattern = Value::Unsigned(rec.axes.bits().into());
-        v.field("axis_pattern", "", FieldSpec::hex(2), pattern);
-        v.field(
-            "acceleration",
-            "0.01G",
-            word,
-            Value::Unsigned(rec.acceleration.into()),
-        );
-        v.field(
-            "deceleration",
-            "0.01G",
-            word,
-            Value::Unsigned(rec.deceleration.into()),
-        );
-        v.field("speed", "mm/s", word, Value::Unsigned(rec.speed.into()));
-        let group = GroupInfo {
-            count: rec.positions.len(),
-            count_field: None,
-            per_item: 1,
-            max: crate::axis::MAX_AXES,
-        };
-        let coord = FieldSpec::signed_hex(8);
-        inspect_items(
-            &coord,
-            rec.positions.iter(),
-            "position",
-            "0.001mm",
-            group,
-            v,
-        );
-        if self.extended {
-            v.field(
-                "extended_data",
-                "",
-                FieldSpec::hex(2),
-                Value::Unsigned(rec.extended.into()),
-            );
-        }
-    }
-}
-
 // ------------------------------------------------------------ additions for the full catalogue
 
 /// Codec of a per-axis group that allows at most `max` axes (2A2H's
@@ -737,6 +761,9 @@ impl<'a, T, C: FieldCodec<'a, T>> FieldCodec<'a, PerAxis<T>> for PerAxisUpTo<C> 
     fn write(&self, value: &PerAxis<T>, w: &mut Writer<'_>) -> Result<()> {
         self.check()?;
         self.inner.write(value, w)
+    }
+    fn len(&self, value: &PerAxis<T>) -> usize {
+        self.inner.len(value)
     }
 }
 
@@ -847,6 +874,9 @@ impl<'a, T: Clone, C: FieldCodec<'a, T> + Copy> FieldCodec<'a, Repeated<'a, T, C
             .ok_or(Error::ValueOutOfRange { offset: w.len() })?;
         w.unsigned(self.count, units as u64)?;
         value.write_items(&self.item, w)
+    }
+    fn len(&self, value: &Repeated<'a, T, C>) -> usize {
+        self.count.len() + value.items_len(&self.item)
     }
 }
 
