@@ -234,6 +234,11 @@ struct SimArgs {
     /// Print only connection summaries, not every frame.
     #[arg(long)]
     quiet: bool,
+    /// Answer every well-formed command normally: no refusal of moves with
+    /// the servo off, before homing, on a busy axis or to an undefined
+    /// position.
+    #[arg(long)]
+    accept_all: bool,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -767,7 +772,10 @@ fn table_read(
         |r| {
             by_number.insert(r.number, r);
         },
-        &stopped,
+        &table::Hooks {
+            note: &|m: &str| eprintln!("{m}"),
+            stop: &stopped,
+        },
     )
     .map_err(|e: TableError| format!("{target}: {e}"))?;
     let recs: Vec<PositionRecord> = by_number.into_values().collect();
@@ -799,6 +807,7 @@ fn simulate_cmd(args: &SimArgs) -> Outcome2 {
         ProfileArg::Xsel2003 => Controller::xsel_2003(station),
     };
     ctl.response_delay_ms = args.reply_delay_ms;
+    ctl.refuse = !args.accept_all;
     let shared = Shared::new(ctl);
     let opts = ServeOptions {
         faults: args.faults.clone().unwrap_or_default(),

@@ -39,7 +39,10 @@
 //!   and the position at the time of the query.
 //!
 //! # Refusals
-//! The manuals state when a real controller refuses a command only in
+//! Only when [`Controller::refuse`] is on (`iai simulate` turns it on;
+//! `--accept-all` turns it off); otherwise every well-formed command gets
+//! its normal response and a move runs whatever the servo and homing
+//! state. The manuals state when a real controller refuses a command only in
 //! general terms (an `&` reply when a received command cannot be executed,
 //! TTA p. 15, 2003 p. 13) and publish no code list. The simulator refuses
 //! the cases below with codes of its own, chosen for it and documented
@@ -122,6 +125,8 @@ pub struct Faults {
     /// The controller stops answering anything once this many position
     /// records were written (it hangs in the middle of a table).
     pub stop_after_records: Option<u64>,
+    /// The controller stops answering anything after this many commands.
+    pub stop_after_commands: Option<u32>,
     /// Chance, per position-write command, that one stored record differs
     /// from the one sent: two adjacent digits of one of its coordinates
     /// swapped, as a line fault that keeps the checksum valid would. The
@@ -368,6 +373,11 @@ pub struct Controller {
     pub axes: [Axis; MAX_AXES],
     /// Position records written, over all connections.
     pub records_written: u64,
+    /// Refuse moves as described in the module docs (servo off, not
+    /// homed, busy, undefined position). Off in the constructors, so that
+    /// protocol tests get a normal response to every well-formed command;
+    /// `iai simulate` turns it on.
+    pub refuse: bool,
 }
 
 /// A command's outcome: a reply frame, or nothing.
@@ -385,6 +395,7 @@ impl Controller {
             table: BTreeMap::new(),
             axes: [Axis::default(); MAX_AXES],
             records_written: 0,
+            refuse: false,
         }
     }
 
@@ -485,7 +496,7 @@ impl Controller {
             }
             0x216 => {
                 let q = ErrorDetailQuery::parse(f).ok()?;
-                // Illustrative details, as in EXAMPLES.md 5.2.
+                // Illustrative details (error C74H, program 1, step 5, axis 2, point -3).
                 Some(self.emit(&ErrorDetailResponse {
                     error_number: 0xC74,
                     detail_1: u32::from(q.type_2),
@@ -602,14 +613,22 @@ impl Controller {
                     return self.ack(f.code());
                 }
                 let Some(rec) = self.table.get(&number).cloned() else {
-                    return Some(self.error_frame(NO_POSITION_CODE));
+                    return if self.refuse {
+                        Some(self.error_frame(NO_POSITION_CODE))
+                    } else {
+                        self.ack(f.code())
+                    };
                 };
                 let targets: Vec<(u8, i32)> = pattern
                     .iter()
                     .filter_map(|n| rec.position(n).map(|p| (n, p)))
                     .collect();
                 if targets.is_empty() {
-                    return Some(self.error_frame(NO_POSITION_CODE));
+                    return if self.refuse {
+                        Some(self.error_frame(NO_POSITION_CODE))
+                    } else {
+                        self.ack(f.code())
+                    };
                 }
                 let pick = |given: u16, stored: u16, default: u16| {
                     [given, stored]
@@ -684,6 +703,9 @@ impl Controller {
                 .axes
                 .get(usize::from(n) - 1)
                 .ok_or(UNSUPPORTED_ERROR_CODE)?;
+            if !self.refuse {
+                continue;
+            }
             if !a.servo {
                 return Err(SERVO_OFF_CODE);
             }
@@ -696,6 +718,10 @@ impl Controller {
         }
         for &(n, to) in targets {
             if let Some(a) = self.axes.get_mut(usize::from(n) - 1) {
+                // Without refusals a new move takes over from where the
+                // axis is.
+                a.pos = a.position(now);
+                a.motion = None;
                 a.completed = false;
                 if kind == Kind::Home {
                     a.home = Home::Returning;
@@ -910,6 +936,9 @@ impl Session {
             if faults
                 .stop_after_records
                 .is_some_and(|n| ctl.records_written >= n)
+                || faults
+                    .stop_after_commands
+                    .is_some_and(|n| self.stats.commands >= n)
             {
                 // Hung: nothing is executed or answered any more.
                 continue;
@@ -1064,6 +1093,10 @@ impl Simulator {
         self.faults
             .stop_after_records
             .is_some_and(|n| self.ctl.records_written >= n)
+            || self
+                .faults
+                .stop_after_commands
+                .is_some_and(|n| self.session.stats.commands >= n)
     }
 
     /// A new connection: partial frames and pending replies are dropped,
@@ -1171,6 +1204,7 @@ mod tests {
     #[test]
     fn a_move_takes_the_time_its_profile_implies() {
         let mut sim = Simulator::tta(ST);
+        sim.refuse = true;
         let one = AxisPattern::first(1);
         // Refused before servo on and before homing.
         let r = send(&mut sim, &move_to(50_000, 100), 0);

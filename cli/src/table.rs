@@ -205,16 +205,19 @@ pub fn write(
 
 /// Reads positions `first..=last` over `link`, calling `each` for every
 /// defined record (a window the engine reads again delivers its records
-/// late: key them by number).
+/// late: key them by number). Error responses are answered as in
+/// [`write`].
 pub fn read(
     link: &mut Link,
     plan: &Plan,
     first: u16,
     last: u16,
     mut each: impl FnMut(PositionRecord),
-    stop: &dyn Fn() -> bool,
+    hooks: &Hooks<'_>,
 ) -> Result<(), TableError> {
+    let Hooks { note, stop } = *hooks;
     let mut rb: ReadBack<FRAME> = ReadBack::new(plan.read_config(first, last));
+    let mut refusals = 0;
     let mut pending: Vec<u8> = Vec::new();
     let mut buf = [0u8; 4096];
     loop {
@@ -249,8 +252,18 @@ pub fn read(
                     }
                 }
             }
-            ReadStep::Records(recs) => recs.for_each(&mut each),
+            ReadStep::Records(recs) => {
+                refusals = 0;
+                recs.for_each(&mut each);
+            }
             ReadStep::Complete(_) => return Ok(()),
+            ReadStep::Failed(TransferError::Controller { code }) if refusals < ERROR_RESENDS => {
+                refusals += 1;
+                note(&format!(
+                    "the controller answered with error code {code:03X}; asking again ({refusals} of {ERROR_RESENDS})"
+                ));
+                rb.resume(link.now());
+            }
             ReadStep::Failed(e) => return Err(TableError::Engine(e)),
         }
     }

@@ -1,7 +1,8 @@
 //! Time for the engines: a wrapping millisecond tick supplied by the caller.
 //!
 //! The sans-IO engines take `now` as an argument; their blocking, `nb` and
-//! async flavours read it from a [`Clock`] (or an [`AsyncClock`]) so that a
+//! async flavours read it from a [`Clock`] (or, with the `async` feature, an
+//! `AsyncClock`) so that a
 //! timeout always starts when the transmission really ended. Any closure
 //! `FnMut() -> u32` is a clock:
 //!

@@ -551,6 +551,10 @@ pub struct GroupInfo {
     /// Units the count field counts per item (8 for port and flag bytes,
     /// 1 elsewhere).
     pub per_item: usize,
+    /// The value the count field holds: `count`, or for port and flag
+    /// groups the number of ports or flags (`count` is that divided by 8,
+    /// rounded up).
+    pub units: usize,
     /// Largest item count the declaration accepts.
     pub max: usize,
 }
@@ -645,6 +649,7 @@ impl<T, C: Inspect<T>> Inspect<PerAxis<T>> for PerAxisCodec<C> {
             count: value.len(),
             count_field: None,
             per_item: 1,
+            units: value.len(),
             max: crate::axis::MAX_AXES,
         };
         inspect_items(&self.item, value.iter(), name, unit, group, v);
@@ -657,6 +662,7 @@ impl<T, C: Inspect<T>, const N: usize> Inspect<[T; N]> for Array<C> {
             count: N,
             count_field: None,
             per_item: 1,
+            units: value.len(),
             max: N,
         };
         inspect_items(&self.0, value.iter(), name, unit, group, v);
@@ -692,6 +698,7 @@ impl<'a, T: Clone, C: FieldCodec<'a, T> + Inspect<T> + Copy> Inspect<Repeated<'a
             count: value.len(),
             count_field: Some(self.count),
             per_item: 1,
+            units: value.len(),
             max: self.max,
         };
         inspect_repeated(&self.item, value, name, unit, group, v);
@@ -710,6 +717,7 @@ impl<'a> Inspect<&'a [u8]> for CountedText {
             count: value.len(),
             count_field: Some(self.count),
             per_item: 1,
+            units: value.len(),
             max: self.max,
         };
         v.enter_group(name, group);
@@ -779,6 +787,7 @@ impl<T, C: Inspect<T>> Inspect<PerAxis<T>> for PerAxisUpTo<C> {
             count: value.len(),
             count_field: None,
             per_item: 1,
+            units: value.len(),
             max: self.max,
         };
         inspect_items(&self.inner.item, value.iter(), name, unit, group, v);
@@ -787,11 +796,9 @@ impl<T, C: Inspect<T>> Inspect<PerAxis<T>> for PerAxisUpTo<C> {
 
 /// Codec of a count field that counts `per_item` units per item, followed
 /// by the items: the port and flag queries (20BH, 20CH, 20DH) give a number
-/// of ports or flags and send one 2-digit byte per 8 of them.
-///
-/// The catalogue does not say how a count that is not a multiple of
-/// `per_item` is rounded, so such a count is refused
-/// ([`Error::ValueOutOfRange`] at the count field) in both directions.
+/// of ports or flags and send one 2-digit byte per 8 of them, the last
+/// byte possibly partly used: `ceil(units / per_item)` items (2003 p. 19:
+/// "2 bytes x (Max 8192 – 1)" of data for any number of ports).
 #[derive(Debug, Clone, Copy)]
 pub struct CountedPer<C> {
     /// Format of the count field.
@@ -819,6 +826,61 @@ pub const fn counted_per<C>(
     }
 }
 
+/// Items counted in units: the number the count field holds (ports,
+/// flags) and the items that carry them (one per `per_item` units, the
+/// last possibly partly used).
+///
+/// ```
+/// use iai_protocol_b::message::{PortData, Repeated};
+/// // 12 ports starting at the query's start port: two bytes, the second
+/// // carrying ports 8..=11 in its low 4 bits.
+/// let data: PortData = PortData { units: 12, items: Repeated::from_slice(&[0xA5, 0x0F]) };
+/// assert_eq!(data.items.len(), 2);
+/// ```
+#[derive(Debug, Clone, Copy)]
+pub struct Units<'a, T, C> {
+    /// The value of the count field (ports, flags).
+    pub units: usize,
+    /// The items.
+    pub items: Repeated<'a, T, C>,
+}
+
+/// No units, no items.
+impl<T, C> Default for Units<'_, T, C> {
+    fn default() -> Self {
+        Units {
+            units: 0,
+            items: Repeated::default(),
+        }
+    }
+}
+
+impl<'a, T: Clone + PartialEq, C: FieldCodec<'a, T> + Copy> PartialEq for Units<'a, T, C> {
+    fn eq(&self, other: &Self) -> bool {
+        self.units == other.units && self.items == other.items
+    }
+}
+impl<'a, T: Clone + Eq, C: FieldCodec<'a, T> + Copy> Eq for Units<'a, T, C> {}
+
+#[cfg(feature = "defmt")]
+impl<T, C> defmt::Format for Units<'_, T, C> {
+    fn format(&self, f: defmt::Formatter) {
+        defmt::write!(
+            f,
+            "Units({=usize} in {=usize} items)",
+            self.units,
+            self.items.len()
+        )
+    }
+}
+
+impl<C> CountedPer<C> {
+    /// Items that carry `units` units.
+    fn items_for(&self, units: usize) -> usize {
+        units.div_ceil(self.per_item.max(1))
+    }
+}
+
 fn read_items<'a, T, C: FieldCodec<'a, T> + Copy>(
     count: usize,
     item: C,
@@ -841,62 +903,61 @@ fn read_items<'a, T, C: FieldCodec<'a, T> + Copy>(
     })
 }
 
-impl<'a, T: Clone, C: FieldCodec<'a, T> + Copy> FieldCodec<'a, Repeated<'a, T, C>>
-    for CountedPer<C>
-{
-    fn read(&self, r: &mut Reader<'a>) -> Result<Repeated<'a, T, C>> {
+impl<'a, T: Clone, C: FieldCodec<'a, T> + Copy> FieldCodec<'a, Units<'a, T, C>> for CountedPer<C> {
+    fn read(&self, r: &mut Reader<'a>) -> Result<Units<'a, T, C>> {
         let at = r.offset();
         let units = r.unsigned(self.count)?;
         let units = usize::try_from(units).map_err(|_| Error::ValueOutOfRange { offset: at })?;
-        let per = self.per_item.max(1);
-        if units % per != 0 {
-            return Err(Error::ValueOutOfRange { offset: at });
-        }
-        let n = units / per;
+        let n = self.items_for(units);
         if n > self.max {
             return Err(Error::CountTooLarge {
                 count: n,
                 max: self.max,
             });
         }
-        read_items(n, self.item, r)
+        Ok(Units {
+            units,
+            items: read_items(n, self.item, r)?,
+        })
     }
-    fn write(&self, value: &Repeated<'a, T, C>, w: &mut Writer<'_>) -> Result<()> {
-        let n = value.len();
+    fn write(&self, value: &Units<'a, T, C>, w: &mut Writer<'_>) -> Result<()> {
+        let n = value.items.len();
         if n > self.max {
             return Err(Error::CountTooLarge {
                 count: n,
                 max: self.max,
             });
         }
-        let units = n
-            .checked_mul(self.per_item.max(1))
-            .ok_or(Error::ValueOutOfRange { offset: w.len() })?;
-        w.unsigned(self.count, units as u64)?;
-        value.write_items(&self.item, w)
+        let expected = self.items_for(value.units);
+        if n != expected {
+            return Err(Error::CountMismatch { expected, found: n });
+        }
+        w.unsigned(self.count, value.units as u64)?;
+        value.items.write_items(&self.item, w)
     }
-    fn len(&self, value: &Repeated<'a, T, C>) -> usize {
-        self.count.len() + value.items_len(&self.item)
+    fn len(&self, value: &Units<'a, T, C>) -> usize {
+        self.count.len() + value.items.items_len(&self.item)
     }
 }
 
-impl<'a, T: Clone, C: FieldCodec<'a, T> + Inspect<T> + Copy> Inspect<Repeated<'a, T, C>>
+impl<'a, T: Clone, C: FieldCodec<'a, T> + Inspect<T> + Copy> Inspect<Units<'a, T, C>>
     for CountedPer<C>
 {
     fn inspect(
         &self,
-        value: &Repeated<'a, T, C>,
+        value: &Units<'a, T, C>,
         name: &'static str,
         unit: &'static str,
         v: &mut dyn Visitor,
     ) {
         let group = GroupInfo {
-            count: value.len(),
+            count: value.items.len(),
             count_field: Some(self.count),
             per_item: self.per_item,
+            units: value.units,
             max: self.max,
         };
-        inspect_repeated(&self.item, value, name, unit, group, v);
+        inspect_repeated(&self.item, &value.items, name, unit, group, v);
     }
 }
 

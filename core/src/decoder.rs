@@ -47,7 +47,8 @@
 
 use crate::checksum::BypassPolicy;
 use crate::error::Error;
-use crate::frame::{self, Envelope, Frame, Header, ENVELOPE_LEN};
+use crate::field::{decode_unsigned, move_within, FieldSpec};
+use crate::frame::{self, Envelope, Frame, Header, Station, ENVELOPE_LEN};
 use crate::limits;
 
 /// Default capacity: the largest frame a controller sends or receives
@@ -121,6 +122,9 @@ pub struct FrameDecoder<const N: usize = DEFAULT_CAPACITY> {
     text: Option<(usize, usize)>,
     /// Envelope of the frame last returned (valid while `state == Done`).
     last: Option<Envelope>,
+    /// Envelope of the last frame that ended with CR LF but failed its
+    /// check (cleared by the next byte).
+    failed: Option<(Header, Station, u16)>,
     /// Bytes of a failed text frame still to decode again:
     /// `buf[replay_pos..replay_len]`.
     replay_pos: usize,
@@ -149,6 +153,7 @@ impl<const N: usize> FrameDecoder<N> {
             policy,
             text: None,
             last: None,
+            failed: None,
             replay_pos: 0,
             replay_len: 0,
             stats: DecoderStats {
@@ -196,6 +201,14 @@ impl<const N: usize> FrameDecoder<N> {
         }
         let bytes = self.buf.get(..self.len)?;
         self.last.map(|env| Frame::from_parts(bytes, env))
+    }
+
+    /// After an [`Event::Error`] for a frame that ended with CR LF but
+    /// failed its check (checksum, digits, layout of the envelope): its
+    /// header, station and code, if they could be read. An engine awaiting
+    /// a reply uses this to tell "my reply arrived broken" from noise.
+    pub fn failed_envelope(&self) -> Option<(Header, Station, u16)> {
+        self.failed
     }
 
     /// Drops any partial frame and bytes waiting to be decoded again
@@ -305,9 +318,11 @@ impl<const N: usize> FrameDecoder<N> {
         if total > N || (waiting > 0 && self.replay_pos < self.len) {
             return None;
         }
-        self.buf
-            .copy_within(self.replay_pos..self.replay_len, kept + extra_len);
-        self.buf.copy_within(p..self.len, 0);
+        let moved = move_within(&mut self.buf, self.replay_pos, waiting, kept + extra_len)
+            && move_within(&mut self.buf, p, kept, 0);
+        if !moved {
+            return None;
+        }
         if let (Some(x), Some(slot)) = (extra, self.buf.get_mut(kept)) {
             *slot = x;
         }
@@ -350,6 +365,7 @@ impl<const N: usize> FrameDecoder<N> {
     }
 
     fn step(&mut self, byte: u8) -> Step {
+        self.failed = None;
         if self.state == State::Done {
             self.len = 0;
             self.state = State::Hunting;
@@ -404,6 +420,7 @@ impl<const N: usize> FrameDecoder<N> {
                             Step::Frame(env)
                         }
                         Err(e) => {
+                            self.failed = envelope_of(bytes);
                             if let Some(step) = self.recover(e, None) {
                                 return step;
                             }
@@ -443,6 +460,14 @@ impl<const N: usize> FrameDecoder<N> {
             self.fail(e, dropped)
         }
     }
+}
+
+/// Header, station and code of a frame's first six bytes, if readable.
+fn envelope_of(bytes: &[u8]) -> Option<(Header, Station, u16)> {
+    let header = Header::from_byte(*bytes.first()?)?;
+    let station = decode_unsigned(FieldSpec::hex(2), bytes.get(1..3)?, 1).ok()?;
+    let code = decode_unsigned(FieldSpec::hex(3), bytes.get(3..6)?, 3).ok()?;
+    Some((header, Station(station as u8), code as u16))
 }
 
 #[cfg(test)]

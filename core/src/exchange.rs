@@ -469,6 +469,34 @@ impl Exchange {
         Due::Done(f)
     }
 
+    /// The awaited reply arrived broken (it ended with CR LF, carried this
+    /// command's station and ID, and failed its checksum or layout): the
+    /// controller answers each command once, so no valid reply will come.
+    /// The command is treated as timed out as soon as the turnaround has
+    /// passed, instead of `timeout_ms` later. (Resending before the
+    /// timeout is an **inference** from the half-duplex rules, 2003 p. 8:
+    /// after its reply the controller is ready for the next command.)
+    pub fn reply_lost(&mut self, now: u32) {
+        if let Phase::Await { deadline } = self.phase {
+            let soon = now.wrapping_add(self.cfg.turnaround_ms).wrapping_add(1);
+            if reached(deadline, soon) {
+                self.phase = Phase::Await { deadline: soon };
+            }
+            self.faulted = true;
+        }
+    }
+
+    /// A frame ended broken; `envelope` is what could be read of it
+    /// ([`crate::decoder::FrameDecoder::failed_envelope`]). If it was this
+    /// command's reply, see [`Exchange::reply_lost`].
+    pub fn broken_frame(&mut self, envelope: Option<(Header, Station, u16)>, now: u32) {
+        if let Some((header, station, code)) = envelope {
+            if judge(self.cfg.station, self.id, header, station, code) != Verdict::Foreign {
+                self.reply_lost(now);
+            }
+        }
+    }
+
     /// Forgets the current command (its replies become stale).
     pub fn abandon(&mut self, now: u32) {
         if self.busy() {
@@ -588,6 +616,18 @@ mod tests {
         // It arrives meanwhile: stale, never the next command's reply.
         assert_eq!(x.offer(&f, true, 3_500), Offer::Stale);
         assert_eq!(x.poll(9_010), Due::Transmit { fresh: true });
+    }
+
+    #[test]
+    fn a_broken_reply_is_resent_after_the_turnaround_not_the_timeout() {
+        let mut x = exchange();
+        x.start(&catalogue::AXIS_STATUS_QUERY, 0);
+        x.poll(0);
+        x.sent(100);
+        x.reply_lost(150);
+        assert_eq!(x.poll(151), Due::WaitUntil(152));
+        assert_eq!(x.poll(152), Due::Transmit { fresh: true });
+        assert_eq!(x.sends(), 2);
     }
 
     #[test]

@@ -268,6 +268,35 @@ pub fn decode_signed(spec: FieldSpec, digits: &[u8], offset: usize) -> Result<i6
     Ok(raw.checked_shl(shift).map_or(0, |v| (v as i64) >> shift))
 }
 
+/// Moves `len` bytes of `buf` from `src` to `dst` (the ranges may overlap);
+/// `false`, moving nothing, if either range is not inside `buf`.
+///
+/// Byte by byte rather than `copy_within`: the compiler cannot always see
+/// that the bounds checked here make `copy_within`'s own assertion dead,
+/// and the crate must keep no panic path. It runs on rare paths only
+/// (carrying records to the next frame, decoding a failed frame again).
+pub(crate) fn move_within(buf: &mut [u8], src: usize, len: usize, dst: usize) -> bool {
+    let (Some(src_end), Some(dst_end)) = (src.checked_add(len), dst.checked_add(len)) else {
+        return false;
+    };
+    if src_end > buf.len() || dst_end > buf.len() {
+        return false;
+    }
+    let mut step = |i: usize| {
+        if let Some(&b) = buf.get(src + i) {
+            if let Some(slot) = buf.get_mut(dst + i) {
+                *slot = b;
+            }
+        }
+    };
+    if dst <= src {
+        (0..len).for_each(&mut step);
+    } else {
+        (0..len).rev().for_each(&mut step);
+    }
+    true
+}
+
 /// A cursor over the body of a received frame.
 ///
 /// Reading never panics: running past the end is

@@ -3,7 +3,8 @@
 //!
 //! - [Receiving frames](#1-receiving-frames): bytes from a UART become
 //!   checked frames, then typed messages, then named fields.
-//! - [Sending a command and reading the reply](#2-sending-a-command-and-reading-the-reply).
+//! - [Sending a command and reading the reply](#2-sending-a-command-and-reading-the-reply):
+//!   the request engine, with the protocol's timeouts and retries.
 //! - [Streaming a position table](#3-streaming-a-position-table): the
 //!   transfer engine writes a table of any size in controller-sized,
 //!   confirmed commands.
@@ -76,62 +77,57 @@
 //!
 //! # 2. Sending a command and reading the reply
 //!
-//! Every typed message emits itself with [`Message::emit`](crate::message::Message::emit)
-//! into a caller's buffer, computing the checksum.
-//! [`io::send`](crate::io::send) does that and writes the frame to any
-//! `embedded_io::Write`; [`io::receive`](crate::io::receive) reads from an
-//! `embedded_io::Read` until a frame is complete, and the response type's
-//! [`Message::parse`](crate::message::Message::parse) checks header, ID and
-//! every field. An `&` reply is an error response: parse it with
-//! [`ErrorResponse::parse`](crate::message::ErrorResponse::parse).
+//! [`Client`](crate::client::Client) sends any command and returns its
+//! typed reply. It applies chapter 5 of the X-SEL specification (the
+//! TTA's own chapter is lost): the reply must be complete within 3 s after
+//! the command was sent, or the command is sent again, up to 3 sends; a
+//! reply counts only if its format, checksum, station and message ID are
+//! right, and only for the command it answers (a late reply to an earlier
+//! command is dropped, never handed to the next one). Commands that must
+//! not run twice (235H relative move, 236H inching, program steps) are
+//! sent once unless you opt in: a lost reply then reports
+//! [`CallError::OutcomeUnknown`](crate::client::CallError::OutcomeUnknown).
+//! An `&` error response is [`CallError::Controller`](crate::client::CallError::Controller)
+//! with its code (and, if asked for, the 216H error detail); it is not
+//! sent again.
 //!
-//! Here the "controller" is played by a byte slice holding its reply.
+//! Motion commands are built from `(axis, value)` pairs, so their axis
+//! pattern always matches their values. The UART is anything with the
+//! `embedded-io` `Read`, `ReadReady` and `Write` traits; the clock any
+//! `FnMut() -> u32` in milliseconds. Here a [`Loopback`](crate::client::Loopback)
+//! plays the controller:
 //!
 //! ```
-//! use iai_protocol_b::axis::{AxisPattern, PerAxis};
-//! use iai_protocol_b::decoder::FrameDecoder;
-//! use iai_protocol_b::frame::{Header, Station};
-//! use iai_protocol_b::io::{receive, send};
-//! use iai_protocol_b::message::{
-//!     AxisStatus, AxisStatusQuery, AxisStatusResponse, ErrorResponse, Message,
-//! };
+//! use iai_protocol_b::client::{CallError, Client, ClientConfig, Loopback};
+//! use iai_protocol_b::frame::Station;
+//! use iai_protocol_b::message::{AbsoluteMove, AxisStatusQuery};
+//! # let mut uart = Loopback::default();
+//! # let mut ms = 0u32;
+//! # let mut now = move || { ms += 1; ms };
 //!
-//! let station = Station(0x99);
-//!
-//! // Host → controller: 212H for axes 1 and 2.
-//! let mut line = [0u8; 64];
-//! let query = AxisStatusQuery { query_axis_pattern: AxisPattern::first(2) };
-//! let n = send(&mut &mut line[..], &query, station, &mut [0u8; 32]).unwrap();
-//! assert_eq!(&line[..n], b"!99212038B\r\n");
-//!
-//! // Controller → host: what a controller with two homed axes would say.
-//! let mut axes = PerAxis::new();
-//! for pos in [1_000, -2_500] {
-//!     axes.push(AxisStatus { axis_status: 0x15, current_position: pos, ..Default::default() })
-//!         .unwrap();
-//! }
-//! let reply = AxisStatusResponse { axis_pattern: AxisPattern::first(2), axes };
-//! let mut wire = [0u8; 64];
-//! let len = reply.emit(station, &mut wire).unwrap();
-//!
-//! // The host reads it back.
-//! let mut dec: FrameDecoder = FrameDecoder::new();
-//! let frame = receive(&mut &wire[..len], &mut dec).unwrap();
-//! match frame.header() {
-//!     Header::Response => {
-//!         let status = AxisStatusResponse::parse(&frame).unwrap();
-//!         let positions: Vec<i32> = status.axes.iter().map(|a| a.current_position).collect();
-//!         assert_eq!(positions, [1_000, -2_500]);
-//!     }
-//!     Header::Error => panic!("controller error {:03X}", ErrorResponse::parse(&frame).unwrap().code),
-//!     Header::Command => unreachable!("a controller does not send commands"),
-//! }
+//! let mut client: Client = Client::new(ClientConfig::new(Station(0x99)));
+//! // 234H: axis 1 to +100.000 mm, axis 2 to -25.500 mm at 100 mm/s.
+//! let go = AbsoluteMove::to(&[(1, 100_000), (2, -25_500)])?.with_speed(100);
+//! client.call(&mut uart, &mut now, &go)?;
+//! // 212H: the typed reply, one status block per axis asked.
+//! let status = client.call(&mut uart, &mut now, &AxisStatusQuery::of(&[1, 2])?)?;
+//! assert_eq!(status.axes.len(), 2);
+//! # Ok::<(), CallError<core::convert::Infallible>>(())
 //! ```
 //!
-//! A real host also needs a timeout: the X-SEL specification allows the
-//! controller a bounded time to answer and asks the host to send the
-//! command again after it. The transfer and read-back engines below do
-//! this themselves.
+//! Without blocking, drive the same engine yourself:
+//! [`Client::start`](crate::client::Client::start), then
+//! [`Client::poll`](crate::client::Client::poll) tells you to transmit
+//! bytes (report [`Client::sent`](crate::client::Client::sent) when the
+//! last one left), to wait until a tick (feeding received bytes to
+//! [`Client::received`](crate::client::Client::received) meanwhile), or
+//! that the request is done; [`Client::response`](crate::client::Client::response)
+//! then parses the reply. [`Client::poll_nb`](crate::client::Client::poll_nb)
+//! and, with the `async` feature, `Client::call_async` wrap that loop.
+//!
+//! To build frames by hand, every message emits itself with
+//! [`Message::emit`](crate::message::Message::emit) into a buffer of
+//! [`Message::emit_len`](crate::message::Message::emit_len) bytes.
 //!
 //! # 3. Streaming a position table
 //!
@@ -140,83 +136,103 @@
 //! sans-IO state machine that pulls records from any source (an iterator
 //! here, a [`RecordQueue`](crate::transfer::RecordQueue) when they arrive
 //! over another link), packs as many as the controller accepts into each
-//! 26DH command, and waits for the reply that confirms that count, sending
-//! again after a timeout. The caller moves bytes and time:
+//! 26DH command, waits for the reply that confirms that count (sending
+//! again after a timeout), then reads the positions back with 21FH and
+//! compares them with what it sent ([`Verify::Full`](crate::transfer::Verify),
+//! the default). The caller moves bytes and time:
 //!
 //! - [`Step::Transmit`](crate::transfer::Step::Transmit): send these bytes,
 //!   then call [`Transfer::sent`](crate::transfer::Transfer::sent);
 //! - [`Step::WaitUntil`](crate::transfer::Step::WaitUntil): feed received
-//!   bytes to [`Transfer::received`](crate::transfer::Transfer::received)
+//!   bytes to [`Transfer::received_all`](crate::transfer::Transfer::received_all)
 //!   and poll again by that tick;
-//! - [`Step::Complete`](crate::transfer::Step::Complete) /
+//! - [`Step::Complete`](crate::transfer::Step::Complete) (with the
+//!   [`Guarantee`](crate::transfer::Guarantee) the run carries) /
 //!   [`Step::Failed`](crate::transfer::Step::Failed): done.
 //!
-//! The controller side of this example is an in-memory loopback: it reads
-//! each command with the [`PositionStreamDecoder`](crate::stream::PositionStreamDecoder)
-//! (record by record, as a bridge or a controller with little RAM would)
-//! and answers with the 26DH response.
+//! The controller of this example is a map in memory: it reads each 26DH
+//! record by record with the [`PositionStreamDecoder`](crate::stream::PositionStreamDecoder)
+//! and stores the records; it answers 21FH from the map.
 //!
 //! ```
+//! use std::collections::BTreeMap;
 //! use iai_protocol_b::checksum::BypassPolicy;
+//! use iai_protocol_b::decoder::{Event, FrameDecoder};
 //! use iai_protocol_b::frame::Station;
-//! use iai_protocol_b::message::{ChangePositionData2Response, Message};
+//! use iai_protocol_b::message::*;
 //! use iai_protocol_b::position::PositionRecord;
 //! use iai_protocol_b::stream::{PositionStreamDecoder, StreamEvent};
-//! use iai_protocol_b::transfer::{Step, Transfer, TransferConfig};
+//! use iai_protocol_b::transfer::{Guarantee, Step, Transfer, TransferConfig};
 //!
 //! let station = Station(0x99);
 //! // 500 records of 3 axes: more than one 2,051-byte frame holds.
-//! let table = (1..=500u16).map(|n| {
-//!     let x = i32::from(n) * 100;
-//!     PositionRecord::new(n, 30, 30, 200, &[(1, x), (2, -x), (3, 5_000)]).unwrap()
-//! });
+//! let table: Vec<_> = (1..=500u16)
+//!     .map(|n| {
+//!         let x = i32::from(n) * 100;
+//!         PositionRecord::new(n, 30, 30, 200, &[(1, x), (2, -x), (3, 5_000)]).unwrap()
+//!     })
+//!     .collect();
 //!
-//! let mut transfer: Transfer<_> = Transfer::new(TransferConfig::tta(station), table);
-//! let mut controller = PositionStreamDecoder::new(BypassPolicy::default());
-//! let mut written = Vec::new();
-//! let mut reply = Vec::new();
-//! let mut now = 0u32;
-//! let stats = loop {
-//!     match transfer.poll(now) {
-//!         Step::Transmit(bytes) => {
-//!             // "Send": the controller reads the command as it arrives.
-//!             let command = bytes.to_vec();
-//!             transfer.sent(now);
-//!             controller.reset();
-//!             let mut input = &command[..];
-//!             let count = loop {
-//!                 let (used, event) = controller.decode(input);
-//!                 input = &input[used..];
-//!                 match event {
-//!                     StreamEvent::Record(rec) => written.push(rec.number),
-//!                     StreamEvent::End { records } => break records,
-//!                     StreamEvent::Error { error, .. } => panic!("{error}"),
-//!                     StreamEvent::NeedMore | StreamEvent::Start { .. } => {}
-//!                 }
-//!             };
-//!             // It answers with the number of positions written.
-//!             let mut buf = [0u8; 16];
-//!             let resp = ChangePositionData2Response { number_of_changed_positions: count };
-//!             let n = resp.emit(station, &mut buf).unwrap();
-//!             reply = buf[..n].to_vec();
-//!         }
-//!         Step::WaitUntil(deadline) => {
-//!             if reply.is_empty() {
-//!                 now = deadline; // nothing on the line: let time pass
-//!             } else {
-//!                 transfer.received(&reply, now);
-//!                 reply.clear();
+//! /// The controller: stores 26DH records, answers 21FH windows.
+//! fn controller(map: &mut BTreeMap<u16, PositionRecord>, command: &[u8], st: Station) -> Vec<u8> {
+//!     let mut out = vec![0u8; 2048];
+//!     if command.starts_with(b"!9926D") {
+//!         let mut dec = PositionStreamDecoder::new(BypassPolicy::default());
+//!         let (mut input, mut written) = (command, 0);
+//!         loop {
+//!             let (used, event) = dec.decode(input);
+//!             input = &input[used..];
+//!             match event {
+//!                 StreamEvent::Record(rec) => { map.insert(rec.number, rec); written += 1 }
+//!                 StreamEvent::End { .. } => break,
+//!                 StreamEvent::Error { error, .. } => panic!("{error}"),
+//!                 _ => {}
 //!             }
 //!         }
-//!         Step::Complete(stats) => break stats,
+//!         let reply = ChangePositionData2Response { number_of_changed_positions: written };
+//!         let n = reply.emit(st, &mut out).unwrap();
+//!         out.truncate(n);
+//!     } else {
+//!         let mut dec: FrameDecoder = FrameDecoder::new();
+//!         let Event::Frame(frame) = dec.decode(command).event else { panic!() };
+//!         let q = EffectivePositionQuery2::parse(&frame).unwrap();
+//!         let head = q.query_head_position_number;
+//!         let window = head..head + q.number_of_query_records;
+//!         let found: Vec<_> = map.range(window).map(|(_, r)| r.clone()).collect();
+//!         let reply = EffectivePositionResponse2 { records: Repeated::from_slice(&found) };
+//!         let n = reply.emit(st, &mut out).unwrap();
+//!         out.truncate(n);
+//!     }
+//!     out
+//! }
+//!
+//! let mut transfer: Transfer<_> = Transfer::new(TransferConfig::tta(station), table.clone().into_iter());
+//! let mut map = BTreeMap::new();
+//! let mut line = Vec::new();
+//! let mut now = 0u32;
+//! let report = loop {
+//!     match transfer.poll(now) {
+//!         Step::Transmit(bytes) => {
+//!             line = controller(&mut map, bytes, station);
+//!             transfer.sent(now);
+//!         }
+//!         Step::WaitUntil(deadline) => {
+//!             if line.is_empty() {
+//!                 now = deadline; // nothing on the line: let time pass
+//!             } else {
+//!                 transfer.received_all(&line, now);
+//!                 line.clear();
+//!             }
+//!         }
+//!         Step::Complete(report) => break report,
 //!         Step::NeedRecords => unreachable!("an iterator is never pending"),
 //!         Step::Failed(e) => panic!("transfer failed: {e:?}"),
 //!     }
 //!     now += 1;
 //! };
-//! assert_eq!(stats.records_confirmed, 500);
-//! assert!(stats.frames_confirmed > 1);
-//! assert_eq!(written, (1..=500).collect::<Vec<u16>>());
+//! assert_eq!(report.guarantee, Guarantee::Verified);
+//! assert_eq!(report.stats.records_verified, 500);
+//! assert_eq!(map.values().cloned().collect::<Vec<_>>(), table);
 //! ```
 //!
 //! Over a real UART, [`Transfer::run_blocking`](crate::transfer::Transfer::run_blocking)

@@ -56,6 +56,7 @@ pub mod client;
 pub mod clock;
 pub mod codec;
 pub mod decoder;
+pub mod drive;
 pub mod error;
 pub mod exchange;
 pub mod field;

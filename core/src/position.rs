@@ -254,6 +254,7 @@ impl Inspect<PositionRecord> for RecordLayout {
             count: rec.positions.len(),
             count_field: None,
             per_item: 1,
+            units: rec.positions.len(),
             max: MAX_AXES,
         };
         inspect_items(

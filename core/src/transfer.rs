@@ -29,14 +29,24 @@
 //! records were written. A reply can come late (after the timeout and the
 //! resend) or twice (an echoing converter). So that no such reply confirms
 //! a frame it does not belong to, the engine never gives a frame a record
-//! count that a reply still in flight could carry: the count of any frame
-//! whose reply came within `duplicate_window_ms`, or that was sent within
-//! `timeout_ms + late_window_ms` and not answered (3 s and 3 + 3 s by
-//! default). It sends fewer records instead, carrying the rest to the next
-//! frame. On a clean line this costs a few per-frame overheads (about 1 %
-//! of the wire time at 115,200 baud, none at 9,600); it never costs a
-//! record. A reply later than those windows is outside what the engine
-//! can tell apart; [`Verify::Full`] catches what it would do.
+//! count that a reply still in flight could carry; it sends fewer records
+//! instead and carries the rest to the next frame:
+//!
+//! - never the count of the frame answered last;
+//! - never the count of a frame sent within `timeout_ms + late_window_ms`
+//!   (3 + 3 s) whose reply did not come, or that was sent more than once;
+//! - once the line has shown a late or duplicated reply (a reply while
+//!   none was awaited, or one with the wrong count), never the count of a
+//!   frame answered within `duplicate_window_ms` (3 s).
+//!
+//! The last rule waits for evidence because it is costly: at 115,200
+//! baud more frames fit in 3 s than an 8-axis frame has counts (24), so
+//! frames get shorter and the transfer takes about 40 % longer. On a clean
+//! line the guard costs about 2 % (every other frame one record shorter).
+//! A reply later than those windows is outside what the engine can tell
+//! apart, and so is the first duplicate on a line that arrives while a
+//! frame with its count was lost: [`Verify::Full`] catches what they would
+//! do.
 //!
 //! # Verification
 //! A confirmed frame means the controller *said* it wrote that many
@@ -66,6 +76,15 @@
 //! | [`Verify::AfterFault`] | every frame confirmed after a timeout, a resend, a count mismatch or an unexpected reply is read back; a frame confirmed at its first send is trusted ([`Guarantee::FaultsVerified`]): a corruption that passes the SC goes unseen | none on a clean line; about one frame's length per faulty frame |
 //! | [`Verify::Full`] | every record ([`Guarantee::Verified`]) | about as much again as the write (a 21FH reply carries the same 82 bytes per 8-axis record as the 26DH), plus an 18-byte query per window |
 //!
+//! A frame whose reply times out (or arrives broken) is sent again with
+//! half its records (the rest go to the next frame), and frames stay that
+//! short until they get through again, growing by a quarter per confirmed
+//! frame: on a noisy line a long frame rarely arrives whole (at one
+//! flipped bit in 1,000 bytes, 2 KB frames fail seven times in eight).
+//! Read-back windows shrink and grow the same way. Each command is still
+//! sent at most `max_sends` times; after [`Step::Failed`], resuming keeps
+//! the smaller sizes.
+//!
 //! After a failure, [`Transfer::resume`] sends the unconfirmed frame (or
 //! the interrupted read-back) again: no record is lost, skipped or
 //! reordered.
@@ -82,9 +101,10 @@ use crate::checksum::{BypassPolicy, ChecksumMode};
 use crate::client::Received;
 use crate::clock::{reached, Clock};
 use crate::decoder::{Event, FrameDecoder};
+use crate::drive::{self, Engine, Stop, Want};
 use crate::error::{Error, BRIDGE_CODES};
 use crate::exchange::{Due, Exchange, ExchangeConfig, Finish, Offer, Quarantine};
-use crate::field::{FieldSpec, Reader, Writer};
+use crate::field::{move_within, FieldSpec, Reader, Writer};
 use crate::frame::{emit_envelope, emit_trailer, Header, Station, ENVELOPE_LEN, TRAILER_LEN};
 use crate::limits;
 use crate::position::{PositionRecord, PositionStream};
@@ -200,6 +220,8 @@ pub struct TransferStats {
     /// Frames sent with fewer records than fitted, so that no reply still
     /// in flight could confirm them.
     pub guarded_frames: u32,
+    /// Frames cut to half their records after a timeout.
+    pub shrunk_frames: u32,
     /// Frames read back and compared equal.
     pub frames_verified: u32,
     /// Records read back and compared equal.
@@ -380,8 +402,6 @@ struct Chunk {
     /// Where the records end and the trailer starts.
     cut: usize,
     saved: [u8; TRAILER_LEN],
-    /// Index, in source order, of its first record.
-    first_index: u32,
     /// Start number (range writes).
     start: u16,
     /// Something abnormal happened while it was written.
@@ -409,6 +429,9 @@ struct Verifier {
     seen: u128,
     /// Whether the reply being decoded can still be the awaited one.
     candidate: bool,
+    /// Whether the frame being decoded is a read-back reply from the
+    /// station (so that breaking means the reply was lost).
+    started: bool,
     station: Station,
     rewrites: u8,
 }
@@ -427,6 +450,7 @@ impl Verifier {
             differ: 0,
             seen: 0,
             candidate: false,
+            started: false,
             station: Station(0),
             rewrites: 0,
         }
@@ -451,8 +475,93 @@ impl<'a> Iterator for Walk<'a> {
     }
 }
 
+/// A frame or window limit after a success: a quarter more, at least one,
+/// at most `max`.
+fn grow(limit: u16, max: u16) -> u16 {
+    limit.saturating_add((limit / 4).max(1)).min(max)
+}
+
 fn bit(i: usize) -> u128 {
     1u128.checked_shl(i as u32).unwrap_or(0)
+}
+
+/// The record counts a reply still in flight could carry (see the module
+/// docs on late and duplicated replies).
+#[derive(Debug, Clone)]
+struct Guard {
+    /// `(count, until, only a duplicate could carry it)`, one per count.
+    entries: heapless::Vec<(u16, u32, bool), RECENT>,
+    /// A late or duplicated reply was seen on this line: from then on the
+    /// counts of answered frames are guarded for the duplicate window too.
+    duplicates_seen: bool,
+    /// The count of the frame answered last (always avoided).
+    previous: u16,
+}
+
+impl Guard {
+    const fn new() -> Self {
+        Guard {
+            entries: heapless::Vec::new(),
+            duplicates_seen: false,
+            previous: 0,
+        }
+    }
+
+    fn prune(&mut self, now: u32) {
+        self.entries.retain(|&(_, u, _)| !reached(now, u));
+    }
+
+    /// Sets the entry of `count` (merging with one that exists).
+    fn note(&mut self, count: u16, until: u32, dup_only: bool, now: u32) {
+        self.prune(now);
+        if let Some(e) = self.entries.iter_mut().find(|e| e.0 == count) {
+            e.1 = crate::clock::later(e.1, until);
+            e.2 &= dup_only;
+        } else if self.entries.push((count, until, dup_only)).is_err() {
+            // Full: keep the latest deadline in the last slot, so that no
+            // count is forgotten early (one may be guarded longer).
+            if let Some(last) = self.entries.last_mut() {
+                last.1 = crate::clock::later(last.1, until);
+                last.2 = false;
+            }
+        }
+    }
+
+    /// A frame of `count` records was sent: its reply may come until
+    /// `until` (timeout plus late window).
+    fn sent(&mut self, count: u16, until: u32, now: u32) {
+        self.note(count, until, false, now);
+    }
+
+    /// The frame of `count` records was answered after `sends` sends.
+    /// Sent once, only a duplicate of the reply can still come (until
+    /// `dup_until`); sent more often, the other sends' replies can too.
+    fn answered(&mut self, count: u16, sends: u8, dup_until: u32, now: u32) {
+        if sends <= 1 {
+            self.entries.retain(|e| e.0 != count);
+        }
+        self.note(count, dup_until, sends <= 1, now);
+        self.previous = count;
+    }
+
+    /// Whether a frame of `n` records could be confirmed by a reply still
+    /// in flight.
+    fn blocks(&self, n: u16, now: u32) -> bool {
+        n == self.previous
+            || self
+                .entries
+                .iter()
+                .any(|&(c, u, dup)| c == n && !reached(now, u) && (!dup || self.duplicates_seen))
+    }
+
+    /// The earliest tick at which a blocked count frees up.
+    fn wake(&self, now: u32) -> u32 {
+        self.entries
+            .iter()
+            .map(|&(_, u, _)| u)
+            .min_by_key(|&u| u.wrapping_sub(now))
+            .unwrap_or(now.wrapping_add(1))
+    }
 }
 
 /// Writes a position table to a controller in confirmed (and verified)
@@ -471,10 +580,15 @@ pub struct Transfer<I, const N: usize = { limits::TTA.command }> {
     /// Records packed, the chunk's first.
     packed: u16,
     chunk: Option<Chunk>,
-    /// Record counts a reply still in flight could carry, and until when.
-    recent: heapless::Vec<(u16, u32), RECENT>,
+    /// Record counts a reply still in flight could carry.
+    guard: Guard,
     /// An unexpected frame came between two frames: the next is faulted.
     pending_fault: bool,
+    /// Records per frame now: halved after a timeout, grown back after
+    /// each confirmation.
+    frame_limit: u16,
+    /// Positions per read-back query now, likewise.
+    window_limit: u16,
     exchange: Exchange,
     replies: FrameDecoder<32>,
     verifier: Verifier,
@@ -496,9 +610,18 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             fill: 0,
             packed: 0,
             chunk: None,
-            recent: heapless::Vec::new(),
+            guard: Guard::new(),
             pending_fault: false,
-            exchange: Exchange::new(cfg.exchange, Quarantine::ByContent),
+            frame_limit: MAX_FRAME_RECORDS,
+            window_limit: cfg.stream.read_back().window(cfg.max_response),
+            exchange: Exchange::new(
+                ExchangeConfig {
+                    // Applied by the engine's own guard (see the module docs).
+                    duplicate_window_ms: 0,
+                    ..cfg.exchange
+                },
+                Quarantine::ByContent,
+            ),
             replies: FrameDecoder::with_policy(BypassPolicy::Reject),
             verifier: Verifier::new(cfg.stream.read_back()),
             state: State::Build { not_before: 0 },
@@ -515,6 +638,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 ignored_frames: 0,
                 line_errors: 0,
                 guarded_frames: 0,
+                shrunk_frames: 0,
                 frames_verified: 0,
                 records_verified: 0,
                 verify_queries: 0,
@@ -610,6 +734,13 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                     let writing = self.state == State::Write;
                     match self.exchange.poll(now) {
                         Due::Transmit { fresh } => {
+                            if fresh && self.exchange.sends() > 1 {
+                                if writing {
+                                    self.shrink_chunk(now);
+                                } else {
+                                    self.shrink_window();
+                                }
+                            }
                             let end = if writing {
                                 self.chunk.map_or(0, |c| c.cut + TRAILER_LEN)
                             } else {
@@ -702,24 +833,10 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 let until = now
                     .wrapping_add(self.cfg.exchange.timeout_ms)
                     .wrapping_add(self.cfg.exchange.late_window_ms);
-                self.remember(c.records, until, now);
+                self.guard.sent(c.records, until, now);
             }
         }
         self.exchange.sent(now);
-    }
-
-    /// Notes that replies carrying `count` may arrive until `until`.
-    fn remember(&mut self, count: u16, until: u32, now: u32) {
-        self.recent.retain(|&(_, u)| !reached(now, u));
-        if let Some(e) = self.recent.iter_mut().find(|(c, _)| *c == count) {
-            e.1 = crate::clock::later(e.1, until);
-        } else if self.recent.push((count, until)).is_err() {
-            // Full: keep the latest deadline of all in the last slot, so
-            // that no count is forgotten early (it may be guarded longer).
-            if let Some(last) = self.recent.last_mut() {
-                last.1 = crate::clock::later(last.1, until);
-            }
-        }
     }
 
     /// Bytes received from the controller at tick `now`. Returns at the
@@ -771,6 +888,10 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                     return TransferEvent::NeedMore;
                 }
                 self.stats.line_errors += 1;
+                if matches!(self.state, State::Write | State::Verify) {
+                    let envelope = self.replies.failed_envelope();
+                    self.exchange.broken_frame(envelope, now);
+                }
                 TransferEvent::Broken(e)
             }
             Event::Frame(f) => {
@@ -792,6 +913,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                     // A late or duplicated write reply between frames.
                     self.stats.stale_replies += 1;
                     self.pending_fault = true;
+                    self.guard.duplicates_seen = true;
                     return TransferEvent::Stale;
                 }
                 let (content_ok, reported) = match (self.state, self.chunk) {
@@ -831,6 +953,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             }
             Offer::Mismatch => {
                 self.stats.count_mismatches += 1;
+                self.guard.duplicates_seen = true;
                 TransferEvent::CountMismatch {
                     sent: self.chunk.map_or(0, |c| c.records),
                     reported,
@@ -838,6 +961,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             }
             Offer::Stale => {
                 self.stats.stale_replies += 1;
+                self.guard.duplicates_seen = true;
                 TransferEvent::Stale
             }
             Offer::Foreign => {
@@ -855,11 +979,13 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         };
         c.faulted |= self.exchange.faulted();
         c.confirmed = true;
+        self.frame_limit = grow(self.frame_limit, MAX_FRAME_RECORDS);
         self.chunk = Some(c);
         // Duplicates of this reply may come for a while; replies to its
         // other sends until their own late window closes.
         let dup = now.wrapping_add(self.cfg.exchange.duplicate_window_ms);
-        self.remember(c.records, dup, now);
+        self.guard
+            .answered(c.records, self.exchange.sends(), dup, now);
         let verify = match self.cfg.verify {
             Verify::Off => false,
             Verify::AfterFault => c.faulted,
@@ -884,11 +1010,8 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 dst.copy_from_slice(&c.saved);
             }
             let carried = self.fill.saturating_sub(c.cut);
-            let fits = c.cut + carried <= N && records_start + carried <= N;
-            if fits {
-                self.frame
-                    .copy_within(c.cut..c.cut + carried, records_start);
-            }
+            // Both ranges lie inside the frame buffer: the chunk was built there.
+            let _ = move_within(&mut self.frame, c.cut, carried, records_start);
             self.packed = self.packed.saturating_sub(c.records);
             self.fill = if self.packed > 0 {
                 records_start + carried
@@ -963,35 +1086,44 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         let v = &mut self.verifier;
         let field_max = v.stream.count_field().max_unsigned();
         let room = field_max.saturating_add(1).saturating_sub(u64::from(head));
-        let window = u64::from(v.stream.window(self.cfg.max_response))
-            .min(room)
-            .max(1);
+        let full = v
+            .stream
+            .window(self.cfg.max_response)
+            .min(self.window_limit);
+        let window = u64::from(full).min(room).max(1);
         v.head = head;
         v.asked = window as u16;
-        let mut w = Writer::new(&mut v.query);
-        let built = emit_envelope(
-            &mut w,
-            Header::Command,
-            self.cfg.exchange.station,
-            v.stream.id,
-        )
-        .and_then(|()| v.stream.write_query(&mut w, head, window as u16))
-        .and_then(|()| emit_trailer(&mut w, self.cfg.checksum));
-        let len = w.len();
-        match (built, catalogue::lookup(v.stream.id)) {
+        let built = self.write_query();
+        match (built, catalogue::lookup(self.verifier.stream.id)) {
             (Ok(()), Some(info)) => {
-                v.query_len = len;
                 self.exchange.start(info, now);
                 self.state = State::Verify;
             }
             (Err(e), _) => self.state = State::Failed(TransferError::Config(e), Resume::Nothing),
             (_, None) => {
+                let id = self.verifier.stream.id;
                 self.state = State::Failed(
-                    TransferError::Config(Error::UnknownMessageId { id: v.stream.id }),
+                    TransferError::Config(Error::UnknownMessageId { id }),
                     Resume::Nothing,
                 )
             }
         }
+    }
+
+    /// Writes the read-back query for the verifier's window.
+    fn write_query(&mut self) -> Result<(), Error> {
+        let v = &mut self.verifier;
+        let mut w = Writer::new(&mut v.query);
+        emit_envelope(
+            &mut w,
+            Header::Command,
+            self.cfg.exchange.station,
+            v.stream.id,
+        )?;
+        v.stream.write_query(&mut w, v.head, v.asked)?;
+        emit_trailer(&mut w, self.cfg.checksum)?;
+        v.query_len = w.len();
+        Ok(())
     }
 
     fn verdict(&mut self, now: u32, all: u128) {
@@ -1019,8 +1151,11 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         );
     }
 
-    /// A read-back window was answered (and compared).
+    /// A read-back window was answered (and compared): let the window
+    /// grow back, ask the next.
     fn window_answered(&mut self, now: u32) {
+        let full = self.verifier.stream.window(self.cfg.max_response);
+        self.window_limit = grow(self.window_limit, full);
         self.start_verify(now);
     }
 
@@ -1047,6 +1182,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 v.station = station;
                 v.seen = 0;
                 v.candidate = kind == v.stream && count <= v.asked;
+                v.started = kind == v.stream && station == self.cfg.exchange.station;
                 TransferEvent::NeedMore
             }
             StreamEvent::Record(rec) => {
@@ -1065,6 +1201,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             StreamEvent::End { .. } => {
                 let v = &mut self.verifier;
                 v.hunting = true;
+                v.started = false;
                 let (station, id, ok) = (v.station, v.stream.id, v.candidate);
                 match self
                     .exchange
@@ -1081,6 +1218,17 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             }
             StreamEvent::Error { .. } => {
                 v.hunting = true;
+                if core::mem::take(&mut v.started) {
+                    // The awaited read-back reply arrived broken.
+                    self.exchange.reply_lost(now);
+                    let v = &mut self.verifier;
+                    if Header::from_byte(b).is_some() {
+                        v.decoder.reset();
+                        v.hunting = false;
+                        let _ = v.decoder.push(b);
+                    }
+                    return TransferEvent::NeedMore;
+                }
                 if Header::from_byte(b).is_some() {
                     v.decoder.reset();
                     v.hunting = false;
@@ -1167,7 +1315,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         let records_start = ENVELOPE_LEN + stream.prefix_len();
         let first_index = self.stats.records_confirmed;
         let start = u32::from(cfg.start) + first_index;
-        let max_records = stream.max_records.min(MAX_FRAME_RECORDS);
+        let max_records = stream.max_records.min(self.frame_limit);
         if self.fill < records_start {
             // Begin a frame only when a record is there for it: a table that
             // ends at the top of a range write's start field must complete.
@@ -1225,23 +1373,47 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             return Ok(Built::Exhausted);
         }
         // The most records that no reply still in flight could confirm.
-        self.recent.retain(|&(_, u)| !reached(now, u));
-        let recent = &self.recent;
-        let taken = |n: u16| recent.iter().any(|&(c, _)| c == n);
-        let Some(n) = (1..=self.packed).rev().find(|&n| !taken(n)) else {
-            let wake = recent
-                .iter()
-                .map(|&(_, u)| u)
-                .min_by_key(|&u| u.wrapping_sub(now));
-            return Ok(Built::Wait(wake.unwrap_or(now.wrapping_add(1))));
+        self.guard.prune(now);
+        let Some(n) = (1..=self.packed)
+            .rev()
+            .find(|&n| !self.guard.blocks(n, now))
+        else {
+            return Ok(Built::Wait(self.guard.wake(now)));
         };
         if n < self.packed {
             self.stats.guarded_frames += 1;
         }
+        let start = u16::try_from(start).map_err(|_| {
+            TransferError::Config(Error::ValueOutOfRange {
+                offset: ENVELOPE_LEN,
+            })
+        })?;
+        let (cut, saved) = self.close_frame(n, start)?;
+        self.chunk = Some(Chunk {
+            records: n,
+            cut,
+            saved,
+            start,
+            faulted: core::mem::take(&mut self.pending_fault),
+            confirmed: false,
+        });
+        Ok(Built::Ready)
+    }
+
+    /// Closes the frame after its first `n` packed records: envelope and
+    /// prefix with that count, the trailer after the `n`-th record. Returns
+    /// where the trailer starts and the bytes it covers.
+    fn close_frame(
+        &mut self,
+        n: u16,
+        start: u16,
+    ) -> Result<(usize, [u8; TRAILER_LEN]), TransferError> {
+        let cfg = self.cfg;
+        let stream = cfg.stream;
         let cut = {
             let mut walk = Walk {
                 bytes: self.frame.get(..self.fill).unwrap_or(&[]),
-                at: records_start,
+                at: ENVELOPE_LEN + stream.prefix_len(),
                 stream,
             };
             for _ in 0..n {
@@ -1249,11 +1421,6 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             }
             walk.at
         };
-        let start = u16::try_from(start).map_err(|_| {
-            TransferError::Config(Error::ValueOutOfRange {
-                offset: ENVELOPE_LEN,
-            })
-        })?;
         let mut saved = [0u8; TRAILER_LEN];
         if let Some(src) = self.frame.get(cut..cut + TRAILER_LEN) {
             saved.copy_from_slice(src);
@@ -1264,16 +1431,55 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             .map_err(TransferError::Config)?;
         let mut w = Writer::resume(&mut self.frame, cut);
         emit_trailer(&mut w, cfg.checksum).map_err(TransferError::Config)?;
-        self.chunk = Some(Chunk {
-            records: n,
-            cut,
-            saved,
-            first_index,
-            start,
-            faulted: core::mem::take(&mut self.pending_fault),
-            confirmed: false,
-        });
-        Ok(Built::Ready)
+        Ok((cut, saved))
+    }
+
+    /// The frame in flight timed out: send its first half instead (a long
+    /// frame is more likely hit by noise) and keep frames that small until
+    /// they get through again. The rest is carried to the next frame; the
+    /// count still avoids those a late reply could carry.
+    fn shrink_chunk(&mut self, now: u32) {
+        let Some(c) = self.chunk else { return };
+        self.guard.prune(now);
+        let Some(n) = (1..=c.records / 2)
+            .rev()
+            .find(|&n| !self.guard.blocks(n, now))
+        else {
+            return;
+        };
+        if let Some(dst) = self.frame.get_mut(c.cut..c.cut + TRAILER_LEN) {
+            dst.copy_from_slice(&c.saved);
+        }
+        match self.close_frame(n, c.start) {
+            Ok((cut, saved)) => {
+                self.chunk = Some(Chunk {
+                    records: n,
+                    cut,
+                    saved,
+                    ..c
+                });
+                self.frame_limit = n;
+                self.stats.shrunk_frames += 1;
+            }
+            Err(e) => self.state = State::Failed(e, Resume::Nothing),
+        }
+    }
+
+    /// A read-back query timed out: ask the same head for half the window.
+    /// A late reply to the larger window still answers the smaller one
+    /// exactly: it lists every record in it.
+    fn shrink_window(&mut self) {
+        let v = &mut self.verifier;
+        if v.asked > 1 {
+            v.asked /= 2;
+            self.window_limit = v.asked;
+            if self.write_query().is_err() {
+                self.state = State::Failed(
+                    TransferError::Config(Error::BufferTooSmall),
+                    Resume::Nothing,
+                );
+            }
+        }
     }
 }
 
@@ -1300,13 +1506,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         U: embedded_io::Read + embedded_io::ReadReady + embedded_io::Write,
         C: Clock,
     {
-        loop {
-            match self.poll_nb(uart, clock) {
-                Ok(report) => return Ok(report),
-                Err(nb::Error::Other(e)) => return Err(e),
-                Err(nb::Error::WouldBlock) => clock.idle(),
-            }
-        }
+        drive::run_blocking(self, uart, clock).map_err(TransferError::from_stop)
     }
 
     /// Makes what progress is possible without waiting: reads the bytes
@@ -1323,41 +1523,18 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         U: embedded_io::Read + embedded_io::ReadReady + embedded_io::Write,
         C: Clock,
     {
-        let io = |e| nb::Error::Other(TransferError::Io(e));
-        let mut buf = [0u8; 32];
-        while uart.read_ready().map_err(io)? {
-            let n = uart.read(&mut buf).map_err(io)?;
-            if n == 0 {
-                break;
-            }
-            let now = clock.now_ms();
-            self.received_all(buf.get(..n).unwrap_or(&[]), now);
-        }
-        match self.poll(clock.now_ms()) {
-            Step::Transmit(bytes) => {
-                uart.write_all(bytes).map_err(io)?;
-                uart.flush().map_err(io)?;
-                let end = clock.now_ms();
-                self.sent(end);
-                Err(nb::Error::WouldBlock)
-            }
-            Step::WaitUntil(_) | Step::NeedRecords => Err(nb::Error::WouldBlock),
-            Step::Complete(report) => Ok(report),
-            Step::Failed(e) => Err(nb::Error::Other(e.widen())),
-        }
+        drive::poll_nb(self, uart, clock).map_err(|e| e.map(TransferError::from_stop))
     }
-}
 
-#[cfg(feature = "async")]
-impl<I: RecordSource, const N: usize> Transfer<I, N> {
     /// Runs the transfer to the end over an `embedded-io-async` UART.
     ///
-    /// While waiting for a reply it polls [`embedded_io_async::ReadReady`]
-    /// and sleeps `poll_ms` between checks, so the deadline is always seen
-    /// even if no byte ever arrives. The clock is read after each write, so
-    /// the reply timeout starts at the end of the transmission. A
+    /// While waiting it checks [`embedded_io_async::ReadReady`] and sleeps
+    /// at most `poll_ms` between checks, so the deadline is always seen
+    /// even if no byte arrives. The clock is read after each write, so the
+    /// reply timeout starts at the end of the transmission. A
     /// [`RecordQueue`] source is filled by whoever owns the transfer
     /// between calls; here a pending source just sleeps.
+    #[cfg(feature = "async")]
     pub async fn run_async<U, C>(
         &mut self,
         uart: &mut U,
@@ -1368,33 +1545,37 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         U: embedded_io_async::Read + embedded_io_async::ReadReady + embedded_io_async::Write,
         C: crate::clock::AsyncClock,
     {
-        let mut buf = [0u8; 32];
-        loop {
-            while uart.read_ready().map_err(TransferError::Io)? {
-                let n = uart.read(&mut buf).await.map_err(TransferError::Io)?;
-                if n == 0 {
-                    break;
-                }
-                let now = clock.now_ms();
-                self.received_all(buf.get(..n).unwrap_or(&[]), now);
-            }
-            let now = clock.now_ms();
-            match self.poll(now) {
-                Step::Transmit(bytes) => {
-                    uart.write_all(bytes).await.map_err(TransferError::Io)?;
-                    uart.flush().await.map_err(TransferError::Io)?;
-                    let end = clock.now_ms();
-                    self.sent(end);
-                }
-                Step::WaitUntil(t) => {
-                    clock
-                        .sleep_ms(t.wrapping_sub(now).clamp(1, poll_ms.max(1)))
-                        .await
-                }
-                Step::NeedRecords => clock.sleep_ms(poll_ms.max(1)).await,
-                Step::Complete(report) => return Ok(report),
-                Step::Failed(e) => return Err(e.widen()),
-            }
+        drive::run_async(self, uart, clock, poll_ms)
+            .await
+            .map_err(TransferError::from_stop)
+    }
+}
+
+impl<I: RecordSource, const N: usize> Engine for Transfer<I, N> {
+    type Output = TransferReport;
+    type Error = TransferError;
+    fn feed(&mut self, bytes: &[u8], now: u32) {
+        self.received_all(bytes, now);
+    }
+    fn want(&mut self, now: u32) -> Want<'_, Result<TransferReport, TransferError>> {
+        match self.poll(now) {
+            Step::Transmit(bytes) => Want::Transmit(bytes),
+            Step::WaitUntil(t) => Want::WaitUntil(t),
+            Step::NeedRecords => Want::Idle,
+            Step::Complete(report) => Want::Done(Ok(report)),
+            Step::Failed(e) => Want::Done(Err(e)),
+        }
+    }
+    fn sent(&mut self, now: u32) {
+        Transfer::sent(self, now);
+    }
+}
+
+impl<E> TransferError<E> {
+    pub(crate) fn from_stop(stop: Stop<TransferError, E>) -> Self {
+        match stop {
+            Stop::Engine(e) => e.widen(),
+            Stop::Io(e) => TransferError::Io(e),
         }
     }
 }
@@ -1438,7 +1619,7 @@ impl<I: Iterator<Item = PositionRecord>> RecordSource for I {
 }
 
 /// A bounded FIFO of records that a producer fills as they arrive (for
-/// example from a [`PositionStreamDecoder`](crate::stream::PositionStreamDecoder))
+/// example from a [`PositionStreamDecoder`])
 /// and a [`Transfer`] drains. It is pending while empty, until
 /// [`RecordQueue::finish`].
 #[derive(Debug, Clone, Default)]
@@ -1488,5 +1669,200 @@ impl<const Q: usize> RecordSource for RecordQueue<Q> {
             None if self.finished => Pull::End,
             None => Pull::Pending,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use std::vec::Vec;
+
+    use super::*;
+    use crate::message::{
+        ChangePositionData2Response, EffectivePositionResponse2, Message, Repeated,
+    };
+
+    const ST: Station = Station(0x99);
+
+    fn records(n: u16, axes: u8) -> Vec<PositionRecord> {
+        (1..=n)
+            .map(|i| {
+                let coords: Vec<(u8, i32)> = (1..=axes).map(|a| (a, i32::from(i) * 10)).collect();
+                PositionRecord::new(i, 30, 30, 100, &coords).unwrap()
+            })
+            .collect()
+    }
+
+    fn reply_26dh(count: u16) -> Vec<u8> {
+        let r = ChangePositionData2Response {
+            number_of_changed_positions: count,
+        };
+        let mut buf = [0u8; 16];
+        let n = r.emit(ST, &mut buf).unwrap();
+        buf[..n].to_vec()
+    }
+
+    fn events(
+        t: &mut Transfer<std::vec::IntoIter<PositionRecord>>,
+        mut bytes: &[u8],
+    ) -> Vec<TransferEvent> {
+        let mut out = Vec::new();
+        loop {
+            let r = t.received(bytes, 10);
+            bytes = &bytes[r.consumed..];
+            if r.event == TransferEvent::NeedMore {
+                return out;
+            }
+            out.push(r.event);
+        }
+    }
+
+    fn transmitted(t: &mut Transfer<std::vec::IntoIter<PositionRecord>>, now: u32) -> Vec<u8> {
+        match t.poll(now) {
+            Step::Transmit(b) => b.to_vec(),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_reply_with_another_count_never_confirms_and_a_reply_before_the_send_is_stale() {
+        let cfg = TransferConfig::tta(ST).with_verify(Verify::Off);
+        let mut t = Transfer::<_>::new(cfg, records(3, 2).into_iter());
+        let frame = transmitted(&mut t, 0);
+        assert_eq!(&frame[..10], b"!9926D0003");
+        // Before `sent`: not a reply to this frame.
+        assert_eq!(events(&mut t, &reply_26dh(3)), [TransferEvent::Stale]);
+        t.sent(5);
+        assert_eq!(
+            events(&mut t, &reply_26dh(2)),
+            [TransferEvent::CountMismatch {
+                sent: 3,
+                reported: 2
+            }]
+        );
+        assert!(matches!(t.poll(10), Step::WaitUntil(3_005)));
+        assert_eq!(
+            events(&mut t, &reply_26dh(3)),
+            [TransferEvent::Confirmed { records: 3 }]
+        );
+        // The turnaround (1 ms, two ticks), then nothing is left to send.
+        assert_eq!(t.poll(20), Step::WaitUntil(22));
+        match t.poll(22) {
+            Step::Complete(r) => {
+                assert_eq!(r.guarantee, Guarantee::Unverified);
+                assert_eq!(r.stats.records_confirmed, 3);
+                assert_eq!(r.stats.count_mismatches, 1);
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn consecutive_frames_never_share_a_count() {
+        // 8-axis records: 24 fit a frame. 48 records go as 24, 23, 1.
+        let cfg = TransferConfig::tta(ST).with_verify(Verify::Off);
+        let mut t = Transfer::<_>::new(cfg, records(48, 8).into_iter());
+        let mut counts = Vec::new();
+        let mut now = 0;
+        loop {
+            match t.poll(now) {
+                Step::Transmit(b) => {
+                    let n =
+                        u16::from_str_radix(std::str::from_utf8(&b[6..10]).unwrap(), 16).unwrap();
+                    counts.push(n);
+                    t.sent(now);
+                    t.received_all(&reply_26dh(n), now + 1);
+                }
+                Step::WaitUntil(d) => now = d,
+                Step::Complete(_) => break,
+                other => panic!("{other:?}"),
+            }
+        }
+        assert_eq!(counts, [24, 23, 1]);
+    }
+
+    #[test]
+    fn a_frame_that_reads_back_different_is_rewritten() {
+        let recs = records(2, 1);
+        let mut t = Transfer::<_>::new(TransferConfig::tta(ST), recs.clone().into_iter());
+        let mut now = 0;
+        let mut writes = 0;
+        let mut stored = recs.clone();
+        stored[1].positions[0] += 1; // the controller holds record 2 altered
+        loop {
+            match t.poll(now) {
+                Step::Transmit(b) if b.starts_with(b"!9926D") => {
+                    writes += 1;
+                    t.sent(now);
+                    if writes > 1 {
+                        stored = recs.clone(); // the rewrite lands
+                    }
+                    t.received_all(&reply_26dh(2), now + 1);
+                }
+                Step::Transmit(b) => {
+                    assert!(
+                        b.starts_with(b"!9921F00010018"),
+                        "a 24-position window from 1"
+                    );
+                    t.sent(now);
+                    let r = EffectivePositionResponse2 {
+                        records: Repeated::from_slice(&stored),
+                    };
+                    let mut buf = [0u8; 128];
+                    let n = r.emit(ST, &mut buf).unwrap();
+                    t.received_all(&buf[..n], now + 1);
+                }
+                Step::WaitUntil(d) => now = d.max(now + 1),
+                Step::Complete(r) => {
+                    assert_eq!(r.guarantee, Guarantee::Verified);
+                    assert_eq!(r.stats.rewrites, 1);
+                    assert_eq!(r.stats.records_verified, 2);
+                    break;
+                }
+                other => panic!("{other:?}"),
+            }
+        }
+        assert_eq!(writes, 2);
+    }
+
+    #[test]
+    fn a_frame_that_stays_different_fails_naming_its_records() {
+        let recs = records(3, 1);
+        let cfg = TransferConfig {
+            rewrites: 1,
+            ..TransferConfig::tta(ST)
+        };
+        let mut t = Transfer::<_>::new(cfg, recs.clone().into_iter());
+        let mut stored = recs.clone();
+        stored.remove(1); // position 2 never gets stored
+        let mut now = 0;
+        let err = loop {
+            match t.poll(now) {
+                Step::Transmit(b) if b.starts_with(b"!9926D") => {
+                    t.sent(now);
+                    t.received_all(&reply_26dh(3), now + 1);
+                }
+                Step::Transmit(_) => {
+                    t.sent(now);
+                    let r = EffectivePositionResponse2 {
+                        records: Repeated::from_slice(&stored),
+                    };
+                    let mut buf = [0u8; 128];
+                    let n = r.emit(ST, &mut buf).unwrap();
+                    t.received_all(&buf[..n], now + 1);
+                }
+                Step::WaitUntil(d) => now = d.max(now + 1),
+                Step::Failed(e) => break e,
+                other => panic!("{other:?}"),
+            }
+        };
+        assert_eq!(
+            err,
+            TransferError::Mismatch {
+                first_position: 2,
+                records: 1
+            }
+        );
+        assert_eq!(t.mismatched_positions().collect::<Vec<_>>(), [2]);
     }
 }

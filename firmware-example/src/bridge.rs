@@ -31,7 +31,7 @@
 //!   upstream unchanged. Anything else from the controller is ignored. If
 //!   no valid reply arrives within [`REPLY_TIMEOUT_MS`] (3 s) the bridge
 //!   returns to idle without answering: the host times out and re-sends,
-//!   as protocol B prescribes (PROTOCOL.md §8, timeout and retry).
+//!   as protocol B prescribes (2003 p. 62, timeout and retry).
 //! * frames the host should never send (`#`, `&`) and noise are dropped.
 //!
 //! # Error responses of the bridge (26DH only)
@@ -49,7 +49,7 @@
 //! command again. Records before the failure may already be written;
 //! writing them again is harmless. The codes are outside anything the
 //! controllers are known to use, but the controllers' own code list is not
-//! published (PROTOCOL.md §9), so treat `B01`..`B05` as the bridge's.
+//! published (TTA p. 15, 2003 p. 13), so treat `B01`..`B05` as the bridge's.
 //!
 //! # Flow control
 //!
@@ -72,10 +72,9 @@ use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
 use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::field::{decode_unsigned, FieldSpec};
 use iai_protocol_b::frame::{emit_frame, Header, Station, ENVELOPE_LEN};
+use iai_protocol_b::limits;
 use iai_protocol_b::stream::{PositionStream, PositionStreamDecoder, StreamEvent};
-use iai_protocol_b::transfer::{
-    RecordQueue, Step, Transfer, TransferConfig, TransferError, TTA_MAX_COMMAND,
-};
+use iai_protocol_b::transfer::{RecordQueue, Step, Transfer, TransferConfig, TransferError};
 
 use crate::log;
 
@@ -111,7 +110,7 @@ pub const ERR_INTERNAL: u16 = 0xB05;
 
 /// Largest frame handled in pass-through (a TTA receives at most 2,051
 /// bytes and sends at most 2,048).
-const FRAME_CAP: usize = TTA_MAX_COMMAND;
+const FRAME_CAP: usize = limits::TTA.command;
 
 /// Upstream bytes read per call (a staging chunk, not a message buffer).
 const IN_CHUNK: usize = 32;
@@ -656,7 +655,7 @@ impl Bridge {
                     break;
                 }
                 self.stats.downstream_in += n as u64;
-                job.received(buf.get(..n).unwrap_or(&[]), now);
+                job.received_all(buf.get(..n).unwrap_or(&[]), now);
                 moved = true;
             }
             loop {
@@ -684,15 +683,17 @@ impl Bridge {
                         }
                         break;
                     }
-                    Step::Complete(stats) => {
-                        answer = Some(Ok(stats.records_confirmed as u16));
+                    Step::Complete(report) => {
+                        answer = Some(Ok(report.stats.records_confirmed as u16));
                         break;
                     }
                     Step::Failed(e) => {
                         log::warning!("26DH transfer failed: {}", e);
                         answer = Some(Err(match e {
                             TransferError::Timeout => ERR_CONTROLLER_TIMEOUT,
-                            TransferError::ErrorResponse { .. } => ERR_CONTROLLER_ERROR,
+                            TransferError::Controller { .. } | TransferError::Bridge { .. } => {
+                                ERR_CONTROLLER_ERROR
+                            }
                             _ => ERR_INTERNAL,
                         }));
                         break;

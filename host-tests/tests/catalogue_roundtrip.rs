@@ -664,11 +664,29 @@ fn values_beyond_their_field_are_refused() {
         q.emit(Station(0x99), &mut buf),
         Err(Error::ValueOutOfRange { .. })
     ));
-    // A port count that is not a multiple of 8 (rounding is not documented).
+    // 12 ports take 2 bytes (ceil(12 / 8)): one byte is too few.
     let bytes = frame_text('#', "20B", "0000000CFF");
     assert!(matches!(
         decode_any(&check(&bytes)),
-        Err(Error::ValueOutOfRange { offset: 10 })
+        Err(Error::BodyTooShort { .. })
+    ));
+    let bytes = frame_text('#', "20B", "0000000CFF0F");
+    assert!(decode_any(&check(&bytes)).is_ok());
+    // A port count and a number of bytes that disagree cannot be emitted.
+    let data = iai_protocol_b::message::PortData {
+        units: 12,
+        items: iai_protocol_b::message::Repeated::from_slice(&[0xFF]),
+    };
+    let resp = iai_protocol_b::message::InputPortResponse {
+        response_start_port_number: 0,
+        input_port_data: data,
+    };
+    assert!(matches!(
+        resp.emit(Station(0x99), &mut buf),
+        Err(Error::CountMismatch {
+            expected: 2,
+            found: 1
+        })
     ));
     // 2A2H zones have at most 4 coordinate axes.
     let bytes = frame_text(
@@ -769,7 +787,7 @@ fn most_records_that_fit_each_profile_and_one_more() {
             }
         }
     }
-    // The figures of PROTOCOL.md §7 (4 / 8 axes).
+    // The buffer arithmetic of TTA p. 15 and p. 60 (4 / 8 axes).
     let p = Profile::TTA;
     assert_eq!(
         p.max_records_per_command(RecordLayout::NUMBER_4, 4),
@@ -877,7 +895,7 @@ fn profile_differences() {
 
 #[test]
 fn real_and_string_variables() {
-    // EXAMPLES.md §1.3: 0x0123456789ABCDEF in both orders.
+    // TTA p. 24 (2003 p. 23): 0x0123456789ABCDEF in both orders.
     let v = RealValue(0x0123_4567_89AB_CDEF);
     assert_eq!(v.to_wire(WordOrder::LowWordFirst).0, 0x89AB_CDEF_0123_4567);
     let bytes = frame_text('#', "20F", "000010189ABCDEF01234567");

@@ -9,8 +9,9 @@
 //!
 //! Covered: the frame decoder, `Frame::new_checked`, `decode_any` and the
 //! field visitor of every message, the position-stream decoder, every
-//! record layout, and the transfer and read-back engines fed arbitrary
-//! reply bytes.
+//! record layout, and the request client, the transfer engine (its write
+//! and streamed read-back paths) and the read-back engine fed arbitrary
+//! reply bytes, including a raw command frame passed through the client.
 #![no_std]
 #![no_main]
 
@@ -18,10 +19,11 @@ use core::hint::black_box;
 
 use cortex_m_rt::entry;
 use iai_protocol_b::checksum::BypassPolicy;
+use iai_protocol_b::client::{Client, ClientConfig, ClientStep};
 use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::field::{FieldSpec, Reader};
 use iai_protocol_b::frame::{Frame, Station};
-use iai_protocol_b::message::{decode_any, Fields, GroupInfo, Value, Visitor};
+use iai_protocol_b::message::{decode_any, AxisStatusQuery, Fields, GroupInfo, Value, Visitor};
 use iai_protocol_b::position::RecordLayout;
 use iai_protocol_b::readback::{ReadBack, ReadBackConfig, ReadStep};
 use iai_protocol_b::stream::{PositionStreamDecoder, StreamEvent};
@@ -118,16 +120,32 @@ fn main() -> ! {
     // The engines, answered with arbitrary bytes.
     let now = black_box(0u32);
     let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(Station(0x99)), core::iter::empty());
-    t.received(input, now);
+    black_box(t.received(input, now));
     if let Step::Transmit(b) = t.poll(now) {
         black_box(b);
     }
+    t.sent(now);
+    t.received_all(input, now);
+    black_box(t.poll(now.wrapping_add(black_box(5_000))));
+    black_box(t.mismatched_positions().count());
+    let mut c: Client = Client::new(ClientConfig::new(Station(0x99)).with_error_detail());
+    let _ = black_box(c.start_frame(input, now));
+    if let Ok(q) = AxisStatusQuery::of(black_box(&[1, 2])) {
+        let _ = black_box(c.start(&q, now));
+    }
+    if let ClientStep::Transmit(b) = c.poll(now) {
+        black_box(b);
+    }
+    c.sent(now);
+    c.received_all(input, now);
+    black_box(c.poll(now.wrapping_add(black_box(3_000))));
+    let _ = black_box(c.response::<AxisStatusQuery>().map(|r| r.axes.len()));
     let mut rb: ReadBack = ReadBack::new(ReadBackConfig::tta(Station(0x99), 1, 100));
     if let ReadStep::Transmit(b) = rb.poll(now) {
         black_box(b);
     }
     rb.sent(now);
-    black_box(rb.received(input, now));
+    black_box(rb.received_all(input, now));
     if let ReadStep::Records(recs) = rb.poll(now) {
         for r in recs {
             black_box(r);

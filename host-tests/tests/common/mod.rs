@@ -200,6 +200,7 @@ pub enum Ev {
         count: usize,
         count_width: Option<usize>,
         per_item: usize,
+        units: usize,
         max: usize,
     },
     Leave,
@@ -264,6 +265,7 @@ impl Visitor for Recorder {
             count: g.count,
             count_width: g.count_field.map(|s| s.len()),
             per_item: g.per_item,
+            units: g.units,
             max: g.max,
         });
     }
@@ -415,8 +417,15 @@ fn gen_seq(
                             _ => gen.fixed_count,
                         }
                         .min(max);
-                        let per = if g.count_rule == "see_note" { 8 } else { 1 };
-                        fmt_value(f, (count * per) as u64)
+                        // Ports and flags: any number, ceil(n / 8) bytes.
+                        let units = if g.count_rule == "see_note" && count > 0 {
+                            count * 8 - gen.below(8) as usize
+                        } else if g.count_rule == "see_note" {
+                            0
+                        } else {
+                            count
+                        };
+                        fmt_value(f, units as u64)
                     }
                 } else {
                     match (gen.mode, f.radix.as_str()) {
@@ -487,15 +496,20 @@ fn gen_seq(
                             .unwrap();
                         let per = if g.count_rule == "see_note" { 8 } else { 1 };
                         (
-                            (lookup(&f, scope) / per) as usize,
+                            lookup(&f, scope).div_ceil(per) as usize,
                             Some(width),
                             per as usize,
                         )
                     };
+                let units = match count_width {
+                    Some(_) if per_item > 1 => lookup(&count_field_of(g, nodes).unwrap(), scope),
+                    _ => count as u64,
+                } as usize;
                 ev.push(Ev::Enter {
                     count,
                     count_width,
                     per_item,
+                    units,
                     max: g.max.unwrap_or(8),
                 });
                 for _ in 0..count {
