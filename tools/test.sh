@@ -48,6 +48,7 @@ echo "ok: iai.exe builds"
 
 step "docs (no warnings) and doctests"
 RUSTDOCFLAGS="-D warnings" cargo doc -q -p iai-protocol-b --no-deps
+RUSTDOCFLAGS="-D warnings" cargo doc -q -p iai-cli --no-deps
 cargo test -q -p iai-protocol-b --doc
 
 step "size report and instruction counts (figures, not assertions)"

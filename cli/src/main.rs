@@ -178,9 +178,8 @@ struct LineArgs {
     #[arg(long, value_enum, default_value = "tta")]
     profile: ProfileArg,
     /// Table commands: how long after a reply a duplicate of it may still
-    /// come, ms (the engines guard against it: reading waits this long
-    /// between windows, writing varies frame sizes). Default: the engines'
-    /// 3000; a line known to duplicate faster can use less.
+    /// come, ms, once the line has shown one (the engines then pace
+    /// themselves by it). Default: the engines' 3000.
     #[arg(long)]
     duplicate_window_ms: Option<u32>,
 }

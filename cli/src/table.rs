@@ -206,7 +206,7 @@ pub fn write(
 /// Reads positions `first..=last` over `link`, calling `each` for every
 /// defined record (a window the engine reads again delivers its records
 /// late: key them by number). Error responses are answered as in
-/// [`write`].
+/// [`write()`].
 pub fn read(
     link: &mut Link,
     plan: &Plan,
