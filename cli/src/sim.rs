@@ -36,7 +36,9 @@
 //! - 238H stops the axes at their current position.
 //! - 212H reports bit 0 (in use) while an axis moves or homes, bits 1-2
 //!   (homing), bit 3 (servo), bit 4 (last operation completed normally),
-//!   and the position at the time of the query.
+//!   and the position at the time of the query. 215H reports AUTO mode,
+//!   no system error, "operating in AUTO" and "system ready"; it has no
+//!   field for motion.
 //!
 //! # Refusals
 //! Only when [`Controller::refuse`] is on (`iai simulate` turns it on;
@@ -485,11 +487,11 @@ impl Controller {
             }
             0x215 => {
                 SystemStatusQuery::parse(f).ok()?;
-                let servo_busy = self.axes.iter().any(Axis::in_use);
+                // AUTO mode, no system error; byte 3: operating in AUTO,
+                // system ready. 215H has no motion field: moves show in
+                // 212H only.
                 Some(self.emit(&SystemStatusResponse {
                     system_mode: 1,
-                    // Byte 2 bit 2: servo interlock; byte 3: AUTO, ready.
-                    status_byte_2: u8::from(servo_busy) << 2,
                     status_byte_3: 0b110,
                     ..SystemStatusResponse::default()
                 }))

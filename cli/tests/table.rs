@@ -196,3 +196,37 @@ fn the_simulator_dumps_its_table_on_sigterm() {
     assert!(log.contains("dumped 50 position(s)"), "{log}");
     assert_eq!(std::fs::read_to_string(&dump).unwrap(), csv);
 }
+
+#[test]
+fn a_2003_x_sel_takes_3_digit_tables_through_245h_and_209h() {
+    let sim = Sim::tcp(&["--quiet", "--profile", "xsel2003"]);
+    let at = sim.at.clone();
+    let csv = csv_table(60, 3, 19);
+    let path = temp("xsel.csv", csv.as_bytes());
+    let line = ["--tcp", at.as_str(), "--profile", "xsel2003"];
+    let mut args = vec!["table", "write", path.to_str().unwrap()];
+    args.extend_from_slice(&line);
+    let out = iai(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let mut args = vec!["table", "read", "--first", "1", "--count", "60"];
+    args.extend_from_slice(&line);
+    assert_eq!(stdout(&iai(&args)), csv);
+    // A number past 245H's three digits is refused before anything is sent.
+    let bad = temp(
+        "xsel-bad.csv",
+        b"number,acceleration,deceleration,speed,axis1\n4096,0.00,0.00,0,1.000\n",
+    );
+    let mut args = vec!["table", "write", bad.to_str().unwrap()];
+    args.extend_from_slice(&line);
+    let out = iai(&args);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("line 2, column number: \"4096\" is outside 0..=4095"),
+        "{}",
+        stderr(&out)
+    );
+    let log = sim.stop();
+    // The write and the read connected; the refused file did not.
+    assert_eq!(log.matches(" opened").count(), 2, "{log}");
+    assert!(log.contains("60 position record(s) written"), "{log}");
+}
