@@ -3,7 +3,8 @@
 //! The engines ([`crate::client`], [`crate::transfer`], [`crate::readback`])
 //! are sans-IO: they say what to transmit and until when to wait, and take
 //! the bytes that arrive. [`Engine`] is that shape; [`poll_nb`] and
-//! [`run_async`] move bytes and time between an engine and a UART. Both
+//! (with the `async` feature) `run_async` move bytes and time between an
+//! engine and a UART. Both
 //! read the clock *after* a transmission has been written and flushed, so
 //! that a reply timeout starts at the end of the transmission.
 

@@ -58,7 +58,8 @@
 //! held for retries, and rewrites the frame when one differs (up to
 //! `rewrites` times, then [`TransferError::Mismatch`] naming the first
 //! differing position). The reply is compared as it streams in through a
-//! [`PositionStreamDecoder`] (no second frame buffer); a comparison counts
+//! [`PositionStreamDecoder`](crate::stream::PositionStreamDecoder) (no
+//! second frame buffer); a comparison counts
 //! only when the reply's SC, station and ID check out.
 //!
 //! What is compared: every field the write sends (position number, axis
@@ -96,6 +97,15 @@
 //! a non-blocking main loop, `Transfer::run_async` with the `async`
 //! feature.
 
+mod guard;
+mod source;
+mod verify;
+
+pub use source::{Pull, RecordQueue, RecordSource};
+
+use guard::Guard;
+use verify::{bit, Verifier, Walk};
+
 use crate::catalogue;
 use crate::checksum::{BypassPolicy, ChecksumMode};
 use crate::client::Received;
@@ -104,18 +114,14 @@ use crate::decoder::{Event, FrameDecoder};
 use crate::drive::{self, Engine, Stop, Want};
 use crate::error::{Error, BRIDGE_CODES};
 use crate::exchange::{Due, Exchange, ExchangeConfig, Finish, Offer, Quarantine};
-use crate::field::{move_within, FieldSpec, Reader, Writer};
+use crate::field::{move_within, Writer};
 use crate::frame::{emit_envelope, emit_trailer, Header, Station, ENVELOPE_LEN, TRAILER_LEN};
 use crate::limits;
 use crate::position::{PositionRecord, PositionStream};
-use crate::stream::{PositionStreamDecoder, StreamEvent};
 
 /// Most records one frame carries (the read-back keeps one bit per record).
 /// A 2,051-byte 26DH holds at most 113 (records without axes).
 pub const MAX_FRAME_RECORDS: u16 = 128;
-
-/// Counts held back by the late-reply guard at once.
-const RECENT: usize = 32;
 
 /// How much the engine reads back.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -410,158 +416,10 @@ struct Chunk {
     confirmed: bool,
 }
 
-/// The read-back of the frame in flight.
-#[derive(Debug, Clone)]
-struct Verifier {
-    stream: PositionStream,
-    decoder: PositionStreamDecoder,
-    /// After a frame ended or broke: waiting for the next header byte.
-    hunting: bool,
-    query: [u8; 24],
-    query_len: usize,
-    head: u16,
-    asked: u16,
-    /// Records of the frame compared (or superseded by a later copy).
-    checked: u128,
-    /// Records of the frame found different or missing.
-    differ: u128,
-    /// For the reply being decoded: records found equal so far.
-    seen: u128,
-    /// Whether the reply being decoded can still be the awaited one.
-    candidate: bool,
-    /// Whether the frame being decoded is a read-back reply from the
-    /// station (so that breaking means the reply was lost).
-    started: bool,
-    station: Station,
-    rewrites: u8,
-}
-
-impl Verifier {
-    const fn new(stream: PositionStream) -> Self {
-        Verifier {
-            stream,
-            decoder: PositionStreamDecoder::new(BypassPolicy::Reject),
-            hunting: true,
-            query: [0; 24],
-            query_len: 0,
-            head: 0,
-            asked: 0,
-            checked: 0,
-            differ: 0,
-            seen: 0,
-            candidate: false,
-            started: false,
-            station: Station(0),
-            rewrites: 0,
-        }
-    }
-}
-
-/// The records of a frame, walked from their wire bytes.
-struct Walk<'a> {
-    bytes: &'a [u8],
-    at: usize,
-    stream: PositionStream,
-}
-
-impl<'a> Iterator for Walk<'a> {
-    type Item = &'a [u8];
-    fn next(&mut self) -> Option<&'a [u8]> {
-        let rest = self.bytes.get(self.at..)?;
-        let len = self.stream.layout.record_len_at(rest)?;
-        let rec = rest.get(..len)?;
-        self.at += len;
-        Some(rec)
-    }
-}
-
 /// A frame or window limit after a success: a quarter more, at least one,
 /// at most `max`.
 fn grow(limit: u16, max: u16) -> u16 {
     limit.saturating_add((limit / 4).max(1)).min(max)
-}
-
-fn bit(i: usize) -> u128 {
-    1u128.checked_shl(i as u32).unwrap_or(0)
-}
-
-/// The record counts a reply still in flight could carry (see the module
-/// docs on late and duplicated replies).
-#[derive(Debug, Clone)]
-struct Guard {
-    /// `(count, until, only a duplicate could carry it)`, one per count.
-    entries: heapless::Vec<(u16, u32, bool), RECENT>,
-    /// A late or duplicated reply was seen on this line: from then on the
-    /// counts of answered frames are guarded for the duplicate window too.
-    duplicates_seen: bool,
-    /// The count of the frame answered last (always avoided).
-    previous: u16,
-}
-
-impl Guard {
-    const fn new() -> Self {
-        Guard {
-            entries: heapless::Vec::new(),
-            duplicates_seen: false,
-            previous: 0,
-        }
-    }
-
-    fn prune(&mut self, now: u32) {
-        self.entries.retain(|&(_, u, _)| !reached(now, u));
-    }
-
-    /// Sets the entry of `count` (merging with one that exists).
-    fn note(&mut self, count: u16, until: u32, dup_only: bool, now: u32) {
-        self.prune(now);
-        if let Some(e) = self.entries.iter_mut().find(|e| e.0 == count) {
-            e.1 = crate::clock::later(e.1, until);
-            e.2 &= dup_only;
-        } else if self.entries.push((count, until, dup_only)).is_err() {
-            // Full: keep the latest deadline in the last slot, so that no
-            // count is forgotten early (one may be guarded longer).
-            if let Some(last) = self.entries.last_mut() {
-                last.1 = crate::clock::later(last.1, until);
-                last.2 = false;
-            }
-        }
-    }
-
-    /// A frame of `count` records was sent: its reply may come until
-    /// `until` (timeout plus late window).
-    fn sent(&mut self, count: u16, until: u32, now: u32) {
-        self.note(count, until, false, now);
-    }
-
-    /// The frame of `count` records was answered after `sends` sends.
-    /// Sent once, only a duplicate of the reply can still come (until
-    /// `dup_until`); sent more often, the other sends' replies can too.
-    fn answered(&mut self, count: u16, sends: u8, dup_until: u32, now: u32) {
-        if sends <= 1 {
-            self.entries.retain(|e| e.0 != count);
-        }
-        self.note(count, dup_until, sends <= 1, now);
-        self.previous = count;
-    }
-
-    /// Whether a frame of `n` records could be confirmed by a reply still
-    /// in flight.
-    fn blocks(&self, n: u16, now: u32) -> bool {
-        n == self.previous
-            || self
-                .entries
-                .iter()
-                .any(|&(c, u, dup)| c == n && !reached(now, u) && (!dup || self.duplicates_seen))
-    }
-
-    /// The earliest tick at which a blocked count frees up.
-    fn wake(&self, now: u32) -> u32 {
-        self.entries
-            .iter()
-            .map(|&(_, u, _)| u)
-            .min_by_key(|&u| u.wrapping_sub(now))
-            .unwrap_or(now.wrapping_add(1))
-    }
 }
 
 /// Writes a position table to a controller in confirmed (and verified)
@@ -1027,269 +885,6 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         };
     }
 
-    /// Records of the chunk that a later copy in the same chunk replaces.
-    fn superseded(&self) -> u128 {
-        let mut mask = 0u128;
-        for (i, n) in self.chunk_numbers().enumerate() {
-            if self.chunk_numbers().skip(i + 1).any(|m| m == n) {
-                mask |= bit(i);
-            }
-        }
-        mask
-    }
-
-    fn walk(&self) -> Walk<'_> {
-        let records_start = ENVELOPE_LEN + self.cfg.stream.prefix_len();
-        let cut = self.chunk.map_or(records_start, |c| c.cut);
-        Walk {
-            bytes: self.frame.get(..cut).unwrap_or(&[]),
-            at: records_start,
-            stream: self.cfg.stream,
-        }
-    }
-
-    /// The position numbers of the chunk's records, in order.
-    fn chunk_numbers(&self) -> impl Iterator<Item = u16> + '_ {
-        let start = self.chunk.map_or(0, |c| c.start);
-        let layout = self.cfg.stream.layout;
-        self.walk().enumerate().map(move |(i, rec)| {
-            if layout.number_width == 0 {
-                start.wrapping_add(i as u16)
-            } else {
-                let digits = rec.get(..usize::from(layout.number_width)).unwrap_or(&[]);
-                let spec = FieldSpec::hex(layout.number_width);
-                crate::field::decode_unsigned(spec, digits, 0).map_or(0, |n| n as u16)
-            }
-        })
-    }
-
-    /// Starts the query for the next window of unchecked records, or gives
-    /// the chunk's verdict.
-    fn start_verify(&mut self, now: u32) {
-        let all = self.chunk.map_or(0, |c| c.records);
-        let all_mask = if all >= 128 {
-            u128::MAX
-        } else {
-            bit(usize::from(all)) - 1
-        };
-        let checked = self.verifier.checked;
-        let lowest = self
-            .chunk_numbers()
-            .enumerate()
-            .filter(|(i, _)| checked & bit(*i) == 0)
-            .map(|(_, n)| n)
-            .min();
-        let Some(head) = lowest else {
-            self.verdict(now, all_mask);
-            return;
-        };
-        let v = &mut self.verifier;
-        let field_max = v.stream.count_field().max_unsigned();
-        let room = field_max.saturating_add(1).saturating_sub(u64::from(head));
-        let full = v
-            .stream
-            .window(self.cfg.max_response)
-            .min(self.window_limit);
-        let window = u64::from(full).min(room).max(1);
-        v.head = head;
-        v.asked = window as u16;
-        let built = self.write_query();
-        match (built, catalogue::lookup(self.verifier.stream.id)) {
-            (Ok(()), Some(info)) => {
-                self.exchange.start(info, now);
-                self.state = State::Verify;
-            }
-            (Err(e), _) => self.state = State::Failed(TransferError::Config(e), Resume::Nothing),
-            (_, None) => {
-                let id = self.verifier.stream.id;
-                self.state = State::Failed(
-                    TransferError::Config(Error::UnknownMessageId { id }),
-                    Resume::Nothing,
-                )
-            }
-        }
-    }
-
-    /// Writes the read-back query for the verifier's window.
-    fn write_query(&mut self) -> Result<(), Error> {
-        let v = &mut self.verifier;
-        let mut w = Writer::new(&mut v.query);
-        emit_envelope(
-            &mut w,
-            Header::Command,
-            self.cfg.exchange.station,
-            v.stream.id,
-        )?;
-        v.stream.write_query(&mut w, v.head, v.asked)?;
-        emit_trailer(&mut w, self.cfg.checksum)?;
-        v.query_len = w.len();
-        Ok(())
-    }
-
-    fn verdict(&mut self, now: u32, all: u128) {
-        let differ = self.verifier.differ & all;
-        if differ == 0 {
-            self.stats.frames_verified += 1;
-            self.stats.records_verified += u32::from(self.chunk.map_or(0, |c| c.records));
-            self.verifier.rewrites = 0;
-            self.finish_chunk(now);
-            return;
-        }
-        if self.verifier.rewrites < self.cfg.rewrites {
-            self.verifier.rewrites += 1;
-            self.stats.rewrites += 1;
-            self.start_write(now);
-            return;
-        }
-        let first_position = self.mismatched_positions().next().unwrap_or(0);
-        self.state = State::Failed(
-            TransferError::Mismatch {
-                first_position,
-                records: differ.count_ones() as u16,
-            },
-            Resume::Write,
-        );
-    }
-
-    /// A read-back window was answered (and compared): let the window
-    /// grow back, ask the next.
-    fn window_answered(&mut self, now: u32) {
-        let full = self.verifier.stream.window(self.cfg.max_response);
-        self.window_limit = grow(self.window_limit, full);
-        self.start_verify(now);
-    }
-
-    /// One byte in the read-back: the stream decoder compares the reply's
-    /// records as they arrive; the comparison counts when its SC checks.
-    fn verify_byte(&mut self, b: u8, now: u32) -> TransferEvent {
-        let v = &mut self.verifier;
-        if v.hunting {
-            if Header::from_byte(b).is_none() {
-                return TransferEvent::NeedMore;
-            }
-            v.decoder.reset();
-            v.hunting = false;
-            v.candidate = false;
-        }
-        match v.decoder.push(b) {
-            StreamEvent::NeedMore => TransferEvent::NeedMore,
-            StreamEvent::Start {
-                kind,
-                station,
-                count,
-                ..
-            } => {
-                v.station = station;
-                v.seen = 0;
-                v.candidate = kind == v.stream && count <= v.asked;
-                v.started = kind == v.stream && station == self.cfg.exchange.station;
-                TransferEvent::NeedMore
-            }
-            StreamEvent::Record(rec) => {
-                let (head, asked) = (self.verifier.head, self.verifier.asked);
-                let inside = u32::from(rec.number) >= u32::from(head)
-                    && u32::from(rec.number) < u32::from(head) + u32::from(asked);
-                if !inside {
-                    self.verifier.candidate = false;
-                } else if self.verifier.candidate {
-                    if let Some(i) = self.matching_record(&rec) {
-                        self.verifier.seen |= bit(i);
-                    }
-                }
-                TransferEvent::NeedMore
-            }
-            StreamEvent::End { .. } => {
-                let v = &mut self.verifier;
-                v.hunting = true;
-                v.started = false;
-                let (station, id, ok) = (v.station, v.stream.id, v.candidate);
-                match self
-                    .exchange
-                    .offer_head(Header::Response, station, id, ok, now)
-                {
-                    Offer::Accepted => self.commit_window(),
-                    // A reply to another window, or one that came early.
-                    Offer::Mismatch | Offer::Stale => {
-                        self.stats.stale_replies += 1;
-                        TransferEvent::Stale
-                    }
-                    other => self.judged(other, 0),
-                }
-            }
-            StreamEvent::Error { .. } => {
-                v.hunting = true;
-                if core::mem::take(&mut v.started) {
-                    // The awaited read-back reply arrived broken.
-                    self.exchange.reply_lost(now);
-                    let v = &mut self.verifier;
-                    if Header::from_byte(b).is_some() {
-                        v.decoder.reset();
-                        v.hunting = false;
-                        let _ = v.decoder.push(b);
-                    }
-                    return TransferEvent::NeedMore;
-                }
-                if Header::from_byte(b).is_some() {
-                    v.decoder.reset();
-                    v.hunting = false;
-                    let _ = v.decoder.push(b);
-                }
-                TransferEvent::NeedMore
-            }
-        }
-    }
-
-    /// The index of the chunk record `rec` should equal, if it does.
-    fn matching_record(&self, rec: &PositionRecord) -> Option<usize> {
-        let last = self
-            .chunk_numbers()
-            .enumerate()
-            .filter(|&(_, n)| n == rec.number)
-            .map(|(i, _)| i)
-            .last()?;
-        let bytes = self.walk().nth(last)?;
-        let mut r = Reader::new(bytes, 0);
-        let mut mine = self.cfg.stream.layout.read_record(&mut r).ok()?;
-        mine.number = rec.number;
-        let extended_ok = !self.cfg.stream.layout.extended || mine.extended == rec.extended;
-        let same = mine.axes == rec.axes
-            && mine.acceleration == rec.acceleration
-            && mine.deceleration == rec.deceleration
-            && mine.speed == rec.speed
-            && mine.positions == rec.positions
-            && extended_ok;
-        same.then_some(last)
-    }
-
-    fn commit_window(&mut self) -> TransferEvent {
-        let (head, asked) = (self.verifier.head, self.verifier.asked);
-        let end = u32::from(head) + u32::from(asked);
-        let seen = self.verifier.seen;
-        let mut checked = self.verifier.checked;
-        let mut differ = self.verifier.differ;
-        let (mut equal, mut missing) = (0u16, 0u16);
-        for (i, n) in self.chunk_numbers().enumerate() {
-            let m = bit(i);
-            if checked & m != 0 || u32::from(n) < u32::from(head) || u32::from(n) >= end {
-                continue;
-            }
-            checked |= m;
-            if seen & m != 0 {
-                equal += 1;
-            } else {
-                differ |= m;
-                missing += 1;
-            }
-        }
-        self.verifier.checked = checked;
-        self.verifier.differ = differ;
-        TransferEvent::Compared {
-            head,
-            equal,
-            differ: missing,
-        }
-    }
-
     /// Takes the next record: the held-back one first, then the source.
     fn pull(&mut self) -> Pull {
         if let Some(r) = self.held.take() {
@@ -1464,23 +1059,6 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             Err(e) => self.state = State::Failed(e, Resume::Nothing),
         }
     }
-
-    /// A read-back query timed out: ask the same head for half the window.
-    /// A late reply to the larger window still answers the smaller one
-    /// exactly: it lists every record in it.
-    fn shrink_window(&mut self) {
-        let v = &mut self.verifier;
-        if v.asked > 1 {
-            v.asked /= 2;
-            self.window_limit = v.asked;
-            if self.write_query().is_err() {
-                self.state = State::Failed(
-                    TransferError::Config(Error::BufferTooSmall),
-                    Resume::Nothing,
-                );
-            }
-        }
-    }
 }
 
 /// What [`Transfer::build`] achieved.
@@ -1576,98 +1154,6 @@ impl<E> TransferError<E> {
         match stop {
             Stop::Engine(e) => e.widen(),
             Stop::Io(e) => TransferError::Io(e),
-        }
-    }
-}
-
-/// What a [`RecordSource`] has to offer.
-#[derive(Debug, Clone, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Pull {
-    /// The next record.
-    Record(PositionRecord),
-    /// No record yet; ask again later.
-    Pending,
-    /// No more records.
-    End,
-}
-
-/// Where a transfer takes its records from. Every
-/// `Iterator<Item = PositionRecord>` is one (never pending); a
-/// [`RecordQueue`] is one that fills as records arrive.
-pub trait RecordSource {
-    /// The next record, if ready.
-    fn pull(&mut self) -> Pull;
-    /// Records in all, if known.
-    fn total(&self) -> Option<u32> {
-        None
-    }
-}
-
-impl<I: Iterator<Item = PositionRecord>> RecordSource for I {
-    fn pull(&mut self) -> Pull {
-        self.next().map_or(Pull::End, Pull::Record)
-    }
-    fn total(&self) -> Option<u32> {
-        let (lo, hi) = self.size_hint();
-        if Some(lo) == hi {
-            u32::try_from(lo).ok()
-        } else {
-            None
-        }
-    }
-}
-
-/// A bounded FIFO of records that a producer fills as they arrive (for
-/// example from a [`PositionStreamDecoder`])
-/// and a [`Transfer`] drains. It is pending while empty, until
-/// [`RecordQueue::finish`].
-#[derive(Debug, Clone, Default)]
-pub struct RecordQueue<const Q: usize> {
-    items: heapless::Deque<PositionRecord, Q>,
-    finished: bool,
-}
-
-impl<const Q: usize> RecordQueue<Q> {
-    /// An empty queue.
-    pub const fn new() -> Self {
-        RecordQueue {
-            items: heapless::Deque::new(),
-            finished: false,
-        }
-    }
-    /// Appends a record; gives it back if the queue is full.
-    pub fn push(&mut self, rec: PositionRecord) -> core::result::Result<(), PositionRecord> {
-        self.items.push_back(rec)
-    }
-    /// No more records will come.
-    pub fn finish(&mut self) {
-        self.finished = true;
-    }
-    /// Whether [`RecordQueue::finish`] was called.
-    pub fn is_finished(&self) -> bool {
-        self.finished
-    }
-    /// Records waiting.
-    pub fn len(&self) -> usize {
-        self.items.len()
-    }
-    /// Whether no record is waiting.
-    pub fn is_empty(&self) -> bool {
-        self.items.is_empty()
-    }
-    /// Whether another record would not fit.
-    pub fn is_full(&self) -> bool {
-        self.items.is_full()
-    }
-}
-
-impl<const Q: usize> RecordSource for RecordQueue<Q> {
-    fn pull(&mut self) -> Pull {
-        match self.items.pop_front() {
-            Some(r) => Pull::Record(r),
-            None if self.finished => Pull::End,
-            None => Pull::Pending,
         }
     }
 }
