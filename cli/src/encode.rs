@@ -640,7 +640,9 @@ fn write_json_level(
                         (true, v) if !v.is_object() => {
                             let mut one = serde_json::Map::new();
                             one.insert(name.to_string(), v.clone());
-                            write_json_level(sample, &one, &format!("{full}[{k}]/"), out)?;
+                            write_json_level(sample, &one, "", out).map_err(|e| {
+                                e.replacen(&format!("{name}: "), &format!("{full}[{k}]: "), 1)
+                            })?;
                         }
                         (_, J::Object(o)) => write_json_level(sample, o, &p, out)?,
                         (_, other) => {
