@@ -304,7 +304,7 @@ fn out_err(e: io::Error) -> Failure {
     }
 }
 
-type Outcome2 = Result<ExitCode, Failure>;
+type Run = Result<ExitCode, Failure>;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
@@ -351,7 +351,7 @@ fn main() -> ExitCode {
     }
 }
 
-fn inspect_cmd(file: &str, json: bool, format: Option<FormatArg>) -> Outcome2 {
+fn inspect_cmd(file: &str, json: bool, format: Option<FormatArg>) -> Run {
     let format = format.map(|f| match f {
         FormatArg::Raw => Format::Raw,
         FormatArg::Text => Format::Text,
@@ -391,13 +391,7 @@ fn build(msg: &MessageArgs, station: u8, response: bool, bypass: bool) -> Result
     encode(&opts)
 }
 
-fn encode_cmd(
-    msg: &MessageArgs,
-    station: u8,
-    response: bool,
-    bypass: bool,
-    fields: bool,
-) -> Outcome2 {
+fn encode_cmd(msg: &MessageArgs, station: u8, response: bool, bypass: bool, fields: bool) -> Run {
     let mut out = io::stdout().lock();
     let header = if response {
         Header::Response
@@ -449,7 +443,7 @@ fn print_item(out: &mut impl Write, item: &inspect::Item, json: bool) -> io::Res
     out.flush()
 }
 
-fn monitor_cmd(line: &LineArgs, json: bool) -> Outcome2 {
+fn monitor_cmd(line: &LineArgs, json: bool) -> Run {
     let mut link = Link::open(&line.target())?;
     let stop = stop_flag();
     let mut ins = inspect::Inspector::new();
@@ -481,7 +475,7 @@ fn show_frame(out: &mut impl Write, frame: &[u8], json: bool) -> io::Result<()> 
     Ok(())
 }
 
-fn send_cmd(msg: &MessageArgs, line: &LineArgs, output: OutputArg, detail: bool) -> Outcome2 {
+fn send_cmd(msg: &MessageArgs, line: &LineArgs, output: OutputArg, detail: bool) -> Run {
     let frame = build(msg, line.station, false, false)?;
     let profile = line.profile.profile();
     if let Ok(f) = iai_protocol_b::frame::Frame::new_checked(
@@ -611,7 +605,7 @@ fn progress_bar(total: u64, what: &str) -> indicatif::ProgressBar {
     bar
 }
 
-fn table_write(file: &Path, line: &LineArgs, verify: Verify, resume: bool) -> Outcome2 {
+fn table_write(file: &Path, line: &LineArgs, verify: Verify, resume: bool) -> Run {
     let plan = line.plan();
     let bytes =
         std::fs::read(file).map_err(|e| format!("{}: cannot read it: {e}", file.display()))?;
@@ -752,7 +746,7 @@ fn table_read(
     output: Option<&Path>,
     axes: Option<u8>,
     line: &LineArgs,
-) -> Outcome2 {
+) -> Run {
     let last = u32::from(first) + count - 1;
     let last = u16::try_from(last).map_err(|_| {
         format!("--first {first} --count {count}: the last position would be {last}, past 65535")
@@ -799,7 +793,7 @@ fn table_read(
     Ok(ExitCode::SUCCESS)
 }
 
-fn simulate_cmd(args: &SimArgs) -> Outcome2 {
+fn simulate_cmd(args: &SimArgs) -> Run {
     let station = Station(args.station);
     let mut ctl = match args.profile {
         ProfileArg::Tta => Controller::tta(station),

@@ -10,7 +10,6 @@ mod fixture_file;
 use common::{iai, iai_stdin, record, stdout, temp, Sim};
 
 use std::io::Write;
-use std::time::{Duration, Instant};
 
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::stream::{PositionStream, PositionStreamEncoder};
@@ -256,10 +255,8 @@ fn a_position_stream_larger_than_the_decoder_is_summarised() {
     assert!(big > 1_600_000);
     cap.extend_from_slice(b"#9926D4E201C\r\n");
     let path = temp("big.bin", &cap);
-    let t = Instant::now();
     let out = iai(&["inspect", "--json", path.to_str().unwrap()]);
     assert!(out.status.success(), "{}", stdout(&out));
-    assert!(t.elapsed() < Duration::from_secs(60));
     let text = stdout(&out);
     let lines: Vec<&str> = text.lines().collect();
     assert_eq!(lines.len(), 3, "{text}");
