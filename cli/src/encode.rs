@@ -436,11 +436,15 @@ fn write_level(
                     nodes.get(i + 1..).unwrap_or(&[]).iter().find(|n| matches!(n, Node::Group { .. })),
                     Some(Node::Group { info, .. }) if info.count_field.is_none()
                 );
-                if text.is_none() && name.ends_with("pattern") && next_is_axes {
+                // A pattern the user gave is checked against the values; a
+                // defaulted one only covers them (the group's maximum is
+                // checked then).
+                let given = text.is_some();
+                if !given && name.ends_with("pattern") && next_is_axes {
                     let n = counts.get(group_no).copied().unwrap_or(0).min(8);
                     text = Some(((1u32 << n) - 1).to_string());
                 }
-                if name.ends_with("pattern") && next_is_axes {
+                if given && name.ends_with("pattern") && next_is_axes {
                     let bits = text
                         .as_deref()
                         .and_then(super::text::parse_int)
@@ -503,7 +507,7 @@ fn check_count(
     }
     if count > info.max {
         return Err(format!(
-            "{name}: {count} item(s) given, at most {} allowed",
+            "{name}: {count} value(s) given, at most {} allowed",
             info.max
         ));
     }

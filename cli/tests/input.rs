@@ -132,7 +132,7 @@ fn numbers_are_parsed_strictly_and_errors_name_the_field() {
         (vec!["encode", "212", "query_axis_pattern=-1"], "negative"),
         (
             vec!["encode", "234", "absolute_coordinate=1,2,3,4,5,6,7,8,9"],
-            "absolute_coordinate: 9 value(s) given",
+            "absolute_coordinate: 9 value(s) given, at most 8 allowed",
         ),
         (
             vec![
