@@ -280,6 +280,16 @@ fn a_homed_axis_moves_and_status_reports_it() {
     let out = send(&at, &["234", "speed=100", "absolute_coordinate=50000"]);
     assert_eq!(out.status.code(), Some(1));
     assert!(stderr(&out).contains("error code 0E4"), "{}", stderr(&out));
+    // With --detail the request engine asks 216H for the latest error.
+    let out = send(
+        &at,
+        &["234", "speed=100", "absolute_coordinate=50000", "--detail"],
+    );
+    assert!(
+        stderr(&out).contains("216H latest system error C74 (not the same number"),
+        "{}",
+        stderr(&out)
+    );
     assert!(send(&at, &["232", "axis_pattern=1", "operation_type=1"])
         .status
         .success());
