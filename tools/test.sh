@@ -13,8 +13,8 @@ step() { printf '\n==> %s\n' "$*"; }
 step "formatting"
 cargo fmt --all --check
 
-step "clippy (core, host tests) -D warnings"
-cargo clippy -p iai-protocol-b -p host-tests --all-targets -- -D warnings
+step "clippy (core, host tests, iai) -D warnings"
+cargo clippy -p iai-protocol-b -p host-tests -p iai-cli --all-targets -- -D warnings
 cargo clippy -p iai-protocol-b --features defmt -- -D warnings
 
 step "core builds for thumbv6m / thumbv7m / thumbv7em (no std, no alloc)"
@@ -50,9 +50,14 @@ for t in thumbv7m-none-eabi thumbv7em-none-eabihf; do
 done
 echo "ok: no panic path survives in the decoders or the bridge (see firmware-example/src/bin/no_panic_proof.rs)"
 
+step "iai builds for Windows (x86_64-pc-windows-gnu, mingw-w64)"
+cargo build -q -p iai-cli --target x86_64-pc-windows-gnu
+echo "ok: iai.exe builds"
+
 step "docs (no warnings) and doctests"
 RUSTDOCFLAGS="-D warnings" cargo doc -q -p iai-protocol-b --no-deps
 RUSTDOCFLAGS="-D warnings" cargo doc -q -p firmware-example --no-deps --no-default-features
+RUSTDOCFLAGS="-D warnings" cargo doc -q -p iai-cli --no-deps
 cargo test -q -p iai-protocol-b --doc
 
 step "size report (flash, static RAM, stack measured under QEMU) and instruction counts (figures, not assertions)"
@@ -63,4 +68,4 @@ step "fuzzing smoke run: 30 s per cargo-fuzz target (installs nightly and cargo-
 ./fuzz/smoke.sh 30
 
 step "tests"
-cargo nextest run -p iai-protocol-b -p host-tests -p firmware-example --no-default-features --no-fail-fast
+cargo nextest run -p iai-protocol-b -p host-tests -p firmware-example -p iai-cli --no-default-features --no-fail-fast

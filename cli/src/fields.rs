@@ -141,7 +141,8 @@ pub fn is_scalar_group(items: &[Vec<Node>], name: &str) -> bool {
 /// The characters of a group of one-character text items (a counted text
 /// such as 216H's message), joined; `None` for any other group.
 pub fn joined_text(items: &[Vec<Node>], name: &str) -> Option<Vec<u8>> {
-    if !is_scalar_group(items, name) {
+    // An empty group shows as an empty list, whatever its items would be.
+    if items.is_empty() || !is_scalar_group(items, name) {
         return None;
     }
     let mut out = Vec::new();
@@ -224,12 +225,24 @@ pub fn text_lines(nodes: &[Node], prefix: &str, indent: &str, out: &mut Vec<Stri
     }
 }
 
-/// A JSON value: numbers as integers, text as strings.
+/// Raw text bytes as a string, one character per byte (Latin-1), so that
+/// 8-bit text survives a trip through JSON.
+pub fn latin1(bytes: &[u8]) -> String {
+    bytes.iter().map(|&b| char::from(b)).collect()
+}
+
+/// The inverse of [`latin1`]; `None` for a character above U+00FF.
+pub fn from_latin1(s: &str) -> Option<Vec<u8>> {
+    s.chars().map(|c| u8::try_from(u32::from(c)).ok()).collect()
+}
+
+/// A JSON value: numbers as integers, text as strings (one character per
+/// byte).
 pub fn json_value(v: &Val) -> String {
     match v {
         Val::Unsigned(n) => n.to_string(),
         Val::Signed(n) => n.to_string(),
-        Val::Text(t) => json_str(&String::from_utf8_lossy(t)),
+        Val::Text(t) => json_str(&latin1(t)),
     }
 }
 
@@ -242,11 +255,7 @@ pub fn json_object(nodes: &[Node]) -> String {
             Node::Leaf { name, value, .. } => format!("{}:{}", json_str(name), json_value(value)),
             Node::Group { name, items, .. } if joined_text(items, name).is_some() => {
                 let text = joined_text(items, name).unwrap_or_default();
-                format!(
-                    "{}:{}",
-                    json_str(name),
-                    json_str(&String::from_utf8_lossy(&text))
-                )
+                format!("{}:{}", json_str(name), json_str(&latin1(&text)))
             }
             Node::Group { name, items, .. } => {
                 let elems: Vec<String> = if is_scalar_group(items, name) {

@@ -23,7 +23,7 @@ use iai_protocol_b::catalogue;
 use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
 use iai_protocol_b::field::{encode_signed, encode_unsigned, FieldSpec, Radix};
 use iai_protocol_b::frame::{emit_frame, Frame, Header, Station};
-use iai_protocol_b::message::{decode_any, AnyMessage};
+use iai_protocol_b::message::{decode_any, AnyMessage, GroupInfo};
 
 use super::fields::{tree, Node, Val};
 
@@ -263,14 +263,42 @@ fn write_value(
     name: &str,
     out: &mut Vec<u8>,
 ) -> Result<(), String> {
+    write_value_as(spec, text, fixed, name, true, out)
+}
+
+fn write_value_as(
+    spec: FieldSpec,
+    text: Option<&str>,
+    fixed: Option<&[u8]>,
+    name: &str,
+    escaped: bool,
+    out: &mut Vec<u8>,
+) -> Result<(), String> {
     let width = usize::from(spec.width);
     let mut digits = vec![b'0'; width];
-    if let (Some(lit), None) = (fixed, text) {
-        out.extend_from_slice(lit);
-        return Ok(());
+    if let Some(lit) = fixed {
+        return match text {
+            Some(t) if t.as_bytes() != lit => Err(format!(
+                "{name}: the field is fixed to {:?}",
+                String::from_utf8_lossy(lit)
+            )),
+            _ => {
+                out.extend_from_slice(lit);
+                Ok(())
+            }
+        };
     }
     if spec.radix == Radix::Text {
-        let t = super::text::unescape(text.unwrap_or("").as_bytes());
+        let raw = text.unwrap_or("");
+        let t = if escaped {
+            super::text::unescape(raw.as_bytes())
+        } else {
+            super::fields::from_latin1(raw).ok_or_else(|| {
+                format!(
+                    "{name}: {raw:?} has a character above U+00FF (text is one byte per character)"
+                )
+            })?
+        };
         if t.len() > width {
             return Err(format!("{name}: at most {width} characters"));
         }
@@ -281,29 +309,51 @@ fn write_value(
     }
     let v = match text {
         None => 0,
-        Some(t) => {
-            super::text::parse_int(t).ok_or_else(|| format!("{name}: {t:?} is not a number"))?
-        }
+        Some(t) => super::text::parse_int(t).ok_or_else(|| {
+            format!(
+                "{name}: {t:?} is not a number (decimal or 0x hex, one optional '-'; {} {})",
+                describe(spec),
+                range_of(spec)
+            )
+        })?,
     };
     let res = if spec.signed {
-        let v = i64::try_from(v).map_err(|_| format!("{name}: {v} out of range"))?;
+        let v = i64::try_from(v).map_err(|_| {
+            format!(
+                "{name}: {v} does not fit {} ({})",
+                describe(spec),
+                range_of(spec)
+            )
+        })?;
         encode_signed(spec, v, &mut digits)
     } else {
-        let v = u64::try_from(v)
-            .map_err(|_| format!("{name}: {v} is negative, the field is unsigned"))?;
+        let v = u64::try_from(v).map_err(|_| {
+            format!(
+                "{name}: {v} is negative, the field is unsigned ({})",
+                range_of(spec)
+            )
+        })?;
         encode_unsigned(spec, v, &mut digits)
     };
     res.map_err(|_| {
-        let range = if spec.signed {
-            let (lo, hi) = spec.signed_range();
-            format!("{lo}..={hi}")
-        } else {
-            format!("0..={}", spec.max_unsigned())
-        };
-        format!("{name}: {v} does not fit {} ({range})", describe(spec))
+        format!(
+            "{name}: {v} does not fit {} ({})",
+            describe(spec),
+            range_of(spec)
+        )
     })?;
     out.extend_from_slice(&digits);
     Ok(())
+}
+
+/// The values a numeric field takes: `0..=255`, `-2147483648..=2147483647`.
+pub fn range_of(spec: FieldSpec) -> String {
+    if spec.signed {
+        let (lo, hi) = spec.signed_range();
+        format!("{lo}..={hi}")
+    } else {
+        format!("0..={}", spec.max_unsigned())
+    }
 }
 
 /// `hex 4`, `signed hex 8`, `dec 2`, `text 10`.
@@ -369,6 +419,7 @@ fn write_level(
         }
     }
     let mut group_no = 0;
+    let mut pattern: Option<(&str, u64)> = None;
     for (i, n) in nodes.iter().enumerate() {
         match n {
             Node::Leaf {
@@ -385,15 +436,27 @@ fn write_level(
                     nodes.get(i + 1..).unwrap_or(&[]).iter().find(|n| matches!(n, Node::Group { .. })),
                     Some(Node::Group { info, .. }) if info.count_field.is_none()
                 );
-                if text.is_none() && name.ends_with("pattern") && next_is_axes {
+                // A pattern the user gave is checked against the values; a
+                // defaulted one only covers them (the group's maximum is
+                // checked then).
+                let given = text.is_some();
+                if !given && name.ends_with("pattern") && next_is_axes {
                     let n = counts.get(group_no).copied().unwrap_or(0).min(8);
                     text = Some(((1u32 << n) - 1).to_string());
+                }
+                if given && name.ends_with("pattern") && next_is_axes {
+                    let bits = text
+                        .as_deref()
+                        .and_then(super::text::parse_int)
+                        .unwrap_or(0);
+                    pattern = Some((name, u64::try_from(bits).unwrap_or(0)));
                 }
                 write_value(*spec, text.as_deref(), fixed, name, out)?;
             }
             Node::Group { name, info, items } => {
                 let count = counts.get(group_no).copied().unwrap_or(0);
                 group_no += 1;
+                check_count(name, info, count, pattern.take())?;
                 if let Some(cf) = info.count_field {
                     let units = (count * info.per_item).to_string();
                     write_value(cf, Some(&units), None, name, out)?;
@@ -422,6 +485,181 @@ fn write_level(
     Ok(())
 }
 
+/// Checks a group's item count: at most the declared maximum, and one
+/// value per axis of the pattern that precedes a per-axis group.
+fn check_count(
+    name: &str,
+    info: &GroupInfo,
+    count: usize,
+    pattern: Option<(&str, u64)>,
+) -> Result<(), String> {
+    if info.count_field.is_none() {
+        if let Some((pname, bits)) = pattern {
+            let axes = bits.count_ones() as usize;
+            if axes != count {
+                return Err(format!(
+                    "{name}: {count} value(s) given, but {pname} = 0x{bits:02X} selects {axes} axis(es); give one value per axis (at most {})",
+                    info.max
+                ));
+            }
+            return Ok(());
+        }
+    }
+    if count > info.max {
+        return Err(format!(
+            "{name}: {count} value(s) given, at most {} allowed",
+            info.max
+        ));
+    }
+    Ok(())
+}
+
+/// Writes one level of the layout from a JSON object in the form that
+/// `iai inspect --json` prints under `fields`.
+fn write_json_level(
+    nodes: &[Node],
+    obj: &serde_json::Map<String, serde_json::Value>,
+    path: &str,
+    out: &mut Vec<u8>,
+) -> Result<(), String> {
+    use serde_json::Value as J;
+    let known: Vec<&str> = nodes.iter().map(Node::name).collect();
+    if let Some(k) = obj.keys().find(|k| !known.contains(&k.as_str())) {
+        return Err(format!(
+            "{path}{k}: no such field here; the fields are: {}",
+            known.join(", ")
+        ));
+    }
+    let text_of = |name: &str, v: &J, spec: Option<FieldSpec>| -> Result<String, String> {
+        match v {
+            J::Number(n) => Ok(n.to_string()),
+            J::String(s) if spec.is_none_or(|s| s.radix == Radix::Text) => Ok(s.clone()),
+            J::String(s) => Ok(s.clone()),
+            other => Err(format!(
+                "{path}{name}: expected a number or a string, found {other}"
+            )),
+        }
+    };
+    let mut pattern: Option<(&str, u64)> = None;
+    for (i, n) in nodes.iter().enumerate() {
+        match n {
+            Node::Leaf {
+                name, spec, value, ..
+            } => {
+                let fixed = match value {
+                    Val::Text(t) if spec.radix != Radix::Text => Some(t.as_slice()),
+                    _ => None,
+                };
+                let given = obj.get(*name);
+                let mut text = given.map(|v| text_of(name, v, Some(*spec))).transpose()?;
+                if let (Some(J::String(s)), None, true) = (given, fixed, spec.radix != Radix::Text)
+                {
+                    return Err(format!(
+                        "{path}{name}: expected a number, found the string {s:?}"
+                    ));
+                }
+                let next_is_axes = matches!(
+                    nodes.get(i + 1..).unwrap_or(&[]).iter().find(|n| matches!(n, Node::Group { .. })),
+                    Some(Node::Group { info, .. }) if info.count_field.is_none()
+                );
+                if name.ends_with("pattern") && next_is_axes {
+                    if text.is_none() {
+                        // Default: the first N axes for N values.
+                        let count = nodes
+                            .get(i + 1..)
+                            .unwrap_or(&[])
+                            .iter()
+                            .find_map(|n| match n {
+                                Node::Group { name, .. } => {
+                                    obj.get(*name).and_then(J::as_array).map(Vec::len)
+                                }
+                                _ => None,
+                            })
+                            .unwrap_or(0)
+                            .min(8);
+                        text = Some(((1u32 << count) - 1).to_string());
+                    }
+                    let bits = text
+                        .as_deref()
+                        .and_then(super::text::parse_int)
+                        .unwrap_or(0);
+                    pattern = Some((name, u64::try_from(bits).unwrap_or(0)));
+                }
+                let full = format!("{path}{name}");
+                write_value_as(*spec, text.as_deref(), fixed, &full, false, out)?;
+            }
+            Node::Group { name, info, items } => {
+                let full = format!("{path}{name}");
+                let given = obj.get(*name);
+                if char_group(n).is_some() {
+                    let t = match given {
+                        None => String::new(),
+                        Some(J::String(s)) => s.clone(),
+                        Some(J::Array(a)) if a.is_empty() => String::new(),
+                        Some(other) => {
+                            return Err(format!("{full}: expected a string, found {other}"))
+                        }
+                    };
+                    let t = super::fields::from_latin1(&t).ok_or_else(|| {
+                        format!("{full}: {t:?} has a character above U+00FF (text is one byte per character)")
+                    })?;
+                    check_count(&full, info, t.len(), None)?;
+                    if let Some(cf) = info.count_field {
+                        write_value(
+                            cf,
+                            Some(&(t.len() * info.per_item).to_string()),
+                            None,
+                            &full,
+                            out,
+                        )?;
+                    }
+                    out.extend_from_slice(&t);
+                    continue;
+                }
+                let list: &[J] = match given {
+                    None => &[],
+                    Some(J::Array(a)) => a,
+                    Some(other) => return Err(format!("{full}: expected an array, found {other}")),
+                };
+                check_count(&full, info, list.len(), pattern.take())?;
+                if let Some(cf) = info.count_field {
+                    write_value(
+                        cf,
+                        Some(&(list.len() * info.per_item).to_string()),
+                        None,
+                        &full,
+                        out,
+                    )?;
+                }
+                let Some(sample) = items.first() else {
+                    if !list.is_empty() {
+                        return Err(format!("{full}: no sample item to encode from"));
+                    }
+                    continue;
+                };
+                let scalar = super::fields::is_scalar_group(items, name);
+                for (k, item) in list.iter().enumerate() {
+                    let p = format!("{full}[{k}].");
+                    match (scalar, item) {
+                        (true, v) if !v.is_object() => {
+                            let mut one = serde_json::Map::new();
+                            one.insert(name.to_string(), v.clone());
+                            write_json_level(sample, &one, "", out).map_err(|e| {
+                                e.replacen(&format!("{name}: "), &format!("{full}[{k}]: "), 1)
+                            })?;
+                        }
+                        (_, J::Object(o)) => write_json_level(sample, o, &p, out)?,
+                        (_, other) => {
+                            return Err(format!("{full}[{k}]: expected an object, found {other}"))
+                        }
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Options of `iai encode`.
 #[derive(Debug, Clone)]
 pub struct EncodeOptions {
@@ -435,10 +673,15 @@ pub struct EncodeOptions {
     pub response: bool,
     /// Send `@@` instead of the checksum.
     pub bypass: bool,
+    /// The fields as a JSON object (instead of `assignments`).
+    pub json: Option<serde_json::Value>,
 }
 
 /// Builds the frame. Returns it, or a message saying what is wrong.
 pub fn encode(opts: &EncodeOptions) -> Result<Vec<u8>, String> {
+    if opts.message.eq_ignore_ascii_case("error") {
+        return encode_error(opts);
+    }
     let header = if opts.response {
         Header::Response
     } else {
@@ -455,18 +698,30 @@ pub fn encode(opts: &EncodeOptions) -> Result<Vec<u8>, String> {
             }
         )
     })?;
+    let mut body = Vec::new();
+    if let Some(json) = &opts.json {
+        if !opts.assignments.is_empty() {
+            return Err("give the fields either as field=value or as JSON, not both".into());
+        }
+        let obj = json
+            .as_object()
+            .ok_or_else(|| format!("the JSON must be an object of fields, found {json}"))?;
+        write_json_level(&nodes, obj, "", &mut body)?;
+        return finish_frame(opts, header, id, &body);
+    }
     let mut values = BTreeMap::new();
     for a in &opts.assignments {
         let (k, v) = a
             .split_once('=')
             .ok_or_else(|| format!("{a:?}: expected field=value"))?;
-        values.insert(k.to_string(), v.to_string());
+        if values.insert(k.to_string(), v.to_string()).is_some() {
+            return Err(format!("{k}: given twice"));
+        }
     }
     let mut args = Args {
         values,
         used: BTreeMap::new(),
     };
-    let mut body = Vec::new();
     write_level(&nodes, &[], &[], &mut args, &mut body)?;
     let unknown: Vec<&String> = args
         .values
@@ -494,15 +749,70 @@ pub fn encode(opts: &EncodeOptions) -> Result<Vec<u8>, String> {
                 .join(" ")
         ));
     }
+    finish_frame(opts, header, id, &body)
+}
+
+fn finish_frame(
+    opts: &EncodeOptions,
+    header: Header,
+    id: u16,
+    body: &[u8],
+) -> Result<Vec<u8>, String> {
     let mode = if opts.bypass {
         ChecksumMode::Bypass
     } else {
         ChecksumMode::Compute
     };
-    let bytes = frame_bytes(header, Station(opts.station), id, &body, mode);
+    let bytes = frame_bytes(header, Station(opts.station), id, body, mode);
     let frame = Frame::new_checked(&bytes, BypassPolicy::Accept).map_err(|e| e.to_string())?;
     decode_any(&frame).map_err(|e| format!("the frame does not decode: {e}"))?;
     Ok(bytes)
+}
+
+/// An error response (`&`, station, 3-digit code): MESSAGE `error`, the
+/// code as `error_code=…` or `{"error_code": …}`.
+fn encode_error(opts: &EncodeOptions) -> Result<Vec<u8>, String> {
+    let sample = frame_bytes(Header::Error, Station(0x99), 0, &[], ChecksumMode::Compute);
+    let nodes = Frame::new_checked(&sample, BypassPolicy::Accept)
+        .ok()
+        .and_then(|f| decode_any(&f).ok())
+        .map(|d| tree(&d.message))
+        .ok_or("error responses cannot be built")?;
+    let mut digits = Vec::new();
+    match &opts.json {
+        Some(json) => {
+            let obj = json
+                .as_object()
+                .ok_or_else(|| format!("the JSON must be an object of fields, found {json}"))?;
+            write_json_level(&nodes, obj, "", &mut digits)?;
+        }
+        None => {
+            let mut values = BTreeMap::new();
+            for a in &opts.assignments {
+                let (k, v) = a
+                    .split_once('=')
+                    .ok_or_else(|| format!("{a:?}: expected field=value"))?;
+                if values.insert(k.to_string(), v.to_string()).is_some() {
+                    return Err(format!("{k}: given twice"));
+                }
+            }
+            let mut args = Args {
+                values,
+                used: BTreeMap::new(),
+            };
+            write_level(&nodes, &[], &[], &mut args, &mut digits)?;
+            if let Some(k) = args.values.keys().find(|k| !args.used.contains_key(*k)) {
+                return Err(format!(
+                    "an error response has no field {k}; its field: error_code"
+                ));
+            }
+        }
+    }
+    let code = std::str::from_utf8(&digits)
+        .ok()
+        .and_then(|d| u16::from_str_radix(d, 16).ok())
+        .ok_or("error_code: not a 3-digit code")?;
+    finish_frame(opts, Header::Error, code, &[])
 }
 
 /// The usage lines of a message's fields (for `iai encode MESSAGE --help`).

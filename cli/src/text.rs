@@ -75,17 +75,21 @@ pub fn json_str(s: &str) -> String {
     out
 }
 
-/// A decimal or `0x` hex integer, optionally negative.
+/// A decimal or `0x` hex integer, optionally negative: one optional `-`,
+/// then digits only (no `+`, no second sign, no `_`, no spaces).
 pub fn parse_int(s: &str) -> Option<i128> {
     let (neg, body) = match s.strip_prefix('-') {
         Some(rest) => (true, rest),
-        None => (false, s.strip_prefix('+').unwrap_or(s)),
+        None => (false, s),
     };
-    let body = body.replace('_', "");
-    let v = match body.strip_prefix("0x").or_else(|| body.strip_prefix("0X")) {
-        Some(hex) => i128::from_str_radix(hex, 16).ok()?,
-        None => body.parse::<i128>().ok()?,
+    let (radix, digits) = match body.strip_prefix("0x").or_else(|| body.strip_prefix("0X")) {
+        Some(hex) => (16, hex),
+        None => (10, body),
     };
+    if digits.is_empty() || !digits.chars().all(|c| c.is_digit(radix)) {
+        return None;
+    }
+    let v = i128::from_str_radix(digits, radix).ok()?;
     Some(if neg { -v } else { v })
 }
 
@@ -105,5 +109,10 @@ mod tests {
         assert_eq!(parse_int("0x1F"), Some(31));
         assert_eq!(parse_int("-25500"), Some(-25500));
         assert_eq!(parse_int("x"), None);
+        for bad in [
+            "--5000", "1__0", "1_0", "+5", "", "-", "0x", "5 ", "1e3", "0x-1",
+        ] {
+            assert_eq!(parse_int(bad), None, "{bad:?}");
+        }
     }
 }

@@ -18,7 +18,7 @@ use iai_protocol_b::message::{decode_any, AnyMessage};
 use iai_protocol_b::stream::{PositionStream, PositionStreamDecoder, StreamEvent};
 
 use super::fields::{json_object, record_tree, text_lines, tree, Node};
-use super::text::{escape, json_str, unescape};
+use super::text::{escape, json_str};
 
 /// Where a byte came from in a text log: line number and direction prefix.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -98,9 +98,14 @@ pub struct Item {
 }
 
 impl Item {
-    /// Whether this entry is an error.
+    /// Whether this entry is an error: a broken frame, noise, or a frame
+    /// whose body does not decode as its message.
     pub fn is_error(&self) -> bool {
-        matches!(self.what, What::Error { .. })
+        match &self.what {
+            What::Error { .. } => true,
+            What::Frame(f) => f.decoded.is_err(),
+            What::Stream(_) => false,
+        }
     }
 }
 
@@ -237,7 +242,12 @@ impl Inspector {
         }
         if let Some(item) = self.skip.as_mut() {
             if !is_header {
+                // The rest of the broken frame, through its LF.
                 item.len += 1;
+                if b == b'\n' {
+                    let item = self.skip.take();
+                    self.items.extend(item);
+                }
                 return;
             }
             let item = self.skip.take();
@@ -477,6 +487,15 @@ impl Inspector {
                         bytes: sample(&bytes),
                     },
                 };
+                if matches!(e, iai_protocol_b::Error::FrameTooLong { .. }) && b != b'\n' {
+                    // The frame goes on past the decoder's buffer: the
+                    // bytes up to its LF (or the next header) belong to
+                    // this one error, not to noise.
+                    self.flush_noise();
+                    self.skip = Some(item);
+                    self.cur.clear();
+                    return;
+                }
                 (Some(item), new_frame)
             }
         };
@@ -727,68 +746,222 @@ pub fn split_prefix(line: &[u8]) -> (Option<&'static str>, &[u8]) {
     (None, line)
 }
 
+/// Why inspecting stopped: the input could not be read, or the output
+/// could not be written (a closed pipe, for one).
+#[derive(Debug)]
+pub enum InspectError {
+    /// Reading the capture failed.
+    Read(std::io::Error),
+    /// Writing the listing failed.
+    Write(std::io::Error),
+}
+
+const PREFIXES: [(&[u8], &str); 6] = [
+    (b"> ", "tx"),
+    (b"< ", "rx"),
+    (b"TX ", "tx"),
+    (b"RX ", "rx"),
+    (b"TX: ", "tx"),
+    (b"RX: ", "rx"),
+];
+
+/// A text log read as a stream: one frame per line, optional direction
+/// prefix and surrounding blanks, escapes as in [`crate::text::unescape`]. Nothing but
+/// a few bytes of the current line is held, whatever the line's length.
+#[derive(Default)]
+struct TextLog {
+    line: usize,
+    /// Still reading the line's leading blanks and direction prefix.
+    head: Option<Vec<u8>>,
+    /// Blanks seen but not yet known to be inside the line.
+    blanks: Vec<u8>,
+    /// An escape sequence in progress.
+    esc: Vec<u8>,
+    /// Last two unescaped bytes of this line, and whether there were any.
+    last: [u8; 2],
+    any: bool,
+    out: Vec<u8>,
+}
+
+impl TextLog {
+    fn emit(&mut self, b: u8) {
+        self.out.push(b);
+        self.last = [self.last[1], b];
+        self.any = true;
+    }
+
+    fn unescaped(&mut self, c: u8) {
+        match self.esc.len() {
+            0 if c == b'\\' => self.esc.push(c),
+            0 => self.emit(c),
+            1 => {
+                self.esc.clear();
+                match c {
+                    b'r' => self.emit(b'\r'),
+                    b'n' => self.emit(b'\n'),
+                    b't' => self.emit(b'\t'),
+                    b'\\' => self.emit(b'\\'),
+                    b'x' => self.esc.extend_from_slice(b"\\x"),
+                    other => {
+                        self.emit(b'\\');
+                        self.emit(other);
+                    }
+                }
+            }
+            2 => self.esc.push(c),
+            _ => {
+                self.esc.push(c);
+                let hex = std::str::from_utf8(self.esc.get(2..4).unwrap_or(&[]))
+                    .ok()
+                    .and_then(|h| u8::from_str_radix(h, 16).ok());
+                let esc = std::mem::take(&mut self.esc);
+                match hex {
+                    Some(v) => self.emit(v),
+                    None => self.literal(&esc),
+                }
+            }
+        }
+    }
+
+    /// An escape that is not one: `\x` as written, the rest read again.
+    fn literal(&mut self, esc: &[u8]) {
+        self.emit(b'\\');
+        self.emit(b'x');
+        for &c in esc.get(2..).unwrap_or(&[]) {
+            self.unescaped(c);
+        }
+    }
+
+    fn content(&mut self, c: u8) {
+        if matches!(c, b' ' | b'\t' | b'\r') {
+            self.blanks.push(c);
+            return;
+        }
+        for b in std::mem::take(&mut self.blanks) {
+            self.unescaped(b);
+        }
+        self.unescaped(c);
+    }
+
+    fn start_content(&mut self, ins: &mut Inspector, dir: Option<&'static str>, replay: &[u8]) {
+        self.flush(ins);
+        ins.set_origin(Origin {
+            line: Some(self.line),
+            dir,
+        });
+        for &c in replay {
+            self.content(c);
+        }
+    }
+
+    fn flush(&mut self, ins: &mut Inspector) {
+        if !self.out.is_empty() {
+            ins.feed(&self.out);
+            self.out.clear();
+        }
+    }
+
+    fn end_line(&mut self, ins: &mut Inspector) {
+        if let Some(head) = self.head.take() {
+            if !head.is_empty() {
+                self.start_content(ins, None, &head);
+            }
+        }
+        self.blanks.clear();
+        let esc = std::mem::take(&mut self.esc);
+        match esc.len() {
+            0 => {}
+            1 => self.emit(b'\\'),
+            _ => self.literal(&esc),
+        }
+        if self.any && self.last != *b"\r\n" {
+            self.emit(b'\r');
+            self.emit(b'\n');
+        }
+        self.flush(ins);
+        self.any = false;
+        self.last = [0; 2];
+    }
+
+    fn feed(&mut self, chunk: &[u8], ins: &mut Inspector) {
+        for &c in chunk {
+            if self.line == 0 {
+                self.line = 1;
+                self.head = Some(Vec::new());
+            }
+            if c == b'\n' {
+                self.end_line(ins);
+                self.line += 1;
+                self.head = Some(Vec::new());
+                continue;
+            }
+            let Some(head) = self.head.as_mut() else {
+                self.content(c);
+                continue;
+            };
+            if head.is_empty() && matches!(c, b' ' | b'\t' | b'\r') {
+                continue;
+            }
+            head.push(c);
+            if let Some((_, dir)) = PREFIXES.iter().find(|(p, _)| *p == head.as_slice()) {
+                self.head = None;
+                self.start_content(ins, Some(dir), &[]);
+            } else if !PREFIXES.iter().any(|(p, _)| p.starts_with(head)) {
+                let replay = std::mem::take(head);
+                self.head = None;
+                self.start_content(ins, None, &replay);
+            }
+        }
+        self.flush(ins);
+    }
+
+    fn finish(&mut self, ins: &mut Inspector) {
+        if self.line > 0 {
+            self.end_line(ins);
+        }
+    }
+}
+
 /// Inspects a whole capture, calling `emit` for each entry as it is found.
-/// Returns (frames, errors).
+/// Returns (frames, errors). Memory stays the same whatever the size of
+/// the capture or of its lines.
 pub fn run(
     mut input: impl BufRead,
     format: Format,
     mut emit: impl FnMut(&Item) -> std::io::Result<()>,
-) -> std::io::Result<(u64, u64)> {
+) -> Result<(u64, u64), InspectError> {
     let mut ins = Inspector::new();
     let mut counts = (0u64, 0u64);
-    let mut drain = |ins: &mut Inspector, counts: &mut (u64, u64)| -> std::io::Result<()> {
+    let mut drain = |ins: &mut Inspector, counts: &mut (u64, u64)| -> Result<(), InspectError> {
         for item in ins.take_items() {
             if item.is_error() {
                 counts.1 += 1;
             } else {
                 counts.0 += 1;
             }
-            emit(&item)?;
+            emit(&item).map_err(InspectError::Write)?;
         }
         Ok(())
     };
-    match format {
-        Format::Raw => {
-            let mut buf = vec![0u8; 1 << 16];
-            loop {
-                let n = input.read(&mut buf)?;
-                if n == 0 {
-                    break;
-                }
-                ins.feed(buf.get(..n).unwrap_or(&[]));
-                drain(&mut ins, &mut counts)?;
-            }
+    let mut text = TextLog::default();
+    let mut buf = vec![0u8; 1 << 16];
+    loop {
+        let n = match input.read(&mut buf) {
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(InspectError::Read(e)),
+        };
+        if n == 0 {
+            break;
         }
-        Format::Text => {
-            let mut line = Vec::new();
-            let mut no = 0;
-            loop {
-                line.clear();
-                if input.read_until(b'\n', &mut line)? == 0 {
-                    break;
-                }
-                no += 1;
-                while line.last().is_some_and(|b| *b == b'\n' || *b == b'\r') {
-                    line.pop();
-                }
-                let trimmed = line.trim_ascii_start();
-                if trimmed.is_empty() {
-                    continue;
-                }
-                let (dir, rest) = split_prefix(trimmed);
-                let mut bytes = unescape(rest.trim_ascii_end());
-                if !bytes.ends_with(b"\r\n") {
-                    bytes.extend_from_slice(b"\r\n");
-                }
-                ins.set_origin(Origin {
-                    line: Some(no),
-                    dir,
-                });
-                ins.feed(&bytes);
-                drain(&mut ins, &mut counts)?;
-            }
+        let chunk = buf.get(..n).unwrap_or(&[]);
+        match format {
+            Format::Raw => ins.feed(chunk),
+            Format::Text => text.feed(chunk, &mut ins),
         }
+        drain(&mut ins, &mut counts)?;
     }
+    text.finish(&mut ins);
     ins.finish();
     drain(&mut ins, &mut counts)?;
     Ok(counts)
@@ -816,16 +989,16 @@ pub fn command(
     format: Option<Format>,
     json: bool,
     out: &mut impl Write,
-) -> std::io::Result<i32> {
+) -> Result<i32, InspectError> {
     let reader: Box<dyn Read> = if path == "-" {
         Box::new(std::io::stdin().lock())
     } else {
-        Box::new(std::fs::File::open(path)?)
+        Box::new(std::fs::File::open(path).map_err(InspectError::Read)?)
     };
     let mut reader = std::io::BufReader::with_capacity(1 << 16, reader);
     let format = match format {
         Some(f) => f,
-        None => guess_format(reader.fill_buf()?),
+        None => guess_format(reader.fill_buf().map_err(InspectError::Read)?),
     };
     let (frames, errors) = run(reader, format, |item| {
         if json {
@@ -838,7 +1011,8 @@ pub fn command(
         }
     })?;
     if !json {
-        writeln!(out, "-- {frames} frame(s), {errors} error(s)")?;
+        writeln!(out, "-- {frames} frame(s), {errors} error(s)").map_err(InspectError::Write)?;
     }
+    out.flush().map_err(InspectError::Write)?;
     Ok(if errors > 0 { 1 } else { 0 })
 }
