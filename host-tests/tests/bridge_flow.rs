@@ -28,10 +28,11 @@ fn full_table(baud: u32, flow: FlowControl) {
     let mut bridge = model::bridge(&cfg.bridge);
     let r = model::run(&cfg, &mut bridge, &mut sim, &[&cmd]);
     let line_rate = f64::from(baud) / 10.0;
+    let reply_after_ms = r.reply_after_ns[0].map_or(f64::NAN, |ns| ns as f64 / 1e6);
     eprintln!(
         "{baud} baud {flow:?}: {} bytes, {} overruns, {} pauses, ring peak {} of 255, \
          virtual {:.1} s, {:.0} B/s = {:.0}% of the line rate ({line_rate:.0} B/s), \
-         {} polls, real {:?}",
+         reply {reply_after_ms:.0} ms after the host's last byte, {} polls, real {:?}",
         r.host_bytes,
         r.overruns,
         r.pauses,
@@ -50,6 +51,13 @@ fn full_table(baud: u32, flow: FlowControl) {
     assert!(
         r.pauses > 0,
         "the controller is slower than the line: the host must be paused"
+    );
+    // The host times out 3 s after its last byte (2003 p. 62): the
+    // bridge's last chunks, their read-back and the reply must fit. Virtual
+    // time, so this is the protocol's deadline, not a machine's speed.
+    assert!(
+        reply_after_ms <= 3_000.0,
+        "the reply came {reply_after_ms:.0} ms after the host's last byte"
     );
 }
 
