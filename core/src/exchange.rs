@@ -477,15 +477,17 @@ impl Exchange {
     /// timeout is an **inference** from the half-duplex rules, 2003 p. 8:
     /// after its reply the controller is ready for the next command.)
     ///
-    /// Only when the frame can be nothing else: after a resend, or while a
-    /// reply to an older command may still come, a broken frame may be one
-    /// of those late replies, and the awaited one may still arrive; the
-    /// timeout then stands (cutting it would spend the sends on replies
-    /// that were never lost).
+    /// After a resend, or while a reply to an older command may still
+    /// come, a broken frame may be one of those late replies and the
+    /// awaited one may still arrive. Then the timeout is cut short only if
+    /// another send is left (an extra send costs at most a stale reply);
+    /// the last send keeps its full timeout, so that a stranger's broken
+    /// reply cannot end the command as timed out.
     pub fn reply_lost(&mut self, now: u32) {
         if let Phase::Await { deadline } = self.phase {
             self.faulted = true;
-            if self.sends > 1 || self.stale_possible(now) {
+            let ambiguous = self.sends > 1 || self.stale_possible(now);
+            if ambiguous && self.sends >= self.cfg.max_sends {
                 return;
             }
             let soon = now.wrapping_add(self.cfg.turnaround_ms).wrapping_add(1);
@@ -640,20 +642,24 @@ mod tests {
     }
 
     #[test]
-    fn after_a_resend_a_broken_frame_may_be_the_first_sends_late_reply() {
+    fn on_the_last_send_a_broken_frame_may_be_an_earlier_sends_late_reply() {
         let mut x = exchange();
         x.start(&catalogue::AXIS_STATUS_QUERY, 0);
         x.poll(0);
         x.sent(0);
         assert_eq!(x.poll(3_000), Due::Transmit { fresh: true });
         x.sent(3_010);
-        // Broken: the first send's reply, late, or the second's? The
-        // second's may still come, so its timeout stands.
+        // Broken: a late reply to the first send, or the second's? A third
+        // send is left: resend after the turnaround.
         x.reply_lost(4_000);
-        assert_eq!(x.poll(4_002), Due::WaitUntil(6_010));
+        assert_eq!(x.poll(4_002), Due::Transmit { fresh: true });
+        x.sent(4_010);
+        // The last send: its timeout stands, and its reply is taken.
+        x.reply_lost(4_500);
+        assert_eq!(x.poll(4_502), Due::WaitUntil(7_010));
         assert!(x.faulted());
         assert_eq!(
-            x.offer(&frame(b"#992122A\r\n"), true, 4_100),
+            x.offer(&frame(b"#992122A\r\n"), true, 4_600),
             Offer::Accepted
         );
     }
