@@ -680,23 +680,7 @@ fn accept_unix_until(
     deadline: Instant,
 ) -> io::Result<UnixStream> {
     listener.set_nonblocking(true)?;
-    loop {
-        match listener.accept() {
-            Ok((stream, _)) => return Ok(stream),
-            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
-            Err(e) => return Err(e),
-        }
-        if let Some(status) = child.try_wait()? {
-            return Err(io::Error::other(format!("QEMU exited early with {status}")));
-        }
-        if Instant::now() >= deadline {
-            return Err(io::Error::new(
-                io::ErrorKind::TimedOut,
-                "timed out waiting for QEMU to connect",
-            ));
-        }
-        thread::sleep(Duration::from_millis(5));
-    }
+    accept_with(|| listener.accept().map(|(s, _)| s), child, deadline)
 }
 
 /// Accept one connection on `listener` before `deadline`, giving up early
@@ -707,9 +691,19 @@ fn accept_until(
     deadline: Instant,
 ) -> io::Result<TcpStream> {
     listener.set_nonblocking(true)?;
+    accept_with(|| listener.accept().map(|(s, _)| s), child, deadline)
+}
+
+/// Polls the non-blocking `accept` until it gives a connection, `child`
+/// exits or `deadline` passes.
+fn accept_with<S>(
+    mut accept: impl FnMut() -> io::Result<S>,
+    child: &mut Child,
+    deadline: Instant,
+) -> io::Result<S> {
     loop {
-        match listener.accept() {
-            Ok((stream, _)) => return Ok(stream),
+        match accept() {
+            Ok(stream) => return Ok(stream),
             Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
             Err(e) => return Err(e),
         }
