@@ -363,6 +363,14 @@ impl Exchange {
         self.faulted
     }
 
+    /// How the current command ended, if it has.
+    pub const fn finished(&self) -> Option<Finish> {
+        match self.phase {
+            Phase::Finished(f) => Some(f),
+            _ => None,
+        }
+    }
+
     /// Whether a reply is awaited now (the command was completely sent).
     pub const fn awaiting(&self) -> bool {
         matches!(self.phase, Phase::Await { .. })

@@ -458,8 +458,11 @@ impl<const N: usize> ReadBack<N> {
     /// [`ReadEvent::Answered`] the reply stays readable until the next
     /// `poll` delivers it, so feed the rest of the input after that poll.
     pub fn received(&mut self, bytes: &[u8], now: u32) -> Received<ReadEvent> {
-        if self.state == State::Deliver {
-            // The reply is held for delivery: take nothing more yet.
+        let answered = self.state == State::Exchange
+            && matches!(self.exchange.finished(), Some(Finish::Replied));
+        if self.state == State::Deliver || answered {
+            // The reply is held for delivery (by the next poll): take
+            // nothing more yet, or the next frame would overwrite it.
             return Received {
                 consumed: 0,
                 event: ReadEvent::NeedMore,
