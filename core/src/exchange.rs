@@ -470,6 +470,13 @@ impl Exchange {
     ) -> Offer {
         let verdict = judge(self.cfg.station, self.id, header, station, code);
         if verdict == Verdict::Foreign {
+            // A reply from our controller to another ID while replies to
+            // earlier commands may still come: a late reply to one of
+            // them, and a copy of it may follow.
+            if station == self.cfg.station && header != Header::Command && self.stale_possible(now)
+            {
+                self.stale_seen(now);
+            }
             return Offer::Foreign;
         }
         if !self.awaiting() {
@@ -883,6 +890,31 @@ mod tests {
         assert_eq!(x.offer(&f, true, 11_000), Offer::Stale);
         assert_eq!(x.poll(12_000), Due::WaitUntil(14_000));
         assert_eq!(x.poll(14_000), Due::Transmit { fresh: true });
+    }
+
+    #[test]
+    fn a_late_reply_to_a_command_with_another_id_holds_back_its_copy() {
+        // A 212H is given up; its late reply arrives while a 216H waits,
+        // so it is foreign there. A copy of it must not answer the next
+        // 212H.
+        let mut cfg = ExchangeConfig::new(S);
+        cfg.duplicate_window_ms = 3_000;
+        let mut x = Exchange::new(cfg, Quarantine::Wait);
+        x.start(&catalogue::AXIS_STATUS_QUERY, 0);
+        x.poll(0);
+        x.sent(0);
+        x.abandon(10);
+        x.start(&catalogue::ERROR_DETAIL_QUERY, 10);
+        assert_eq!(x.poll(10), Due::WaitUntil(6_000));
+        let late = frame(b"#992122A\r\n");
+        assert_eq!(x.offer(&late, true, 5_000), Offer::Foreign);
+        x.abandon(5_000);
+        x.start(&catalogue::AXIS_STATUS_QUERY, 5_000);
+        // Its copy may come until 5,000 + 3,000.
+        assert_eq!(x.poll(5_000), Due::WaitUntil(8_000));
+        assert_eq!(x.offer(&late, true, 7_000), Offer::Stale);
+        assert_eq!(x.poll(8_000), Due::WaitUntil(10_000));
+        assert_eq!(x.poll(10_000), Due::Transmit { fresh: true });
     }
 
     #[test]
