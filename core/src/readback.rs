@@ -11,17 +11,21 @@
 //! the window, and it came after the query was completely sent.
 //!
 //! # Late and duplicated replies
-//! A reply holding records belongs to one window only (windows do not
-//! overlap), so a late one can never pass for another. After a timeout and
-//! resend, the next query waits until the replies still owed can no longer
-//! arrive (`timeout_ms + late_window_ms` after the last send), dropping
-//! what comes meanwhile. An *empty* reply is the same for every window:
+//! After a timeout and resend, the next query waits until the replies
+//! still owed can no longer arrive (`timeout_ms + late_window_ms` after the
+//! last send), dropping what comes meanwhile. A copy of any reply may come
+//! up to `duplicate_window_ms` after it, and two replies can pass for each
+//! other where their windows meet: every empty reply is alike, and a
+//! window asked again at half its size after a timeout is overlapped by
+//! the next one. So:
 //!
+//! - a stale reply (one that came while none was awaited) holds the next
+//!   query until `duplicate_window_ms` after it;
 //! - once this read-back has seen a late or duplicated reply, a query that
-//!   follows an empty reply of the same message waits out
-//!   `duplicate_window_ms` after it, so that its duplicate cannot pass for
-//!   the next window's answer (a clean line never waits);
-//! - if a reply holding records arrives for a window already answered
+//!   follows an empty reply waits out `duplicate_window_ms` after it, so
+//!   that its duplicate cannot pass for the next window's answer (a clean
+//!   line never waits);
+//! - if a reply holding records arrives for a window already delivered
 //!   empty (its duplicate came first), that window is read again and its
 //!   records delivered then, marked [`ReplyRecords::reread`].
 //!
@@ -109,7 +113,7 @@ impl ReadBackConfig {
 pub struct ReadBackStats {
     /// Queries answered.
     pub queries: u32,
-    /// Records received (and delivered).
+    /// Records delivered (in [`ReadStep::Records`]).
     pub records: u32,
     /// Queries sent again after a timeout.
     pub retries: u32,
@@ -252,6 +256,10 @@ pub struct ReadBack<const N: usize = { limits::TTA.response }> {
     rereads: heapless::Deque<(u32, u16), 4>,
     /// When the last empty reply came (for the duplicate guard).
     last_empty: Option<u32>,
+    /// When the last stale reply came: a copy of it may follow, and it
+    /// may hold records of the next window (which overlaps a window asked
+    /// before a shrink).
+    last_stale: Option<u32>,
     /// A late or duplicated reply was seen on this line.
     duplicates_seen: bool,
     /// Hash of the window's first reply, awaiting its confirmation.
@@ -277,6 +285,7 @@ impl<const N: usize> ReadBack<N> {
             empties: heapless::Deque::new(),
             rereads: heapless::Deque::new(),
             last_empty: None,
+            last_stale: None,
             duplicates_seen: false,
             first_reply: None,
             stats: ReadBackStats::default(),
@@ -307,13 +316,16 @@ impl<const N: usize> ReadBack<N> {
                         Some(t) if !passed(now, t, h) => t,
                         _ => now,
                     };
-                    if let (true, Some(t)) = (self.duplicates_seen, self.last_empty) {
+                    let empty = self.last_empty.filter(|_| self.duplicates_seen);
+                    let mut guarded = false;
+                    for t in [empty, self.last_stale].into_iter().flatten() {
                         let clear = t.wrapping_add(self.cfg.exchange.duplicate_window_ms);
                         if !passed(now, clear, h) && !reached(at, clear) {
-                            self.stats.guarded_queries += 1;
+                            guarded = true;
                             at = later(at, clear);
                         }
                     }
+                    self.stats.guarded_queries += u32::from(guarded);
                     match catalogue::lookup(self.cfg.stream.id) {
                         Some(info) => self.exchange.start(info, at),
                         None => {
@@ -383,6 +395,29 @@ impl<const N: usize> ReadBack<N> {
                         }
                         None => (Reader::new(&[], 0), 0),
                     };
+                    self.stats.records += u32::from(left);
+                    if left == 0 {
+                        // Delivered empty: a stale reply holding one of
+                        // its records reopens it (see `reopen`).
+                        let h = self.exchange.horizon();
+                        // Entries expire in the order they were made.
+                        while self
+                            .empties
+                            .front()
+                            .is_some_and(|e| passed(now, e.until, h))
+                        {
+                            self.empties.pop_front();
+                        }
+                        if self.empties.is_full() {
+                            self.empties.pop_front();
+                        }
+                        let until = now.wrapping_add(self.cfg.exchange.duplicate_window_ms);
+                        let _ = self.empties.push_back(EmptyWindow {
+                            head: window_head,
+                            asked,
+                            until,
+                        });
+                    }
                     return ReadStep::Records(ReplyRecords {
                         r,
                         left,
@@ -486,12 +521,12 @@ impl<const N: usize> ReadBack<N> {
                 }
                 ReadEvent::Broken(e)
             }
-            Ok(seen) => self.frame(seen, window, now),
+            Ok(seen) => self.frame(seen, now),
         };
         Received { consumed, event }
     }
 
-    fn frame(&mut self, seen: Seen, window: (u32, u16), now: u32) -> ReadEvent {
+    fn frame(&mut self, seen: Seen, now: u32) -> ReadEvent {
         let offer = if self.state == State::Exchange {
             self.exchange.offer_head(
                 seen.header,
@@ -516,27 +551,8 @@ impl<const N: usize> ReadBack<N> {
             Offer::Accepted => {
                 let records = seen.check.unwrap_or(0);
                 self.stats.queries += 1;
-                self.stats.records += u32::from(records);
-                // Entries expire in the order they were made.
-                let h = self.exchange.horizon();
-                while self
-                    .empties
-                    .front()
-                    .is_some_and(|e| passed(now, e.until, h))
-                {
-                    self.empties.pop_front();
-                }
                 if records == 0 {
                     self.last_empty = Some(now);
-                    let until = now.wrapping_add(self.cfg.exchange.duplicate_window_ms);
-                    if self.empties.is_full() {
-                        self.empties.pop_front();
-                    }
-                    let _ = self.empties.push_back(EmptyWindow {
-                        head: window.0,
-                        asked: window.1,
-                        until,
-                    });
                 }
                 ReadEvent::Answered { records }
             }
@@ -544,6 +560,9 @@ impl<const N: usize> ReadBack<N> {
             Offer::Mismatch | Offer::Stale => {
                 self.stats.stale_replies += 1;
                 self.duplicates_seen = true;
+                if self.cfg.exchange.duplicate_window_ms > 0 {
+                    self.last_stale = Some(now);
+                }
                 if let Some(n) = seen.first_record {
                     self.reopen(n, now);
                 }
@@ -628,6 +647,8 @@ impl<const N: usize> ReadBack<N> {
         if self.asked > 1 {
             self.asked /= 2;
             self.window_limit = self.asked;
+            // A reply to the smaller window confirms nothing of the larger.
+            self.first_reply = None;
             if self.write_query().is_err() {
                 self.state = State::Failed(TransferError::Config(Error::BufferTooSmall));
             }

@@ -38,6 +38,7 @@ fn a_written_table_reads_back_equal() {
     let windows = 2_000u32.div_ceil(24);
     assert_eq!(stats.windows_confirmed, windows);
     assert_eq!(stats.queries, 2 * windows);
+    assert_eq!(stats.records, 2_000, "each record counted once");
     // Unconfirmed: once each.
     let cfg = ReadBackConfig {
         confirm: false,
@@ -208,4 +209,128 @@ fn an_answered_reply_is_held_until_it_is_polled() {
         }
         other => panic!("{other:?}"),
     }
+}
+
+/// Polls until the engine transmits, returning the query and the tick it
+/// went out at (`now` advances to each deadline).
+fn next_query(rb: &mut ReadBack, now: &mut u32) -> Vec<u8> {
+    use iai_protocol_b::readback::ReadStep;
+    loop {
+        match rb.poll(*now) {
+            ReadStep::Transmit(q) => return q.to_vec(),
+            ReadStep::WaitUntil(t) => *now = t,
+            other => panic!("a query expected, got {other:?}"),
+        }
+    }
+}
+
+/// The records of the window the next poll delivers.
+fn delivered(rb: &mut ReadBack, now: u32) -> (u16, u16, bool, Vec<u16>) {
+    use iai_protocol_b::readback::ReadStep;
+    match rb.poll(now) {
+        ReadStep::Records(r) => (
+            r.head(),
+            r.asked(),
+            r.reread(),
+            r.map(|p| p.number).collect(),
+        ),
+        other => panic!("records expected, got {other:?}"),
+    }
+}
+
+/// A late reply to a window given up after a timeout holds records of the
+/// next window, which overlaps it (the window shrank). A copy of it may
+/// follow: the next query waits out the duplicate window after the late
+/// reply, so that no copy can pass for its answer (fuzz finding F8).
+#[test]
+fn a_late_reply_holds_back_the_next_query_until_its_copy_cannot_come() {
+    use iai_protocol_b::readback::ReadEvent;
+    let mut sim = Simulator::tta(ST);
+    for n in [3u16, 5] {
+        let mut r = host_tests::table::record(u32::from(n), 8, 4);
+        r.number = n;
+        sim.table.insert(n, r);
+    }
+    let cfg = ReadBackConfig {
+        confirm: false,
+        max_response: 360,
+        ..ReadBackConfig::tta(ST, 1, 8)
+    };
+    assert_eq!(cfg.window(), 4);
+    let mut rb: ReadBack = ReadBack::new(cfg);
+    let mut now = 0;
+    // 1+4 goes out; its reply (holding 3) will come late.
+    let q = next_query(&mut rb, &mut now);
+    rb.sent(now + 1);
+    sim.receive(&q, now + 1);
+    let late = sim.take_output(u32::MAX);
+    // Timeout: 1+2 is asked and answered empty.
+    now += 3_001;
+    let q = next_query(&mut rb, &mut now);
+    rb.sent(now + 1);
+    sim.receive(&q, now + 1);
+    let reply = sim.take_output(u32::MAX);
+    assert_eq!(
+        rb.received(&reply, now + 100).event,
+        ReadEvent::Answered { records: 0 }
+    );
+    assert_eq!(delivered(&mut rb, now + 101), (1, 2, false, vec![]));
+    // The late reply to 1+4 comes just before the hold for it ends.
+    let hold = now + 1 + 6_000;
+    assert_eq!(rb.received(&late, hold - 100).event, ReadEvent::Stale);
+    // The next window (3+3) waits until a copy of it cannot come.
+    let mut at = hold;
+    assert!(matches!(
+        rb.poll(at),
+        iai_protocol_b::readback::ReadStep::WaitUntil(t) if t == hold - 100 + 3_000
+    ));
+    let q = next_query(&mut rb, &mut at);
+    assert_eq!(at, hold - 100 + 3_000);
+    rb.sent(at + 1);
+    sim.receive(&q, at + 1);
+    let reply = sim.take_output(u32::MAX);
+    assert_eq!(
+        rb.received(&reply, at + 100).event,
+        ReadEvent::Answered { records: 2 }
+    );
+    assert_eq!(delivered(&mut rb, at + 101), (3, 3, false, vec![3, 5]));
+    assert_eq!(rb.stats().records, 2);
+}
+
+/// Confirmed reads: a reply to the window shrunk after a timeout confirms
+/// nothing of the larger window asked before (fuzz finding F10), and an
+/// empty window is delivered once, not as a re-read.
+#[test]
+fn a_shrunk_window_is_confirmed_by_its_own_replies() {
+    use iai_protocol_b::readback::ReadEvent;
+    let mut sim = Simulator::tta(ST);
+    let cfg = ReadBackConfig {
+        max_response: 360,
+        ..ReadBackConfig::tta(ST, 1, 4)
+    };
+    let mut rb: ReadBack = ReadBack::new(cfg);
+    let mut now = 0;
+    let empty = |rb: &mut ReadBack, sim: &mut Simulator, now: &mut u32| {
+        let q = next_query(rb, now);
+        rb.sent(*now + 1);
+        sim.receive(&q, *now + 1);
+        let reply = sim.take_output(u32::MAX);
+        *now += 100;
+        assert_eq!(
+            rb.received(&reply, *now).event,
+            ReadEvent::Answered { records: 0 }
+        );
+        *now += 1;
+    };
+    // 1+4 answered empty; its confirmation query is lost.
+    empty(&mut rb, &mut sim, &mut now);
+    let _lost = next_query(&mut rb, &mut now);
+    rb.sent(now + 1);
+    now += 3_001;
+    // Resent as 1+2 and answered empty: not yet confirmed.
+    empty(&mut rb, &mut sim, &mut now);
+    // A second reply to 1+2 confirms it.
+    empty(&mut rb, &mut sim, &mut now);
+    assert_eq!(delivered(&mut rb, now), (1, 2, false, vec![]));
+    assert_eq!(rb.stats().windows_confirmed, 1);
 }
