@@ -353,7 +353,8 @@ impl PositionStreamDecoder {
             // A whole well-formed record in the input: read it in place.
             if self.phase == DecPhase::RecordHead && self.stage.len == 0 {
                 if let Some(kind) = self.kind {
-                    if let Some((rec, len, sum)) = kind.layout.read_fast(rest) {
+                    let mut rec = PositionRecord::default();
+                    if let Some((len, sum)) = kind.layout.read_in_place(rest, &mut rec) {
                         self.sum.add_sum(sum);
                         self.offset += len;
                         self.done += 1;
