@@ -34,6 +34,8 @@
 
 pub use crate::position::PositionStream;
 
+use core::borrow::Borrow;
+
 use crate::checksum::{BypassPolicy, Checksum};
 use crate::error::{Error, Result};
 use crate::field::{hex_digit, hex_value, FieldSpec, Reader, Writer};
@@ -96,9 +98,16 @@ pub struct PositionStreamEncoder<I> {
     phase: EncPhase,
 }
 
-impl<I: Iterator<Item = PositionRecord>> PositionStreamEncoder<I> {
+impl<I> PositionStreamEncoder<I>
+where
+    I: Iterator,
+    I::Item: Borrow<PositionRecord>,
+{
     /// Starts a frame of `kind` from `station` with `count` records taken
     /// from `source` (`start` is the start number where the message has one).
+    ///
+    /// The source may yield records or references to them: `records.iter()`
+    /// over a slice hands each record over without copying it.
     pub fn new(
         kind: PositionStream,
         station: Station,
@@ -150,9 +159,10 @@ impl<I: Iterator<Item = PositionRecord>> PositionStreamEncoder<I> {
                     });
                 };
                 // Straight into `out` when the record fits, else staged.
+                let rec = rec.borrow();
                 let fits = room.len() >= self.kind.layout.record_len(axis_count(rec.axes));
                 let dst: &mut [u8] = if fits { room } else { &mut self.stage.buf };
-                match self.kind.layout.put_record(&rec, dst) {
+                match self.kind.layout.put_record(rec, dst) {
                     Ok((len, sum)) => {
                         self.sum.add_sum(sum);
                         self.emitted += 1;
@@ -343,6 +353,7 @@ impl PositionStreamDecoder {
     /// [`StreamEvent::End`] or [`StreamEvent::Error`] nothing more is
     /// consumed (`(0, NeedMore)`) until [`PositionStreamDecoder::reset`]:
     /// the rest of the input belongs to whatever follows the frame.
+    #[inline]
     pub fn decode(&mut self, input: &[u8]) -> (usize, StreamEvent) {
         let mut used = 0;
         while self.phase != DecPhase::Finished {
@@ -399,6 +410,77 @@ impl PositionStreamDecoder {
             }
         }
         (used, StreamEvent::NeedMore)
+    }
+
+    /// Consumes bytes as [`Self::decode`] does, but writes the records
+    /// into `out` (overwriting them in place) instead of handing them out
+    /// one event at a time: the bulk path, for a caller that takes many
+    /// records at once. Returns `(consumed, records, event)`: the records
+    /// are `out[..records]`, and `event` is never [`StreamEvent::Record`].
+    ///
+    /// It stops at `Start`, `End` or `Error` (the event says which, as
+    /// `decode` would), and otherwise when the input is used up or `out` is
+    /// full (`NeedMore` either way; call again with more input, or with
+    /// `out` emptied). Whole records in the input are read in place;
+    /// a record cut by the end of the input is staged and completed on the
+    /// next call, as by `decode`. Elements of `out` past `records` may have
+    /// been overwritten.
+    ///
+    /// ```
+    /// use iai_protocol_b::checksum::BypassPolicy;
+    /// use iai_protocol_b::position::PositionRecord;
+    /// use iai_protocol_b::stream::{PositionStreamDecoder, StreamEvent};
+    /// let wire = b"!9926D0002000103001E001E0064000186A0FFFF9C64000201000000000000000030392B\r\n";
+    /// let mut dec = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
+    /// let mut recs: [PositionRecord; 8] = Default::default();
+    /// let (used, n, ev) = dec.decode_records(wire, &mut recs);
+    /// assert!(matches!(ev, StreamEvent::Start { count: 2, .. }));
+    /// assert_eq!(n, 0);
+    /// let (rest, n, ev) = dec.decode_records(&wire[used..], &mut recs);
+    /// assert_eq!((used + rest, n, ev), (wire.len(), 2, StreamEvent::End { records: 2 }));
+    /// assert_eq!(recs[1].position(1), Some(12_345));
+    /// ```
+    pub fn decode_records(
+        &mut self,
+        input: &[u8],
+        out: &mut [PositionRecord],
+    ) -> (usize, usize, StreamEvent) {
+        let mut used = 0;
+        let mut n = 0;
+        loop {
+            if let (DecPhase::RecordHead, 0, Some(kind)) = (self.phase, self.stage.len, self.kind) {
+                let left = usize::from(self.count.saturating_sub(self.done));
+                let room = out.get_mut(n..).unwrap_or(&mut []);
+                let fit = room.len().min(left);
+                let room = room.get_mut(..fit).unwrap_or(&mut []);
+                let rest = input.get(used..).unwrap_or(&[]);
+                let (len, k, sum) = kind.layout.read_records(rest, room);
+                if k > 0 {
+                    self.sum.add_sum(sum);
+                    self.offset += len;
+                    // At most `left` records: `done` stays within its u16 count.
+                    self.done += k as u16;
+                    used += len;
+                    n += k;
+                    self.enter_record_or_trailer(kind);
+                }
+            }
+            let in_records = matches!(self.phase, DecPhase::RecordHead | DecPhase::RecordRest);
+            if in_records && n >= out.len() {
+                return (used, n, StreamEvent::NeedMore);
+            }
+            let (len, ev) = self.decode(input.get(used..).unwrap_or(&[]));
+            used += len;
+            match (ev, out.get_mut(n)) {
+                (StreamEvent::Record(rec), Some(slot)) => {
+                    *slot = rec;
+                    n += 1;
+                }
+                // `out` had room: a record always finds its slot.
+                (StreamEvent::Record(_), None) => return (used, n, StreamEvent::NeedMore),
+                (ev, _) => return (used, n, ev),
+            }
+        }
     }
 
     /// Pushes one byte (ignored after the end of the frame, see [`Self::decode`]).
@@ -672,5 +754,241 @@ mod tests {
                 }
             )
         );
+    }
+
+    /// Bulk decoding against event-by-event decoding.
+    mod bulk {
+        use super::*;
+        use crate::axis::{AxisPattern, PerAxis};
+        use std::vec::Vec;
+
+        fn xorshift(seed: u32) -> impl FnMut() -> u32 {
+            let mut x = seed | 1;
+            move || {
+                x ^= x << 13;
+                x ^= x >> 17;
+                x ^= x << 5;
+                x
+            }
+        }
+
+        /// `count` records that fit `kind`'s layout, of 0 to 8 axes.
+        fn records(
+            kind: PositionStream,
+            count: usize,
+            next: &mut impl FnMut() -> u32,
+        ) -> Vec<PositionRecord> {
+            (0..count)
+                .map(|_| {
+                    let axes = AxisPattern::from_bits(next() as u8);
+                    let mut positions = PerAxis::new();
+                    for _ in 0..axes.count() {
+                        positions.push(next() as i32).unwrap();
+                    }
+                    PositionRecord {
+                        number: match kind.layout.number_width {
+                            0 => 0,
+                            3 => (next() & 0xFFF) as u16,
+                            _ => next() as u16,
+                        },
+                        axes,
+                        acceleration: next() as u16,
+                        deceleration: next() as u16,
+                        speed: next() as u16,
+                        positions,
+                        extended: if kind.layout.extended {
+                            next() as u8
+                        } else {
+                            0
+                        },
+                    }
+                })
+                .collect()
+        }
+
+        /// A whole frame of `recs`, pulled in `chunk`-byte pieces, the
+        /// records handed over by reference.
+        fn frame(kind: PositionStream, recs: &[PositionRecord], chunk: usize) -> Vec<u8> {
+            let mut enc =
+                PositionStreamEncoder::new(kind, Station(0x99), 1, recs.len() as u16, recs.iter())
+                    .unwrap();
+            let mut out = Vec::new();
+            let mut buf = [0u8; 200];
+            loop {
+                let n = enc.read(&mut buf[..chunk]).unwrap();
+                if n == 0 {
+                    return out;
+                }
+                out.extend_from_slice(&buf[..n]);
+            }
+        }
+
+        /// Every event other than `NeedMore` of `decode`, the input given
+        /// in pieces of `chunk` bytes; and the bytes consumed.
+        fn by_events(bytes: &[u8], chunk: usize) -> (Vec<StreamEvent>, usize) {
+            let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
+            let mut events = Vec::new();
+            let mut used = 0;
+            for piece in bytes.chunks(chunk) {
+                let mut rest = piece;
+                loop {
+                    let (n, ev) = d.decode(rest);
+                    used += n;
+                    rest = &rest[n..];
+                    match ev {
+                        StreamEvent::NeedMore => break,
+                        ev => events.push(ev),
+                    }
+                }
+            }
+            (events, used)
+        }
+
+        /// The same through `decode_records` into `room` records (their
+        /// contents stale), the records as `Record` events.
+        fn by_bulk(
+            bytes: &[u8],
+            chunk: usize,
+            room: usize,
+            stale: &PositionRecord,
+        ) -> (Vec<StreamEvent>, usize) {
+            let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
+            let mut out = std::vec![stale.clone(); room];
+            let mut events = Vec::new();
+            let mut used = 0;
+            for piece in bytes.chunks(chunk) {
+                let mut rest = piece;
+                loop {
+                    let (n, k, ev) = d.decode_records(rest, &mut out);
+                    assert!(k <= room);
+                    assert_ne!(ev, StreamEvent::Record(stale.clone()));
+                    assert!(!matches!(ev, StreamEvent::Record(_)));
+                    used += n;
+                    rest = &rest[n..];
+                    events.extend(out[..k].iter().cloned().map(StreamEvent::Record));
+                    match ev {
+                        // Stopped for input, or for room: call again.
+                        StreamEvent::NeedMore if k < room || n == 0 && k == 0 => break,
+                        StreamEvent::NeedMore => {}
+                        ev => events.push(ev),
+                    }
+                }
+            }
+            (events, used)
+        }
+
+        #[test]
+        fn the_same_events_however_the_input_and_the_room_come() {
+            let mut next = xorshift(29);
+            for kind in PositionStream::ALL {
+                for count in [0usize, 1, 2, 5, 9] {
+                    let recs = records(kind, count, &mut next);
+                    let mut wire = frame(kind, &recs, 1 + next() as usize % 90);
+                    // Bytes after the frame belong to whatever follows it.
+                    wire.extend_from_slice(b"#99");
+                    let stale = records(kind, 1, &mut next).remove(0);
+                    for chunk in [1, 2, 7, 30, 64, 1000] {
+                        let (expect, used) = by_events(&wire, chunk);
+                        assert_eq!(expect.len(), count + 2, "{kind:?}");
+                        assert_eq!(
+                            expect.last(),
+                            Some(&StreamEvent::End {
+                                records: count as u16
+                            })
+                        );
+                        assert_eq!(used, wire.len() - 3);
+                        for room in [1, 2, 3, 8] {
+                            let got = by_bulk(&wire, chunk, room, &stale);
+                            assert_eq!(
+                                got,
+                                (expect.clone(), used),
+                                "{kind:?} chunk {chunk} room {room}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+
+        #[test]
+        fn the_same_errors() {
+            let mut next = xorshift(31);
+            for kind in [
+                PositionStream::CHANGE_2,
+                PositionStream::RANGE,
+                PositionStream::QUERY_3_RESPONSE,
+            ] {
+                let recs = records(kind, 4, &mut next);
+                let wire = frame(kind, &recs, 64);
+                let stale = recs[0].clone();
+                for at in 0..wire.len() {
+                    for bad in [b'G', b'0', b'f', b'\r', b'\n', b'@', b'#'] {
+                        let mut w = wire.clone();
+                        if w[at] == bad {
+                            continue;
+                        }
+                        w[at] = bad;
+                        for chunk in [5, 1000] {
+                            let expect = by_events(&w, chunk);
+                            for room in [1, 3] {
+                                let got = by_bulk(&w, chunk, room, &stale);
+                                assert_eq!(got, expect, "{kind:?} {bad:#04X} at {at}");
+                            }
+                        }
+                    }
+                }
+                // Cut short: the same records, no end.
+                for cut in 0..wire.len() {
+                    assert_eq!(
+                        by_bulk(&wire[..cut], 1000, 2, &stale),
+                        by_events(&wire[..cut], 1000)
+                    );
+                }
+            }
+        }
+
+        #[test]
+        fn room_is_respected_and_nothing_follows_the_end() {
+            let mut next = xorshift(37);
+            let kind = PositionStream::CHANGE_2;
+            let recs = records(kind, 5, &mut next);
+            let wire = frame(kind, &recs, 64);
+            let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
+            let mut out: [PositionRecord; 2] = Default::default();
+            let (used, n, ev) = d.decode_records(&wire, &mut out);
+            assert!(matches!(ev, StreamEvent::Start { count: 5, .. }));
+            assert_eq!((used, n), (10, 0));
+            assert_eq!(
+                d.decode_records(&wire[used..], &mut []),
+                (0, 0, StreamEvent::NeedMore),
+                "no room"
+            );
+            let mut at = used;
+            let mut got = Vec::new();
+            loop {
+                let (u, n, ev) = d.decode_records(&wire[at..], &mut out);
+                at += u;
+                got.extend_from_slice(&out[..n]);
+                assert_eq!(d.records_done() as usize, got.len());
+                assert_eq!(d.offset(), at);
+                if ev != StreamEvent::NeedMore {
+                    assert_eq!(ev, StreamEvent::End { records: 5 });
+                    break;
+                }
+                assert_eq!(n, 2, "stopped for room");
+            }
+            assert_eq!((at, &got), (wire.len(), &recs));
+            assert_eq!(
+                d.decode_records(b"!99", &mut out),
+                (0, 0, StreamEvent::NeedMore)
+            );
+            // A record cut by the end of the input completes on the next call.
+            let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
+            let (u, _, _) = d.decode_records(&wire, &mut out);
+            let (u2, n, ev) = d.decode_records(&wire[u..u + 5], &mut out);
+            assert_eq!((u2, n, ev), (5, 0, StreamEvent::NeedMore));
+            let (_, n, _) = d.decode_records(&wire[u + 5..], &mut out);
+            assert_eq!(&out[..n], &recs[..2]);
+        }
     }
 }
