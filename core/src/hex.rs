@@ -73,14 +73,17 @@ const fn positional(shift: u32) -> [u32; 256] {
     t
 }
 
+/// The four [`positional`] tables, one after the other: one base address
+/// for all four.
+static TABLES: [[u32; 256]; 4] = [positional(12), positional(8), positional(4), positional(0)];
 /// [`positional`] for the last digit of a group of four.
-static T0: [u32; 256] = positional(0);
+static T0: &[u32; 256] = &TABLES[3];
 /// [`positional`] for the third digit of a group of four.
-static T4: [u32; 256] = positional(4);
+static T4: &[u32; 256] = &TABLES[2];
 /// [`positional`] for the second digit of a group of four.
-static T8: [u32; 256] = positional(8);
+static T8: &[u32; 256] = &TABLES[1];
 /// [`positional`] for the first digit of a group of four.
-static T12: [u32; 256] = positional(12);
+static T12: &[u32; 256] = &TABLES[0];
 
 /// The entry of `byte` in `table`.
 #[inline(always)]
@@ -108,26 +111,26 @@ fn group4(d: &[u8; 4]) -> u32 {
     };
     #[cfg(not(target_has_atomic = "32"))]
     let [a, b, c, e] = *d;
-    entry(&T12, a)
-        .wrapping_add(entry(&T8, b))
-        .wrapping_add(entry(&T4, c))
-        .wrapping_add(entry(&T0, e))
+    entry(T12, a)
+        .wrapping_add(entry(T8, b))
+        .wrapping_add(entry(T4, c))
+        .wrapping_add(entry(T0, e))
 }
 
 /// [`group4`] for three digits.
 #[inline(always)]
 fn group3(d: &[u8; 3]) -> u32 {
     let [a, b, c] = *d;
-    entry(&T8, a)
-        .wrapping_add(entry(&T4, b))
-        .wrapping_add(entry(&T0, c))
+    entry(T8, a)
+        .wrapping_add(entry(T4, b))
+        .wrapping_add(entry(T0, c))
 }
 
 /// [`group4`] for two digits.
 #[inline(always)]
 fn group2(d: &[u8; 2]) -> u32 {
     let [a, b] = *d;
-    entry(&T4, a).wrapping_add(entry(&T0, b))
+    entry(T4, a).wrapping_add(entry(T0, b))
 }
 
 /// Whether a group (or the OR of groups) had only hex digits.
@@ -168,8 +171,8 @@ pub const fn digit(n: u8) -> u8 {
 /// The value of `byte` as a hex digit of either case, or `None`.
 #[inline]
 pub fn value(byte: u8) -> Option<u8> {
-    let v = entry(&T0, byte);
-    if clean(v) {
+    let v = entry(T0, byte);
+    if single_is_digit(v) {
         Some(v as u8 & 0xF)
     } else {
         None
@@ -179,7 +182,16 @@ pub fn value(byte: u8) -> Option<u8> {
 /// Whether `byte` is a hex digit of either case.
 #[inline]
 pub fn is_digit(byte: u8) -> bool {
-    clean(entry(&T0, byte))
+    single_is_digit(entry(T0, byte))
+}
+
+/// Whether one [`T0`] entry is a digit's: its bits 24-31 hold the byte,
+/// at least `'0'`, where [`MARK`] has none. One comparison of the whole
+/// word (testing bits 16-23 would do too, but invites a byte load at an
+/// offset the table's address then has to be computed for, per byte).
+#[inline(always)]
+const fn single_is_digit(e: u32) -> bool {
+    e >= (b'0' as u32) << 24
 }
 
 #[inline(always)]
@@ -832,7 +844,7 @@ mod tests {
     fn positional_tables() {
         for b in 0..=255u8 {
             let v = decode_bytewise(&[b]).ok().map(|v| v as u32);
-            for (t, shift) in [(&T0, 0), (&T4, 4), (&T8, 8), (&T12, 12)] {
+            for (t, shift) in [(T0, 0), (T4, 4), (T8, 8), (T12, 12)] {
                 let e = entry(t, b);
                 match v {
                     Some(v) => assert_eq!(e, (v << shift) | (u32::from(b) << 24), "{b:#04X}"),
