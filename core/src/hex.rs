@@ -18,7 +18,7 @@
 //!   checksum, against 28 without it for spreading the nibbles over a word
 //!   and adding `'0'` or `'A' - 10` with SWAR arithmetic.
 //! - Decoding looks up each digit of a group of four in a table for its
-//!   position in the group ([`T12`], [`T8`], [`T4`], [`T0`]), which holds
+//!   position in the group (`T12`, `T8`, `T4`, `T0`), which holds
 //!   its value already shifted into place (bits 0-15), the byte itself
 //!   (bits 24-31) and, for a byte that is not a hex digit, a marker in bits
 //!   16-23 that no valid entry has. Adding the four entries gives the
