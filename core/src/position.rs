@@ -201,37 +201,13 @@ impl RecordLayout {
     /// ([`crate::hex`]), others a digit at a time.
     #[inline(always)]
     pub fn put_record(self, rec: &PositionRecord, out: &mut [u8]) -> Result<(usize, u32)> {
-        let n = axis_count(rec.axes);
-        if rec.positions.len() != n {
-            return Err(Error::CountMismatch {
-                expected: n,
-                found: rec.positions.len(),
-            });
-        }
-        let len = self.record_len(n);
-        let out = out.get_mut(..len).ok_or(Error::BufferTooSmall)?;
-        match self.put_fast(rec, out) {
-            Some(Ok(sum)) => Ok((len, sum)),
-            Some(Err(e)) => Err(e),
-            None => {
-                let mut w = Writer::new(out);
-                self.write_record_per_field(rec, &mut w)?;
-                Ok((len, w.written().iter().map(|&b| u32::from(b)).sum()))
-            }
-        }
-    }
-
-    /// The whole-field path of [`RecordLayout::put_record`]: `None` for a
-    /// layout it does not handle. `out` is exactly the record.
-    #[inline(always)]
-    fn put_fast(self, rec: &PositionRecord, out: &mut [u8]) -> Option<Result<u32>> {
         match (self.number_width, self.extended) {
-            (4, false) => put_fixed::<4, 18, false>(rec, out),
-            (4, true) => put_fixed::<4, 18, true>(rec, out),
-            (3, false) => put_fixed::<3, 17, false>(rec, out),
-            (0, false) => put_fixed::<0, 14, false>(rec, out),
-            (0, true) => put_fixed::<0, 14, true>(rec, out),
-            _ => None,
+            (4, false) => put_as::<4, 18, false>(self, rec, out),
+            (4, true) => put_as::<4, 18, true>(self, rec, out),
+            (3, false) => put_as::<3, 17, false>(self, rec, out),
+            (0, false) => put_as::<0, 14, false>(self, rec, out),
+            (0, true) => put_as::<0, 14, true>(self, rec, out),
+            _ => put_as::<PER_FIELD, 0, false>(self, rec, out),
         }
     }
 
@@ -752,8 +728,71 @@ fn piece_mut<const N: usize>(b: &mut [u8], at: usize) -> Option<&mut [u8; N]> {
     b.get_mut(at..at + N)?.try_into().ok()
 }
 
-/// [`RecordLayout::put_fast`] for one layout: `NW` digits of number (0, 3
-/// or 4), `HEAD` = `NW` + 14 bytes before the coordinates.
+/// The `NW` of [`put_as`] for a layout written a field at a time.
+pub(crate) const PER_FIELD: usize = usize::MAX;
+
+/// [`RecordLayout::put_record`] for `layout` with its shape known at
+/// compile time: `NW` digits of number (0, 3 or 4), `HEAD` = `NW` + 14
+/// bytes before the coordinates, `EXT` extended data; or `NW` =
+/// [`PER_FIELD`] for any other layout. A loop over many records picks the
+/// shape once, outside.
+#[inline(always)]
+pub(crate) fn put_as<const NW: usize, const HEAD: usize, const EXT: bool>(
+    layout: RecordLayout,
+    rec: &PositionRecord,
+    out: &mut [u8],
+) -> Result<(usize, u32)> {
+    let len = len_as::<NW, HEAD, EXT>(layout, rec)?;
+    let out = out.get_mut(..len).ok_or(Error::BufferTooSmall)?;
+    Ok((len, put_exact::<NW, HEAD, EXT>(layout, rec, out)?))
+}
+
+/// The wire length of `rec` in `layout` (the shape of [`put_as`]), once
+/// its coordinates are checked against its axis pattern.
+#[inline(always)]
+pub(crate) fn len_as<const NW: usize, const HEAD: usize, const EXT: bool>(
+    layout: RecordLayout,
+    rec: &PositionRecord,
+) -> Result<usize> {
+    let n = axis_count(rec.axes);
+    if rec.positions.len() != n {
+        return Err(Error::CountMismatch {
+            expected: n,
+            found: rec.positions.len(),
+        });
+    }
+    Ok(if NW == PER_FIELD {
+        layout.record_len(n)
+    } else {
+        HEAD + 8 * n + if EXT { 2 } else { 0 }
+    })
+}
+
+/// [`put_as`] into `out` of exactly [`len_as`] bytes; the sum of the
+/// bytes written.
+#[inline(always)]
+pub(crate) fn put_exact<const NW: usize, const HEAD: usize, const EXT: bool>(
+    layout: RecordLayout,
+    rec: &PositionRecord,
+    out: &mut [u8],
+) -> Result<u32> {
+    let fast = if NW == PER_FIELD {
+        None
+    } else {
+        put_fixed::<NW, HEAD, EXT>(rec, out)
+    };
+    match fast {
+        Some(r) => r,
+        None => {
+            let mut w = Writer::new(out);
+            layout.write_record_per_field(rec, &mut w)?;
+            Ok(w.written().iter().map(|&b| u32::from(b)).sum())
+        }
+    }
+}
+
+/// The whole-field path of [`put_as`] for one layout: `NW` digits of number (0, 3
+/// or 4), `HEAD` = `NW` + 14 bytes before the coordinates; `out` is exactly the record.
 #[inline(always)]
 fn put_fixed<const NW: usize, const HEAD: usize, const EXT: bool>(
     rec: &PositionRecord,
@@ -815,7 +854,9 @@ where
     let (head, rest) = bytes.split_first_chunk::<HEAD>()?;
     let mut b = D::default();
     let axes = AxisPattern::from_bits(b.decode2(piece::<2>(head, NW)?));
-    let n = axis_count(axes);
+    // At most 8 (said again for the optimiser: the loop below then runs at
+    // most 8 times, and is laid out straight rather than unrolled by 4).
+    let n = axis_count(axes).min(MAX_AXES);
     let tail = 8 * n + if EXT { 2 } else { 0 };
     let rest = rest.get(..tail)?;
     rec.number = match NW {

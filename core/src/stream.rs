@@ -41,7 +41,7 @@ use crate::error::{Error, Result};
 use crate::field::{hex_digit, hex_value, FieldSpec, Reader, Writer};
 use crate::frame::{emit_envelope, Header, Station, ENVELOPE_LEN};
 use crate::io::IoError;
-use crate::position::{axis_count, PositionRecord};
+use crate::position::{len_as, put_exact, PositionRecord, PER_FIELD};
 
 /// Staging buffer size of the streaming encoder and decoder: the longest
 /// record (4 + 2 + 12 + 8 × 8 + 2 = 84 bytes) or the longest envelope and
@@ -65,12 +65,17 @@ impl Stage {
         }
     }
     fn pending(&self) -> &[u8] {
-        self.buf.get(self.pos..self.len).unwrap_or(&[])
+        self.pending_from(self.pos)
+    }
+    fn pending_from(&self, pos: usize) -> &[u8] {
+        self.buf.get(pos..self.len).unwrap_or(&[])
     }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum EncPhase {
+    /// The envelope and prefix are still to be staged (by the first `read`).
+    Start,
     Records,
     Trailer,
     Done,
@@ -91,6 +96,8 @@ enum EncPhase {
 pub struct PositionStreamEncoder<I> {
     kind: PositionStream,
     source: I,
+    station: Station,
+    start: u16,
     count: u16,
     emitted: u16,
     sum: Checksum,
@@ -108,6 +115,7 @@ where
     ///
     /// The source may yield records or references to them: `records.iter()`
     /// over a slice hands each record over without copying it.
+    #[inline]
     pub fn new(
         kind: PositionStream,
         station: Station,
@@ -115,21 +123,22 @@ where
         count: u16,
         source: I,
     ) -> Result<Self> {
-        let mut stage = Stage::new();
-        let mut w = Writer::new(&mut stage.buf);
+        // Checked here, written by the first `read`: a stage filled here
+        // and returned by value would be copied on the way out.
+        let mut head = [0u8; STAGE_LEN];
+        let mut w = Writer::new(&mut head);
         emit_envelope(&mut w, kind.header, station, kind.id)?;
         kind.write_prefix(&mut w, start, count)?;
-        stage.len = w.len();
-        let mut sum = Checksum::new();
-        sum.update(stage.pending());
         Ok(PositionStreamEncoder {
             kind,
             source,
+            station,
+            start,
             count,
             emitted: 0,
-            sum,
-            stage,
-            phase: EncPhase::Records,
+            sum: Checksum::new(),
+            stage: Stage::new(),
+            phase: EncPhase::Start,
         })
     }
 
@@ -140,6 +149,10 @@ where
 
     /// Fills `out` with the next bytes of the frame; `Ok(0)` once the whole
     /// frame (through LF) was produced.
+    ///
+    /// Records go straight into `out`; only a record that `out` cannot
+    /// take whole is encoded into the stage, and as much of it as fits is
+    /// copied out at once.
     pub fn read(&mut self, out: &mut [u8]) -> Result<usize> {
         let mut n = 0;
         while n < out.len() {
@@ -148,49 +161,114 @@ where
                 let k = copy_words(room, self.stage.pending());
                 self.stage.pos += k;
                 n += k;
-                continue;
-            }
-            if self.phase == EncPhase::Records && self.emitted < self.count {
-                let Some(rec) = self.source.next() else {
-                    self.phase = EncPhase::Failed;
-                    return Err(Error::CountMismatch {
-                        expected: usize::from(self.count),
-                        found: usize::from(self.emitted),
-                    });
-                };
-                // Straight into `out` when the record fits, else staged.
-                let rec = rec.borrow();
-                let fits = room.len() >= self.kind.layout.record_len(axis_count(rec.axes));
-                let dst: &mut [u8] = if fits { room } else { &mut self.stage.buf };
-                match self.kind.layout.put_record(rec, dst) {
-                    Ok((len, sum)) => {
-                        self.sum.add_sum(sum);
-                        self.emitted += 1;
-                        if fits {
-                            n += len;
-                        } else {
-                            self.stage.len = len;
-                            self.stage.pos = 0;
-                        }
-                    }
-                    Err(e) => {
-                        self.phase = EncPhase::Failed;
-                        return Err(e);
-                    }
-                }
-                continue;
-            }
-            if !self.refill()? {
+            } else if self.phase == EncPhase::Records && self.emitted < self.count {
+                n = self.records(out, n)?;
+            } else if !self.refill()? {
                 break;
             }
         }
         Ok(n)
     }
 
+    /// Encodes records into `out` from `n` on, until it is full or the
+    /// records are done; a record that does not fit whole goes to the
+    /// stage, and its first bytes to `out`. Returns the new `n`. The
+    /// layout's shape is picked once, here.
+    #[inline(always)]
+    fn records(&mut self, out: &mut [u8], n: usize) -> Result<usize> {
+        let layout = self.kind.layout;
+        match (layout.number_width, layout.extended) {
+            (4, false) => self.records_as::<4, 18, false>(out, n),
+            (4, true) => self.records_as::<4, 18, true>(out, n),
+            (3, false) => self.records_as::<3, 17, false>(out, n),
+            (0, false) => self.records_as::<0, 14, false>(out, n),
+            (0, true) => self.records_as::<0, 14, true>(out, n),
+            _ => self.records_as::<PER_FIELD, 0, false>(out, n),
+        }
+    }
+
+    /// [`Self::records`] for one shape (see `position::put_as`).
+    #[inline(always)]
+    fn records_as<const NW: usize, const HEAD: usize, const EXT: bool>(
+        &mut self,
+        out: &mut [u8],
+        n: usize,
+    ) -> Result<usize> {
+        let layout = self.kind.layout;
+        let count = self.count;
+        let mut emitted = self.emitted;
+        let mut sum = 0u32;
+        let mut result = Ok(());
+        let total = out.len();
+        // What is left of `out`, as one moving slice.
+        let mut rest = out.get_mut(n..).unwrap_or(&mut []);
+        while emitted < count && !rest.is_empty() {
+            let Some(rec) = self.source.next() else {
+                result = Err(Error::CountMismatch {
+                    expected: usize::from(count),
+                    found: usize::from(emitted),
+                });
+                break;
+            };
+            let rec = rec.borrow();
+            let len = match len_as::<NW, HEAD, EXT>(layout, rec) {
+                Ok(len) => len,
+                Err(e) => {
+                    result = Err(e);
+                    break;
+                }
+            };
+            if len <= rest.len() {
+                let (dst, tail) = core::mem::take(&mut rest).split_at_mut(len);
+                match put_exact::<NW, HEAD, EXT>(layout, rec, dst) {
+                    Ok(s) => sum = sum.wrapping_add(s),
+                    Err(e) => {
+                        result = Err(e);
+                        break;
+                    }
+                }
+                rest = tail;
+                emitted += 1;
+                continue;
+            }
+            // Not whole into `out`: into the stage, and what fits out now.
+            let staged = stage_record::<NW, HEAD, EXT>(layout, rec, &mut self.stage.buf, len);
+            match staged {
+                Ok(s) => {
+                    sum = sum.wrapping_add(s);
+                    emitted += 1;
+                    self.stage.len = len;
+                    let k = copy_words(rest, self.stage.pending_from(0));
+                    self.stage.pos = k;
+                    rest = rest.get_mut(k..).unwrap_or(&mut []);
+                }
+                Err(e) => result = Err(e),
+            }
+            break;
+        }
+        let n = total - rest.len();
+        self.emitted = emitted;
+        self.sum.add_sum(sum);
+        if result.is_err() {
+            self.phase = EncPhase::Failed;
+        }
+        result.map(|()| n)
+    }
+
     /// After the last record: loads the trailer into the stage; `false`
     /// when done. (`read` encodes the records.)
     fn refill(&mut self) -> Result<bool> {
         match self.phase {
+            EncPhase::Start => {
+                let mut w = Writer::new(&mut self.stage.buf);
+                emit_envelope(&mut w, self.kind.header, self.station, self.kind.id)?;
+                self.kind.write_prefix(&mut w, self.start, self.count)?;
+                self.stage.len = w.len();
+                self.stage.pos = 0;
+                self.sum.update(self.stage.pending());
+                self.phase = EncPhase::Records;
+                Ok(true)
+            }
             EncPhase::Records => {
                 if self.source.next().is_some() {
                     self.phase = EncPhase::Failed;
@@ -655,15 +733,36 @@ impl PositionStreamDecoder {
     }
 }
 
-/// Copies as much of `src` as fits into `dst`, a 4-byte word at a time
-/// (the library `memcpy` is slow for the short, unaligned pieces a record
-/// leaves); returns the bytes copied.
+/// [`put_exact`] of a record of `len` bytes into the stage: the path of
+/// the one record per `read` that does not fit `out` whole, kept out of
+/// line so that the loop over the others stays small.
+#[inline(never)]
+fn stage_record<const NW: usize, const HEAD: usize, const EXT: bool>(
+    layout: crate::position::RecordLayout,
+    rec: &PositionRecord,
+    stage: &mut [u8; STAGE_LEN],
+    len: usize,
+) -> Result<u32> {
+    match stage.get_mut(..len) {
+        Some(dst) => put_exact::<NW, HEAD, EXT>(layout, rec, dst),
+        None => Err(Error::BufferTooSmall),
+    }
+}
+
+/// Copies as much of `src` as fits into `dst`, 16 bytes (four words) at
+/// a time, then a word at a time (the library `memcpy` is slow for the
+/// short, unaligned pieces a record leaves); returns the bytes copied.
 #[inline(always)]
 fn copy_words(dst: &mut [u8], src: &[u8]) -> usize {
     let n = dst.len().min(src.len());
     if let (Some(d), Some(s)) = (dst.get_mut(..n), src.get(..n)) {
-        let mut dw = d.chunks_exact_mut(4);
-        let mut sw = s.chunks_exact(4);
+        let mut d16 = d.chunks_exact_mut(16);
+        let mut s16 = s.chunks_exact(16);
+        for (a, b) in (&mut d16).zip(&mut s16) {
+            a.copy_from_slice(b);
+        }
+        let mut dw = d16.into_remainder().chunks_exact_mut(4);
+        let mut sw = s16.remainder().chunks_exact(4);
         for (a, b) in (&mut dw).zip(&mut sw) {
             a.copy_from_slice(b);
         }
@@ -757,12 +856,12 @@ mod tests {
     }
 
     /// Bulk decoding against event-by-event decoding.
-    mod bulk {
+    pub(super) mod bulk {
         use super::*;
         use crate::axis::{AxisPattern, PerAxis};
         use std::vec::Vec;
 
-        fn xorshift(seed: u32) -> impl FnMut() -> u32 {
+        pub(in super::super) fn xorshift(seed: u32) -> impl FnMut() -> u32 {
             let mut x = seed | 1;
             move || {
                 x ^= x << 13;
@@ -773,7 +872,7 @@ mod tests {
         }
 
         /// `count` records that fit `kind`'s layout, of 0 to 8 axes.
-        fn records(
+        pub(in super::super) fn records(
             kind: PositionStream,
             count: usize,
             next: &mut impl FnMut() -> u32,
@@ -989,6 +1088,225 @@ mod tests {
             assert_eq!((u2, n, ev), (5, 0, StreamEvent::NeedMore));
             let (_, n, _) = d.decode_records(&wire[u + 5..], &mut out);
             assert_eq!(&out[..n], &recs[..2]);
+        }
+    }
+
+    /// The encoder against a frame written field by field.
+    mod encoder {
+        use super::bulk::{records, xorshift};
+        use super::*;
+        use crate::checksum::ChecksumMode;
+        use crate::frame::emit_trailer;
+        use crate::position::RecordLayout;
+        use std::vec::Vec;
+
+        fn reference(kind: PositionStream, start: u16, recs: &[PositionRecord]) -> Vec<u8> {
+            let mut buf = std::vec![0u8; 4096];
+            let mut w = Writer::new(&mut buf);
+            emit_envelope(&mut w, kind.header, Station(0x42), kind.id).unwrap();
+            kind.write_prefix(&mut w, start, recs.len() as u16).unwrap();
+            for r in recs {
+                kind.layout.write_record_per_field(r, &mut w).unwrap();
+            }
+            emit_trailer(&mut w, ChecksumMode::Compute).unwrap();
+            let n = w.len();
+            buf.truncate(n);
+            buf
+        }
+
+        /// The whole frame pulled in pieces of `chunk` bytes (a repeating
+        /// pattern of sizes when `chunk` is 0); the error, if any, and
+        /// what came before it.
+        fn pull<I>(enc: &mut PositionStreamEncoder<I>, chunk: usize) -> (Vec<u8>, Option<Error>)
+        where
+            I: Iterator,
+            I::Item: Borrow<PositionRecord>,
+        {
+            let mut out = Vec::new();
+            let mut buf = [0u8; 300];
+            for k in 0.. {
+                let size = if chunk == 0 {
+                    [1, 7, 64, 3, 90, 26][k % 6]
+                } else {
+                    chunk
+                };
+                match enc.read(&mut buf[..size]) {
+                    Ok(0) => return (out, None),
+                    Ok(n) => {
+                        assert!(n == size || enc.phase == EncPhase::Done, "{n} of {size}");
+                        out.extend_from_slice(&buf[..n]);
+                    }
+                    Err(e) => return (out, Some(e)),
+                }
+            }
+            unreachable!()
+        }
+
+        #[test]
+        fn every_kind_and_piece_size_gives_the_reference_frame() {
+            let mut next = xorshift(41);
+            for kind in PositionStream::ALL {
+                for count in [0usize, 1, 3, 11] {
+                    let recs = records(kind, count, &mut next);
+                    let expect = reference(kind, 7, &recs);
+                    for chunk in [0, 1, 2, 5, 13, 26, 64, 81, 82, 83, 88, 89, 300] {
+                        let by_ref = PositionStreamEncoder::new(
+                            kind,
+                            Station(0x42),
+                            7,
+                            count as u16,
+                            recs.iter(),
+                        );
+                        let mut by_ref = by_ref.unwrap();
+                        assert_eq!(
+                            pull(&mut by_ref, chunk),
+                            (expect.clone(), None),
+                            "{kind:?} {chunk}"
+                        );
+                        assert_eq!(by_ref.records_emitted() as usize, count);
+                        assert_eq!(by_ref.read(&mut [0u8; 8]), Ok(0), "done stays done");
+                        let mut by_value = PositionStreamEncoder::new(
+                            kind,
+                            Station(0x42),
+                            7,
+                            count as u16,
+                            recs.iter().cloned(),
+                        )
+                        .unwrap();
+                        assert_eq!(pull(&mut by_value, chunk).0, expect);
+                    }
+                }
+            }
+        }
+
+        /// A layout no message has goes field by field, through the same
+        /// paths.
+        #[test]
+        fn other_layouts_too() {
+            let mut next = xorshift(43);
+            let mut kind = PositionStream::CHANGE_3;
+            kind.layout = RecordLayout {
+                number_width: 2,
+                extended: true,
+            };
+            let mut recs = records(PositionStream::CHANGE_3, 6, &mut next);
+            for r in &mut recs {
+                r.number &= 0xFF;
+            }
+            let expect = reference(kind, 0, &recs);
+            for chunk in [0, 1, 30, 300] {
+                let mut enc =
+                    PositionStreamEncoder::new(kind, Station(0x42), 0, 6, recs.iter()).unwrap();
+                assert_eq!(pull(&mut enc, chunk), (expect.clone(), None));
+            }
+            // Longer than the stage: refused when it does not fit `out`.
+            kind.layout = RecordLayout {
+                number_width: 16,
+                extended: true,
+            };
+            let rec = PositionRecord::new(
+                1,
+                0,
+                0,
+                0,
+                &[
+                    (1, 1),
+                    (2, 2),
+                    (3, 3),
+                    (4, 4),
+                    (5, 5),
+                    (6, 6),
+                    (7, 7),
+                    (8, 8),
+                ],
+            )
+            .unwrap();
+            let mut enc =
+                PositionStreamEncoder::new(kind, Station(0x42), 0, 1, core::iter::once(&rec))
+                    .unwrap();
+            assert_eq!(pull(&mut enc, 300).1, None, "fits a large enough out");
+            let mut enc =
+                PositionStreamEncoder::new(kind, Station(0x42), 0, 1, core::iter::once(&rec))
+                    .unwrap();
+            assert_eq!(pull(&mut enc, 50).1, Some(Error::BufferTooSmall));
+        }
+
+        #[test]
+        fn refusals_leave_the_frame_unterminated() {
+            let mut next = xorshift(47);
+            let kind = PositionStream::CHANGE_2;
+            let recs = records(kind, 5, &mut next);
+            let full = reference(kind, 0, &recs);
+            for chunk in [0, 1, 64, 300] {
+                // The source ends early.
+                let mut enc =
+                    PositionStreamEncoder::new(kind, Station(0x42), 0, 6, recs.iter()).unwrap();
+                let (got, err) = pull(&mut enc, chunk);
+                assert_eq!(
+                    err,
+                    Some(Error::CountMismatch {
+                        expected: 6,
+                        found: 5
+                    })
+                );
+                assert!(full.starts_with(&got[..got.len().min(6)]), "the envelope");
+                assert!(!got.ends_with(b"\r\n"));
+                assert_eq!(enc.read(&mut [0u8; 8]), Ok(0), "nothing after a refusal");
+                // Or runs long.
+                let mut enc =
+                    PositionStreamEncoder::new(kind, Station(0x42), 0, 4, recs.iter()).unwrap();
+                assert_eq!(
+                    pull(&mut enc, chunk).1,
+                    Some(Error::CountMismatch {
+                        expected: 4,
+                        found: 5
+                    })
+                );
+                // A record whose coordinates do not match its pattern, third.
+                let mut bad = recs.clone();
+                bad[2].positions.clear();
+                if bad[2].axes.is_empty() {
+                    bad[2].positions.push(1).unwrap();
+                }
+                let mut enc =
+                    PositionStreamEncoder::new(kind, Station(0x42), 0, 5, bad.iter()).unwrap();
+                let (got, err) = pull(&mut enc, chunk);
+                assert!(matches!(err, Some(Error::CountMismatch { .. })), "{err:?}");
+                assert_eq!(enc.records_emitted(), 2);
+                assert!(got.len() < full.len() - 4);
+                assert_eq!(enc.read(&mut [0u8; 8]), Ok(0));
+            }
+            // A number too wide for 3 digits.
+            let mut recs = records(PositionStream::CHANGE, 2, &mut next);
+            recs[1].number = 0x1000;
+            let mut enc = PositionStreamEncoder::new(
+                PositionStream::CHANGE,
+                Station(0x42),
+                0,
+                2,
+                recs.iter(),
+            )
+            .unwrap();
+            assert_eq!(
+                pull(&mut enc, 64).1,
+                Some(Error::ValueOutOfRange { offset: 0 })
+            );
+            // What the prefix cannot carry is refused up front.
+            assert_eq!(
+                PositionStreamEncoder::new(kind, Station(0x42), 0, 20_001, recs.iter()).err(),
+                Some(Error::CountTooLarge {
+                    count: 20_001,
+                    max: 20_000
+                })
+            );
+            assert!(PositionStreamEncoder::new(
+                PositionStream::RANGE,
+                Station(0x42),
+                0x1000,
+                1,
+                recs.iter()
+            )
+            .is_err());
         }
     }
 }
