@@ -21,6 +21,9 @@
 //! # What is counted, per wire byte of the same frames
 //! - `encode`: `PositionStreamEncoder::read` pulled in 64-byte chunks into
 //!   RAM, the records handed over by reference (`records.iter()`).
+//! - `encode-frame`: the same encoder read into the whole frame buffer at
+//!   once (a transmit buffer as large as the frame: one `read` gives the
+//!   frame, the next `Ok(0)`).
 //! - `decode`: `PositionStreamDecoder::decode` over the whole frame, one
 //!   `StreamEvent::Record` per record, each moved out to the caller.
 //! - `decode-records`: `PositionStreamDecoder::decode_records` over the
@@ -176,9 +179,10 @@ fn record(i: u32, axes: u8) -> PositionRecord {
     }
 }
 
-/// Encodes one 26DH frame of `recs` into `out`; its length, or `None`.
-#[inline(never)]
-fn encode(recs: &[PositionRecord], out: &mut [u8]) -> Option<usize> {
+/// Encodes one 26DH frame of `recs` into `out`, pulled `chunk` bytes at a
+/// time; its length, or `None`.
+#[inline(always)]
+fn encode_in(recs: &[PositionRecord], out: &mut [u8], chunk: usize) -> Option<usize> {
     let count = u16::try_from(recs.len()).ok()?;
     let mut enc = PositionStreamEncoder::new(
         PositionStream::CHANGE_2,
@@ -190,13 +194,25 @@ fn encode(recs: &[PositionRecord], out: &mut [u8]) -> Option<usize> {
     .ok()?;
     let mut len = 0;
     loop {
-        let end = (len + CHUNK).min(out.len());
+        let end = usize::saturating_add(len, chunk).min(out.len());
         match enc.read(out.get_mut(len..end)?) {
             Ok(0) => return Some(len),
             Ok(n) => len += n,
             Err(_) => return None,
         }
     }
+}
+
+/// [`encode_in`] 64-byte chunks.
+#[inline(never)]
+fn encode(recs: &[PositionRecord], out: &mut [u8]) -> Option<usize> {
+    encode_in(recs, out, CHUNK)
+}
+
+/// [`encode_in`] one chunk as large as `out`.
+#[inline(never)]
+fn encode_frame(recs: &[PositionRecord], out: &mut [u8]) -> Option<usize> {
+    encode_in(recs, out, usize::MAX)
 }
 
 /// Decodes one frame with the stream decoder; the records delivered, or
@@ -222,16 +238,16 @@ fn decode(frame: &[u8]) -> Option<u16> {
     None
 }
 
-/// Decodes one frame with the stream decoder's bulk path, [`BATCH`]
-/// records at a time; the records delivered, or `None`.
+/// Decodes one frame with the stream decoder's bulk path into `recs`, the
+/// caller's array (reused from frame to frame); the records delivered, or
+/// `None`.
 #[inline(never)]
-fn decode_records(frame: &[u8]) -> Option<u16> {
+fn decode_records(frame: &[u8], recs: &mut [PositionRecord; BATCH]) -> Option<u16> {
     let mut dec = PositionStreamDecoder::default();
-    let mut recs: [PositionRecord; BATCH] = core::array::from_fn(|_| PositionRecord::default());
     let mut input = frame;
     let mut records = 0;
     while !input.is_empty() {
-        let (used, n, ev) = dec.decode_records(input, &mut recs);
+        let (used, n, ev) = dec.decode_records(input, recs);
         input = input.get(used..)?;
         black_box(recs.get(..n)?);
         records += n as u16;
@@ -271,6 +287,7 @@ fn checksum(frame: &[u8]) -> u8 {
 #[derive(Default)]
 struct Figures {
     encode: u32,
+    encode_frame: u32,
     decode: u32,
     decode_records: u32,
     push: u32,
@@ -289,6 +306,7 @@ fn run_workload(
         .get_mut(..usize::from(w.per_frame))
         .ok_or("workload larger than the record array")?;
     let mut dec: FrameDecoder = FrameDecoder::new();
+    let mut batch: [PositionRecord; BATCH] = Default::default();
     let mut f = Figures::default();
     let net = |t: u32| t.saturating_sub(empty);
     for k in 0..u32::from(FRAMES) {
@@ -300,6 +318,12 @@ fn run_workload(
         let (t, len) = timed(|| encode(black_box(recs), black_box(&mut *frame)));
         let len = len.ok_or("encode failed")?;
         f.encode += net(t);
+        let mut whole = [0u8; FRAME_CAP];
+        let (t, n) = timed(|| encode_frame(black_box(recs), black_box(&mut whole)));
+        if n != Some(len) || whole != *frame {
+            return Err("encode_frame did not give the same frame");
+        }
+        f.encode_frame += net(t);
         let bytes = frame.get(..len).ok_or("frame longer than its buffer")?;
         f.bytes += len;
 
@@ -309,7 +333,7 @@ fn run_workload(
         }
         f.decode += net(t);
 
-        let (t, n) = timed(|| decode_records(black_box(bytes)));
+        let (t, n) = timed(|| decode_records(black_box(bytes), black_box(&mut batch)));
         if n != Some(w.per_frame) {
             return Err("decode_records did not give back every record");
         }
@@ -354,6 +378,7 @@ pub fn run(print: fn(core::fmt::Arguments<'_>)) -> bool {
             Ok(f) => {
                 for (what, t) in [
                     ("encode", f.encode),
+                    ("encode-frame", f.encode_frame),
                     ("decode", f.decode),
                     ("decode-records", f.decode_records),
                     ("push", f.push),

@@ -12,7 +12,8 @@
 //!
 //! for the boards `mps2-an386` (Cortex-M4F), `lm3s6965evb` (Cortex-M3) and
 //! `microbit` (Cortex-M0, if this QEMU has it), the workloads `26dh-8axis`
-//! and `26dh-1axis`, and `encode` (`PositionStreamEncoder::read`),
+//! and `26dh-1axis`, and `encode` (`PositionStreamEncoder::read` in 64-byte
+//! chunks), `encode-frame` (the same, the whole frame in one `read`),
 //! `decode` (`PositionStreamDecoder::decode`, a record per event),
 //! `decode-records` (`PositionStreamDecoder::decode_records`, records
 //! straight into the caller's array), `push` (the frame decoder) and
@@ -58,7 +59,14 @@ const BOARDS: [Board; 3] = [
 ];
 
 /// The figures printed, in order.
-const FIGURES: [&str; 5] = ["encode", "decode", "decode-records", "push", "checksum"];
+const FIGURES: [&str; 6] = [
+    "encode",
+    "encode-frame",
+    "decode",
+    "decode-records",
+    "push",
+    "checksum",
+];
 const QEMU: &str = "qemu-system-arm";
 const ICOUNT: &str = "shift=5,sleep=off";
 const TIMEOUT: Duration = Duration::from_secs(120);
