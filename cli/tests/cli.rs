@@ -4,23 +4,13 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
-#[path = "../../host-tests/fixtures/fixture_file.rs"]
-mod fixture_file;
 
-use common::{iai, iai_stdin, record, stdout, temp, Sim};
+use common::{fixture_file, fixtures, iai, iai_stdin, record, stdout, temp, Sim};
 
 use std::io::Write;
 
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::stream::{PositionStream, PositionStreamEncoder};
-
-fn fixtures() -> Vec<fixture_file::Fixture> {
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../host-tests/fixtures/frames.txt"
-    );
-    fixture_file::parse(&std::fs::read_to_string(path).unwrap())
-}
 
 /// The value of `"key":` in a JSON line (strings without quotes).
 fn get<'a>(line: &'a str, key: &str) -> Option<&'a str> {

@@ -4,22 +4,12 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
-#[path = "../../host-tests/fixtures/fixture_file.rs"]
-mod fixture_file;
 
 use std::io::{Read, Write};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use common::{iai, iai_stdin, stderr, stdout, temp, Sim};
-
-fn fixtures() -> Vec<fixture_file::Fixture> {
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../host-tests/fixtures/frames.txt"
-    );
-    fixture_file::parse(&std::fs::read_to_string(path).unwrap())
-}
+use common::{fixture_file, fixtures, iai, iai_stdin, stderr, stdout, temp, Sim};
 
 /// The frame in normal form: upper-case digits (outside text fields) and
 /// the SC computed.

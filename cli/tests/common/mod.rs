@@ -8,6 +8,18 @@ use std::sync::mpsc::{channel, Receiver};
 use std::time::Duration;
 
 use iai_protocol_b::axis::{AxisPattern, PerAxis};
+
+#[path = "../../../host-tests/fixtures/fixture_file.rs"]
+pub mod fixture_file;
+
+/// The recorded frames of `host-tests/fixtures/frames.txt`.
+pub fn fixtures() -> Vec<fixture_file::Fixture> {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../host-tests/fixtures/frames.txt"
+    );
+    fixture_file::parse(&std::fs::read_to_string(path).unwrap())
+}
 use iai_protocol_b::position::PositionRecord;
 
 pub fn iai(args: &[&str]) -> Output {
