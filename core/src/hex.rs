@@ -17,12 +17,16 @@
 //!   lookups. On a Cortex-M4 that is 21 instructions for 8 digits with the
 //!   checksum, against 28 without it for spreading the nibbles over a word
 //!   and adding `'0'` or `'A' - 10` with SWAR arithmetic.
-//! - Decoding looks up each digit in a table that gives its value, or
-//!   `0xFFFF_0000` for a byte that is not a hex digit. Four values are
-//!   shifted together into a `u32`; a bad digit sets bits above bit 15 at
-//!   whatever position it had, so one comparison validates the group. On a
-//!   Cortex-M4 that is 37 instructions for 8 digits, against 49 for SWAR
-//!   range checks of both cases.
+//! - Decoding looks up each digit of a group of four in a table for its
+//!   position in the group (`T12`, `T8`, `T4`, `T0`), which holds
+//!   its value already shifted into place (bits 0-15), the byte itself
+//!   (bits 24-31) and, for a byte that is not a hex digit, a marker in bits
+//!   16-23 that no valid entry has. Adding the four entries gives the
+//!   group's value, the low byte of the sum of its bytes (what it adds to
+//!   the checksum) and, if any byte was bad, a non-zero bits 16-23 (k bad
+//!   bytes add k × 0xFF there: never 0 for k from 1 to 4), so one test
+//!   validates a group or a whole record. On a Cortex-M4 that is 4 loads,
+//!   4 table loads and 3 additions for 4 digits with their sum.
 //! - The checksum adds 4-byte words: bytes 0 and 2 of every word into one
 //!   accumulator of two 16-bit lanes, bytes 1 and 3 into another (one
 //!   `uxtb16` and one add each on a Cortex-M4), folded every 256 words
@@ -32,29 +36,108 @@
 //! No indexing: table lookups use `get` with a `u8` index (the optimiser
 //! sees it is in bounds), and the array forms take `&[u8; N]` so their
 //! lengths are known. No arithmetic can overflow: sums are `u32` over at
-//! most 1,024 bytes before they are folded.
+//! most 1,024 bytes before they are folded, and table entries are added
+//! with wrapping additions (only the low byte of their sum counts).
 
-/// The marker [`VALUES`] holds for a byte that is not a hex digit.
-const INVALID: u32 = 0xFFFF_0000;
+/// What a positional table ([`T0`]…[`T12`]) holds for a byte that is not
+/// a hex digit: bits 16-23 set, where a valid digit's entry has none.
+const MARK: u32 = 0x00FF_0000;
 
-/// The value of every byte as a hex digit of either case, or [`INVALID`].
+/// The value of `byte` as a hex digit of either case (a `const fn` for
+/// the tables), or `None`.
+const fn hex_value(byte: u8) -> Option<u32> {
+    match byte {
+        b'0'..=b'9' => Some((byte - b'0') as u32),
+        b'A'..=b'F' => Some((byte - b'A' + 10) as u32),
+        b'a'..=b'f' => Some((byte - b'a' + 10) as u32),
+        _ => None,
+    }
+}
+
+/// For every byte: its value as a hex digit shifted left by `shift` (bits
+/// 0-15), and the byte itself (bits 24-31, what it adds to the checksum);
+/// [`MARK`] for a byte that is not a hex digit. Bits 16-23 are clear in
+/// every valid entry (see the module docs).
 // Indexing in a const initialiser is checked at compile time: it cannot panic at run time.
 #[allow(clippy::indexing_slicing)]
-static VALUES: [u32; 256] = {
-    let mut t = [INVALID; 256];
+const fn positional(shift: u32) -> [u32; 256] {
+    let mut t = [MARK; 256];
     let mut i = 0;
-    while i < 10 {
-        t[b'0' as usize + i] = i as u32;
-        i += 1;
-    }
-    let mut i = 0;
-    while i < 6 {
-        t[b'A' as usize + i] = 10 + i as u32;
-        t[b'a' as usize + i] = 10 + i as u32;
+    while i < 256 {
+        if let Some(v) = hex_value(i as u8) {
+            // Disjoint bit fields, so adding them is or-ing them.
+            t[i] = (v << shift) + ((i as u32) << 24);
+        }
         i += 1;
     }
     t
-};
+}
+
+/// The four [`positional`] tables, one after the other: one base address
+/// for all four.
+static TABLES: [[u32; 256]; 4] = [positional(12), positional(8), positional(4), positional(0)];
+/// [`positional`] for the last digit of a group of four.
+static T0: &[u32; 256] = &TABLES[3];
+/// [`positional`] for the third digit of a group of four.
+static T4: &[u32; 256] = &TABLES[2];
+/// [`positional`] for the second digit of a group of four.
+static T8: &[u32; 256] = &TABLES[1];
+/// [`positional`] for the first digit of a group of four.
+static T12: &[u32; 256] = &TABLES[0];
+
+/// The entry of `byte` in `table`.
+#[inline(always)]
+fn entry(table: &[u32; 256], byte: u8) -> u32 {
+    // A `u8` index is always in bounds of the 256 entries.
+    table.get(usize::from(byte)).copied().unwrap_or(MARK)
+}
+
+/// Up to four digits at once: their value (bits 0-15), bits 16-23 set if
+/// any byte is not a hex digit, and the low byte of the sum of the bytes
+/// (bits 24-31) if none is. Each `entry` is one load; adding them costs
+/// one instruction each.
+///
+/// Where a word can be loaded from any address, the four bytes come in one
+/// load and are taken apart in registers: four byte loads would each want
+/// a register of their own until they are looked up, which spills on a
+/// Cortex-M with a whole record in flight. Armv6-M (no unaligned loads,
+/// told apart as in [`sum`]) loads the bytes one by one.
+#[inline(always)]
+fn group4(d: &[u8; 4]) -> u32 {
+    #[cfg(target_has_atomic = "32")]
+    let [a, b, c, e] = {
+        let w = u32::from_le_bytes(*d);
+        [w as u8, (w >> 8) as u8, (w >> 16) as u8, (w >> 24) as u8]
+    };
+    #[cfg(not(target_has_atomic = "32"))]
+    let [a, b, c, e] = *d;
+    entry(T12, a)
+        .wrapping_add(entry(T8, b))
+        .wrapping_add(entry(T4, c))
+        .wrapping_add(entry(T0, e))
+}
+
+/// [`group4`] for three digits.
+#[inline(always)]
+fn group3(d: &[u8; 3]) -> u32 {
+    let [a, b, c] = *d;
+    entry(T8, a)
+        .wrapping_add(entry(T4, b))
+        .wrapping_add(entry(T0, c))
+}
+
+/// [`group4`] for two digits.
+#[inline(always)]
+fn group2(d: &[u8; 2]) -> u32 {
+    let [a, b] = *d;
+    entry(T4, a).wrapping_add(entry(T0, b))
+}
+
+/// Whether a group (or the OR of groups) had only hex digits.
+#[inline(always)]
+const fn clean(g: u32) -> bool {
+    g & MARK == 0
+}
 
 /// For every byte: its two upper-case digits (bits 0-7 the first digit,
 /// 8-15 the second, so a little-endian store writes them in order) and
@@ -88,9 +171,9 @@ pub const fn digit(n: u8) -> u8 {
 /// The value of `byte` as a hex digit of either case, or `None`.
 #[inline]
 pub fn value(byte: u8) -> Option<u8> {
-    let v = lookup(byte);
-    if v <= 0xF {
-        Some(v as u8)
+    let v = entry(T0, byte);
+    if single_is_digit(v) {
+        Some(v as u8 & 0xF)
     } else {
         None
     }
@@ -99,13 +182,16 @@ pub fn value(byte: u8) -> Option<u8> {
 /// Whether `byte` is a hex digit of either case.
 #[inline]
 pub fn is_digit(byte: u8) -> bool {
-    lookup(byte) <= 0xF
+    single_is_digit(entry(T0, byte))
 }
 
+/// Whether one [`T0`] entry is a digit's: its bits 24-31 hold the byte,
+/// at least `'0'`, where [`MARK`] has none. One comparison of the whole
+/// word (testing bits 16-23 would do too, but invites a byte load at an
+/// offset the table's address then has to be computed for, per byte).
 #[inline(always)]
-fn lookup(byte: u8) -> u32 {
-    // A `u8` index is always in bounds of the 256 entries.
-    VALUES.get(usize::from(byte)).copied().unwrap_or(INVALID)
+const fn single_is_digit(e: u32) -> bool {
+    e >= (b'0' as u32) << 24
 }
 
 #[inline(always)]
@@ -192,27 +278,15 @@ pub fn encode8(v: u32) -> [u8; 8] {
     out
 }
 
-/// Four digit values shifted together; above `0xFFFF` if any byte is not
-/// a hex digit (see the module docs). The marker of a bad digit has its
-/// lowest set bit at 16, 20, 24 or 28 by position, so no combination of
-/// markers cancels: here and in the decoders below `^` would do what `|`
-/// does (equivalent mutants, excluded in `.cargo/mutants.toml`).
-#[inline(always)]
-fn raw4(d: &[u8; 4]) -> u32 {
-    let [a, b, c, e] = *d;
-    (lookup(a) << 12) | (lookup(b) << 8) | (lookup(c) << 4) | lookup(e)
-}
-
 /// The value of two hex digits of either case; `None` if either is not a
 /// hex digit.
 #[inline]
 pub fn decode2(d: &[u8; 2]) -> Option<u8> {
-    let [a, b] = *d;
-    let v = (lookup(a) << 4) | lookup(b);
-    if v > 0xFF {
-        None
+    let g = group2(d);
+    if clean(g) {
+        Some(g as u8)
     } else {
-        Some(v as u8)
+        None
     }
 }
 
@@ -226,11 +300,11 @@ pub fn decode2(d: &[u8; 2]) -> Option<u8> {
 /// ```
 #[inline]
 pub fn decode4(d: &[u8; 4]) -> Option<u16> {
-    let v = raw4(d);
-    if v > 0xFFFF {
-        None
+    let g = group4(d);
+    if clean(g) {
+        Some(g as u16)
     } else {
-        Some(v as u16)
+        None
     }
 }
 
@@ -244,14 +318,30 @@ pub fn decode4(d: &[u8; 4]) -> Option<u16> {
 /// ```
 #[inline]
 pub fn decode8(d: &[u8; 8]) -> Option<u32> {
-    let [a, b, c, e, f, g, h, i] = *d;
-    let hi = raw4(&[a, b, c, e]);
-    let lo = raw4(&[f, g, h, i]);
-    if (hi | lo) > 0xFFFF {
-        None
+    let (hi, lo) = halves(d);
+    if clean(hi | lo) {
+        Some(join(hi, lo))
     } else {
-        Some((hi << 16) | lo)
+        None
     }
+}
+
+/// The two [`group4`]s of eight digits.
+#[inline(always)]
+fn halves(d: &[u8; 8]) -> (u32, u32) {
+    let (hi, lo) = d.split_at(4);
+    match (<&[u8; 4]>::try_from(hi), <&[u8; 4]>::try_from(lo)) {
+        (Ok(hi), Ok(lo)) => (group4(hi), group4(lo)),
+        // Eight bytes split at 4: never taken.
+        _ => (MARK, MARK),
+    }
+}
+
+/// The value of eight digits from their two groups (one `pkhbt` on a
+/// Cortex-M4).
+#[inline(always)]
+fn join(hi: u32, lo: u32) -> u32 {
+    (hi << 16) | (lo & 0xFFFF)
 }
 
 /// Decodes many fields and validates them all with one comparison at the
@@ -274,8 +364,8 @@ pub fn decode8(d: &[u8; 8]) -> Option<u32> {
 /// ```
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Batch {
-    /// The OR of every group's raw value: above `0xFFFF` once a byte was
-    /// not a hex digit.
+    /// The OR of every group: bits 16-23 set once a byte was not a hex
+    /// digit.
     seen: u32,
     /// The sum of every byte decoded (what they add to the checksum).
     sum: u32,
@@ -290,32 +380,28 @@ impl Batch {
     /// Two digits (see [`decode2`]).
     #[inline(always)]
     pub fn decode2(&mut self, d: &[u8; 2]) -> u8 {
-        let [a, b] = *d;
-        // A bad digit sets bits 20-31 or 16-31: above 0xFFFF either way.
-        let v = (lookup(a) << 4) | lookup(b);
-        self.seen |= v;
-        self.sum += u32::from(a) + u32::from(b);
-        v as u8
+        let g = group2(d);
+        self.seen |= g;
+        self.sum += d.iter().map(|&b| u32::from(b)).sum::<u32>();
+        g as u8
     }
 
     /// Four digits (see [`decode4`]).
     #[inline(always)]
     pub fn decode4(&mut self, d: &[u8; 4]) -> u16 {
-        let v = raw4(d);
-        self.seen |= v;
+        let g = group4(d);
+        self.seen |= g;
         self.sum += d.iter().map(|&b| u32::from(b)).sum::<u32>();
-        v as u16
+        g as u16
     }
 
     /// Eight digits (see [`decode8`]).
     #[inline(always)]
     pub fn decode8(&mut self, d: &[u8; 8]) -> u32 {
-        let [a, b, c, e, f, g, h, i] = *d;
-        let hi = raw4(&[a, b, c, e]);
-        let lo = raw4(&[f, g, h, i]);
+        let (hi, lo) = halves(d);
         self.seen |= hi | lo;
         self.sum += d.iter().map(|&b| u32::from(b)).sum::<u32>();
-        (hi << 16) | lo
+        join(hi, lo)
     }
 
     /// The sum of every byte decoded so far (what they add to the
@@ -328,7 +414,114 @@ impl Batch {
     /// Whether every byte decoded so far was a hex digit.
     #[inline(always)]
     pub fn is_valid(&self) -> bool {
-        self.seen <= 0xFFFF
+        clean(self.seen)
+    }
+}
+
+/// A [`Batch`] that keeps only the low byte of the sum, which is all a
+/// checksum needs, for at most 255 digits: the stream decoder's record
+/// path (a record has at most 84).
+///
+/// Each group's sum comes out of the same table loads as its value (bits
+/// 24-31 of [`group4`]), and its bits 16-31 are added to one accumulator:
+/// one instruction per group for the check and the sum together. A group
+/// with k bad bytes has `k × 0xFF` in bits 16-23, and since bits 24-31
+/// only carry upwards, the accumulator's low byte is `-K` modulo 256 for K
+/// bad bytes in all: 0 exactly when K is 0, as K < 256. Its bits 8-31 are
+/// then the sum of the groups' byte sums, whose low byte is the checksum's.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct ModBatch {
+    /// Bits 16-31 of every group added up (see above).
+    acc: u32,
+}
+
+impl ModBatch {
+    #[inline(always)]
+    fn add(&mut self, g: u32) {
+        self.acc = self.acc.wrapping_add(g >> 16);
+    }
+}
+
+/// The decoding half of [`Batch`] and [`ModBatch`]: what the whole-field
+/// record reader needs of either.
+pub(crate) trait Digits {
+    /// Two digits.
+    fn decode2(&mut self, d: &[u8; 2]) -> u8;
+    /// Three digits.
+    fn decode3(&mut self, d: &[u8; 3]) -> u16;
+    /// Four digits.
+    fn decode4(&mut self, d: &[u8; 4]) -> u16;
+    /// Eight digits.
+    fn decode8(&mut self, d: &[u8; 8]) -> u32;
+    /// Whether every byte so far was a hex digit.
+    fn is_valid(&self) -> bool;
+    /// The sum of the bytes so far; [`ModBatch`]: only its low byte.
+    fn sum(&self) -> u32;
+}
+
+impl Digits for Batch {
+    #[inline(always)]
+    fn decode2(&mut self, d: &[u8; 2]) -> u8 {
+        Batch::decode2(self, d)
+    }
+    #[inline(always)]
+    fn decode3(&mut self, d: &[u8; 3]) -> u16 {
+        let g = group3(d);
+        self.seen |= g;
+        self.sum += d.iter().map(|&b| u32::from(b)).sum::<u32>();
+        g as u16
+    }
+    #[inline(always)]
+    fn decode4(&mut self, d: &[u8; 4]) -> u16 {
+        Batch::decode4(self, d)
+    }
+    #[inline(always)]
+    fn decode8(&mut self, d: &[u8; 8]) -> u32 {
+        Batch::decode8(self, d)
+    }
+    #[inline(always)]
+    fn is_valid(&self) -> bool {
+        Batch::is_valid(self)
+    }
+    #[inline(always)]
+    fn sum(&self) -> u32 {
+        Batch::sum(self)
+    }
+}
+
+impl Digits for ModBatch {
+    #[inline(always)]
+    fn decode2(&mut self, d: &[u8; 2]) -> u8 {
+        let g = group2(d);
+        self.add(g);
+        g as u8
+    }
+    #[inline(always)]
+    fn decode3(&mut self, d: &[u8; 3]) -> u16 {
+        let g = group3(d);
+        self.add(g);
+        g as u16
+    }
+    #[inline(always)]
+    fn decode4(&mut self, d: &[u8; 4]) -> u16 {
+        let g = group4(d);
+        self.add(g);
+        g as u16
+    }
+    #[inline(always)]
+    fn decode8(&mut self, d: &[u8; 8]) -> u32 {
+        let (hi, lo) = halves(d);
+        self.add(hi);
+        self.add(lo);
+        join(hi, lo)
+    }
+    #[inline(always)]
+    fn is_valid(&self) -> bool {
+        self.acc & 0xFF == 0
+    }
+    #[inline(always)]
+    fn sum(&self) -> u32 {
+        self.acc >> 8
     }
 }
 
@@ -643,6 +836,136 @@ mod tests {
             assert_eq!(b.is_valid(), x.is_ascii_hexdigit(), "{x:#04X}");
             if b.is_valid() {
                 assert_eq!(Some(v), decode2(&[b'A', x]));
+            }
+        }
+    }
+
+    #[test]
+    fn positional_tables() {
+        for b in 0..=255u8 {
+            let v = decode_bytewise(&[b]).ok().map(|v| v as u32);
+            for (t, shift) in [(T0, 0), (T4, 4), (T8, 8), (T12, 12)] {
+                let e = entry(t, b);
+                match v {
+                    Some(v) => assert_eq!(e, (v << shift) | (u32::from(b) << 24), "{b:#04X}"),
+                    None => assert_eq!(e, MARK, "{b:#04X}"),
+                }
+            }
+            assert_eq!(value(b).map(u32::from), v);
+        }
+    }
+
+    /// Digits as a `ModBatch` reads them, by group width.
+    fn mod_decode(m: &mut ModBatch, g: &[u8]) -> u32 {
+        match g.len() {
+            2 => u32::from(Digits::decode2(m, g.try_into().unwrap())),
+            3 => u32::from(Digits::decode3(m, g.try_into().unwrap())),
+            4 => u32::from(Digits::decode4(m, g.try_into().unwrap())),
+            _ => Digits::decode8(m, g.try_into().unwrap()),
+        }
+    }
+
+    #[test]
+    fn a_mod_batch_gives_values_and_the_low_byte_of_the_sum() {
+        let mut next = xorshift(21);
+        let widths = [2usize, 3, 4, 8];
+        for _ in 0..3000 {
+            // Up to a whole record's worth of digits (84), in both cases.
+            let mut m = ModBatch::default();
+            let mut b = Batch::new();
+            let mut total = 0u32;
+            let mut digits = 0;
+            while digits < 76 {
+                let w = widths[(next.next().unwrap() % 4) as usize];
+                let r = next.next().unwrap();
+                let mut g = [0u8; 8];
+                for (k, d) in g[..w].iter_mut().enumerate() {
+                    let x = digit((r >> (4 * k)) as u8);
+                    *d = if (r >> (28 - k)) & 1 == 1 {
+                        x.to_ascii_lowercase()
+                    } else {
+                        x
+                    };
+                }
+                let g = &g[..w];
+                let expect = decode_bytewise(g).unwrap() as u32;
+                assert_eq!(mod_decode(&mut m, g), expect, "{g:?}");
+                let via_batch = match w {
+                    2 => u32::from(b.decode2(g.try_into().unwrap())),
+                    3 => u32::from(Digits::decode3(&mut b, g.try_into().unwrap())),
+                    4 => u32::from(b.decode4(g.try_into().unwrap())),
+                    _ => b.decode8(g.try_into().unwrap()),
+                };
+                assert_eq!(via_batch, expect);
+                total += g.iter().map(|&x| u32::from(x)).sum::<u32>();
+                digits += w;
+            }
+            assert!(Digits::is_valid(&m));
+            assert_eq!(Digits::sum(&m) as u8, total as u8);
+            assert_eq!(Digits::sum(&b), total, "a Batch keeps the whole sum");
+        }
+    }
+
+    /// Bad bytes anywhere, up to one in every position of a record's worth
+    /// of groups: never taken for valid.
+    #[test]
+    fn a_mod_batch_sees_every_bad_byte() {
+        let groups: [&[u8]; 6] = [b"0001", b"ff", b"1e00", b"ABC", b"FFFF9C64", b"7fffffff"];
+        let all: usize = groups.iter().map(|g| g.len()).sum();
+        let mut next = xorshift(8);
+        let bad = [b'G', b'g', b'/', b':', b'@', b'`', 0x00, 0x80, 0xFF, b'\r'];
+        for _ in 0..20_000 {
+            // Which positions are bad: one, a few or all of them.
+            let pick = next.next().unwrap();
+            let k = match pick % 4 {
+                0 => 1,
+                1 => 2 + (pick >> 8) as usize % 4,
+                2 => (pick >> 8) as usize % all + 1,
+                _ => all,
+            };
+            let mut flagged = [false; 32];
+            let mut placed = 0;
+            while placed < k {
+                let at = next.next().unwrap() as usize % all;
+                if !flagged[at] {
+                    flagged[at] = true;
+                    placed += 1;
+                }
+            }
+            let mut m = ModBatch::default();
+            let mut at = 0;
+            for _ in 0..3 {
+                at = 0;
+                let mut m1 = ModBatch::default();
+                for g in groups {
+                    let mut d = [0u8; 8];
+                    d[..g.len()].copy_from_slice(g);
+                    for (j, x) in d[..g.len()].iter_mut().enumerate() {
+                        if flagged[at + j] {
+                            *x = bad[(next.next().unwrap() % bad.len() as u32) as usize];
+                        }
+                    }
+                    mod_decode(&mut m1, &d[..g.len()]);
+                    mod_decode(&mut m, &d[..g.len()]);
+                    at += g.len();
+                }
+                assert!(!Digits::is_valid(&m1), "{k} bad of {at}");
+            }
+            assert!(!Digits::is_valid(&m), "{k} bad of {at}, three times over");
+        }
+        // Every byte in every position of each width.
+        for w in [2usize, 3, 4, 8] {
+            for pos in 0..w {
+                for x in 0..=255u8 {
+                    let mut d = *b"8a6F0c9E";
+                    d[pos] = x;
+                    let mut m = ModBatch::default();
+                    let v = mod_decode(&mut m, &d[..w]);
+                    assert_eq!(Digits::is_valid(&m), x.is_ascii_hexdigit(), "{x:#04X}");
+                    if x.is_ascii_hexdigit() {
+                        assert_eq!(u64::from(v), decode_bytewise(&d[..w]).unwrap());
+                    }
+                }
             }
         }
     }

@@ -201,37 +201,13 @@ impl RecordLayout {
     /// ([`crate::hex`]), others a digit at a time.
     #[inline(always)]
     pub fn put_record(self, rec: &PositionRecord, out: &mut [u8]) -> Result<(usize, u32)> {
-        let n = axis_count(rec.axes);
-        if rec.positions.len() != n {
-            return Err(Error::CountMismatch {
-                expected: n,
-                found: rec.positions.len(),
-            });
-        }
-        let len = self.record_len(n);
-        let out = out.get_mut(..len).ok_or(Error::BufferTooSmall)?;
-        match self.put_fast(rec, out) {
-            Some(Ok(sum)) => Ok((len, sum)),
-            Some(Err(e)) => Err(e),
-            None => {
-                let mut w = Writer::new(out);
-                self.write_record_per_field(rec, &mut w)?;
-                Ok((len, w.written().iter().map(|&b| u32::from(b)).sum()))
-            }
-        }
-    }
-
-    /// The whole-field path of [`RecordLayout::put_record`]: `None` for a
-    /// layout it does not handle. `out` is exactly the record.
-    #[inline(always)]
-    fn put_fast(self, rec: &PositionRecord, out: &mut [u8]) -> Option<Result<u32>> {
         match (self.number_width, self.extended) {
-            (4, false) => put_fixed::<4, 18, false>(rec, out),
-            (4, true) => put_fixed::<4, 18, true>(rec, out),
-            (3, false) => put_fixed::<3, 17, false>(rec, out),
-            (0, false) => put_fixed::<0, 14, false>(rec, out),
-            (0, true) => put_fixed::<0, 14, true>(rec, out),
-            _ => None,
+            (4, false) => put_as::<4, 18, false>(self, rec, out),
+            (4, true) => put_as::<4, 18, true>(self, rec, out),
+            (3, false) => put_as::<3, 17, false>(self, rec, out),
+            (0, false) => put_as::<0, 14, false>(self, rec, out),
+            (0, true) => put_as::<0, 14, true>(self, rec, out),
+            _ => put_as::<PER_FIELD, 0, false>(self, rec, out),
         }
     }
 
@@ -287,6 +263,79 @@ impl RecordLayout {
             (0, true) => read_fixed::<0, 14, true>(bytes),
             _ => None,
         }
+    }
+
+    /// Reads records one after another from the start of `bytes` straight
+    /// into `out`, overwriting them in place (no record is moved), until
+    /// `out` is full or what follows is not a complete, well-formed record.
+    /// Returns `(bytes read, records read, sum)`: the records are
+    /// `out[..records]`, and the low byte of `sum` is the low byte of the
+    /// sum of the bytes read, what they add to the checksum (its other bits
+    /// mean nothing). `out[records]`, if there is one, may have been
+    /// overwritten with a meaningless record.
+    ///
+    /// Number widths 0, 3 and 4 read whole fields at a time, others a field
+    /// at a time. It never says what is wrong: where it stops,
+    /// [`RecordLayout::read_record`] tells.
+    ///
+    /// ```
+    /// use iai_protocol_b::position::{PositionRecord, RecordLayout};
+    /// let wire = b"000103001E001E0064000186A0FFFF9C64000201000000000000000030392B";
+    /// let mut out: [PositionRecord; 4] = Default::default();
+    /// let (used, n, sum) = RecordLayout::NUMBER_4.read_records(wire, &mut out);
+    /// assert_eq!((used, n), (60, 2), "the last 2 bytes are no record");
+    /// assert_eq!(out[1].number, 2);
+    /// assert_eq!(out[1].position(1), Some(12_345));
+    /// assert_eq!(sum as u8, wire[..60].iter().fold(0u8, |s, &b| s.wrapping_add(b)));
+    /// ```
+    pub fn read_records(self, bytes: &[u8], out: &mut [PositionRecord]) -> (usize, usize, u32) {
+        match (self.number_width, self.extended) {
+            (4, false) => read_run::<4, 18, false>(bytes, out),
+            (4, true) => read_run::<4, 18, true>(bytes, out),
+            (3, false) => read_run::<3, 17, false>(bytes, out),
+            (0, false) => read_run::<0, 14, false>(bytes, out),
+            (0, true) => read_run::<0, 14, true>(bytes, out),
+            _ => self.read_run_per_field(bytes, out),
+        }
+    }
+
+    /// One record as [`RecordLayout::read_records`] reads it: into `rec`,
+    /// `Some((length, sum))` with only the low byte of `sum` meaningful;
+    /// `None` for other number widths and for what is not a complete,
+    /// well-formed record.
+    #[inline(always)]
+    pub(crate) fn read_in_place(
+        self,
+        bytes: &[u8],
+        rec: &mut PositionRecord,
+    ) -> Option<(usize, u32)> {
+        use hex::ModBatch as M;
+        match (self.number_width, self.extended) {
+            (4, false) => read_into::<4, 18, false, M>(bytes, rec),
+            (4, true) => read_into::<4, 18, true, M>(bytes, rec),
+            (3, false) => read_into::<3, 17, false, M>(bytes, rec),
+            (0, false) => read_into::<0, 14, false, M>(bytes, rec),
+            (0, true) => read_into::<0, 14, true, M>(bytes, rec),
+            _ => None,
+        }
+    }
+
+    /// [`RecordLayout::read_records`] a field at a time.
+    fn read_run_per_field(self, bytes: &[u8], out: &mut [PositionRecord]) -> (usize, usize, u32) {
+        let mut used = 0;
+        let mut n = 0;
+        for rec in out.iter_mut() {
+            let mut r = Reader::new(bytes.get(used..).unwrap_or(&[]), 0);
+            match self.read_record_per_field(&mut r) {
+                Ok(got) => *rec = got,
+                Err(_) => break,
+            }
+            used += r.offset();
+            n += 1;
+        }
+        let read = bytes.get(..used).unwrap_or(&[]);
+        let sum = read.iter().fold(0u32, |s, &b| s.wrapping_add(u32::from(b)));
+        (used, n, sum)
     }
 
     /// [`RecordLayout::read_record`] a field at a time through the
@@ -679,8 +728,71 @@ fn piece_mut<const N: usize>(b: &mut [u8], at: usize) -> Option<&mut [u8; N]> {
     b.get_mut(at..at + N)?.try_into().ok()
 }
 
-/// [`RecordLayout::put_fast`] for one layout: `NW` digits of number (0, 3
-/// or 4), `HEAD` = `NW` + 14 bytes before the coordinates.
+/// The `NW` of [`put_as`] for a layout written a field at a time.
+pub(crate) const PER_FIELD: usize = usize::MAX;
+
+/// [`RecordLayout::put_record`] for `layout` with its shape known at
+/// compile time: `NW` digits of number (0, 3 or 4), `HEAD` = `NW` + 14
+/// bytes before the coordinates, `EXT` extended data; or `NW` =
+/// [`PER_FIELD`] for any other layout. A loop over many records picks the
+/// shape once, outside.
+#[inline(always)]
+pub(crate) fn put_as<const NW: usize, const HEAD: usize, const EXT: bool>(
+    layout: RecordLayout,
+    rec: &PositionRecord,
+    out: &mut [u8],
+) -> Result<(usize, u32)> {
+    let len = len_as::<NW, HEAD, EXT>(layout, rec)?;
+    let out = out.get_mut(..len).ok_or(Error::BufferTooSmall)?;
+    Ok((len, put_exact::<NW, HEAD, EXT>(layout, rec, out)?))
+}
+
+/// The wire length of `rec` in `layout` (the shape of [`put_as`]), once
+/// its coordinates are checked against its axis pattern.
+#[inline(always)]
+pub(crate) fn len_as<const NW: usize, const HEAD: usize, const EXT: bool>(
+    layout: RecordLayout,
+    rec: &PositionRecord,
+) -> Result<usize> {
+    let n = axis_count(rec.axes);
+    if rec.positions.len() != n {
+        return Err(Error::CountMismatch {
+            expected: n,
+            found: rec.positions.len(),
+        });
+    }
+    Ok(if NW == PER_FIELD {
+        layout.record_len(n)
+    } else {
+        HEAD + 8 * n + if EXT { 2 } else { 0 }
+    })
+}
+
+/// [`put_as`] into `out` of exactly [`len_as`] bytes; the sum of the
+/// bytes written.
+#[inline(always)]
+pub(crate) fn put_exact<const NW: usize, const HEAD: usize, const EXT: bool>(
+    layout: RecordLayout,
+    rec: &PositionRecord,
+    out: &mut [u8],
+) -> Result<u32> {
+    let fast = if NW == PER_FIELD {
+        None
+    } else {
+        put_fixed::<NW, HEAD, EXT>(rec, out)
+    };
+    match fast {
+        Some(r) => r,
+        None => {
+            let mut w = Writer::new(out);
+            layout.write_record_per_field(rec, &mut w)?;
+            Ok(w.written().iter().map(|&b| u32::from(b)).sum())
+        }
+    }
+}
+
+/// The whole-field path of [`put_as`] for one layout: `NW` digits of number (0, 3
+/// or 4), `HEAD` = `NW` + 14 bytes before the coordinates; `out` is exactly the record.
 #[inline(always)]
 fn put_fixed<const NW: usize, const HEAD: usize, const EXT: bool>(
     rec: &PositionRecord,
@@ -720,29 +832,49 @@ fn put_fixed<const NW: usize, const HEAD: usize, const EXT: bool>(
 fn read_fixed<const NW: usize, const HEAD: usize, const EXT: bool>(
     bytes: &[u8],
 ) -> Option<(PositionRecord, usize, u32)> {
+    let mut rec = PositionRecord::default();
+    let (len, sum) = read_into::<NW, HEAD, EXT, hex::Batch>(bytes, &mut rec)?;
+    Some((rec, len, sum))
+}
+
+/// [`read_fixed`] into a record the caller holds: every field of `rec`
+/// is overwritten, in place. `Some((length, sum))` for a complete,
+/// well-formed record, the sum of its bytes as `D` keeps it (exact with
+/// [`hex::Batch`], its low byte with [`hex::ModBatch`]); on `None`, `rec`
+/// holds whatever was decoded before the check (meaningless, but a valid
+/// record).
+#[inline(always)]
+pub(crate) fn read_into<const NW: usize, const HEAD: usize, const EXT: bool, D>(
+    bytes: &[u8],
+    rec: &mut PositionRecord,
+) -> Option<(usize, u32)>
+where
+    D: hex::Digits + Default,
+{
     let (head, rest) = bytes.split_first_chunk::<HEAD>()?;
-    let mut b = hex::Batch::new();
+    let mut b = D::default();
     let axes = AxisPattern::from_bits(b.decode2(piece::<2>(head, NW)?));
-    let n = axis_count(axes);
+    // At most 8 (said again for the optimiser: the loop below then runs at
+    // most 8 times, and is laid out straight rather than unrolled by 4).
+    let n = axis_count(axes).min(MAX_AXES);
     let tail = 8 * n + if EXT { 2 } else { 0 };
     let rest = rest.get(..tail)?;
-    let number = match NW {
+    rec.number = match NW {
         4 => b.decode4(piece::<4>(head, 0)?),
-        3 => {
-            let [x, y, z] = *piece::<3>(head, 0)?;
-            b.decode4(&[b'0', x, y, z])
-        }
+        3 => b.decode3(piece::<3>(head, 0)?),
         _ => 0,
     };
-    let acceleration = b.decode4(piece::<4>(head, NW + 2)?);
-    let deceleration = b.decode4(piece::<4>(head, NW + 6)?);
-    let speed = b.decode4(piece::<4>(head, NW + 10)?);
-    let mut positions = PerAxis::new();
+    rec.axes = axes;
+    rec.acceleration = b.decode4(piece::<4>(head, NW + 2)?);
+    rec.deceleration = b.decode4(piece::<4>(head, NW + 6)?);
+    rec.speed = b.decode4(piece::<4>(head, NW + 10)?);
+    rec.positions.clear();
     let mut coords = rest.chunks_exact(8);
     for d in &mut coords {
-        let _ = positions.push(b.decode8(d.try_into().ok()?) as i32);
+        // At most 8 axes: the push cannot fail.
+        let _ = rec.positions.push(b.decode8(d.try_into().ok()?) as i32);
     }
-    let extended = if EXT {
+    rec.extended = if EXT {
         b.decode2(coords.remainder().try_into().ok()?)
     } else {
         0
@@ -750,25 +882,28 @@ fn read_fixed<const NW: usize, const HEAD: usize, const EXT: bool>(
     if !b.is_valid() {
         return None;
     }
-    // The '0' put before a 3-digit number is not on the wire.
-    let sum = if NW == 3 {
-        b.sum() - u32::from(b'0')
-    } else {
-        b.sum()
-    };
-    Some((
-        PositionRecord {
-            number,
-            axes,
-            acceleration,
-            deceleration,
-            speed,
-            positions,
-            extended,
-        },
-        HEAD + tail,
-        sum,
-    ))
+    Some((HEAD + tail, b.sum()))
+}
+
+/// [`RecordLayout::read_records`] for one layout (see [`put_fixed`]).
+#[inline(always)]
+fn read_run<const NW: usize, const HEAD: usize, const EXT: bool>(
+    bytes: &[u8],
+    out: &mut [PositionRecord],
+) -> (usize, usize, u32) {
+    let mut used = 0;
+    let mut n = 0;
+    let mut sum = 0u32;
+    for rec in out.iter_mut() {
+        let rest = bytes.get(used..).unwrap_or(&[]);
+        let Some((len, s)) = read_into::<NW, HEAD, EXT, hex::ModBatch>(rest, rec) else {
+            break;
+        };
+        used += len;
+        n += 1;
+        sum = sum.wrapping_add(s);
+    }
+    (used, n, sum)
 }
 
 #[cfg(test)]
@@ -863,6 +998,7 @@ mod tests {
 /// The whole-field record codec against the per-field reference.
 #[cfg(test)]
 mod whole_fields {
+    extern crate std;
     use super::*;
 
     const LAYOUTS: [RecordLayout; 5] = [
@@ -1033,6 +1169,130 @@ mod whole_fields {
                 expected: 1,
                 found: 2
             })
+        );
+    }
+
+    /// A run of records and its wire bytes, with where each record ends.
+    fn run(
+        layout: RecordLayout,
+        count: usize,
+        next: &mut impl FnMut() -> u32,
+    ) -> (
+        std::vec::Vec<PositionRecord>,
+        std::vec::Vec<u8>,
+        std::vec::Vec<usize>,
+    ) {
+        let mut recs = std::vec::Vec::new();
+        let mut wire = std::vec::Vec::new();
+        let mut ends = std::vec::Vec::new();
+        for _ in 0..count {
+            let mut rec = record(RecordLayout::NUMBER_4_EXTENDED, next);
+            let width = u32::from(layout.number_width);
+            if width < 4 {
+                rec.number &= ((1u32 << (4 * width)) - 1) as u16;
+            }
+            if !layout.extended {
+                rec.extended = 0;
+            }
+            let (bytes, n) = per_field(layout, &rec);
+            wire.extend_from_slice(&bytes[..n]);
+            ends.push(wire.len());
+            recs.push(rec);
+        }
+        (recs, wire, ends)
+    }
+
+    fn low_sum(bytes: &[u8]) -> u8 {
+        bytes.iter().fold(0u8, |s, &b| s.wrapping_add(b))
+    }
+
+    /// `read_records` against `read_record`, record after record: whole
+    /// runs into arrays of every size, runs cut anywhere, runs with a bad
+    /// byte anywhere; both cases of digits.
+    #[test]
+    fn runs_of_records_read_in_place() {
+        let mut next = xorshift(17);
+        let other = RecordLayout {
+            number_width: 5,
+            extended: true,
+        };
+        for layout in LAYOUTS.into_iter().chain([other]) {
+            for round in 0..30 {
+                let count = 1 + round % 6;
+                let (recs, mut wire, ends) = run(layout, count, &mut next);
+                if round % 2 == 1 {
+                    wire.make_ascii_lowercase();
+                }
+                // Whole runs, into every size of array (stale contents).
+                for room in 0..=count + 1 {
+                    let mut out = std::vec![record(layout, &mut next); room];
+                    let (used, n, sum) = layout.read_records(&wire, &mut out);
+                    let want = room.min(count);
+                    let end = if want == 0 { 0 } else { ends[want - 1] };
+                    assert_eq!((used, n), (end, want), "{layout:?} room {room}");
+                    assert_eq!(&out[..n], &recs[..n]);
+                    assert_eq!(sum as u8, low_sum(&wire[..used]));
+                }
+                // Cut anywhere: the whole records before the cut.
+                let mut out = std::vec![PositionRecord::default(); count];
+                for cut in 0..wire.len() {
+                    let whole = ends.iter().filter(|&&e| e <= cut).count();
+                    let (used, n, sum) = layout.read_records(&wire[..cut], &mut out);
+                    let end = if whole == 0 { 0 } else { ends[whole - 1] };
+                    assert_eq!((used, n), (end, whole), "{layout:?} cut {cut}");
+                    assert_eq!(&out[..n], &recs[..n]);
+                    assert_eq!(sum as u8, low_sum(&wire[..used]));
+                }
+                // A bad byte anywhere: the records before its record.
+                for at in (0..wire.len()).step_by(3) {
+                    for bad in [b'G', b'/', b':', b'@', b'`', b'g', 0x80, b'\n'] {
+                        let mut w = wire.clone();
+                        w[at] = bad;
+                        let before = ends.iter().filter(|&&e| e <= at).count();
+                        let (used, n, _) = layout.read_records(&w, &mut out);
+                        let end = if before == 0 { 0 } else { ends[before - 1] };
+                        assert_eq!((used, n), (end, before), "{layout:?} {bad:#04X} at {at}");
+                        assert_eq!(&out[..n], &recs[..n]);
+                        // What the one-record path says of the rest.
+                        let mut r = Reader::new(&w[used..], 0);
+                        assert!(layout.read_record(&mut r).is_err());
+                    }
+                }
+            }
+        }
+    }
+
+    /// The stream decoder's in-place reader: what `read_fast` reads, with
+    /// the low byte of the sum; nothing of a malformed record.
+    #[test]
+    fn in_place_reads_agree_with_read_fast() {
+        let mut next = xorshift(23);
+        for layout in LAYOUTS {
+            for _ in 0..200 {
+                let rec = record(layout, &mut next);
+                let (wire, n) = per_field(layout, &rec);
+                let mut got = record(layout, &mut next);
+                let (len, sum) = layout.read_in_place(&wire[..n + 3], &mut got).unwrap();
+                assert_eq!((&got, len), (&rec, n));
+                assert_eq!(sum as u8, low_sum(&wire[..n]));
+                for cut in 0..n {
+                    assert_eq!(layout.read_in_place(&wire[..cut], &mut got), None);
+                }
+                for at in 0..n {
+                    let mut w = wire;
+                    w[at] = b'x';
+                    assert_eq!(layout.read_in_place(&w[..n], &mut got), None, "{at}");
+                }
+            }
+        }
+        let mut got = PositionRecord::default();
+        let odd = RecordLayout {
+            number_width: 2,
+            extended: false,
+        };
+        assert_eq!(
+            odd.read_in_place(b"0101000000000000000000000000", &mut got),
+            None
         );
     }
 

@@ -34,12 +34,14 @@
 
 pub use crate::position::PositionStream;
 
+use core::borrow::Borrow;
+
 use crate::checksum::{BypassPolicy, Checksum};
 use crate::error::{Error, Result};
 use crate::field::{hex_digit, hex_value, FieldSpec, Reader, Writer};
 use crate::frame::{emit_envelope, Header, Station, ENVELOPE_LEN};
 use crate::io::IoError;
-use crate::position::{axis_count, PositionRecord};
+use crate::position::{len_as, put_exact, PositionRecord, PER_FIELD};
 
 /// Staging buffer size of the streaming encoder and decoder: the longest
 /// record (4 + 2 + 12 + 8 × 8 + 2 = 84 bytes) or the longest envelope and
@@ -63,12 +65,17 @@ impl Stage {
         }
     }
     fn pending(&self) -> &[u8] {
-        self.buf.get(self.pos..self.len).unwrap_or(&[])
+        self.pending_from(self.pos)
+    }
+    fn pending_from(&self, pos: usize) -> &[u8] {
+        self.buf.get(pos..self.len).unwrap_or(&[])
     }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum EncPhase {
+    /// The envelope and prefix are still to be staged (by the first `read`).
+    Start,
     Records,
     Trailer,
     Done,
@@ -89,6 +96,8 @@ enum EncPhase {
 pub struct PositionStreamEncoder<I> {
     kind: PositionStream,
     source: I,
+    station: Station,
+    start: u16,
     count: u16,
     emitted: u16,
     sum: Checksum,
@@ -96,9 +105,17 @@ pub struct PositionStreamEncoder<I> {
     phase: EncPhase,
 }
 
-impl<I: Iterator<Item = PositionRecord>> PositionStreamEncoder<I> {
+impl<I> PositionStreamEncoder<I>
+where
+    I: Iterator,
+    I::Item: Borrow<PositionRecord>,
+{
     /// Starts a frame of `kind` from `station` with `count` records taken
     /// from `source` (`start` is the start number where the message has one).
+    ///
+    /// The source may yield records or references to them: `records.iter()`
+    /// over a slice hands each record over without copying it.
+    #[inline]
     pub fn new(
         kind: PositionStream,
         station: Station,
@@ -106,21 +123,22 @@ impl<I: Iterator<Item = PositionRecord>> PositionStreamEncoder<I> {
         count: u16,
         source: I,
     ) -> Result<Self> {
-        let mut stage = Stage::new();
-        let mut w = Writer::new(&mut stage.buf);
+        // Checked here, written by the first `read`: a stage filled here
+        // and returned by value would be copied on the way out.
+        let mut head = [0u8; STAGE_LEN];
+        let mut w = Writer::new(&mut head);
         emit_envelope(&mut w, kind.header, station, kind.id)?;
         kind.write_prefix(&mut w, start, count)?;
-        stage.len = w.len();
-        let mut sum = Checksum::new();
-        sum.update(stage.pending());
         Ok(PositionStreamEncoder {
             kind,
             source,
+            station,
+            start,
             count,
             emitted: 0,
-            sum,
-            stage,
-            phase: EncPhase::Records,
+            sum: Checksum::new(),
+            stage: Stage::new(),
+            phase: EncPhase::Start,
         })
     }
 
@@ -131,6 +149,10 @@ impl<I: Iterator<Item = PositionRecord>> PositionStreamEncoder<I> {
 
     /// Fills `out` with the next bytes of the frame; `Ok(0)` once the whole
     /// frame (through LF) was produced.
+    ///
+    /// Records go straight into `out`; only a record that `out` cannot
+    /// take whole is encoded into the stage, and as much of it as fits is
+    /// copied out at once.
     pub fn read(&mut self, out: &mut [u8]) -> Result<usize> {
         let mut n = 0;
         while n < out.len() {
@@ -139,48 +161,114 @@ impl<I: Iterator<Item = PositionRecord>> PositionStreamEncoder<I> {
                 let k = copy_words(room, self.stage.pending());
                 self.stage.pos += k;
                 n += k;
-                continue;
-            }
-            if self.phase == EncPhase::Records && self.emitted < self.count {
-                let Some(rec) = self.source.next() else {
-                    self.phase = EncPhase::Failed;
-                    return Err(Error::CountMismatch {
-                        expected: usize::from(self.count),
-                        found: usize::from(self.emitted),
-                    });
-                };
-                // Straight into `out` when the record fits, else staged.
-                let fits = room.len() >= self.kind.layout.record_len(axis_count(rec.axes));
-                let dst: &mut [u8] = if fits { room } else { &mut self.stage.buf };
-                match self.kind.layout.put_record(&rec, dst) {
-                    Ok((len, sum)) => {
-                        self.sum.add_sum(sum);
-                        self.emitted += 1;
-                        if fits {
-                            n += len;
-                        } else {
-                            self.stage.len = len;
-                            self.stage.pos = 0;
-                        }
-                    }
-                    Err(e) => {
-                        self.phase = EncPhase::Failed;
-                        return Err(e);
-                    }
-                }
-                continue;
-            }
-            if !self.refill()? {
+            } else if self.phase == EncPhase::Records && self.emitted < self.count {
+                n = self.records(out, n)?;
+            } else if !self.refill()? {
                 break;
             }
         }
         Ok(n)
     }
 
+    /// Encodes records into `out` from `n` on, until it is full or the
+    /// records are done; a record that does not fit whole goes to the
+    /// stage, and its first bytes to `out`. Returns the new `n`. The
+    /// layout's shape is picked once, here.
+    #[inline(always)]
+    fn records(&mut self, out: &mut [u8], n: usize) -> Result<usize> {
+        let layout = self.kind.layout;
+        match (layout.number_width, layout.extended) {
+            (4, false) => self.records_as::<4, 18, false>(out, n),
+            (4, true) => self.records_as::<4, 18, true>(out, n),
+            (3, false) => self.records_as::<3, 17, false>(out, n),
+            (0, false) => self.records_as::<0, 14, false>(out, n),
+            (0, true) => self.records_as::<0, 14, true>(out, n),
+            _ => self.records_as::<PER_FIELD, 0, false>(out, n),
+        }
+    }
+
+    /// [`Self::records`] for one shape (see `position::put_as`).
+    #[inline(always)]
+    fn records_as<const NW: usize, const HEAD: usize, const EXT: bool>(
+        &mut self,
+        out: &mut [u8],
+        n: usize,
+    ) -> Result<usize> {
+        let layout = self.kind.layout;
+        let count = self.count;
+        let mut emitted = self.emitted;
+        let mut sum = 0u32;
+        let mut result = Ok(());
+        let total = out.len();
+        // What is left of `out`, as one moving slice.
+        let mut rest = out.get_mut(n..).unwrap_or(&mut []);
+        while emitted < count && !rest.is_empty() {
+            let Some(rec) = self.source.next() else {
+                result = Err(Error::CountMismatch {
+                    expected: usize::from(count),
+                    found: usize::from(emitted),
+                });
+                break;
+            };
+            let rec = rec.borrow();
+            let len = match len_as::<NW, HEAD, EXT>(layout, rec) {
+                Ok(len) => len,
+                Err(e) => {
+                    result = Err(e);
+                    break;
+                }
+            };
+            if len <= rest.len() {
+                let (dst, tail) = core::mem::take(&mut rest).split_at_mut(len);
+                match put_exact::<NW, HEAD, EXT>(layout, rec, dst) {
+                    Ok(s) => sum = sum.wrapping_add(s),
+                    Err(e) => {
+                        result = Err(e);
+                        break;
+                    }
+                }
+                rest = tail;
+                emitted += 1;
+                continue;
+            }
+            // Not whole into `out`: into the stage, and what fits out now.
+            let staged = stage_record::<NW, HEAD, EXT>(layout, rec, &mut self.stage.buf, len);
+            match staged {
+                Ok(s) => {
+                    sum = sum.wrapping_add(s);
+                    emitted += 1;
+                    self.stage.len = len;
+                    let k = copy_words(rest, self.stage.pending_from(0));
+                    self.stage.pos = k;
+                    rest = rest.get_mut(k..).unwrap_or(&mut []);
+                }
+                Err(e) => result = Err(e),
+            }
+            break;
+        }
+        let n = total - rest.len();
+        self.emitted = emitted;
+        self.sum.add_sum(sum);
+        if result.is_err() {
+            self.phase = EncPhase::Failed;
+        }
+        result.map(|()| n)
+    }
+
     /// After the last record: loads the trailer into the stage; `false`
     /// when done. (`read` encodes the records.)
     fn refill(&mut self) -> Result<bool> {
         match self.phase {
+            EncPhase::Start => {
+                let mut w = Writer::new(&mut self.stage.buf);
+                emit_envelope(&mut w, self.kind.header, self.station, self.kind.id)?;
+                self.kind.write_prefix(&mut w, self.start, self.count)?;
+                self.stage.len = w.len();
+                self.stage.pos = 0;
+                self.sum.update(self.stage.pending());
+                self.phase = EncPhase::Records;
+                Ok(true)
+            }
             EncPhase::Records => {
                 if self.source.next().is_some() {
                     self.phase = EncPhase::Failed;
@@ -343,6 +431,7 @@ impl PositionStreamDecoder {
     /// [`StreamEvent::End`] or [`StreamEvent::Error`] nothing more is
     /// consumed (`(0, NeedMore)`) until [`PositionStreamDecoder::reset`]:
     /// the rest of the input belongs to whatever follows the frame.
+    #[inline]
     pub fn decode(&mut self, input: &[u8]) -> (usize, StreamEvent) {
         let mut used = 0;
         while self.phase != DecPhase::Finished {
@@ -353,7 +442,8 @@ impl PositionStreamDecoder {
             // A whole well-formed record in the input: read it in place.
             if self.phase == DecPhase::RecordHead && self.stage.len == 0 {
                 if let Some(kind) = self.kind {
-                    if let Some((rec, len, sum)) = kind.layout.read_fast(rest) {
+                    let mut rec = PositionRecord::default();
+                    if let Some((len, sum)) = kind.layout.read_in_place(rest, &mut rec) {
                         self.sum.add_sum(sum);
                         self.offset += len;
                         self.done += 1;
@@ -398,6 +488,77 @@ impl PositionStreamDecoder {
             }
         }
         (used, StreamEvent::NeedMore)
+    }
+
+    /// Consumes bytes as [`Self::decode`] does, but writes the records
+    /// into `out` (overwriting them in place) instead of handing them out
+    /// one event at a time: the bulk path, for a caller that takes many
+    /// records at once. Returns `(consumed, records, event)`: the records
+    /// are `out[..records]`, and `event` is never [`StreamEvent::Record`].
+    ///
+    /// It stops at `Start`, `End` or `Error` (the event says which, as
+    /// `decode` would), and otherwise when the input is used up or `out` is
+    /// full (`NeedMore` either way; call again with more input, or with
+    /// `out` emptied). Whole records in the input are read in place;
+    /// a record cut by the end of the input is staged and completed on the
+    /// next call, as by `decode`. Elements of `out` past `records` may have
+    /// been overwritten.
+    ///
+    /// ```
+    /// use iai_protocol_b::checksum::BypassPolicy;
+    /// use iai_protocol_b::position::PositionRecord;
+    /// use iai_protocol_b::stream::{PositionStreamDecoder, StreamEvent};
+    /// let wire = b"!9926D0002000103001E001E0064000186A0FFFF9C64000201000000000000000030392B\r\n";
+    /// let mut dec = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
+    /// let mut recs: [PositionRecord; 8] = Default::default();
+    /// let (used, n, ev) = dec.decode_records(wire, &mut recs);
+    /// assert!(matches!(ev, StreamEvent::Start { count: 2, .. }));
+    /// assert_eq!(n, 0);
+    /// let (rest, n, ev) = dec.decode_records(&wire[used..], &mut recs);
+    /// assert_eq!((used + rest, n, ev), (wire.len(), 2, StreamEvent::End { records: 2 }));
+    /// assert_eq!(recs[1].position(1), Some(12_345));
+    /// ```
+    pub fn decode_records(
+        &mut self,
+        input: &[u8],
+        out: &mut [PositionRecord],
+    ) -> (usize, usize, StreamEvent) {
+        let mut used = 0;
+        let mut n = 0;
+        loop {
+            if let (DecPhase::RecordHead, 0, Some(kind)) = (self.phase, self.stage.len, self.kind) {
+                let left = usize::from(self.count.saturating_sub(self.done));
+                let room = out.get_mut(n..).unwrap_or(&mut []);
+                let fit = room.len().min(left);
+                let room = room.get_mut(..fit).unwrap_or(&mut []);
+                let rest = input.get(used..).unwrap_or(&[]);
+                let (len, k, sum) = kind.layout.read_records(rest, room);
+                if k > 0 {
+                    self.sum.add_sum(sum);
+                    self.offset += len;
+                    // At most `left` records: `done` stays within its u16 count.
+                    self.done += k as u16;
+                    used += len;
+                    n += k;
+                    self.enter_record_or_trailer(kind);
+                }
+            }
+            let in_records = matches!(self.phase, DecPhase::RecordHead | DecPhase::RecordRest);
+            if in_records && n >= out.len() {
+                return (used, n, StreamEvent::NeedMore);
+            }
+            let (len, ev) = self.decode(input.get(used..).unwrap_or(&[]));
+            used += len;
+            match (ev, out.get_mut(n)) {
+                (StreamEvent::Record(rec), Some(slot)) => {
+                    *slot = rec;
+                    n += 1;
+                }
+                // `out` had room: a record always finds its slot.
+                (StreamEvent::Record(_), None) => return (used, n, StreamEvent::NeedMore),
+                (ev, _) => return (used, n, ev),
+            }
+        }
     }
 
     /// Pushes one byte (ignored after the end of the frame, see [`Self::decode`]).
@@ -572,15 +733,36 @@ impl PositionStreamDecoder {
     }
 }
 
-/// Copies as much of `src` as fits into `dst`, a 4-byte word at a time
-/// (the library `memcpy` is slow for the short, unaligned pieces a record
-/// leaves); returns the bytes copied.
+/// [`put_exact`] of a record of `len` bytes into the stage: the path of
+/// the one record per `read` that does not fit `out` whole, kept out of
+/// line so that the loop over the others stays small.
+#[inline(never)]
+fn stage_record<const NW: usize, const HEAD: usize, const EXT: bool>(
+    layout: crate::position::RecordLayout,
+    rec: &PositionRecord,
+    stage: &mut [u8; STAGE_LEN],
+    len: usize,
+) -> Result<u32> {
+    match stage.get_mut(..len) {
+        Some(dst) => put_exact::<NW, HEAD, EXT>(layout, rec, dst),
+        None => Err(Error::BufferTooSmall),
+    }
+}
+
+/// Copies as much of `src` as fits into `dst`, 16 bytes (four words) at
+/// a time, then a word at a time (the library `memcpy` is slow for the
+/// short, unaligned pieces a record leaves); returns the bytes copied.
 #[inline(always)]
 fn copy_words(dst: &mut [u8], src: &[u8]) -> usize {
     let n = dst.len().min(src.len());
     if let (Some(d), Some(s)) = (dst.get_mut(..n), src.get(..n)) {
-        let mut dw = d.chunks_exact_mut(4);
-        let mut sw = s.chunks_exact(4);
+        let mut d16 = d.chunks_exact_mut(16);
+        let mut s16 = s.chunks_exact(16);
+        for (a, b) in (&mut d16).zip(&mut s16) {
+            a.copy_from_slice(b);
+        }
+        let mut dw = d16.into_remainder().chunks_exact_mut(4);
+        let mut sw = s16.remainder().chunks_exact(4);
         for (a, b) in (&mut dw).zip(&mut sw) {
             a.copy_from_slice(b);
         }
@@ -671,5 +853,460 @@ mod tests {
                 }
             )
         );
+    }
+
+    /// Bulk decoding against event-by-event decoding.
+    pub(super) mod bulk {
+        use super::*;
+        use crate::axis::{AxisPattern, PerAxis};
+        use std::vec::Vec;
+
+        pub(in super::super) fn xorshift(seed: u32) -> impl FnMut() -> u32 {
+            let mut x = seed | 1;
+            move || {
+                x ^= x << 13;
+                x ^= x >> 17;
+                x ^= x << 5;
+                x
+            }
+        }
+
+        /// `count` records that fit `kind`'s layout, of 0 to 8 axes.
+        pub(in super::super) fn records(
+            kind: PositionStream,
+            count: usize,
+            next: &mut impl FnMut() -> u32,
+        ) -> Vec<PositionRecord> {
+            (0..count)
+                .map(|_| {
+                    let axes = AxisPattern::from_bits(next() as u8);
+                    let mut positions = PerAxis::new();
+                    for _ in 0..axes.count() {
+                        positions.push(next() as i32).unwrap();
+                    }
+                    PositionRecord {
+                        number: match kind.layout.number_width {
+                            0 => 0,
+                            3 => (next() & 0xFFF) as u16,
+                            _ => next() as u16,
+                        },
+                        axes,
+                        acceleration: next() as u16,
+                        deceleration: next() as u16,
+                        speed: next() as u16,
+                        positions,
+                        extended: if kind.layout.extended {
+                            next() as u8
+                        } else {
+                            0
+                        },
+                    }
+                })
+                .collect()
+        }
+
+        /// A whole frame of `recs`, pulled in `chunk`-byte pieces, the
+        /// records handed over by reference.
+        fn frame(kind: PositionStream, recs: &[PositionRecord], chunk: usize) -> Vec<u8> {
+            let mut enc =
+                PositionStreamEncoder::new(kind, Station(0x99), 1, recs.len() as u16, recs.iter())
+                    .unwrap();
+            let mut out = Vec::new();
+            let mut buf = [0u8; 200];
+            loop {
+                let n = enc.read(&mut buf[..chunk]).unwrap();
+                if n == 0 {
+                    return out;
+                }
+                out.extend_from_slice(&buf[..n]);
+            }
+        }
+
+        /// Every event other than `NeedMore` of `decode`, the input given
+        /// in pieces of `chunk` bytes; and the bytes consumed.
+        fn by_events(bytes: &[u8], chunk: usize) -> (Vec<StreamEvent>, usize) {
+            let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
+            let mut events = Vec::new();
+            let mut used = 0;
+            for piece in bytes.chunks(chunk) {
+                let mut rest = piece;
+                loop {
+                    let (n, ev) = d.decode(rest);
+                    used += n;
+                    rest = &rest[n..];
+                    match ev {
+                        StreamEvent::NeedMore => break,
+                        ev => events.push(ev),
+                    }
+                }
+            }
+            (events, used)
+        }
+
+        /// The same through `decode_records` into `room` records (their
+        /// contents stale), the records as `Record` events.
+        fn by_bulk(
+            bytes: &[u8],
+            chunk: usize,
+            room: usize,
+            stale: &PositionRecord,
+        ) -> (Vec<StreamEvent>, usize) {
+            let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
+            let mut out = std::vec![stale.clone(); room];
+            let mut events = Vec::new();
+            let mut used = 0;
+            for piece in bytes.chunks(chunk) {
+                let mut rest = piece;
+                loop {
+                    let (n, k, ev) = d.decode_records(rest, &mut out);
+                    assert!(k <= room);
+                    assert_ne!(ev, StreamEvent::Record(stale.clone()));
+                    assert!(!matches!(ev, StreamEvent::Record(_)));
+                    used += n;
+                    rest = &rest[n..];
+                    events.extend(out[..k].iter().cloned().map(StreamEvent::Record));
+                    match ev {
+                        // Stopped for input, or for room: call again.
+                        StreamEvent::NeedMore if k < room || n == 0 && k == 0 => break,
+                        StreamEvent::NeedMore => {}
+                        ev => events.push(ev),
+                    }
+                }
+            }
+            (events, used)
+        }
+
+        #[test]
+        fn the_same_events_however_the_input_and_the_room_come() {
+            let mut next = xorshift(29);
+            for kind in PositionStream::ALL {
+                for count in [0usize, 1, 2, 5, 9] {
+                    let recs = records(kind, count, &mut next);
+                    let mut wire = frame(kind, &recs, 1 + next() as usize % 90);
+                    // Bytes after the frame belong to whatever follows it.
+                    wire.extend_from_slice(b"#99");
+                    let stale = records(kind, 1, &mut next).remove(0);
+                    for chunk in [1, 2, 7, 30, 64, 1000] {
+                        let (expect, used) = by_events(&wire, chunk);
+                        assert_eq!(expect.len(), count + 2, "{kind:?}");
+                        assert_eq!(
+                            expect.last(),
+                            Some(&StreamEvent::End {
+                                records: count as u16
+                            })
+                        );
+                        assert_eq!(used, wire.len() - 3);
+                        for room in [1, 2, 3, 8] {
+                            let got = by_bulk(&wire, chunk, room, &stale);
+                            assert_eq!(
+                                got,
+                                (expect.clone(), used),
+                                "{kind:?} chunk {chunk} room {room}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+
+        #[test]
+        fn the_same_errors() {
+            let mut next = xorshift(31);
+            for kind in [
+                PositionStream::CHANGE_2,
+                PositionStream::RANGE,
+                PositionStream::QUERY_3_RESPONSE,
+            ] {
+                let recs = records(kind, 4, &mut next);
+                let wire = frame(kind, &recs, 64);
+                let stale = recs[0].clone();
+                for at in 0..wire.len() {
+                    for bad in [b'G', b'0', b'f', b'\r', b'\n', b'@', b'#'] {
+                        let mut w = wire.clone();
+                        if w[at] == bad {
+                            continue;
+                        }
+                        w[at] = bad;
+                        for chunk in [5, 1000] {
+                            let expect = by_events(&w, chunk);
+                            for room in [1, 3] {
+                                let got = by_bulk(&w, chunk, room, &stale);
+                                assert_eq!(got, expect, "{kind:?} {bad:#04X} at {at}");
+                            }
+                        }
+                    }
+                }
+                // Cut short: the same records, no end.
+                for cut in 0..wire.len() {
+                    assert_eq!(
+                        by_bulk(&wire[..cut], 1000, 2, &stale),
+                        by_events(&wire[..cut], 1000)
+                    );
+                }
+            }
+        }
+
+        #[test]
+        fn room_is_respected_and_nothing_follows_the_end() {
+            let mut next = xorshift(37);
+            let kind = PositionStream::CHANGE_2;
+            let recs = records(kind, 5, &mut next);
+            let wire = frame(kind, &recs, 64);
+            let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
+            let mut out: [PositionRecord; 2] = Default::default();
+            let (used, n, ev) = d.decode_records(&wire, &mut out);
+            assert!(matches!(ev, StreamEvent::Start { count: 5, .. }));
+            assert_eq!((used, n), (10, 0));
+            assert_eq!(
+                d.decode_records(&wire[used..], &mut []),
+                (0, 0, StreamEvent::NeedMore),
+                "no room"
+            );
+            let mut at = used;
+            let mut got = Vec::new();
+            loop {
+                let (u, n, ev) = d.decode_records(&wire[at..], &mut out);
+                at += u;
+                got.extend_from_slice(&out[..n]);
+                assert_eq!(d.records_done() as usize, got.len());
+                assert_eq!(d.offset(), at);
+                if ev != StreamEvent::NeedMore {
+                    assert_eq!(ev, StreamEvent::End { records: 5 });
+                    break;
+                }
+                assert_eq!(n, 2, "stopped for room");
+            }
+            assert_eq!((at, &got), (wire.len(), &recs));
+            assert_eq!(
+                d.decode_records(b"!99", &mut out),
+                (0, 0, StreamEvent::NeedMore)
+            );
+            // A record cut by the end of the input completes on the next call.
+            let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
+            let (u, _, _) = d.decode_records(&wire, &mut out);
+            let (u2, n, ev) = d.decode_records(&wire[u..u + 5], &mut out);
+            assert_eq!((u2, n, ev), (5, 0, StreamEvent::NeedMore));
+            let (_, n, _) = d.decode_records(&wire[u + 5..], &mut out);
+            assert_eq!(&out[..n], &recs[..2]);
+        }
+    }
+
+    /// The encoder against a frame written field by field.
+    mod encoder {
+        use super::bulk::{records, xorshift};
+        use super::*;
+        use crate::checksum::ChecksumMode;
+        use crate::frame::emit_trailer;
+        use crate::position::RecordLayout;
+        use std::vec::Vec;
+
+        fn reference(kind: PositionStream, start: u16, recs: &[PositionRecord]) -> Vec<u8> {
+            let mut buf = std::vec![0u8; 4096];
+            let mut w = Writer::new(&mut buf);
+            emit_envelope(&mut w, kind.header, Station(0x42), kind.id).unwrap();
+            kind.write_prefix(&mut w, start, recs.len() as u16).unwrap();
+            for r in recs {
+                kind.layout.write_record_per_field(r, &mut w).unwrap();
+            }
+            emit_trailer(&mut w, ChecksumMode::Compute).unwrap();
+            let n = w.len();
+            buf.truncate(n);
+            buf
+        }
+
+        /// The whole frame pulled in pieces of `chunk` bytes (a repeating
+        /// pattern of sizes when `chunk` is 0); the error, if any, and
+        /// what came before it.
+        fn pull<I>(enc: &mut PositionStreamEncoder<I>, chunk: usize) -> (Vec<u8>, Option<Error>)
+        where
+            I: Iterator,
+            I::Item: Borrow<PositionRecord>,
+        {
+            let mut out = Vec::new();
+            let mut buf = [0u8; 300];
+            for k in 0.. {
+                let size = if chunk == 0 {
+                    [1, 7, 64, 3, 90, 26][k % 6]
+                } else {
+                    chunk
+                };
+                match enc.read(&mut buf[..size]) {
+                    Ok(0) => return (out, None),
+                    Ok(n) => {
+                        assert!(n == size || enc.phase == EncPhase::Done, "{n} of {size}");
+                        out.extend_from_slice(&buf[..n]);
+                    }
+                    Err(e) => return (out, Some(e)),
+                }
+            }
+            unreachable!()
+        }
+
+        #[test]
+        fn every_kind_and_piece_size_gives_the_reference_frame() {
+            let mut next = xorshift(41);
+            for kind in PositionStream::ALL {
+                for count in [0usize, 1, 3, 11] {
+                    let recs = records(kind, count, &mut next);
+                    let expect = reference(kind, 7, &recs);
+                    for chunk in [0, 1, 2, 5, 13, 26, 64, 81, 82, 83, 88, 89, 300] {
+                        let by_ref = PositionStreamEncoder::new(
+                            kind,
+                            Station(0x42),
+                            7,
+                            count as u16,
+                            recs.iter(),
+                        );
+                        let mut by_ref = by_ref.unwrap();
+                        assert_eq!(
+                            pull(&mut by_ref, chunk),
+                            (expect.clone(), None),
+                            "{kind:?} {chunk}"
+                        );
+                        assert_eq!(by_ref.records_emitted() as usize, count);
+                        assert_eq!(by_ref.read(&mut [0u8; 8]), Ok(0), "done stays done");
+                        let mut by_value = PositionStreamEncoder::new(
+                            kind,
+                            Station(0x42),
+                            7,
+                            count as u16,
+                            recs.iter().cloned(),
+                        )
+                        .unwrap();
+                        assert_eq!(pull(&mut by_value, chunk).0, expect);
+                    }
+                }
+            }
+        }
+
+        /// A layout no message has goes field by field, through the same
+        /// paths.
+        #[test]
+        fn other_layouts_too() {
+            let mut next = xorshift(43);
+            let mut kind = PositionStream::CHANGE_3;
+            kind.layout = RecordLayout {
+                number_width: 2,
+                extended: true,
+            };
+            let mut recs = records(PositionStream::CHANGE_3, 6, &mut next);
+            for r in &mut recs {
+                r.number &= 0xFF;
+            }
+            let expect = reference(kind, 0, &recs);
+            for chunk in [0, 1, 30, 300] {
+                let mut enc =
+                    PositionStreamEncoder::new(kind, Station(0x42), 0, 6, recs.iter()).unwrap();
+                assert_eq!(pull(&mut enc, chunk), (expect.clone(), None));
+            }
+            // Longer than the stage: refused when it does not fit `out`.
+            kind.layout = RecordLayout {
+                number_width: 16,
+                extended: true,
+            };
+            let rec = PositionRecord::new(
+                1,
+                0,
+                0,
+                0,
+                &[
+                    (1, 1),
+                    (2, 2),
+                    (3, 3),
+                    (4, 4),
+                    (5, 5),
+                    (6, 6),
+                    (7, 7),
+                    (8, 8),
+                ],
+            )
+            .unwrap();
+            let mut enc =
+                PositionStreamEncoder::new(kind, Station(0x42), 0, 1, core::iter::once(&rec))
+                    .unwrap();
+            assert_eq!(pull(&mut enc, 300).1, None, "fits a large enough out");
+            let mut enc =
+                PositionStreamEncoder::new(kind, Station(0x42), 0, 1, core::iter::once(&rec))
+                    .unwrap();
+            assert_eq!(pull(&mut enc, 50).1, Some(Error::BufferTooSmall));
+        }
+
+        #[test]
+        fn refusals_leave_the_frame_unterminated() {
+            let mut next = xorshift(47);
+            let kind = PositionStream::CHANGE_2;
+            let recs = records(kind, 5, &mut next);
+            let full = reference(kind, 0, &recs);
+            for chunk in [0, 1, 64, 300] {
+                // The source ends early.
+                let mut enc =
+                    PositionStreamEncoder::new(kind, Station(0x42), 0, 6, recs.iter()).unwrap();
+                let (got, err) = pull(&mut enc, chunk);
+                assert_eq!(
+                    err,
+                    Some(Error::CountMismatch {
+                        expected: 6,
+                        found: 5
+                    })
+                );
+                assert!(full.starts_with(&got[..got.len().min(6)]), "the envelope");
+                assert!(!got.ends_with(b"\r\n"));
+                assert_eq!(enc.read(&mut [0u8; 8]), Ok(0), "nothing after a refusal");
+                // Or runs long.
+                let mut enc =
+                    PositionStreamEncoder::new(kind, Station(0x42), 0, 4, recs.iter()).unwrap();
+                assert_eq!(
+                    pull(&mut enc, chunk).1,
+                    Some(Error::CountMismatch {
+                        expected: 4,
+                        found: 5
+                    })
+                );
+                // A record whose coordinates do not match its pattern, third.
+                let mut bad = recs.clone();
+                bad[2].positions.clear();
+                if bad[2].axes.is_empty() {
+                    bad[2].positions.push(1).unwrap();
+                }
+                let mut enc =
+                    PositionStreamEncoder::new(kind, Station(0x42), 0, 5, bad.iter()).unwrap();
+                let (got, err) = pull(&mut enc, chunk);
+                assert!(matches!(err, Some(Error::CountMismatch { .. })), "{err:?}");
+                assert_eq!(enc.records_emitted(), 2);
+                assert!(got.len() < full.len() - 4);
+                assert_eq!(enc.read(&mut [0u8; 8]), Ok(0));
+            }
+            // A number too wide for 3 digits.
+            let mut recs = records(PositionStream::CHANGE, 2, &mut next);
+            recs[1].number = 0x1000;
+            let mut enc = PositionStreamEncoder::new(
+                PositionStream::CHANGE,
+                Station(0x42),
+                0,
+                2,
+                recs.iter(),
+            )
+            .unwrap();
+            assert_eq!(
+                pull(&mut enc, 64).1,
+                Some(Error::ValueOutOfRange { offset: 0 })
+            );
+            // What the prefix cannot carry is refused up front.
+            assert_eq!(
+                PositionStreamEncoder::new(kind, Station(0x42), 0, 20_001, recs.iter()).err(),
+                Some(Error::CountTooLarge {
+                    count: 20_001,
+                    max: 20_000
+                })
+            );
+            assert!(PositionStreamEncoder::new(
+                PositionStream::RANGE,
+                Station(0x42),
+                0x1000,
+                1,
+                recs.iter()
+            )
+            .is_err());
+        }
     }
 }

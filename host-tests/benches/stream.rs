@@ -13,7 +13,11 @@
 //! Each figure is the median of timed runs (after a warm-up). The table
 //! prints MB/s of wire bytes and the core's speed relative to each anchor
 //! (`core/hex 1.50x` = the core takes two thirds of the `hex` crate's
-//! time). Figures, never assertions. Run: `cargo bench -p host-tests`.
+//! time). The core also runs as its embedded callers use it: the encoder
+//! given the records by reference (no clone) and the bulk decoder
+//! (`decode_records` into an array); those rows carry their speed relative
+//! to the `hex` crate. Figures, never assertions. Run:
+//! `cargo bench -p host-tests`.
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -57,7 +61,7 @@ fn time<R>(quick: bool, mut f: impl FnMut() -> R) -> f64 {
 }
 
 fn encode_core(recs: &[PositionRecord], out: &mut [u8]) -> usize {
-    let mut enc = PositionStreamEncoder::new(
+    let enc = PositionStreamEncoder::new(
         PositionStream::CHANGE_2,
         Station(0x99),
         0,
@@ -65,6 +69,29 @@ fn encode_core(recs: &[PositionRecord], out: &mut [u8]) -> usize {
         recs.iter().cloned(),
     )
     .unwrap();
+    pull(enc, out)
+}
+
+/// [`encode_core`] with the records handed over by reference
+/// (`recs.iter()`): no clone.
+fn encode_core_by_ref(recs: &[PositionRecord], out: &mut [u8]) -> usize {
+    let enc = PositionStreamEncoder::new(
+        PositionStream::CHANGE_2,
+        Station(0x99),
+        0,
+        recs.len() as u16,
+        recs.iter(),
+    )
+    .unwrap();
+    pull(enc, out)
+}
+
+/// The whole frame out of `enc` into `out`, 256 bytes per `read`.
+fn pull<I>(mut enc: PositionStreamEncoder<I>, out: &mut [u8]) -> usize
+where
+    I: Iterator,
+    I::Item: std::borrow::Borrow<PositionRecord>,
+{
     let mut len = 0;
     loop {
         let end = (len + 256).min(out.len());
@@ -97,6 +124,26 @@ fn decode_core(frame: &[u8]) -> u32 {
     n
 }
 
+/// [`decode_core`] with the bulk path: `decode_records` into a caller's
+/// array of 64 records, 256 input bytes at a time.
+fn decode_core_records(frame: &[u8], batch: &mut [PositionRecord; 64]) -> u32 {
+    let mut dec = PositionStreamDecoder::new(BypassPolicy::Reject);
+    let mut n = 0u32;
+    for chunk in frame.chunks(256) {
+        let mut rest = chunk;
+        while !rest.is_empty() {
+            let (used, k, ev) = dec.decode_records(rest, batch);
+            rest = &rest[used..];
+            black_box(&batch[..k]);
+            n += k as u32;
+            if let StreamEvent::Error { error, .. } = ev {
+                panic!("decode_records: {error}");
+            }
+        }
+    }
+    n
+}
+
 struct Row {
     name: &'static str,
     secs: f64,
@@ -111,6 +158,11 @@ fn workload(axes: u8, quick: bool) {
     assert_eq!(encode_core(&recs, &mut out), len);
     assert_eq!(out, frame, "core and naive encoders disagree");
     assert_eq!(decode_core(&frame), RECORDS);
+    let mut batch: [PositionRecord; 64] = std::array::from_fn(|_| PositionRecord::default());
+    assert_eq!(decode_core_records(&frame, &mut batch), RECORDS);
+    out.fill(0);
+    assert_eq!(encode_core_by_ref(&recs, &mut out), len);
+    assert_eq!(out, frame, "by reference, the encoder gives the same frame");
 
     // The hex digits of the frame (count, records, SC) and their binary values.
     let digits = &frame[6..len - 2];
@@ -122,6 +174,10 @@ fn workload(axes: u8, quick: bool) {
         Row {
             name: "core streaming encoder",
             secs: time(quick, || encode_core(black_box(&recs), &mut out)),
+        },
+        Row {
+            name: "core encoder, records by ref",
+            secs: time(quick, || encode_core_by_ref(black_box(&recs), &mut out)),
         },
         Row {
             name: "naive format!",
@@ -152,6 +208,10 @@ fn workload(axes: u8, quick: bool) {
         Row {
             name: "core streaming decoder",
             secs: time(quick, || decode_core(black_box(&frame))),
+        },
+        Row {
+            name: "core decode_records (bulk)",
+            secs: time(quick, || decode_core_records(black_box(&frame), &mut batch)),
         },
         Row {
             name: "naive from_str_radix",
@@ -208,16 +268,22 @@ fn workload(axes: u8, quick: bool) {
         "  encode   (cloning the records for it: {:.3} ms of that; without it the encoder runs at {:.1} MB/s, core/hex {:.2}x)",
         handover * 1e3,
         len as f64 / own / 1e6,
-        (len as f64 / own) / (digits.len() as f64 / encode[2].secs)
+        (len as f64 / own) / (digits.len() as f64 / encode[3].secs)
     );
     report("decode", &decode, len, digits.len());
     report("checksum", &checksum, len, digits.len());
     println!();
 }
 
-/// Prints MB/s of each row and the first row's speed relative to the others.
+/// Prints MB/s of each row and the first row's speed relative to the
+/// others; other rows of the core ("core ...") get their speed relative to
+/// the `hex` crate's row.
 fn report(what: &str, rows: &[Row], wire: usize, digits: usize) {
     let core = &rows[0];
+    let hex_rate = rows
+        .iter()
+        .find(|r| short(r.name) == "hex")
+        .map(|r| digits as f64 / r.secs);
     for row in rows {
         // The crates see only the digits; count the bytes each one touched.
         let bytes = if row.name.contains("hex") {
@@ -230,6 +296,10 @@ fn report(what: &str, rows: &[Row], wire: usize, digits: usize) {
         let ratio = core_rate / (bytes as f64 / row.secs);
         let rel = if std::ptr::eq(row, core) {
             String::new()
+        } else if row.name.starts_with("core") {
+            hex_rate.map_or(String::new(), |h| {
+                format!("  core/hex {:.2}x", wire as f64 / row.secs / h)
+            })
         } else {
             format!("  core/{} {ratio:.2}x", short(row.name))
         };
