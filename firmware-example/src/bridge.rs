@@ -231,6 +231,36 @@ pub struct Stats {
     pub downstream_out: u64,
 }
 
+impl Stats {
+    /// Every counter with its field name, in declaration order: what a
+    /// board prints at the end of a run, in the `Debug` layout, without
+    /// linking `core::fmt`.
+    pub fn fields(&self) -> [(&'static str, u64); 20] {
+        [
+            ("forwarded", u64::from(self.forwarded)),
+            ("relayed", u64::from(self.relayed)),
+            ("reply_timeouts", u64::from(self.reply_timeouts)),
+            ("rejected", u64::from(self.rejected)),
+            ("refused", u64::from(self.refused)),
+            ("other_station", u64::from(self.other_station)),
+            ("own_queries", u64::from(self.own_queries)),
+            ("streams_ok", u64::from(self.streams_ok)),
+            ("streams_failed", u64::from(self.streams_failed)),
+            ("records", u64::from(self.records)),
+            ("chunks_sent", u64::from(self.chunks_sent)),
+            ("retries", u64::from(self.retries)),
+            ("chunk_timeouts", u64::from(self.chunk_timeouts)),
+            ("chunk_error_replies", u64::from(self.chunk_error_replies)),
+            ("upstream_overruns", u64::from(self.upstream_overruns)),
+            ("downstream_overruns", u64::from(self.downstream_overruns)),
+            ("upstream_in", self.upstream_in),
+            ("upstream_out", self.upstream_out),
+            ("downstream_in", self.downstream_in),
+            ("downstream_out", self.downstream_out),
+        ]
+    }
+}
+
 /// The last `&` code the bridge sent of its own, and when.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -1330,6 +1360,28 @@ mod tests {
     use crate::config::{AllowList, Policy};
     use iai_protocol_b::checksum::ChecksumMode;
     use iai_protocol_b::frame::Frame;
+
+    #[test]
+    fn stats_fields_spell_the_debug_text() {
+        use std::format;
+        use std::string::String;
+        let stats = Stats {
+            forwarded: 1,
+            streams_ok: 7,
+            upstream_in: u64::MAX,
+            downstream_out: 42,
+            ..Stats::default()
+        };
+        let mut text = String::from("Stats { ");
+        for (i, (name, value)) in stats.fields().iter().enumerate() {
+            if i > 0 {
+                text.push_str(", ");
+            }
+            text.push_str(&format!("{name}: {value}"));
+        }
+        text.push_str(" }");
+        assert_eq!(text, format!("{stats:?}"));
+    }
 
     #[test]
     fn chunks_fit_the_final_reply_budget() {
