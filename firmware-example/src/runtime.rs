@@ -172,8 +172,12 @@ impl Out {
 
     /// Writes `s`.
     pub fn str(&mut self, s: &str) -> &mut Self {
+        self.bytes(s.as_bytes())
+    }
+
+    fn bytes(&mut self, b: &[u8]) -> &mut Self {
         if let Some(host) = self.0.as_mut() {
-            let _ = host.write_all(s.as_bytes());
+            let _ = host.write_all(b);
         }
         self
     }
@@ -191,7 +195,7 @@ impl Out {
                 break;
             }
         }
-        self.digits(&digits, at)
+        self.bytes(digits.get(at..).unwrap_or(&[]))
     }
 
     /// Writes `n` as `0x` and eight lower-case hex digits (`{:#010x}`).
@@ -203,13 +207,7 @@ impl Out {
             let nibble = (n >> (28 - 4 * i)) & 0xF;
             *d = b"0123456789abcdef"[nibble as usize];
         }
-        self.digits(&digits, 0)
-    }
-
-    fn digits(&mut self, digits: &[u8], from: usize) -> &mut Self {
-        // ASCII digits only.
-        let text = core::str::from_utf8(digits.get(from..).unwrap_or(&[])).unwrap_or("");
-        self.str(text)
+        self.bytes(&digits)
     }
 }
 
