@@ -238,10 +238,27 @@ macro_rules! catalogue {
 
         /// The entry of message `id`, if the catalogue has one.
         pub const fn lookup(id: u16) -> Option<&'static MessageInfo> {
-            match id {
-                $( $id => Some(&$konst), )*
-                _ => None,
+            // A binary search over `ALL` (ascending, checked below at
+            // compile time): in flash it is the 54 pointers of `ALL` and a
+            // loop, where a `match` on the ID compiles to a large jump
+            // table.
+            let (mut lo, mut hi) = (0, ALL.len());
+            while lo < hi {
+                let mid = lo + (hi - lo) / 2;
+                let Some((_, [entry, ..])) = ALL.split_at_checked(mid) else {
+                    // Cannot happen: `mid < hi <= ALL.len()`.
+                    return None;
+                };
+                if entry.id == id {
+                    return Some(entry);
+                }
+                if entry.id < id {
+                    lo = mid + 1;
+                } else {
+                    hi = mid;
+                }
             }
+            None
         }
     };
     (@reply) => { Reply::Normal };
@@ -378,6 +395,17 @@ fn hex_number(digits: &[u8]) -> Option<u16> {
         crate::field::hex_value(b).map(|d| (n << 4) | u16::from(d))
     })
 }
+
+// `lookup` searches `ALL` by halving: its IDs must ascend.
+// Indexing in a const initialiser is checked at compile time.
+#[allow(clippy::indexing_slicing)]
+const _: () = {
+    let mut i = 1;
+    while i < ALL.len() {
+        assert!(ALL[i - 1].id < ALL[i].id, "catalogue IDs must ascend");
+        i += 1;
+    }
+};
 
 /// A frame's text span is known once this many bytes are in.
 // Indexing in a const initialiser is checked at compile time.
