@@ -232,31 +232,55 @@ pub struct Stats {
 }
 
 impl Stats {
-    /// Every counter with its field name, in declaration order: what a
-    /// board prints at the end of a run, in the `Debug` layout, without
+    /// The field names, in declaration order: with [`Stats::values`], what
+    /// a board prints at the end of a run in the `Debug` layout without
     /// linking `core::fmt`.
-    pub fn fields(&self) -> [(&'static str, u64); 20] {
+    pub const NAMES: [&'static str; 20] = [
+        "forwarded",
+        "relayed",
+        "reply_timeouts",
+        "rejected",
+        "refused",
+        "other_station",
+        "own_queries",
+        "streams_ok",
+        "streams_failed",
+        "records",
+        "chunks_sent",
+        "retries",
+        "chunk_timeouts",
+        "chunk_error_replies",
+        "upstream_overruns",
+        "downstream_overruns",
+        "upstream_in",
+        "upstream_out",
+        "downstream_in",
+        "downstream_out",
+    ];
+
+    /// Every counter, in declaration order (see [`Stats::NAMES`]).
+    pub fn values(&self) -> [u64; 20] {
         [
-            ("forwarded", u64::from(self.forwarded)),
-            ("relayed", u64::from(self.relayed)),
-            ("reply_timeouts", u64::from(self.reply_timeouts)),
-            ("rejected", u64::from(self.rejected)),
-            ("refused", u64::from(self.refused)),
-            ("other_station", u64::from(self.other_station)),
-            ("own_queries", u64::from(self.own_queries)),
-            ("streams_ok", u64::from(self.streams_ok)),
-            ("streams_failed", u64::from(self.streams_failed)),
-            ("records", u64::from(self.records)),
-            ("chunks_sent", u64::from(self.chunks_sent)),
-            ("retries", u64::from(self.retries)),
-            ("chunk_timeouts", u64::from(self.chunk_timeouts)),
-            ("chunk_error_replies", u64::from(self.chunk_error_replies)),
-            ("upstream_overruns", u64::from(self.upstream_overruns)),
-            ("downstream_overruns", u64::from(self.downstream_overruns)),
-            ("upstream_in", self.upstream_in),
-            ("upstream_out", self.upstream_out),
-            ("downstream_in", self.downstream_in),
-            ("downstream_out", self.downstream_out),
+            u64::from(self.forwarded),
+            u64::from(self.relayed),
+            u64::from(self.reply_timeouts),
+            u64::from(self.rejected),
+            u64::from(self.refused),
+            u64::from(self.other_station),
+            u64::from(self.own_queries),
+            u64::from(self.streams_ok),
+            u64::from(self.streams_failed),
+            u64::from(self.records),
+            u64::from(self.chunks_sent),
+            u64::from(self.retries),
+            u64::from(self.chunk_timeouts),
+            u64::from(self.chunk_error_replies),
+            u64::from(self.upstream_overruns),
+            u64::from(self.downstream_overruns),
+            self.upstream_in,
+            self.upstream_out,
+            self.downstream_in,
+            self.downstream_out,
         ]
     }
 }
@@ -1382,7 +1406,7 @@ mod tests {
             ..Stats::default()
         };
         let mut text = String::from("Stats { ");
-        for (i, (name, value)) in stats.fields().iter().enumerate() {
+        for (i, (name, value)) in Stats::NAMES.iter().zip(stats.values()).enumerate() {
             if i > 0 {
                 text.push_str(", ");
             }

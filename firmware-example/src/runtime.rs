@@ -266,11 +266,11 @@ pub fn finish(result: Result<Stats, Error<Infallible, Infallible>>, up_pauses: u
     out.str("firmware-example: quit at ")
         .dec(u64::from(now_ms()))
         .str(" ms\nfirmware-example: Stats { ");
-    for (i, (name, value)) in stats.fields().iter().enumerate() {
+    for (i, (name, value)) in Stats::NAMES.iter().zip(stats.values()).enumerate() {
         if i > 0 {
             out.str(", ");
         }
-        out.str(name).str(": ").dec(*value);
+        out.str(name).str(": ").dec(value);
     }
     out.str(" }\nfirmware-example: upstream pauses ")
         .dec(u64::from(up_pauses))
