@@ -814,12 +814,9 @@ impl Bridge {
                     // Its catalogue entry says what to expect; one outside
                     // the catalogue is sent once and any `#` with its ID
                     // taken.
-                    match catalogue::lookup(id) {
-                        Some(info) => self.exchange.start(info, now),
-                        None => self
-                            .exchange
-                            .start_raw(id, Resend::Unsafe, Reply::Normal, now),
-                    }
+                    let (resend, reply) =
+                        catalogue::request_rules(id).unwrap_or((Resend::Unsafe, Reply::Normal));
+                    self.exchange.start_raw(id, resend, reply, now);
                     self.mode = Mode::SendCommand;
                     self.out_off = 0;
                 }
