@@ -198,6 +198,23 @@ struct Args {
 }
 
 impl Args {
+    /// `field=value` arguments; a field given twice is an error.
+    fn parse(assignments: &[String]) -> Result<Self, String> {
+        let mut values = BTreeMap::new();
+        for a in assignments {
+            let (k, v) = a
+                .split_once('=')
+                .ok_or_else(|| format!("{a:?}: expected field=value"))?;
+            if values.insert(k.to_string(), v.to_string()).is_some() {
+                return Err(format!("{k}: given twice"));
+            }
+        }
+        Ok(Args {
+            values,
+            used: BTreeMap::new(),
+        })
+    }
+
     /// The raw value for a field (`name` or `group.name`).
     fn get(&mut self, path: &[&str], name: &str) -> Option<String> {
         let mut keys = vec![name.to_string()];
@@ -709,19 +726,7 @@ pub fn encode(opts: &EncodeOptions) -> Result<Vec<u8>, String> {
         write_json_level(&nodes, obj, "", &mut body)?;
         return finish_frame(opts, header, id, &body);
     }
-    let mut values = BTreeMap::new();
-    for a in &opts.assignments {
-        let (k, v) = a
-            .split_once('=')
-            .ok_or_else(|| format!("{a:?}: expected field=value"))?;
-        if values.insert(k.to_string(), v.to_string()).is_some() {
-            return Err(format!("{k}: given twice"));
-        }
-    }
-    let mut args = Args {
-        values,
-        used: BTreeMap::new(),
-    };
+    let mut args = Args::parse(&opts.assignments)?;
     write_level(&nodes, &[], &[], &mut args, &mut body)?;
     let unknown: Vec<&String> = args
         .values
@@ -787,19 +792,7 @@ fn encode_error(opts: &EncodeOptions) -> Result<Vec<u8>, String> {
             write_json_level(&nodes, obj, "", &mut digits)?;
         }
         None => {
-            let mut values = BTreeMap::new();
-            for a in &opts.assignments {
-                let (k, v) = a
-                    .split_once('=')
-                    .ok_or_else(|| format!("{a:?}: expected field=value"))?;
-                if values.insert(k.to_string(), v.to_string()).is_some() {
-                    return Err(format!("{k}: given twice"));
-                }
-            }
-            let mut args = Args {
-                values,
-                used: BTreeMap::new(),
-            };
+            let mut args = Args::parse(&opts.assignments)?;
             write_level(&nodes, &[], &[], &mut args, &mut digits)?;
             if let Some(k) = args.values.keys().find(|k| !args.used.contains_key(*k)) {
                 return Err(format!(

@@ -190,6 +190,19 @@ impl Inspector {
 
     /// Ends the capture: whatever is still open is reported as cut short.
     pub fn finish(&mut self) {
+        self.close("the end of the capture");
+    }
+
+    /// Ends a line of a text log, which holds one frame: whatever is
+    /// still open is reported as cut short, and the next line starts
+    /// afresh (a frame that swallowed the line's end, such as a 200H whose
+    /// fixed-width text ran past it, cannot take the next line's frame
+    /// with it).
+    pub fn end_line(&mut self) {
+        self.close("the end of its line");
+    }
+
+    fn close(&mut self, by: &str) {
         if let Some(st) = self.stream.take() {
             let records = st.item.as_ref().map_or(0, |i| i.records);
             self.items.push(Item {
@@ -199,7 +212,7 @@ impl Inspector {
                 what: What::Error {
                     kind: "Truncated".into(),
                     message: format!(
-                        "position stream cut short by the end of the capture after {} bytes ({records} records read)",
+                        "position stream cut short by {by} after {} bytes ({records} records read)",
                         st.len
                     ),
                     bytes: sample(&st.copy),
@@ -222,9 +235,7 @@ impl Inspector {
                 origin: self.frame_start.1,
                 what: What::Error {
                     kind: "Truncated".into(),
-                    message: format!(
-                        "frame cut short by the end of the capture after {pending} bytes"
-                    ),
+                    message: format!("frame cut short by {by} after {pending} bytes"),
                     bytes: sample(&self.cur),
                 },
             });
@@ -879,6 +890,9 @@ impl TextLog {
             self.emit(b'\n');
         }
         self.flush(ins);
+        if self.any {
+            ins.end_line();
+        }
         self.any = false;
         self.last = [0; 2];
     }

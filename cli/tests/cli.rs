@@ -166,6 +166,26 @@ fn every_error_of_a_mixed_capture_is_at_its_offset() {
     assert!(text.contains("-- 3 frame(s), 6 error(s)"), "{text}");
 }
 
+/// In a text log each line holds one frame: a 200H whose fixed-width
+/// text (10 characters, 2003 p. 15) runs past its line is reported on that
+/// line, and the frames of the next lines stand on their own.
+#[test]
+fn in_a_text_log_each_line_starts_afresh() {
+    let log = "> !99200HELLO\n< #99212021C00000000002715AF\\r\\n\n> !99212038B\n";
+    let path = temp("text-200h.log", log.as_bytes());
+    let out = iai(&["inspect", "--json", path.to_str().unwrap()]);
+    let text = stdout(&out);
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 3, "{text}");
+    assert_eq!(get(lines[0], "error"), Some("Truncated"), "{text}");
+    assert_eq!(get(lines[0], "line"), Some("1"), "{text}");
+    for (line, n, code) in [(lines[1], "2", "212"), (lines[2], "3", "212")] {
+        assert_eq!(get(line, "type"), Some("frame"), "{text}");
+        assert_eq!(get(line, "line"), Some(n), "{text}");
+        assert_eq!(get(line, "id"), Some(code), "{text}");
+    }
+}
+
 fn encode_then_inspect(args: &[&str]) -> String {
     let out = iai(args);
     assert!(

@@ -48,7 +48,7 @@
 use crate::catalogue;
 use crate::checksum::{BypassPolicy, ChecksumMode};
 use crate::client::Received;
-use crate::clock::{later, reached};
+use crate::clock::{later, passed, reached};
 use crate::decoder::{Event, FrameDecoder};
 use crate::drive::{self, Engine, Want};
 use crate::error::{Error, BRIDGE_CODES};
@@ -212,7 +212,7 @@ pub enum ReadEvent {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum State {
-    Query { not_before: u32 },
+    Query { not_before: Option<u32> },
     Exchange,
     Deliver,
     Complete,
@@ -273,7 +273,7 @@ impl<const N: usize> ReadBack<N> {
             query_len: 0,
             exchange: Exchange::new(own_duplicates(cfg.exchange), Quarantine::Wait),
             replies: FrameDecoder::with_policy(BypassPolicy::Reject),
-            state: State::Query { not_before: 0 },
+            state: State::Query { not_before: None },
             empties: heapless::Deque::new(),
             rereads: heapless::Deque::new(),
             last_empty: None,
@@ -302,10 +302,14 @@ impl<const N: usize> ReadBack<N> {
                         self.state = State::Failed(TransferError::Config(e));
                         continue;
                     }
-                    let mut at = not_before;
+                    let h = self.exchange.horizon();
+                    let mut at = match not_before {
+                        Some(t) if !passed(now, t, h) => t,
+                        _ => now,
+                    };
                     if let (true, Some(t)) = (self.duplicates_seen, self.last_empty) {
                         let clear = t.wrapping_add(self.cfg.exchange.duplicate_window_ms);
-                        if !reached(now, clear) && !reached(at, clear) {
+                        if !passed(now, clear, h) && !reached(at, clear) {
                             self.stats.guarded_queries += 1;
                             at = later(at, clear);
                         }
@@ -361,7 +365,7 @@ impl<const N: usize> ReadBack<N> {
                     let turnaround = now.wrapping_add(self.cfg.exchange.turnaround_ms + 1);
                     self.first_reply = None;
                     self.state = State::Query {
-                        not_before: turnaround,
+                        not_before: Some(turnaround),
                     };
                     let window_head = self.current_head;
                     let asked = self.asked;
@@ -443,7 +447,9 @@ impl<const N: usize> ReadBack<N> {
                 if self.rereading {
                     let _ = self.rereads.push_front((self.current_head, self.asked));
                 }
-                self.state = State::Query { not_before: now };
+                self.state = State::Query {
+                    not_before: Some(now),
+                };
             }
         }
     }
@@ -452,8 +458,11 @@ impl<const N: usize> ReadBack<N> {
     /// [`ReadEvent::Answered`] the reply stays readable until the next
     /// `poll` delivers it, so feed the rest of the input after that poll.
     pub fn received(&mut self, bytes: &[u8], now: u32) -> Received<ReadEvent> {
-        if self.state == State::Deliver {
-            // The reply is held for delivery: take nothing more yet.
+        let answered = self.state == State::Exchange
+            && matches!(self.exchange.finished(), Some(Finish::Replied));
+        if self.state == State::Deliver || answered {
+            // The reply is held for delivery (by the next poll): take
+            // nothing more yet, or the next frame would overwrite it.
             return Received {
                 consumed: 0,
                 event: ReadEvent::NeedMore,
@@ -509,7 +518,12 @@ impl<const N: usize> ReadBack<N> {
                 self.stats.queries += 1;
                 self.stats.records += u32::from(records);
                 // Entries expire in the order they were made.
-                while self.empties.front().is_some_and(|e| reached(now, e.until)) {
+                let h = self.exchange.horizon();
+                while self
+                    .empties
+                    .front()
+                    .is_some_and(|e| passed(now, e.until, h))
+                {
                     self.empties.pop_front();
                 }
                 if records == 0 {
@@ -546,10 +560,10 @@ impl<const N: usize> ReadBack<N> {
     /// was answered empty: that answer was a duplicate; read it again.
     fn reopen(&mut self, number: u16, now: u32) {
         let n = u32::from(number);
-        let hit = self
-            .empties
-            .iter()
-            .position(|e| !reached(now, e.until) && n >= e.head && n < e.head + u32::from(e.asked));
+        let h = self.exchange.horizon();
+        let hit = self.empties.iter().position(|e| {
+            !passed(now, e.until, h) && n >= e.head && n < e.head + u32::from(e.asked)
+        });
         let Some(i) = hit else { return };
         let mut kept = heapless::Deque::new();
         for (j, w) in self.empties.iter().enumerate() {

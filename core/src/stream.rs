@@ -372,6 +372,17 @@ impl PositionStreamDecoder {
                 (Some(dst), Some(src)) if take > 0 => dst.copy_from_slice(src),
                 _ => return (used, self.fail(Error::FrameTooLong { limit: STAGE_LEN })),
             }
+            // A CR or LF where the unit has none: the frame ended early (a
+            // byte was lost or changed). Say so now, not after waiting for
+            // bytes that will not come.
+            if let Some(at) = self.early_end(self.stage.len, rest.get(..take).unwrap_or(&[])) {
+                return (
+                    used + at + 1,
+                    self.fail(Error::BodyTooShort {
+                        offset: self.offset + self.stage.len + at,
+                    }),
+                );
+            }
             self.stage.len = end;
             used += take;
             if self.stage.len < self.need {
@@ -392,6 +403,20 @@ impl PositionStreamDecoder {
     /// Pushes one byte (ignored after the end of the frame, see [`Self::decode`]).
     pub fn push(&mut self, byte: u8) -> StreamEvent {
         self.decode(&[byte]).1
+    }
+
+    /// The index in `bytes` (which go to the stage at `from`) of the first
+    /// CR or LF out of place: anywhere but the trailer's last two bytes.
+    fn early_end(&self, from: usize, bytes: &[u8]) -> Option<usize> {
+        let trailer = self.phase == DecPhase::Trailer;
+        bytes.iter().enumerate().position(|(i, &b)| {
+            let at = from + i;
+            match b {
+                b'\r' => !(trailer && at == 2),
+                b'\n' => !(trailer && at == 3),
+                _ => false,
+            }
+        })
     }
 
     fn fail(&mut self, error: Error) -> StreamEvent {
@@ -564,4 +589,87 @@ fn copy_words(dst: &mut [u8], src: &[u8]) -> usize {
         }
     }
     n
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+
+    /// Two 26DH records of different length (EXAMPLES 6.2).
+    const WIRE: &[u8] =
+        b"!9926D0002000103001E001E0064000186A0FFFF9C64000201000000000000000030392B\r\n";
+
+    /// Pushes `bytes` one at a time; the events other than `NeedMore`,
+    /// with the index of the byte that gave each.
+    fn push_all(bytes: &[u8]) -> std::vec::Vec<(usize, StreamEvent)> {
+        let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
+        bytes
+            .iter()
+            .enumerate()
+            .map(|(i, &b)| (i, d.push(b)))
+            .filter(|(_, e)| *e != StreamEvent::NeedMore)
+            .collect()
+    }
+
+    #[test]
+    fn the_example_ends_at_its_line_feed() {
+        let events = push_all(WIRE);
+        assert_eq!(events.len(), 4, "{events:?}");
+        assert_eq!(events[3], (WIRE.len() - 1, StreamEvent::End { records: 2 }));
+    }
+
+    #[test]
+    fn a_frame_one_byte_short_fails_at_its_carriage_return() {
+        // A digit of the last coordinate lost (a 0x11 taken for XON by the
+        // UART): the record still decodes, shifted, and the SC's second
+        // digit and the CR stand where the SC should. The CR ends the
+        // frame at once; the decoder does not wait for a fourth byte.
+        let mut short = WIRE.to_vec();
+        short.remove(WIRE.len() - 6);
+        let events = push_all(&short);
+        let cr = short.len() - 2;
+        assert_eq!(
+            events.last(),
+            Some(&(
+                cr,
+                StreamEvent::Error {
+                    error: Error::BodyTooShort { offset: cr },
+                    records_ok: 2,
+                }
+            )),
+            "{events:?}"
+        );
+    }
+
+    #[test]
+    fn a_line_feed_inside_a_record_fails_there() {
+        let mut broken = WIRE.to_vec();
+        broken[30] = b'\n';
+        let events = push_all(&broken);
+        assert_eq!(
+            events.last(),
+            Some(&(
+                30,
+                StreamEvent::Error {
+                    error: Error::BodyTooShort { offset: 30 },
+                    records_ok: 0,
+                }
+            ))
+        );
+        // Fed whole, the same.
+        let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
+        let (used, start) = d.decode(&broken);
+        assert!(matches!(start, StreamEvent::Start { count: 2, .. }));
+        assert_eq!(
+            d.decode(&broken[used..]),
+            (
+                31 - used,
+                StreamEvent::Error {
+                    error: Error::BodyTooShort { offset: 30 },
+                    records_ok: 0,
+                }
+            )
+        );
+    }
 }

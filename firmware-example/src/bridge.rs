@@ -39,21 +39,49 @@
 //! The bytes go one by one into a [`PositionStreamDecoder`]; each record
 //! goes into the bounded [`RecordQueue`] of a [`Transfer`], which writes the
 //! records to the controller in 26DH commands of at most 2,051 bytes, each
-//! confirmed, with the spec's timeout and retries. While the queue is full
-//! the bridge stops reading the upstream; the receive ring then fills and
-//! the line's flow control stops the host ([`crate::serial`]). When the
-//! upstream frame has ended with a valid checksum and every chunk is
-//! confirmed, the bridge answers once: `#` station `26D` count(4 hex).
-//! On failure it answers `&` with one of [`codes`] B01..B05, B07.
+//! confirmed with the spec's timeout and retries, and **reads each one back
+//! (21FH) and compares it record by record before it takes more records
+//! from the host** ([`Verify::Full`](iai_protocol_b::transfer::Verify)): a
+//! chunk that reads back different is rewritten, twice at most. While the
+//! queue is full the bridge stops reading the upstream; the receive ring
+//! then fills and the line's flow control stops the host
+//! ([`crate::serial`]). The host's last record is held back until the
+//! upstream checksum is known, so a 26DH whose checksum fails never
+//! completes a write. When the upstream frame has ended with a valid
+//! checksum and every chunk is confirmed and read back equal, the bridge
+//! answers once: `#` station `26D` count(4 hex).
 //!
-//! Loss the bridge detects: bytes lost in its receive ring or the UART
-//! (overrun count, `&` B07 at once; the records sent so far were decoded
-//! from bytes received before the loss), a wrong checksum or a broken
-//! record (B01, at the end or at the broken byte). Loss it cannot detect
-//! before the end: a byte changed on the wire into another valid hex digit
-//! (only the checksum at the end shows it, after earlier chunks were
-//! written). Position writes are idempotent, so after any `&` the host
-//! sends the whole command again.
+//! The host times out 3 s after its last byte (2003 p. 62). What the
+//! bridge still has to do then is bounded by [`pipeline`]: chunk and queue
+//! sizes for the downstream rate such that the rest fits
+//! [`FINAL_BUDGET_MS`].
+//!
+//! # What `#` and `&` mean to the host
+//!
+//! * `#` with the count: the controller holds every record of the message,
+//!   read back and compared, and the message's checksum was right.
+//! * `&` with the controller's own code: the controller refused a chunk;
+//!   the bridge stops at once (an `&` is not resent blindly, 2003 p. 66) so
+//!   that the host can ask 216H for its detail.
+//! * `&` with a bridge code ([`codes`]): B01 (malformed, found at the broken
+//!   byte or at the checksum), B02 (a chunk unconfirmed after 3 sends),
+//!   B04 (the host stalled), B05 (no transfer could start), B07 (bytes
+//!   lost on the way in), B0A (a chunk still read back different after two
+//!   rewrites).
+//!
+//! An `&` carries a code and nothing else, so it cannot say how far the
+//! write went. The host should assume that any prefix of the message's
+//! records may have been written, and, after B01, B04 or B07, that records
+//! decoded from bytes corrupted before the error showed may have been
+//! written too: a flipped bit in a position number writes a position the
+//! host never named (in the bridge fault suite, 47 of 2,400 corrupted
+//! messages wrote 181 such positions, about 4 each). Position writes are
+//! idempotent: sending the whole message again makes every one of its
+//! records right; positions outside it that matter must be read back.
+//!
+//! Why the bridge cannot simply hold the message until its checksum is
+//! known: a 26DH may be 1,640,014 bytes, and the bridge's whole RAM is
+//! 8 KiB. Only the last record is held back.
 //!
 //! # Buffers
 //!
@@ -79,7 +107,7 @@ use iai_protocol_b::transfer::{
 use crate::codes;
 use crate::config::{Config, Source};
 use crate::log;
-use crate::serial::{FlowControl, XOFF, XON};
+use crate::serial::{self, FlowControl, UPSTREAM_MARKS, XOFF, XON};
 use crate::status;
 
 /// Upstream silence required before the quit sequence.
@@ -307,6 +335,8 @@ struct StreamWork {
     /// The host's last record, held back until its checksum is known: a
     /// 26DH whose checksum fails never completes a write.
     last: Option<PositionRecord>,
+    /// Chunk and queue sizes for the downstream rate.
+    pipeline: Pipeline,
 }
 
 /// The shared 2,051-byte area (see the module docs). The variants differ
@@ -974,6 +1004,7 @@ impl Bridge {
             decoder,
             job: None,
             last: None,
+            pipeline: pipeline(self.cfg.downstream_baud),
         });
         self.stream_deadline = None;
         self.tx_blocked = false;
@@ -986,9 +1017,19 @@ impl Bridge {
         log::info!("26DH stream for station {=u8:02X}", station.0);
     }
 
+    /// Whether the 26DH queue holds all the records the pipeline allows
+    /// (see [`pipeline`]): the bridge then stops reading the host.
     fn queue_full(&mut self) -> bool {
         match &mut self.work {
-            Work::Stream(StreamWork { job: Some(j), .. }) => j.source_mut().is_full(),
+            Work::Stream(StreamWork {
+                job: Some(j),
+                pipeline,
+                ..
+            }) => {
+                let limit = pipeline.queued_records;
+                let q = j.source_mut();
+                q.is_full() || q.len() >= limit
+            }
             _ => false,
         }
     }
@@ -1047,7 +1088,7 @@ impl Bridge {
                 } => {
                     log::info!("26DH: {=u16} records", count);
                     let cfg = TransferConfig {
-                        max_records: records_in_budget(self.cfg.downstream_baud),
+                        max_records: work.pipeline.chunk_records,
                         ..TransferConfig::tta(s)
                     };
                     let job = Transfer::new(cfg, RecordQueue::new()).with_total(u32::from(count));
@@ -1248,25 +1289,99 @@ impl Bridge {
     }
 }
 
-/// Records per 26DH chunk such that, when the host's last byte arrives,
-/// what is left (a chunk in flight, the queued records, the held-back last
-/// one) can be written and read back within [`FINAL_BUDGET_MS`] at
-/// `baud`: each 8-axis record crosses the line twice, 82 bytes of 10 bits
-/// each way, and the queue of [`QUEUE_LEN`] plus the held-back record is
-/// always left. 2 at 9,600 baud, 37 at 38,400, the engine's cap of
-/// [`MAX_FRAME_RECORDS`] from 115,200 (a 2,051-byte frame holds 24 8-axis
-/// records, more of fewer axes).
-pub const fn records_in_budget(baud: u32) -> u16 {
-    // Bit times per record: 2 directions x 82 bytes x 10 bits.
-    const BITS_PER_RECORD: u64 = 2 * 82 * 10;
-    let fit = FINAL_BUDGET_MS as u64 * baud as u64 / (1_000 * BITS_PER_RECORD);
-    let left = fit.saturating_sub(QUEUE_LEN as u64 + 1);
-    if left < 1 {
-        1
-    } else if left > MAX_FRAME_RECORDS as u64 {
-        MAX_FRAME_RECORDS
+/// Controller time allowed per command when the 26DH pipeline is sized:
+/// its response delay (α, I/O parameter 97, 2003 p. 8) plus the time it
+/// takes to store a chunk. Neither manual gives a figure, so this is an
+/// **assumption** (the processing time of the host model's tests); a
+/// slower controller makes the final reply later by the difference per
+/// command.
+pub const PROCESSING_ALLOWANCE_MS: u32 = 50;
+
+/// A 26DH command's envelope, count and trailer.
+const CHUNK_ENVELOPE_BYTES: u64 = 14;
+
+/// Bytes on the downstream line per chunk besides its records: the 26DH
+/// command's envelope, count and trailer, its reply (14), the 21FH query
+/// (18) and its reply's envelope, count, start and trailer (18).
+const CHUNK_OVERHEAD_BYTES: u64 = CHUNK_ENVELOPE_BYTES + 14 + 18 + 18;
+
+/// Bytes of an 8-axis 26DH record, the longest (TTA p. 60).
+const LONGEST_RECORD_BYTES: u64 = 82;
+
+/// Fewest records per chunk. The transfer never gives a frame the count of
+/// the frame before (a late reply could confirm it); with chunks of at
+/// least 3 the counts alternate without ever leaving a frame of one after
+/// a frame of one, which would wait out the duplicate window.
+const MIN_CHUNK_RECORDS: u16 = 3;
+
+/// How much of a 26DH the bridge holds between the host and the
+/// controller (see [`pipeline`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Pipeline {
+    /// Most records per 26DH chunk.
+    pub chunk_records: u16,
+    /// Most records decoded from the host and waiting for a chunk.
+    pub queued_records: usize,
+}
+
+/// Microseconds `bytes` take at `baud` (8N1).
+const fn line_us(bytes: u64, baud: u64) -> u64 {
+    bytes * 10_000_000 / baud
+}
+
+/// Worst-case time (µs) from the host's last byte to the end of the last
+/// chunk's read-back with chunks of `chunk` records and a queue of `queued`
+/// at `baud`. Still to be written and read back (each byte crossing the
+/// line twice): what the receive ring may hold (up to its pause mark plus
+/// the host's latency), the queued records, the held-back last record and
+/// a chunk just sent, all of 8-axis records (the longest; a chunk is at
+/// most a 2,051-byte frame whatever its records), each chunk with its
+/// commands' overhead and [`PROCESSING_ALLOWANCE_MS`] per command.
+const fn finish_us(chunk: u64, queued: u64, baud: u64) -> u64 {
+    let ring = (UPSTREAM_MARKS.pause_at + serial::HOST_LATENCY) as u64;
+    let frame_records = (FRAME_CAP as u64 - CHUNK_ENVELOPE_BYTES) / LONGEST_RECORD_BYTES;
+    let chunk_bytes = if chunk < frame_records {
+        chunk
     } else {
-        left as u16
+        frame_records
+    } * LONGEST_RECORD_BYTES;
+    let bytes = ring + (queued + 1) * LONGEST_RECORD_BYTES + chunk_bytes;
+    let chunks = bytes.div_ceil(chunk_bytes);
+    let per_chunk =
+        line_us(CHUNK_OVERHEAD_BYTES, baud) + 2 * 1_000 * PROCESSING_ALLOWANCE_MS as u64;
+    2 * line_us(bytes, baud) + chunks * per_chunk
+}
+
+/// The largest chunks (then the longest queue) such that, when the host's
+/// last byte arrives, what is left can be written and read back within
+/// [`FINAL_BUDGET_MS`] at `baud`, in a worst-case model: the receive ring
+/// full to its pause mark plus the host's latency, the queue, the held-back
+/// record and a chunk just sent, all of 8-axis records, written and read
+/// back, with [`PROCESSING_ALLOWANCE_MS`] per command. Chunks of at least
+/// three records and a queue of at least one whatever the rate. At 9,600
+/// baud: chunks of 5 records and a queue of 1 (1.93 s left at
+/// the end, worst case); 19,200: 15 and 1 (1.92 s); from 38,400: chunks
+/// as long as a 2,051-byte frame allows (24 8-axis records, more of fewer
+/// axes) and the full queue of [`QUEUE_LEN`] (1.74 s at 38,400, 0.71 s at
+/// 115,200).
+pub const fn pipeline(baud: u32) -> Pipeline {
+    let baud = if baud == 0 { 1 } else { baud as u64 };
+    let budget = FINAL_BUDGET_MS as u64 * 1_000;
+    let mut chunk = MAX_FRAME_RECORDS as u64;
+    while chunk > MIN_CHUNK_RECORDS as u64 {
+        if finish_us(chunk, 1, baud) <= budget {
+            break;
+        }
+        chunk -= 1;
+    }
+    let mut queued = QUEUE_LEN as u64;
+    while queued > 1 && finish_us(chunk, queued, baud) > budget {
+        queued -= 1;
+    }
+    Pipeline {
+        chunk_records: chunk as u16,
+        queued_records: queued as usize,
     }
 }
 
@@ -1414,13 +1529,27 @@ mod tests {
     }
 
     #[test]
-    fn chunks_fit_the_final_reply_budget() {
-        assert_eq!(records_in_budget(0), 1);
-        assert_eq!(records_in_budget(1_200), 1);
-        assert_eq!(records_in_budget(9_600), 2);
-        assert_eq!(records_in_budget(38_400), 37);
-        assert_eq!(records_in_budget(115_200), MAX_FRAME_RECORDS);
-        assert_eq!(records_in_budget(u32::MAX), MAX_FRAME_RECORDS);
+    fn the_pipeline_fits_the_final_reply_budget() {
+        let p = |chunk_records, queued_records| Pipeline {
+            chunk_records,
+            queued_records,
+        };
+        assert_eq!(pipeline(9_600), p(5, 1));
+        assert_eq!(pipeline(19_200), p(15, 1));
+        assert_eq!(pipeline(38_400), p(MAX_FRAME_RECORDS, QUEUE_LEN));
+        assert_eq!(pipeline(u32::MAX), p(MAX_FRAME_RECORDS, QUEUE_LEN));
+        // Too slow for the budget: the smallest pipeline that still runs.
+        assert_eq!(pipeline(0), p(MIN_CHUNK_RECORDS, 1));
+        assert_eq!(pipeline(1_200), p(MIN_CHUNK_RECORDS, 1));
+        for baud in [9_600u32, 19_200, 38_400, 57_600, 115_200, 230_400] {
+            let q = pipeline(baud);
+            let t = finish_us(
+                u64::from(q.chunk_records),
+                q.queued_records as u64,
+                baud.into(),
+            );
+            assert!(t <= u64::from(FINAL_BUDGET_MS) * 1_000, "{baud}: {t} us");
+        }
     }
 
     /// A port over byte vectors: reads `input`, collects what is written.

@@ -12,7 +12,6 @@ pub mod model;
 
 use std::collections::{BTreeMap, VecDeque};
 use std::io::{self, Read, Write};
-use std::net::TcpStream;
 use std::os::fd::AsRawFd;
 use std::os::unix::net::UnixStream;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -26,7 +25,7 @@ use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::stream::{PositionStream, PositionStreamEncoder};
 
-use crate::sim::{serve_tcp, Simulator};
+use crate::sim::Simulator;
 
 /// The bridge's `&` codes and IDs, from the bridge library itself.
 pub use firmware_example::codes;
@@ -40,28 +39,19 @@ pub struct SimThread {
 
 impl SimThread {
     /// Serve `sim` on `stream` (normally a clone of the session's
-    /// downstream socket) until the peer closes it (QEMU exits).
-    pub fn spawn(sim: Simulator, stream: TcpStream) -> Self {
-        Self::spawn_with(sim, stream, false)
-    }
-
-    /// Like [`SimThread::spawn`]; with `live`, keep [`SimThread::records`]
-    /// up to date (serving in small steps instead of `serve_tcp`).
-    pub fn spawn_with(mut sim: Simulator, stream: TcpStream, live: bool) -> Self {
+    /// downstream socket) until the peer closes it (QEMU exits), its
+    /// replies paced to `baud` (see [`serve_paced`]).
+    pub fn spawn(mut sim: Simulator, stream: UnixStream, baud: Option<u32>) -> Self {
         let records = Arc::new(AtomicU64::new(0));
         let shared = Arc::clone(&records);
         let handle = thread::spawn(move || {
-            let result = if live {
-                serve_live(&mut sim, stream, &shared)
-            } else {
-                serve_tcp(&mut sim, stream)
-            };
+            let result = serve_paced(&mut sim, stream, &shared, baud);
             (sim, result)
         });
         SimThread { handle, records }
     }
 
-    /// Records the simulator has written so far (live mode only).
+    /// Records the simulator has written so far.
     pub fn records(&self) -> u64 {
         self.records.load(Ordering::Relaxed)
     }
@@ -76,13 +66,30 @@ impl SimThread {
     }
 }
 
-/// `serve_tcp` with a live count of the records written.
-fn serve_live(sim: &mut Simulator, mut stream: TcpStream, records: &AtomicU64) -> io::Result<()> {
+/// Serves `sim` on `stream` with its replies paced to `baud` (10 bits a
+/// byte), as a controller's UART sends them, and a live count of the
+/// records written. QEMU models no baud rate: unpaced, a 2 KB read-back
+/// reply would reach the bridge's 128-byte receive ring as fast as its
+/// interrupt can take bytes, a burst no controller sends, and overrun it.
+/// Like [`HostLink`], the next bytes go only once QEMU has read the
+/// previous ones, and the line restarts after QEMU stood still.
+fn serve_paced(
+    sim: &mut Simulator,
+    mut stream: UnixStream,
+    records: &AtomicU64,
+    baud: Option<u32>,
+) -> io::Result<()> {
     let t0 = Instant::now();
     let now = || t0.elapsed().as_millis() as u32;
-    stream.set_read_timeout(Some(Duration::from_millis(1)))?;
-    stream.set_nodelay(true)?;
+    let byte_time = baud.map(|b| Duration::from_secs_f64(10.0 / f64::from(b.max(1))));
+    // Non-blocking, with short sleeps: a read timeout is rounded up to the
+    // kernel's tick (4 ms), too coarse to pace 11.5 bytes a millisecond.
+    stream.set_nonblocking(true)?;
     let mut buf = [0u8; 4096];
+    let mut out: VecDeque<u8> = VecDeque::new();
+    // When the line (re)started and how many bytes it has sent since.
+    let mut base = Instant::now();
+    let mut since_base = 0u32;
     loop {
         match stream.read(&mut buf) {
             Ok(0) => return Ok(()),
@@ -90,18 +97,64 @@ fn serve_live(sim: &mut Simulator, mut stream: TcpStream, records: &AtomicU64) -
                 sim.receive(&buf[..n], now());
                 records.store(sim.stats().records_written, Ordering::Relaxed);
             }
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
-                ) => {}
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                thread::sleep(Duration::from_micros(100));
+            }
             Err(e) => return Err(e),
         }
-        let out = sim.take_output(now());
-        if !out.is_empty() {
-            stream.write_all(&out)?;
+        if out.is_empty() {
+            out.extend(sim.take_output(now()));
+            // An idle line starts afresh.
+            base = Instant::now();
+            since_base = 0;
+        } else {
+            out.extend(sim.take_output(now()));
+        }
+        if out.is_empty() || unread(&stream, SIOCOUTQ)? > 0 {
+            continue;
+        }
+        let n = match byte_time {
+            None => out.len(),
+            Some(bt) => {
+                let due = (base.elapsed().as_secs_f64() / bt.as_secs_f64()) as u32;
+                due.saturating_sub(since_base).min(HOST_CHUNK as u32) as usize
+            }
+        };
+        if n == 0 {
+            continue;
+        }
+        let chunk: Vec<u8> = out.drain(..n.min(out.len())).collect();
+        write_all_nonblocking(&mut stream, &chunk)?;
+        since_base += chunk.len() as u32;
+    }
+}
+
+/// Writes all of `bytes` to a non-blocking socket, waiting while it is full.
+fn write_all_nonblocking(stream: &mut UnixStream, mut bytes: &[u8]) -> io::Result<()> {
+    while !bytes.is_empty() {
+        match stream.write(bytes) {
+            Ok(0) => return Err(io::ErrorKind::WriteZero.into()),
+            Ok(n) => bytes = bytes.get(n..).unwrap_or(&[]),
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                thread::sleep(Duration::from_micros(100));
+            }
+            Err(e) => return Err(e),
         }
     }
+    Ok(())
+}
+
+/// `ioctl` count `request` of the socket `fd` (see [`SIOCOUTQ`],
+/// [`FIONREAD`]).
+fn unread(fd: &impl AsRawFd, request: u64) -> io::Result<i32> {
+    let mut count: i32 = 0;
+    // SAFETY: both requests write one int through the pointer; the fd is an
+    // open socket.
+    let rc = unsafe { ioctl(fd.as_raw_fd(), request, &mut count) };
+    if rc != 0 {
+        return Err(io::Error::last_os_error());
+    }
+    Ok(count)
 }
 
 /// One whole 26DH command (header through LF) carrying `records`.
@@ -299,14 +352,7 @@ impl HostLink {
     fn wait_for_zero(&self, request: u64, what: &str, limit: Duration) -> io::Result<Duration> {
         let start = Instant::now();
         loop {
-            let mut count: i32 = 0;
-            // SAFETY: both requests write one int through the pointer; the
-            // fd is this link's open socket.
-            let rc = unsafe { ioctl(self.writer.as_raw_fd(), request, &mut count) };
-            if rc != 0 {
-                return Err(io::Error::last_os_error());
-            }
-            if count == 0 {
+            if unread(&self.writer, request)? == 0 {
                 return Ok(start.elapsed());
             }
             if start.elapsed() >= limit {

@@ -5,10 +5,10 @@
 //! that the test command builds each board once (building inside a test
 //! made the first test of a board pay for the whole optimised build: the
 //! mps2-an386 pass-through test took about 9 s, nearly all of it cargo).
-//! [`QemuSession::start`] boots an ELF with both serial ports wired to TCP
+//! [`QemuSession::start`] boots an ELF with both serial ports wired to Unix
 //! sockets: [`QemuSession::upstream`] is the first serial port (the host
-//! side of the bridge, a Unix socket), [`QemuSession::downstream`] the
-//! second (the controller side, TCP on the loopback interface), and a configuration block (see
+//! side of the bridge), [`QemuSession::downstream`] the second (the
+//! controller side), and a configuration block (see
 //! `firmware_example::config`) loaded into the flash page at the ELF's
 //! `_bridge_config` symbol. The firmware ends the run through semihosting
 //! `exit`, which becomes QEMU's exit code (0 on success).
@@ -21,7 +21,6 @@
 
 use std::fmt;
 use std::io::{self, Read, Write};
-use std::net::{Ipv4Addr, TcpListener, TcpStream};
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -237,7 +236,7 @@ pub struct QemuSession {
     /// First serial port: the host side of the bridge.
     pub upstream: UnixStream,
     /// Second serial port: the controller side of the bridge.
-    pub downstream: TcpStream,
+    pub downstream: UnixStream,
     board: Board,
     child: Child,
     stdout: Capture,
@@ -394,20 +393,18 @@ impl QemuSession {
             Some(cfg) => Some(config_loader_arg(elf, cfg)?),
             None => None,
         };
-        // The upstream is a Unix socket: its sender can tell how much QEMU
-        // has not read yet (see `HostLink`).
+        // Both lines are Unix sockets: their senders can tell how much QEMU
+        // has not read yet (see `HostLink` and the simulator's pacing).
         static SOCKETS: AtomicU32 = AtomicU32::new(0);
         let sock_dir = target_dir().join("qemu-sockets");
         std::fs::create_dir_all(&sock_dir)?;
-        let sock = sock_dir.join(format!(
-            "up-{}-{}.sock",
-            std::process::id(),
-            SOCKETS.fetch_add(1, Ordering::Relaxed)
-        ));
+        let n = SOCKETS.fetch_add(1, Ordering::Relaxed);
+        let sock = sock_dir.join(format!("up-{}-{n}.sock", std::process::id()));
+        let down_sock = sock_dir.join(format!("down-{}-{n}.sock", std::process::id()));
         let _ = std::fs::remove_file(&sock);
+        let _ = std::fs::remove_file(&down_sock);
         let upstream_listener = UnixListener::bind(&sock)?;
-        let downstream_listener = TcpListener::bind((Ipv4Addr::LOCALHOST, 0))?;
-        let p1 = downstream_listener.local_addr()?.port();
+        let downstream_listener = UnixListener::bind(&down_sock)?;
 
         let mut command = Command::new(QEMU);
         command
@@ -418,7 +415,7 @@ impl QemuSession {
             .arg(format!("socket,id=u0,path={}", sock.display()))
             .args(["-serial", "chardev:u0"])
             .arg("-chardev")
-            .arg(format!("socket,id=u1,host=127.0.0.1,port={p1}"))
+            .arg(format!("socket,id=u1,path={}", down_sock.display()))
             .args(["-serial", "chardev:u1"])
             .args(extra_args);
         if let Some(loader) = &loader {
@@ -442,7 +439,7 @@ impl QemuSession {
         let deadline = Instant::now() + timeout;
         let accepted = accept_unix_until(&upstream_listener, &mut child, deadline)
             .and_then(|up| {
-                let down = accept_until(&downstream_listener, &mut child, deadline)?;
+                let down = accept_unix_until(&downstream_listener, &mut child, deadline)?;
                 Ok((up, down))
             })
             .and_then(|streams| match ready_marker {
@@ -453,6 +450,7 @@ impl QemuSession {
                 _ => Ok(streams),
             });
         let _ = std::fs::remove_file(&sock);
+        let _ = std::fs::remove_file(&down_sock);
         let (upstream, downstream) = match accepted {
             Ok(streams) => streams,
             Err(e) => {
@@ -485,7 +483,6 @@ impl QemuSession {
         session.upstream.set_write_timeout(Some(timeout))?;
         let down = &session.downstream;
         down.set_nonblocking(false)?;
-        down.set_nodelay(true)?;
         down.set_read_timeout(Some(timeout))?;
         down.set_write_timeout(Some(timeout))?;
         Ok(session)
@@ -673,43 +670,27 @@ pub fn config_loader_arg(elf: &Path, cfg: &Config) -> io::Result<String> {
     Ok(format!("loader,file={},addr={addr:#x}", file.display()))
 }
 
-/// [`accept_until`] for a Unix socket.
+/// Accept one connection on `listener` before `deadline`, giving up early
+/// if `child` exits.
 fn accept_unix_until(
     listener: &UnixListener,
     child: &mut Child,
     deadline: Instant,
 ) -> io::Result<UnixStream> {
     listener.set_nonblocking(true)?;
-    loop {
-        match listener.accept() {
-            Ok((stream, _)) => return Ok(stream),
-            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
-            Err(e) => return Err(e),
-        }
-        if let Some(status) = child.try_wait()? {
-            return Err(io::Error::other(format!("QEMU exited early with {status}")));
-        }
-        if Instant::now() >= deadline {
-            return Err(io::Error::new(
-                io::ErrorKind::TimedOut,
-                "timed out waiting for QEMU to connect",
-            ));
-        }
-        thread::sleep(Duration::from_millis(5));
-    }
+    accept_with(|| listener.accept().map(|(s, _)| s), child, deadline)
 }
 
-/// Accept one connection on `listener` before `deadline`, giving up early
-/// if `child` exits.
-fn accept_until(
-    listener: &TcpListener,
+/// Polls the non-blocking `accept` until it gives a connection, `child`
+/// exits or `deadline` passes.
+fn accept_with<S>(
+    mut accept: impl FnMut() -> io::Result<S>,
     child: &mut Child,
     deadline: Instant,
-) -> io::Result<TcpStream> {
-    listener.set_nonblocking(true)?;
+) -> io::Result<S> {
     loop {
-        match listener.accept() {
-            Ok((stream, _)) => return Ok(stream),
+        match accept() {
+            Ok(stream) => return Ok(stream),
             Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
             Err(e) => return Err(e),
         }

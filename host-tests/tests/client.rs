@@ -420,3 +420,31 @@ fn the_blocking_flavour_over_a_uart_and_a_closure_clock() {
     let none = c.call(&mut uart, &mut clock, &SoftwareReset {});
     assert!(none.is_ok());
 }
+
+/// Every engine's first command goes out at once whatever the tick: a
+/// bridge idle since boot may send its first command on day 25 (past
+/// 2^31 ms) or just before its clock wraps on day 49.7.
+#[test]
+fn engines_start_at_once_on_any_tick() {
+    use iai_protocol_b::readback::{ReadBack, ReadBackConfig, ReadStep};
+    use iai_protocol_b::transfer::{Step, Transfer, TransferConfig};
+    for now in [0u32, 0x8000_0000, 0x8000_0001, u32::MAX - 5_000, u32::MAX] {
+        let mut c = client();
+        c.start(&AxisStatusQuery::default(), now).unwrap();
+        assert!(
+            matches!(c.poll(now), ClientStep::Transmit(_)),
+            "client at {now:#x}"
+        );
+        let mut t: Transfer<_> =
+            Transfer::new(TransferConfig::tta(ST), host_tests::table::table(3, 1, 1));
+        assert!(
+            matches!(t.poll(now), Step::Transmit(_)),
+            "transfer at {now:#x}"
+        );
+        let mut r: ReadBack = ReadBack::new(ReadBackConfig::tta(ST, 1, 100));
+        assert!(
+            matches!(r.poll(now), ReadStep::Transmit(_)),
+            "read-back at {now:#x}"
+        );
+    }
+}

@@ -53,7 +53,7 @@ fn start_with(sim: Simulator, cfg: &Config) -> (QemuSession, SimThread, HostLink
     )
     .expect("start QEMU");
     let down = qemu.downstream.try_clone().expect("clone downstream");
-    let sim = SimThread::spawn(sim, down);
+    let sim = SimThread::spawn(sim, down, Some(cfg.downstream_baud));
     let link = HostLink::new(&qemu.upstream, Some(cfg.upstream_baud), true).expect("host link");
     (qemu, sim, link)
 }

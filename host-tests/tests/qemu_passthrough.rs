@@ -26,6 +26,7 @@ fn bridges_a_query_and_quits(board: Board) {
     let sim = SimThread::spawn(
         Simulator::tta(STATION),
         qemu.downstream.try_clone().expect("clone downstream"),
+        Some(115_200),
     );
 
     let mut buf = [0u8; 32];

@@ -172,3 +172,40 @@ fn the_blocking_flavour_hands_every_window_to_the_sink() {
     assert_eq!(got, table(300, 4, 8).collect::<Vec<_>>());
     assert_eq!(stats.windows_confirmed, 300u32.div_ceil(24));
 }
+
+/// After a window's reply is answered, the engine takes no more bytes until
+/// the next poll has delivered it: a frame fed right behind it would
+/// otherwise overwrite the reply in the decoder and its records be lost.
+#[test]
+fn an_answered_reply_is_held_until_it_is_polled() {
+    use iai_protocol_b::readback::{ReadEvent, ReadStep};
+    let mut sim = Simulator::tta(ST);
+    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(3, 2, 5));
+    run(&mut t, &mut sim, 0).result.unwrap();
+    let cfg = ReadBackConfig {
+        confirm: false,
+        ..ReadBackConfig::tta(ST, 1, 3)
+    };
+    let mut rb: ReadBack = ReadBack::new(cfg);
+    let ReadStep::Transmit(q) = rb.poll(0) else {
+        panic!("a query first")
+    };
+    let q = q.to_vec();
+    rb.sent(1);
+    sim.receive(&q, 1);
+    let mut bytes = sim.take_output(10_000);
+    let reply_len = bytes.len();
+    // A stray copy right behind it.
+    bytes.extend_from_within(..reply_len);
+    let r = rb.received(&bytes, 20);
+    assert_eq!(r.event, ReadEvent::Answered { records: 3 });
+    assert_eq!(r.consumed, reply_len);
+    let r = rb.received(&bytes[reply_len..], 21);
+    assert_eq!((r.consumed, r.event), (0, ReadEvent::NeedMore));
+    match rb.poll(22) {
+        ReadStep::Records(recs) => {
+            assert_eq!(recs.collect::<Vec<_>>(), table(3, 2, 5).collect::<Vec<_>>())
+        }
+        other => panic!("{other:?}"),
+    }
+}

@@ -1,7 +1,7 @@
 //! The late-reply guard: which record counts a reply still in flight
 //! could carry (see the module docs of [`crate::transfer`]).
 
-use crate::clock::{later, reached};
+use crate::clock::{later, passed};
 
 /// Counts held back by the late-reply guard at once.
 const RECENT: usize = 32;
@@ -15,6 +15,8 @@ pub(super) struct Guard {
     /// A late or duplicated reply was seen on this line: from then on the
     /// counts of answered frames are guarded for the duplicate window too.
     pub(super) duplicates_seen: bool,
+    /// How far ahead any `until` may lie (see [`passed`]).
+    pub(super) horizon: u32,
     /// The count of the frame answered last, avoided even before the
     /// line showed a duplicate, until the tick beside it (its answer plus
     /// the duplicate window). It must expire: when the records left are
@@ -25,16 +27,23 @@ pub(super) struct Guard {
 }
 
 impl Guard {
-    pub(super) const fn new() -> Self {
+    pub(super) const fn new(horizon: u32) -> Self {
         Guard {
             entries: heapless::Vec::new(),
             duplicates_seen: false,
+            horizon,
             previous: (0, 0),
         }
     }
 
+    /// Whether `until` is over at `now`.
+    fn over(&self, now: u32, until: u32) -> bool {
+        passed(now, until, self.horizon)
+    }
+
     pub(super) fn prune(&mut self, now: u32) {
-        self.entries.retain(|&(_, u, _)| !reached(now, u));
+        let h = self.horizon;
+        self.entries.retain(|&(_, u, _)| !passed(now, u, h));
     }
 
     /// Sets the entry of `count` (merging with one that exists).
@@ -72,7 +81,7 @@ impl Guard {
 
     /// Whether the rule on the previous count still holds at `now`.
     fn previous_blocks(&self, n: u16, now: u32) -> bool {
-        n == self.previous.0 && !reached(now, self.previous.1)
+        n == self.previous.0 && !self.over(now, self.previous.1)
     }
 
     /// Whether a frame of `n` records could be confirmed by a reply still
@@ -82,18 +91,18 @@ impl Guard {
             || self
                 .entries
                 .iter()
-                .any(|&(c, u, dup)| c == n && !reached(now, u) && (!dup || self.duplicates_seen))
+                .any(|&(c, u, dup)| c == n && !self.over(now, u) && (!dup || self.duplicates_seen))
     }
 
     /// The earliest tick, later than `now`, at which a blocked count
     /// frees up (every rule expires, so this is never a busy wait).
     pub(super) fn wake(&self, now: u32) -> u32 {
-        let previous = (!reached(now, self.previous.1)).then_some(self.previous.1);
+        let previous = (!self.over(now, self.previous.1)).then_some(self.previous.1);
         self.entries
             .iter()
             .map(|&(_, u, _)| u)
             .chain(previous)
-            .filter(|&u| !reached(now, u))
+            .filter(|&u| !self.over(now, u))
             .min_by_key(|&u| u.wrapping_sub(now))
             .unwrap_or(now.wrapping_add(1))
     }
@@ -105,7 +114,7 @@ mod tests {
 
     #[test]
     fn the_previous_count_is_avoided_for_the_duplicate_window_only() {
-        let mut g = Guard::new();
+        let mut g = Guard::new(6_001);
         // A frame of one record answered at its first send, at 100 ms.
         g.sent(1, 6_100, 0);
         g.answered(1, 1, 3_100, 100);
@@ -118,7 +127,7 @@ mod tests {
 
     #[test]
     fn a_count_sent_twice_stays_guarded_for_its_late_window() {
-        let mut g = Guard::new();
+        let mut g = Guard::new(6_001);
         g.sent(5, 6_000, 0);
         g.sent(5, 9_000, 3_000);
         g.answered(5, 2, 6_100, 3_100);
@@ -130,9 +139,9 @@ mod tests {
 
     #[test]
     fn wake_is_always_later_than_now() {
-        let g = Guard::new();
+        let g = Guard::new(6_001);
         assert_eq!(g.wake(u32::MAX), 0);
-        let mut g = Guard::new();
+        let mut g = Guard::new(6_001);
         g.answered(3, 1, 10, 5);
         assert_eq!(g.wake(20), 21);
     }

@@ -59,7 +59,12 @@
 //! transmit buffer, compares them record by record with the frame still
 //! held for retries, and rewrites the frame when one differs (up to
 //! `rewrites` times, then [`TransferError::Mismatch`] naming the first
-//! differing position). The reply is compared as it streams in through a
+//! differing position). A read-back reply carries nothing that ties it
+//! to its query, so after a rewrite the frame's next read-back waits until
+//! no reply to its earlier queries can still come (`duplicate_window_ms`
+//! after the last one, longer while a late reply to a resent query is
+//! possible): otherwise a copy of the reply from before the rewrite could
+//! pass for the new state (about 3 s per rewrite). The reply is compared as it streams in through a
 //! [`PositionStreamDecoder`](crate::stream::PositionStreamDecoder) (no
 //! second frame buffer); a comparison counts
 //! only when the reply's SC, station and ID check out.
@@ -111,7 +116,7 @@ use verify::{bit, Verifier, Walk};
 use crate::catalogue;
 use crate::checksum::{BypassPolicy, ChecksumMode};
 use crate::client::Received;
-use crate::clock::{reached, Clock};
+use crate::clock::{later, passed, Clock};
 use crate::decoder::{Event, FrameDecoder};
 use crate::drive::{self, Engine, Stop, Want};
 use crate::error::{Error, BRIDGE_CODES};
@@ -245,6 +250,9 @@ pub struct TransferStats {
     pub verify_bytes_sent: u64,
     /// Frames written again because their read-back differed.
     pub rewrites: u32,
+    /// Read-back queries held after a rewrite until no reply to the
+    /// frame's earlier queries could still arrive.
+    pub held_queries: u32,
     /// Bytes received from the controller.
     pub bytes_received: u64,
 }
@@ -389,7 +397,7 @@ pub enum TransferEvent {
 enum State {
     /// Packing the next frame (from this tick on).
     Build {
-        not_before: u32,
+        not_before: Option<u32>,
     },
     /// The frame is being sent and confirmed.
     Write,
@@ -475,7 +483,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             fill: 0,
             packed: 0,
             chunk: None,
-            guard: Guard::new(),
+            guard: Guard::new(cfg.exchange.horizon()),
             pending_fault: false,
             frame_limit: cfg.max_records.clamp(1, MAX_FRAME_RECORDS),
             window_limit: cfg.stream.read_back().window(cfg.max_response),
@@ -489,7 +497,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             ),
             replies: FrameDecoder::with_policy(BypassPolicy::Reject),
             verifier: Verifier::new(cfg.stream.read_back()),
-            state: State::Build { not_before: 0 },
+            state: State::Build { not_before: None },
             stats: TransferStats {
                 records_confirmed: 0,
                 frames_confirmed: 0,
@@ -509,6 +517,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 verify_queries: 0,
                 verify_bytes_sent: 0,
                 rewrites: 0,
+                held_queries: 0,
                 bytes_received: 0,
             },
         }
@@ -584,8 +593,10 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         loop {
             match self.state {
                 State::Build { not_before } => {
-                    if !reached(now, not_before) {
-                        return Step::WaitUntil(not_before);
+                    if let Some(t) =
+                        not_before.filter(|&t| !passed(now, t, self.exchange.horizon()))
+                    {
+                        return Step::WaitUntil(t);
                     }
                     match self.build(now) {
                         Ok(Built::Ready) => self.start_write(now),
@@ -673,6 +684,13 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
     fn start_write(&mut self, now: u32) {
         if let Some(c) = self.chunk.as_mut() {
             c.confirmed = false;
+        }
+        if core::mem::take(&mut self.verifier.queried) {
+            // Written again after a read-back: the next read-back waits
+            // until no reply to the earlier queries can come (their
+            // duplicates, late replies to their other sends).
+            let dup = now.wrapping_add(self.cfg.exchange.duplicate_window_ms);
+            self.verifier.hold = Some(later(self.exchange.quiet_from(now), dup));
         }
         match catalogue::lookup(self.cfg.stream.id) {
             Some(info) => {
@@ -839,7 +857,9 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
     /// The write reply came: read back, or finish the frame.
     fn confirmed(&mut self, now: u32) {
         let Some(mut c) = self.chunk else {
-            self.state = State::Build { not_before: now };
+            self.state = State::Build {
+                not_before: Some(now),
+            };
             return;
         };
         c.faulted |= self.exchange.faulted();
@@ -871,6 +891,8 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
     /// The frame is done: restore what its trailer covered, carry the
     /// records it did not take to the front.
     fn finish_chunk(&mut self, now: u32) {
+        self.verifier.hold = None;
+        self.verifier.queried = false;
         if let Some(c) = self.chunk.take() {
             self.stats.records_confirmed += u32::from(c.records);
             let records_start = ENVELOPE_LEN + self.cfg.stream.prefix_len();
@@ -891,7 +913,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             .wrapping_add(self.cfg.exchange.turnaround_ms)
             .wrapping_add(1);
         self.state = State::Build {
-            not_before: turnaround,
+            not_before: Some(turnaround),
         };
     }
 
@@ -1319,6 +1341,56 @@ mod tests {
             }
         }
         assert_eq!(writes, 2);
+    }
+
+    /// A read-back reply carries nothing that ties it to its query: after
+    /// a rewrite, a copy of the reply from before it would read as the
+    /// new state. The next query waits until no such copy can come.
+    #[test]
+    fn after_a_rewrite_an_old_read_back_reply_cannot_verify_the_frame() {
+        let recs = records(2, 1);
+        let mut t = Transfer::<_>::new(TransferConfig::tta(ST), recs.clone().into_iter());
+        let mut altered = recs.clone();
+        altered[1].positions[0] += 1;
+        let read_back = |stored: &[PositionRecord]| {
+            let r = EffectivePositionResponse2 {
+                records: Repeated::from_slice(stored),
+            };
+            let mut buf = [0u8; 128];
+            let n = r.emit(ST, &mut buf).unwrap();
+            buf[..n].to_vec()
+        };
+        let old = read_back(&altered);
+        // Written, confirmed, read back different at 11.
+        assert!(matches!(t.poll(0), Step::Transmit(b) if b.starts_with(b"!9926D")));
+        t.sent(5);
+        t.received_all(&reply_26dh(2), 6);
+        assert!(matches!(t.poll(6), Step::WaitUntil(8)));
+        assert!(matches!(t.poll(8), Step::Transmit(b) if b.starts_with(b"!9921F")));
+        t.sent(10);
+        t.received_all(&old, 11);
+        // The rewrite goes out and is confirmed.
+        assert!(matches!(t.poll(11), Step::WaitUntil(13)));
+        assert!(matches!(t.poll(13), Step::Transmit(b) if b.starts_with(b"!9926D")));
+        t.sent(20);
+        t.received_all(&reply_26dh(2), 21);
+        // The read-back waits out the duplicate window of the old reply
+        // (3 s from the verdict at 11).
+        assert_eq!(t.poll(23), Step::WaitUntil(3_011));
+        // A copy of the old reply meanwhile is stale, not a comparison.
+        assert_eq!(t.received(&old, 500).event, TransferEvent::Stale,);
+        assert!(matches!(t.poll(3_011), Step::Transmit(b) if b.starts_with(b"!9921F")));
+        t.sent(3_015);
+        t.received_all(&read_back(&recs), 3_016);
+        assert_eq!(t.poll(3_016), Step::WaitUntil(3_018));
+        match t.poll(3_018) {
+            Step::Complete(r) => {
+                assert_eq!(r.guarantee, Guarantee::Verified);
+                assert_eq!(r.stats.rewrites, 1);
+                assert_eq!(r.stats.held_queries, 1);
+            }
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]

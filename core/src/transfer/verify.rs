@@ -7,6 +7,7 @@ use super::source::RecordSource;
 use super::{grow, Resume, State, Transfer, TransferError, TransferEvent};
 use crate::catalogue;
 use crate::checksum::BypassPolicy;
+use crate::clock::passed;
 use crate::error::Error;
 use crate::exchange::Offer;
 use crate::field::{FieldSpec, Reader, Writer};
@@ -38,6 +39,14 @@ pub(super) struct Verifier {
     pub(super) started: bool,
     pub(super) station: Station,
     pub(super) rewrites: u8,
+    /// The chunk was written again after some of it was read back: its
+    /// read-back queries wait until this tick, when no reply to the
+    /// earlier ones can arrive any more (a read-back reply carries nothing
+    /// that ties it to one query, so an old reply would pass for the new
+    /// state).
+    pub(super) hold: Option<u32>,
+    /// A read-back query of the chunk in flight was sent.
+    pub(super) queried: bool,
 }
 
 impl Verifier {
@@ -57,6 +66,8 @@ impl Verifier {
             started: false,
             station: Station(0),
             rewrites: 0,
+            hold: None,
+            queried: false,
         }
     }
 }
@@ -154,9 +165,18 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         v.head = head;
         v.asked = window as u16;
         let built = self.write_query();
+        let h = self.exchange.horizon();
+        let at = match self.verifier.hold {
+            Some(t) if !passed(now, t, h) => {
+                self.stats.held_queries += 1;
+                t
+            }
+            _ => now,
+        };
         match (built, catalogue::lookup(self.verifier.stream.id)) {
             (Ok(()), Some(info)) => {
-                self.exchange.start(info, now);
+                self.exchange.start(info, at);
+                self.verifier.queried = true;
                 self.state = State::Verify;
             }
             (Err(e), _) => self.state = State::Failed(TransferError::Config(e), Resume::Nothing),

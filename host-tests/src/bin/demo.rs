@@ -13,7 +13,9 @@
 //! Run through `./tools/demo.sh`. Options: `--records N` (1..=20000),
 //! `--baud B`, `--processing-ms MS` (the controller's time per command,
 //! default 100), `--board lm3s6965|mps2-an386`, `--faults SEED` (controller
-//! faults: flipped reply bits, dropped and `&` replies), `--elf PATH`,
+//! faults: flipped bits both ways, dropped and `&` replies, records stored
+//! altered; the host sends the command again after an `&`, up to
+//! [`MAX_SENDS`] times), `--elf PATH`,
 //! `--timeout SECS` (whole run, default 600). Exit code 0 only if the
 //! simulator's table equals the source and QEMU exited cleanly.
 
@@ -28,6 +30,9 @@ use firmware_example::codes;
 use firmware_example::config::Config;
 use firmware_example::status;
 use host_tests::bridge::{check_table, command_26dh, reply_26dh, HostLink, SimThread};
+
+/// Sends of the 26DH before the demo gives up (a host's own retries).
+const MAX_SENDS: u32 = 8;
 use host_tests::qemu::{build_firmware, test_config, Board, QemuSession, READY_MARKER};
 use host_tests::sim::{Faults, Simulator};
 use host_tests::table::table;
@@ -200,22 +205,26 @@ fn run() -> Result<(), String> {
     sim.response_delay_ms = o.processing_ms;
     if let Some(seed) = o.faults {
         sim = sim.with_faults(
+            // Rates a resend gets through: a 2 KB read-back reply is
+            // broken one time in five at 1e-4 flipped bits per byte.
             Faults {
-                flip_bit_out: 0.001,
+                flip_bit_out: 1e-4,
+                flip_bit_in: 1e-5,
                 drop_every_nth_reply: Some(25),
-                error_reply: 0.05,
+                error_reply: 0.005,
                 garbage_before_reply: 0.05,
+                swap_record: 0.02,
                 ..Faults::default()
             },
             seed,
         );
     }
-    let sim = SimThread::spawn_with(
+    let sim = SimThread::spawn(
         sim,
         qemu.downstream
             .try_clone()
             .map_err(|e| format!("downstream socket: {e}"))?,
-        true,
+        Some(o.baud),
     );
     let link = Arc::new(
         HostLink::new(&qemu.upstream, Some(o.baud), true)
@@ -253,7 +262,7 @@ fn run() -> Result<(), String> {
             Err(_) => return Err("sender thread panicked".to_owned()),
         }
         match reply {
-            Some(r) if r.first() == Some(&b'&') && sends < 4 => {
+            Some(r) if r.first() == Some(&b'&') && sends < MAX_SENDS => {
                 eprintln!(
                     "\ndemo: the bridge answered {:?}; sending the command again",
                     String::from_utf8_lossy(&r).trim_end()
@@ -311,7 +320,7 @@ fn run() -> Result<(), String> {
         String::from_utf8_lossy(&reply).trim_end()
     );
     println!(
-        "  bridge -> ctrl   {} bytes in {} 26DH commands, {} bytes of replies",
+        "  bridge -> ctrl   {} bytes in {} commands (26DH chunks and their 21FH read-backs), {} bytes of replies",
         s.bytes_in, s.commands, s.bytes_out
     );
     println!(

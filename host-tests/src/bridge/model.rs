@@ -79,6 +79,9 @@ pub struct ModelReport {
     pub host_bytes: u64,
     /// Virtual time from the first byte to the last reply, ns.
     pub elapsed_ns: u64,
+    /// For each command that got a reply: from the host's last byte to the
+    /// reply's last byte, ns (what the host's 3 s reply timeout measures).
+    pub reply_after_ns: Vec<Option<u64>>,
     /// Highest upstream ring level seen.
     pub max_ring: usize,
     /// Times the bridge's loop ran.
@@ -197,6 +200,8 @@ pub fn run(
     for cmd in commands {
         host.out.extend(cmd.iter().copied());
         let mut reply = None;
+        let mut last_host_byte = t;
+        let mut reply_after = None;
         let mut last_progress = t;
         loop {
             // The bridge's loop, until it waits.
@@ -281,6 +286,8 @@ pub fn run(
                     if let Some(b) = host.out.pop_front() {
                         report.host_bytes += 1;
                         host_tx_free = t + up_byte;
+                        // The byte has arrived when its last bit has.
+                        last_host_byte = t + up_byte;
                         up_isr.on_receive(b);
                         report.max_ring = report.max_ring.max(up_isr.rx_level());
                         host.sent_one();
@@ -300,7 +307,9 @@ pub fn run(
                             _ => {
                                 if let Event::Frame(f) = host.replies.push(b) {
                                     reply = Some(f.as_bytes().to_vec());
-                                    report.elapsed_ns = t;
+                                    report.elapsed_ns = t + up_byte;
+                                    reply_after =
+                                        Some((t + up_byte).saturating_sub(last_host_byte));
                                 }
                             }
                         }
@@ -333,6 +342,7 @@ pub fn run(
             run_bridge = true;
         }
         report.replies.push(reply);
+        report.reply_after_ns.push(reply_after);
     }
     report.overruns = up.overruns();
     if flow == FlowControl::RtsCts {
