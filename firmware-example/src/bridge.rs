@@ -89,7 +89,7 @@
 //! decoder (the command, then the reply); in a 26DH it is the transfer's
 //! chunk buffer. The two never run at once.
 
-use embedded_io::{Read, ReadReady, Write, WriteReady};
+use embedded_io::{Write, WriteReady};
 use iai_protocol_b::catalogue::{self, Reply, Resend};
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::clock::reached;
@@ -109,6 +109,11 @@ use crate::config::{Config, Source};
 use crate::log;
 use crate::serial::{self, FlowControl, UPSTREAM_MARKS, XOFF, XON};
 use crate::status;
+
+// Defined in the layers below; re-exported where the bridge's users
+// have always found them.
+pub use crate::serial::Port;
+pub use crate::status::{LastError, Stats};
 
 /// Upstream silence required before the quit sequence.
 pub const QUIT_GUARD_MS: u32 = 20;
@@ -144,16 +149,6 @@ const IN_CHUNK: usize = 16;
 
 /// The 26DH stream the bridge splits.
 const STREAM: PositionStream = PositionStream::CHANGE_2;
-
-/// A serial port as the bridge sees it: non-blocking `embedded-io` plus an
-/// overrun count.
-pub trait Port: Read + ReadReady + Write + WriteReady {
-    /// Received bytes lost since the last call (receive ring full, or the
-    /// UART's overrun flag). Ports that cannot lose bytes return 0.
-    fn take_overruns(&mut self) -> u32 {
-        0
-    }
-}
 
 /// Why [`Bridge::poll`] failed: a port reported an error.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -211,116 +206,6 @@ pub struct Interest {
     pub down_read: bool,
     /// Room to write downstream.
     pub down_write: bool,
-}
-
-/// What the bridge counted since start.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Stats {
-    /// Commands forwarded downstream as they were.
-    pub forwarded: u32,
-    /// Replies relayed upstream.
-    pub relayed: u32,
-    /// Forwarded commands that got no valid reply in time.
-    pub reply_timeouts: u32,
-    /// Upstream frames dropped as malformed (never forwarded).
-    pub rejected: u32,
-    /// Commands refused by the policy (answered `&` B06).
-    pub refused: u32,
-    /// Commands for a station other than the controller's and the bridge's.
-    pub other_station: u32,
-    /// Commands the bridge answered itself (its own station).
-    pub own_queries: u32,
-    /// 26DH commands completed (`#` sent).
-    pub streams_ok: u32,
-    /// 26DH commands answered with `&`.
-    pub streams_failed: u32,
-    /// Records confirmed by the controller in 26DH chunks.
-    pub records: u32,
-    /// 26DH chunks sent downstream, retries included.
-    pub chunks_sent: u32,
-    /// Chunks sent again.
-    pub retries: u32,
-    /// Chunk replies that timed out.
-    pub chunk_timeouts: u32,
-    /// `&` replies to chunks.
-    pub chunk_error_replies: u32,
-    /// Upstream bytes lost (receive overruns).
-    pub upstream_overruns: u32,
-    /// Downstream bytes lost (receive overruns).
-    pub downstream_overruns: u32,
-    /// Bytes read from the upstream.
-    pub upstream_in: u64,
-    /// Bytes written to the upstream.
-    pub upstream_out: u64,
-    /// Bytes read from the downstream.
-    pub downstream_in: u64,
-    /// Bytes written to the downstream.
-    pub downstream_out: u64,
-}
-
-impl Stats {
-    /// The field names, in declaration order: with [`Stats::values`], what
-    /// a board prints at the end of a run in the `Debug` layout without
-    /// linking `core::fmt`.
-    pub const NAMES: [&'static str; 20] = [
-        "forwarded",
-        "relayed",
-        "reply_timeouts",
-        "rejected",
-        "refused",
-        "other_station",
-        "own_queries",
-        "streams_ok",
-        "streams_failed",
-        "records",
-        "chunks_sent",
-        "retries",
-        "chunk_timeouts",
-        "chunk_error_replies",
-        "upstream_overruns",
-        "downstream_overruns",
-        "upstream_in",
-        "upstream_out",
-        "downstream_in",
-        "downstream_out",
-    ];
-
-    /// Every counter, in declaration order (see [`Stats::NAMES`]).
-    pub fn values(&self) -> [u64; 20] {
-        [
-            u64::from(self.forwarded),
-            u64::from(self.relayed),
-            u64::from(self.reply_timeouts),
-            u64::from(self.rejected),
-            u64::from(self.refused),
-            u64::from(self.other_station),
-            u64::from(self.own_queries),
-            u64::from(self.streams_ok),
-            u64::from(self.streams_failed),
-            u64::from(self.records),
-            u64::from(self.chunks_sent),
-            u64::from(self.retries),
-            u64::from(self.chunk_timeouts),
-            u64::from(self.chunk_error_replies),
-            u64::from(self.upstream_overruns),
-            u64::from(self.downstream_overruns),
-            self.upstream_in,
-            self.upstream_out,
-            self.downstream_in,
-            self.downstream_out,
-        ]
-    }
-}
-
-/// The last `&` code the bridge sent of its own, and when.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct LastError {
-    /// The code ([`codes`]).
-    pub code: u16,
-    /// The tick (ms) it was sent.
-    pub at_ms: u32,
 }
 
 /// The 26DH transfer: records from the upstream decoder through a bounded
@@ -1503,30 +1388,9 @@ mod tests {
 
     use super::*;
     use crate::config::{AllowList, Policy};
+    use embedded_io::{Read, ReadReady};
     use iai_protocol_b::checksum::ChecksumMode;
     use iai_protocol_b::frame::Frame;
-
-    #[test]
-    fn stats_fields_spell_the_debug_text() {
-        use std::format;
-        use std::string::String;
-        let stats = Stats {
-            forwarded: 1,
-            streams_ok: 7,
-            upstream_in: u64::MAX,
-            downstream_out: 42,
-            ..Stats::default()
-        };
-        let mut text = String::from("Stats { ");
-        for (i, (name, value)) in Stats::NAMES.iter().zip(stats.values()).enumerate() {
-            if i > 0 {
-                text.push_str(", ");
-            }
-            text.push_str(&format!("{name}: {value}"));
-        }
-        text.push_str(" }");
-        assert_eq!(text, format!("{stats:?}"));
-    }
 
     #[test]
     fn the_pipeline_fits_the_final_reply_budget() {

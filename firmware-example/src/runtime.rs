@@ -13,11 +13,12 @@ use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::SYST;
 use cortex_m_rt::{exception, ExceptionFrame};
 use cortex_m_semihosting::{debug, hio};
-use firmware_example::bridge::{Bridge, Error, Stats};
+use firmware_example::bridge::{Bridge, Error};
 use firmware_example::config::{BlockError, Config, Source, BLOCK_LEN};
 use firmware_example::serial::{
     DownstreamLine, FlowControl, IsrEnd, ThreadEnd, UpstreamLine, DOWNSTREAM_MARKS, UPSTREAM_MARKS,
 };
+use firmware_example::status::Stats;
 
 /// System tick rate of [`now_ms`].
 pub const TICK_HZ: u32 = 1_000;
