@@ -260,18 +260,112 @@ impl<const N: usize> FrameDecoder<N> {
     }
 
     fn event(&self, outcome: Step) -> Event<'_> {
-        match outcome {
-            Step::More => Event::NeedMore,
-            Step::Frame(env) => {
-                let bytes = self.buf.get(..self.inner.len).unwrap_or(&[]);
-                Event::Frame(Frame::from_parts(bytes, env))
-            }
-            Step::Error(e) => Event::Error(e),
+        self.inner.event(&self.buf, outcome)
+    }
+}
+
+/// A push decoder of frames in a buffer it borrows at each call: the
+/// state of a [`FrameDecoder`] without its buffer, so that a program can
+/// decode in an area that serves something else between frames (a bridge
+/// decodes single commands and replies in the frame buffer of its 26DH
+/// transfer).
+///
+/// Pass the same buffer to every call until [`SliceDecoder::reset`]: the
+/// frame in progress lives in it. Its length is the capacity (the largest
+/// frame accepted). Another buffer, or one written in between, gives
+/// wrong frames or errors but never a panic. After `reset` any buffer
+/// may be used. Behaves as a [`FrameDecoder`] of the buffer's length in
+/// every other respect.
+#[derive(Debug, Clone)]
+pub struct SliceDecoder {
+    inner: Inner,
+}
+
+impl Default for SliceDecoder {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl SliceDecoder {
+    /// A decoder with the default `@@` policy ([`BypassPolicy::CommandsOnly`]).
+    pub const fn new() -> Self {
+        Self::with_policy(BypassPolicy::CommandsOnly)
+    }
+
+    /// A decoder with the given `@@` policy.
+    pub const fn with_policy(policy: BypassPolicy) -> Self {
+        SliceDecoder {
+            inner: FrameDecoder::<0>::with_policy(policy).inner,
+        }
+    }
+
+    /// The `@@` policy in force.
+    pub fn policy(&self) -> BypassPolicy {
+        self.inner.policy
+    }
+
+    /// Changes the `@@` policy.
+    pub fn set_policy(&mut self, policy: BypassPolicy) {
+        self.inner.policy = policy;
+    }
+
+    /// Counters since creation.
+    pub fn stats(&self) -> DecoderStats {
+        self.inner.stats
+    }
+
+    /// Bytes held in the buffer: the frame in progress and bytes waiting to
+    /// be decoded again after a failed text frame.
+    pub fn pending(&self) -> usize {
+        self.inner.pending()
+    }
+
+    /// The frame returned by the last call, until the next byte is pushed
+    /// (`buf`: the buffer of that call).
+    pub fn last_frame<'b>(&self, buf: &'b [u8]) -> Option<Frame<'b>> {
+        self.inner.last_frame(buf)
+    }
+
+    /// As [`FrameDecoder::failed_envelope`].
+    pub fn failed_envelope(&self) -> Option<(Header, Station, u16)> {
+        self.inner.failed
+    }
+
+    /// Drops any partial frame and bytes waiting to be decoded again
+    /// (counted as discarded) and starts hunting; the buffer is free.
+    pub fn reset(&mut self) {
+        self.inner.reset();
+    }
+
+    /// As [`FrameDecoder::push`], in `buf`.
+    pub fn push<'b>(&mut self, buf: &'b mut [u8], byte: u8) -> Event<'b> {
+        let outcome = self.inner.push(buf, byte);
+        self.inner.event(buf, outcome)
+    }
+
+    /// As [`FrameDecoder::decode`], in `buf`.
+    pub fn decode<'b>(&mut self, buf: &'b mut [u8], input: &[u8]) -> Decoded<'b> {
+        let (consumed, outcome) = self.inner.decode(buf, input);
+        Decoded {
+            consumed,
+            event: self.inner.event(buf, outcome),
         }
     }
 }
 
 impl Inner {
+    fn event<'b>(&self, buf: &'b [u8], outcome: Step) -> Event<'b> {
+        match outcome {
+            Step::More => Event::NeedMore,
+            Step::Frame(env) => {
+                let bytes = buf.get(..self.len).unwrap_or(&[]);
+                Event::Frame(Frame::from_parts(bytes, env))
+            }
+            Step::Error(e) => Event::Error(e),
+        }
+    }
+
     fn pending(&self) -> usize {
         let frame = match self.state {
             State::Done | State::Hunting => 0,
@@ -551,6 +645,87 @@ mod tests {
     use std::vec::Vec;
 
     const SERVO_REPLY: &[u8] = b"#992322C\r\n";
+
+    /// A [`SliceDecoder`] over a 64-byte buffer gives what a
+    /// `FrameDecoder<64>` gives, pushed byte by byte and decoded in pieces:
+    /// frames, errors (an over-long frame, a bad checksum, a cut 200H whose
+    /// text swallowed a reply) and counters.
+    #[test]
+    fn a_slice_decoder_decodes_as_a_frame_decoder_of_its_buffer() {
+        let mut input = Vec::new();
+        input.extend_from_slice(b"xx#992322C\r\n");
+        input.extend_from_slice(b"!99200AB!99200CD#992322C\r\n");
+        input.push(b'!');
+        input.extend_from_slice(&[b'0'; 80]);
+        input.extend_from_slice(b"\r\n#992322D\r\n");
+        input.extend_from_slice(SERVO_REPLY);
+
+        let mut owned: FrameDecoder<64> = FrameDecoder::new();
+        let mut state = SliceDecoder::new();
+        let mut buf = [0u8; 64];
+        for &b in &input {
+            let a = owned.push(b).map_frame(|f| f.as_bytes().to_vec());
+            let c = state.push(&mut buf, b).map_frame(|f| f.as_bytes().to_vec());
+            assert_eq!(a, c);
+            assert_eq!(
+                owned.last_frame().map(|f| f.as_bytes().to_vec()),
+                state.last_frame(&buf).map(|f| f.as_bytes().to_vec())
+            );
+            loop {
+                let a = owned.decode(b"").event.map_frame(|f| f.as_bytes().to_vec());
+                let c = state
+                    .decode(&mut buf, b"")
+                    .event
+                    .map_frame(|f| f.as_bytes().to_vec());
+                assert_eq!(a, c);
+                if a == Err(None) {
+                    break;
+                }
+            }
+            assert_eq!(owned.pending(), state.pending());
+            assert_eq!(owned.failed_envelope(), state.failed_envelope());
+        }
+        assert_eq!(owned.stats(), state.stats());
+        assert_eq!(state.stats().frames, 3);
+        assert!(state.stats().errors >= 3);
+
+        // In pieces.
+        let mut owned: FrameDecoder<64> = FrameDecoder::new();
+        let mut state = SliceDecoder::new();
+        let mut buf = [0u8; 64];
+        for piece in input.chunks(7) {
+            let (mut x, mut y) = (piece, piece);
+            loop {
+                let a = owned.decode(x);
+                let c = state.decode(&mut buf, y);
+                assert_eq!(a.consumed, c.consumed);
+                let (ea, ec) = (
+                    a.event.map_frame(|f| f.as_bytes().to_vec()),
+                    c.event.map_frame(|f| f.as_bytes().to_vec()),
+                );
+                assert_eq!(ea, ec);
+                x = &x[a.consumed..];
+                y = &y[c.consumed..];
+                if ea == Err(None) {
+                    break;
+                }
+            }
+        }
+        assert_eq!(owned.stats(), state.stats());
+        state.reset();
+        assert_eq!(state.pending(), 0);
+    }
+
+    impl<'d> Event<'d> {
+        /// `Ok(frame)`, `Err(Some(error))` or `Err(None)` (need more).
+        fn map_frame<T>(self, f: impl FnOnce(Frame<'d>) -> T) -> Result<T, Option<Error>> {
+            match self {
+                Event::NeedMore => Err(None),
+                Event::Frame(fr) => Ok(f(fr)),
+                Event::Error(e) => Err(Some(e)),
+            }
+        }
+    }
 
     #[test]
     fn golden_frame_after_noise() {
