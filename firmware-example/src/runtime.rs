@@ -339,7 +339,10 @@ unsafe fn DefaultHandler(irqn: i16) {
 /// byte per step (a word per step where the caller guarantees 4-byte
 /// alignment) in a few dozen bytes. The bridge moves at most a few KB per
 /// frame, at serial-line rates. The stores are volatile so that the
-/// optimiser cannot turn the loops back into calls to these functions.
+/// optimiser cannot turn the loops back into calls to these functions, and
+/// no routine calls another by its C name (the optimiser takes a call to
+/// `memmove` for the built-in and lowers it to `__aeabi_memmove`, which
+/// would then call itself).
 pub mod mem {
     /// Copies `n` bytes forwards.
     ///
@@ -386,6 +389,41 @@ pub mod mem {
         }
     }
 
+    /// Copies `n` bytes; `dst` and `src` may overlap.
+    ///
+    /// # Safety
+    /// As `memmove`: `src` readable and `dst` writable for `n` bytes.
+    #[inline(always)]
+    unsafe fn move_bytes(dst: *mut u8, src: *const u8, n: usize) {
+        if (dst as usize) <= (src as usize) {
+            // SAFETY: the caller's contract; `dst` is not above `src`.
+            unsafe { forward(dst, src, n) };
+        } else {
+            for i in (0..n).rev() {
+                // SAFETY: the caller's contract; backwards, as `dst` is
+                // above `src`.
+                unsafe { dst.add(i).write_volatile(src.add(i).read()) };
+            }
+        }
+    }
+
+    /// Compares `n` bytes: 0 if equal, else the difference of the first
+    /// bytes that differ.
+    ///
+    /// # Safety
+    /// As `memcmp`: `a` and `b` readable for `n` bytes.
+    #[inline(always)]
+    unsafe fn compare(a: *const u8, b: *const u8, n: usize) -> i32 {
+        for i in 0..n {
+            // SAFETY: the caller's contract.
+            let (x, y) = unsafe { (a.add(i).read_volatile(), b.add(i).read_volatile()) };
+            if x != y {
+                return i32::from(x) - i32::from(y);
+            }
+        }
+        0
+    }
+
     /// `memcpy`.
     ///
     /// # Safety
@@ -403,16 +441,8 @@ pub mod mem {
     /// `src` readable and `dst` writable for `n` bytes; they may overlap.
     #[no_mangle]
     pub unsafe extern "C" fn memmove(dst: *mut u8, src: *const u8, n: usize) -> *mut u8 {
-        if (dst as usize) <= (src as usize) {
-            // SAFETY: the caller's contract; `dst` is not above `src`.
-            unsafe { forward(dst, src, n) };
-        } else {
-            for i in (0..n).rev() {
-                // SAFETY: the caller's contract; backwards, as `dst` is
-                // above `src`.
-                unsafe { dst.add(i).write_volatile(src.add(i).read()) };
-            }
-        }
+        // SAFETY: the caller's contract.
+        unsafe { move_bytes(dst, src, n) };
         dst
     }
 
@@ -433,14 +463,8 @@ pub mod mem {
     /// `a` and `b` readable for `n` bytes.
     #[no_mangle]
     pub unsafe extern "C" fn memcmp(a: *const u8, b: *const u8, n: usize) -> i32 {
-        for i in 0..n {
-            // SAFETY: the caller's contract.
-            let (x, y) = unsafe { (a.add(i).read_volatile(), b.add(i).read_volatile()) };
-            if x != y {
-                return i32::from(x) - i32::from(y);
-            }
-        }
-        0
+        // SAFETY: the caller's contract.
+        unsafe { compare(a, b, n) }
     }
 
     /// `bcmp`.
@@ -450,7 +474,7 @@ pub mod mem {
     #[no_mangle]
     pub unsafe extern "C" fn bcmp(a: *const u8, b: *const u8, n: usize) -> i32 {
         // SAFETY: the caller's contract.
-        unsafe { memcmp(a, b, n) }
+        unsafe { compare(a, b, n) }
     }
 
     /// `__aeabi_memcpy`.
@@ -490,7 +514,7 @@ pub mod mem {
     #[no_mangle]
     pub unsafe extern "aapcs" fn __aeabi_memmove(dst: *mut u8, src: *const u8, n: usize) {
         // SAFETY: the caller's contract.
-        unsafe { memmove(dst, src, n) };
+        unsafe { move_bytes(dst, src, n) };
     }
 
     /// `__aeabi_memmove4`.
@@ -500,7 +524,7 @@ pub mod mem {
     #[no_mangle]
     pub unsafe extern "aapcs" fn __aeabi_memmove4(dst: *mut u8, src: *const u8, n: usize) {
         // SAFETY: the caller's contract.
-        unsafe { memmove(dst, src, n) };
+        unsafe { move_bytes(dst, src, n) };
     }
 
     /// `__aeabi_memmove8`.
@@ -510,7 +534,7 @@ pub mod mem {
     #[no_mangle]
     pub unsafe extern "aapcs" fn __aeabi_memmove8(dst: *mut u8, src: *const u8, n: usize) {
         // SAFETY: the caller's contract.
-        unsafe { memmove(dst, src, n) };
+        unsafe { move_bytes(dst, src, n) };
     }
 
     /// `__aeabi_memset` (note the argument order: length, then value).
