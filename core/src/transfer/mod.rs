@@ -760,9 +760,12 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             let dup = now.wrapping_add(self.cfg.exchange.duplicate_window_ms);
             self.verifier.hold = Some(later(self.exchange.quiet_from(now), dup));
         }
-        match catalogue::lookup(self.cfg.stream.id) {
-            Some(info) => {
-                self.exchange.start(info, now);
+        // The resend rules, not the entry: `lookup` would link every
+        // entry and its name into a program.
+        match catalogue::request_rules(self.cfg.stream.id) {
+            Some((resend, reply)) => {
+                self.exchange
+                    .start_raw(self.cfg.stream.id, resend, reply, now);
                 self.state = State::Write;
             }
             None => {
