@@ -6,8 +6,10 @@
 # board:
 #   ram <board> static <bytes> stack <bytes> total <bytes>
 #   flash <board> <bytes>
-# The stm32g030 (Cortex-M0+) is built and sized only: QEMU has no model of
-# it (its one Cortex-M0 board, microbit, has a single UART).
+# and, for the QEMU (Cortex-M3/M4) boards, whether the goal is met:
+#   goal <board> ram met|missed flash met|missed
+# The stm32g030 (Cortex-M0+, STM32G030x8) is built and sized only: QEMU has
+# no model of it (its one Cortex-M0 board, microbit, has a single UART).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 target=${CARGO_TARGET_DIR:-target}
@@ -49,9 +51,12 @@ for b in "${boards[@]}"; do
       [ "$peak" -gt "$stack" ] && stack=$peak
     done
     echo "ram $board static $static stack $stack total $((static + stack))"
+    echo "flash $board $flash"
+    verdict() { [ "$1" -le "$2" ] && echo met || echo missed; }
+    echo "goal $board ram $(verdict $((static + stack)) 8192) flash $(verdict "$flash" 32768)"
   else
     echo "ram $board static $static stack unmeasured total unmeasured"
+    echo "flash $board $flash"
   fi
-  echo "flash $board $flash"
 done
 echo "goal (Cortex-M3/M4 boards): total RAM <= 8192, flash <= 32768"

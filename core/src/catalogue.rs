@@ -254,10 +254,27 @@ macro_rules! catalogue {
 
         /// The entry of message `id`, if the catalogue has one.
         pub const fn lookup(id: u16) -> Option<&'static MessageInfo> {
-            match id {
-                $( $id => Some(&$konst), )*
-                _ => None,
+            // A binary search over `ALL` (ascending, checked below at
+            // compile time): in flash it is the 54 pointers of `ALL` and a
+            // loop, where a `match` on the ID compiles to a large jump
+            // table.
+            let (mut lo, mut hi) = (0, ALL.len());
+            while lo < hi {
+                let mid = lo + (hi - lo) / 2;
+                let Some((_, [entry, ..])) = ALL.split_at_checked(mid) else {
+                    // Cannot happen: `mid < hi <= ALL.len()`.
+                    return None;
+                };
+                if entry.id == id {
+                    return Some(entry);
+                }
+                if entry.id < id {
+                    lo = mid + 1;
+                } else {
+                    hi = mid;
+                }
             }
+            None
         }
     };
     (@reply) => { Reply::Normal };
@@ -385,7 +402,8 @@ catalogue! {
 /// ```
 pub fn text_span(header: Header, prefix: &[u8]) -> Option<(usize, usize)> {
     let id = hex_number(prefix.get(3..6)?)?;
-    lookup(id)?.text?.span(header, prefix)
+    let (_, text) = TEXTS.iter().find(|(x, _)| *x == id)?;
+    text.span(header, prefix)
 }
 
 /// The value of up to 4 hex digits of either case.
@@ -393,6 +411,127 @@ fn hex_number(digits: &[u8]) -> Option<u16> {
     digits.iter().try_fold(0u16, |n, &b| {
         crate::field::hex_value(b).map(|d| (n << 4) | u16::from(d))
     })
+}
+
+// `lookup` searches `ALL` by halving: its IDs must ascend.
+// Indexing in a const initialiser is checked at compile time.
+#[allow(clippy::indexing_slicing)]
+const _: () = {
+    let mut i = 1;
+    while i < ALL.len() {
+        assert!(ALL[i - 1].id < ALL[i].id, "catalogue IDs must ascend");
+        i += 1;
+    }
+};
+
+/// Entries with a text field.
+// Indexing in a const initialiser is checked at compile time.
+#[allow(clippy::indexing_slicing)]
+const TEXT_ENTRIES: usize = {
+    let mut n = 0;
+    let mut i = 0;
+    while i < ALL.len() {
+        if ALL[i].text.is_some() {
+            n += 1;
+        }
+        i += 1;
+    }
+    n
+};
+
+/// Their IDs and text fields: what [`text_span`] searches, so that the
+/// frame check does not link the whole catalogue.
+// Indexing in a const initialiser is checked at compile time.
+#[allow(clippy::indexing_slicing)]
+const TEXTS: [(u16, TextField); TEXT_ENTRIES] = {
+    let mut out = [(0, TextField::CountedInResponse { start: 0 }); TEXT_ENTRIES];
+    let (mut i, mut k) = (0, 0);
+    while i < ALL.len() {
+        if let Some(t) = ALL[i].text {
+            out[k] = (ALL[i].id, t);
+            k += 1;
+        }
+        i += 1;
+    }
+    out
+};
+
+/// Every ID of [`ALL`], in its (ascending) order.
+// Indexing in a const initialiser is checked at compile time.
+#[allow(clippy::indexing_slicing)]
+const IDS: [u16; ALL.len()] = {
+    let mut ids = [0; ALL.len()];
+    let mut i = 0;
+    while i < ALL.len() {
+        ids[i] = ALL[i].id;
+        i += 1;
+    }
+    ids
+};
+
+/// Bit `i` set: entry `i` of [`ALL`] is [`Resend::Unsafe`].
+// Indexing in a const initialiser is checked at compile time.
+#[allow(clippy::indexing_slicing)]
+const UNSAFE: u64 = {
+    assert!(ALL.len() <= 64, "one bit per entry");
+    let mut bits = 0;
+    let mut i = 0;
+    while i < ALL.len() {
+        if let Resend::Unsafe = ALL[i].resend {
+            bits |= 1 << i;
+        }
+        i += 1;
+    }
+    bits
+};
+
+/// Entries whose reply is not [`Reply::Normal`].
+// Indexing in a const initialiser is checked at compile time.
+#[allow(clippy::indexing_slicing)]
+const SPECIAL_REPLIES: usize = {
+    let mut n = 0;
+    let mut i = 0;
+    while i < ALL.len() {
+        if !ALL[i].has_normal_response() {
+            n += 1;
+        }
+        i += 1;
+    }
+    n
+};
+
+/// Their IDs and replies.
+// Indexing in a const initialiser is checked at compile time.
+#[allow(clippy::indexing_slicing)]
+const REPLIES: [(u16, Reply); SPECIAL_REPLIES] = {
+    let mut out = [(0, Reply::Normal); SPECIAL_REPLIES];
+    let (mut i, mut k) = (0, 0);
+    while i < ALL.len() {
+        if !ALL[i].has_normal_response() {
+            out[k] = (ALL[i].id, ALL[i].reply);
+            k += 1;
+        }
+        i += 1;
+    }
+    out
+};
+
+/// What a request engine needs of message `id`'s entry, if the catalogue
+/// has one: whether a resend is harmless and what the controller answers
+/// (as [`lookup`]`(id)` gives them). Unlike [`lookup`], it does not link
+/// the entries and their names into a program: an ID table and a bit set.
+pub fn request_rules(id: u16) -> Option<(Resend, Reply)> {
+    let i = IDS.binary_search(&id).ok()?;
+    let resend = if UNSAFE.checked_shr(i as u32).unwrap_or(0) & 1 != 0 {
+        Resend::Unsafe
+    } else {
+        Resend::Safe
+    };
+    let reply = REPLIES
+        .iter()
+        .find(|(x, _)| *x == id)
+        .map_or(Reply::Normal, |&(_, r)| r);
+    Some((resend, reply))
 }
 
 /// A frame's text span is known once this many bytes are in.
@@ -471,6 +610,20 @@ mod tests {
                 ready_after_ms: 10_000
             }
         );
+    }
+
+    #[test]
+    fn request_rules_and_text_spans_agree_with_the_entries() {
+        for id in 0..=0xFFF {
+            let entry = lookup(id);
+            assert_eq!(
+                request_rules(id),
+                entry.map(|m| (m.resend, m.reply)),
+                "{id:03X}"
+            );
+            let text = TEXTS.iter().find(|(x, _)| *x == id).map(|&(_, t)| t);
+            assert_eq!(text, entry.and_then(|m| m.text), "{id:03X}");
+        }
     }
 
     #[test]

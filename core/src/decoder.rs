@@ -112,9 +112,19 @@ enum Step {
 }
 
 /// A push decoder of frames with an `N`-byte buffer.
-#[derive(Debug, Clone)]
+///
+/// Only the buffer depends on `N`: the decoding itself is one
+/// non-generic body over a byte slice, so a program with decoders of
+/// several capacities carries its code once.
+#[derive(Clone)]
 pub struct FrameDecoder<const N: usize = DEFAULT_CAPACITY> {
     buf: [u8; N],
+    inner: Inner,
+}
+
+/// The decoder's state apart from its buffer.
+#[derive(Debug, Clone)]
+struct Inner {
     len: usize,
     state: State,
     policy: BypassPolicy,
@@ -130,6 +140,24 @@ pub struct FrameDecoder<const N: usize = DEFAULT_CAPACITY> {
     replay_pos: usize,
     replay_len: usize,
     stats: DecoderStats,
+}
+
+impl<const N: usize> core::fmt::Debug for FrameDecoder<N> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let i = &self.inner;
+        f.debug_struct("FrameDecoder")
+            .field("buf", &self.buf)
+            .field("len", &i.len)
+            .field("state", &i.state)
+            .field("policy", &i.policy)
+            .field("text", &i.text)
+            .field("last", &i.last)
+            .field("failed", &i.failed)
+            .field("replay_pos", &i.replay_pos)
+            .field("replay_len", &i.replay_len)
+            .field("stats", &i.stats)
+            .finish()
+    }
 }
 
 impl<const N: usize> Default for FrameDecoder<N> {
@@ -148,30 +176,32 @@ impl<const N: usize> FrameDecoder<N> {
     pub const fn with_policy(policy: BypassPolicy) -> Self {
         FrameDecoder {
             buf: [0; N],
-            len: 0,
-            state: State::Hunting,
-            policy,
-            text: None,
-            last: None,
-            failed: None,
-            replay_pos: 0,
-            replay_len: 0,
-            stats: DecoderStats {
-                frames: 0,
-                errors: 0,
-                discarded_bytes: 0,
+            inner: Inner {
+                len: 0,
+                state: State::Hunting,
+                policy,
+                text: None,
+                last: None,
+                failed: None,
+                replay_pos: 0,
+                replay_len: 0,
+                stats: DecoderStats {
+                    frames: 0,
+                    errors: 0,
+                    discarded_bytes: 0,
+                },
             },
         }
     }
 
     /// The `@@` policy in force.
     pub fn policy(&self) -> BypassPolicy {
-        self.policy
+        self.inner.policy
     }
 
     /// Changes the `@@` policy.
     pub fn set_policy(&mut self, policy: BypassPolicy) {
-        self.policy = policy;
+        self.inner.policy = policy;
     }
 
     /// The buffer capacity (largest frame accepted).
@@ -181,26 +211,18 @@ impl<const N: usize> FrameDecoder<N> {
 
     /// Counters since creation.
     pub fn stats(&self) -> DecoderStats {
-        self.stats
+        self.inner.stats
     }
 
     /// Bytes held: the frame in progress and bytes waiting to be decoded
     /// again after a failed text frame.
     pub fn pending(&self) -> usize {
-        let frame = match self.state {
-            State::Done | State::Hunting => 0,
-            _ => self.len,
-        };
-        frame + self.replay_len.saturating_sub(self.replay_pos)
+        self.inner.pending()
     }
 
     /// The frame returned by the last call, until the next byte is pushed.
     pub fn last_frame(&self) -> Option<Frame<'_>> {
-        if self.state != State::Done {
-            return None;
-        }
-        let bytes = self.buf.get(..self.len)?;
-        self.last.map(|env| Frame::from_parts(bytes, env))
+        self.inner.last_frame(&self.buf)
     }
 
     /// After an [`Event::Error`] for a frame that ended with CR LF but
@@ -208,58 +230,21 @@ impl<const N: usize> FrameDecoder<N> {
     /// header, station and code, if they could be read. An engine awaiting
     /// a reply uses this to tell "my reply arrived broken" from noise.
     pub fn failed_envelope(&self) -> Option<(Header, Station, u16)> {
-        self.failed
+        self.inner.failed
     }
 
     /// Drops any partial frame and bytes waiting to be decoded again
     /// (counted as discarded) and starts hunting.
     pub fn reset(&mut self) {
-        self.discard(self.pending());
-        self.len = 0;
-        self.replay_pos = 0;
-        self.replay_len = 0;
-        self.state = State::Hunting;
+        self.inner.reset();
     }
 
     /// Pushes one byte. If bytes of a failed text frame are waiting to be
     /// decoded again, `byte` joins them and they come first; call
     /// `decode(&[])` until [`Event::NeedMore`] to drain them.
     pub fn push(&mut self, byte: u8) -> Event<'_> {
-        let outcome = if self.replay_pos < self.replay_len {
-            match self.buf.get_mut(self.replay_len) {
-                Some(slot) => {
-                    *slot = byte;
-                    self.replay_len += 1;
-                }
-                // Cannot happen: a replayed region is shorter than the buffer.
-                None => self.discard(1),
-            }
-            self.replay()
-        } else {
-            self.step(byte)
-        };
-        match outcome {
-            Step::More => Event::NeedMore,
-            Step::Frame(env) => self.frame_event(env),
-            Step::Error(e) => Event::Error(e),
-        }
-    }
-
-    /// Steps the bytes waiting to be decoded again until an event.
-    fn replay(&mut self) -> Step {
-        while self.replay_pos < self.replay_len {
-            let Some(&b) = self.buf.get(self.replay_pos) else {
-                break;
-            };
-            self.replay_pos += 1;
-            let outcome = self.step(b);
-            if !matches!(outcome, Step::More) {
-                return outcome;
-            }
-        }
-        self.replay_pos = 0;
-        self.replay_len = 0;
-        Step::More
+        let outcome = self.inner.push(&mut self.buf, byte);
+        self.event(outcome)
     }
 
     /// Consumes bytes from `input` until a frame or an error is ready or
@@ -267,28 +252,190 @@ impl<const N: usize> FrameDecoder<N> {
     /// it answers [`Event::NeedMore`] (bytes being decoded again after a
     /// failed text frame come out before new input, with `consumed` 0).
     pub fn decode(&mut self, input: &[u8]) -> Decoded<'_> {
+        let (consumed, outcome) = self.inner.decode(&mut self.buf, input);
+        Decoded {
+            consumed,
+            event: self.event(outcome),
+        }
+    }
+
+    fn event(&self, outcome: Step) -> Event<'_> {
+        self.inner.event(&self.buf, outcome)
+    }
+}
+
+/// A push decoder of frames in a buffer it borrows at each call: the
+/// state of a [`FrameDecoder`] without its buffer, so that a program can
+/// decode in an area that serves something else between frames (a bridge
+/// decodes single commands and replies in the frame buffer of its 26DH
+/// transfer).
+///
+/// Pass the same buffer to every call until [`SliceDecoder::reset`]: the
+/// frame in progress lives in it. Its length is the capacity (the largest
+/// frame accepted). Another buffer, or one written in between, gives
+/// wrong frames or errors but never a panic. After `reset` any buffer
+/// may be used. Behaves as a [`FrameDecoder`] of the buffer's length in
+/// every other respect.
+#[derive(Debug, Clone)]
+pub struct SliceDecoder {
+    inner: Inner,
+}
+
+impl Default for SliceDecoder {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl SliceDecoder {
+    /// A decoder with the default `@@` policy ([`BypassPolicy::CommandsOnly`]).
+    pub const fn new() -> Self {
+        Self::with_policy(BypassPolicy::CommandsOnly)
+    }
+
+    /// A decoder with the given `@@` policy.
+    pub const fn with_policy(policy: BypassPolicy) -> Self {
+        SliceDecoder {
+            inner: FrameDecoder::<0>::with_policy(policy).inner,
+        }
+    }
+
+    /// The `@@` policy in force.
+    pub fn policy(&self) -> BypassPolicy {
+        self.inner.policy
+    }
+
+    /// Changes the `@@` policy.
+    pub fn set_policy(&mut self, policy: BypassPolicy) {
+        self.inner.policy = policy;
+    }
+
+    /// Counters since creation.
+    pub fn stats(&self) -> DecoderStats {
+        self.inner.stats
+    }
+
+    /// Bytes held in the buffer: the frame in progress and bytes waiting to
+    /// be decoded again after a failed text frame.
+    pub fn pending(&self) -> usize {
+        self.inner.pending()
+    }
+
+    /// The frame returned by the last call, until the next byte is pushed
+    /// (`buf`: the buffer of that call).
+    pub fn last_frame<'b>(&self, buf: &'b [u8]) -> Option<Frame<'b>> {
+        self.inner.last_frame(buf)
+    }
+
+    /// As [`FrameDecoder::failed_envelope`].
+    pub fn failed_envelope(&self) -> Option<(Header, Station, u16)> {
+        self.inner.failed
+    }
+
+    /// Drops any partial frame and bytes waiting to be decoded again
+    /// (counted as discarded) and starts hunting; the buffer is free.
+    pub fn reset(&mut self) {
+        self.inner.reset();
+    }
+
+    /// As [`FrameDecoder::push`], in `buf`.
+    pub fn push<'b>(&mut self, buf: &'b mut [u8], byte: u8) -> Event<'b> {
+        let outcome = self.inner.push(buf, byte);
+        self.inner.event(buf, outcome)
+    }
+
+    /// As [`FrameDecoder::decode`], in `buf`.
+    pub fn decode<'b>(&mut self, buf: &'b mut [u8], input: &[u8]) -> Decoded<'b> {
+        let (consumed, outcome) = self.inner.decode(buf, input);
+        Decoded {
+            consumed,
+            event: self.inner.event(buf, outcome),
+        }
+    }
+}
+
+impl Inner {
+    fn event<'b>(&self, buf: &'b [u8], outcome: Step) -> Event<'b> {
+        match outcome {
+            Step::More => Event::NeedMore,
+            Step::Frame(env) => {
+                let bytes = buf.get(..self.len).unwrap_or(&[]);
+                Event::Frame(Frame::from_parts(bytes, env))
+            }
+            Step::Error(e) => Event::Error(e),
+        }
+    }
+
+    fn pending(&self) -> usize {
+        let frame = match self.state {
+            State::Done | State::Hunting => 0,
+            _ => self.len,
+        };
+        frame + self.replay_len.saturating_sub(self.replay_pos)
+    }
+
+    fn last_frame<'b>(&self, buf: &'b [u8]) -> Option<Frame<'b>> {
+        if self.state != State::Done {
+            return None;
+        }
+        let bytes = buf.get(..self.len)?;
+        self.last.map(|env| Frame::from_parts(bytes, env))
+    }
+
+    fn reset(&mut self) {
+        self.discard(self.pending());
+        self.len = 0;
+        self.replay_pos = 0;
+        self.replay_len = 0;
+        self.state = State::Hunting;
+    }
+
+    fn push(&mut self, buf: &mut [u8], byte: u8) -> Step {
+        if self.replay_pos < self.replay_len {
+            match buf.get_mut(self.replay_len) {
+                Some(slot) => {
+                    *slot = byte;
+                    self.replay_len += 1;
+                }
+                // Cannot happen: a replayed region is shorter than the buffer.
+                None => self.discard(1),
+            }
+            self.replay(buf)
+        } else {
+            self.step(buf, byte)
+        }
+    }
+
+    fn decode(&mut self, buf: &mut [u8], input: &[u8]) -> (usize, Step) {
         let mut consumed = 0;
-        let mut outcome = self.replay();
+        let mut outcome = self.replay(buf);
         if matches!(outcome, Step::More) {
             for &b in input {
                 consumed += 1;
-                outcome = self.step(b);
+                outcome = self.step(buf, b);
                 if !matches!(outcome, Step::More) {
                     break;
                 }
             }
         }
-        let event = match outcome {
-            Step::More => Event::NeedMore,
-            Step::Frame(env) => self.frame_event(env),
-            Step::Error(e) => Event::Error(e),
-        };
-        Decoded { consumed, event }
+        (consumed, outcome)
     }
 
-    fn frame_event(&self, env: Envelope) -> Event<'_> {
-        let bytes = self.buf.get(..self.len).unwrap_or(&[]);
-        Event::Frame(Frame::from_parts(bytes, env))
+    /// Steps the bytes waiting to be decoded again until an event.
+    fn replay(&mut self, buf: &mut [u8]) -> Step {
+        while self.replay_pos < self.replay_len {
+            let Some(&b) = buf.get(self.replay_pos) else {
+                break;
+            };
+            self.replay_pos += 1;
+            let outcome = self.step(buf, b);
+            if !matches!(outcome, Step::More) {
+                return outcome;
+            }
+        }
+        self.replay_pos = 0;
+        self.replay_len = 0;
+        Step::More
     }
 
     fn discard(&mut self, n: usize) {
@@ -306,26 +453,26 @@ impl<const N: usize> FrameDecoder<N> {
     /// byte follows its start, sets its bytes from there (and `extra`, the
     /// byte that broke it, if it was not stored) up to be decoded again,
     /// ahead of any bytes still waiting; `true` if it did.
-    fn recover(&mut self, e: Error, extra: Option<u8>) -> Option<Step> {
+    fn recover(&mut self, buf: &mut [u8], e: Error, extra: Option<u8>) -> Option<Step> {
         self.text?;
-        let frame = self.buf.get(1..self.len)?;
+        let frame = buf.get(1..self.len)?;
         let p = 1 + frame.iter().position(|&b| Header::from_byte(b).is_some())?;
         let kept = self.len - p;
         // Waiting bytes follow the failed frame's: move them up first.
         let waiting = self.replay_len.saturating_sub(self.replay_pos);
         let extra_len = usize::from(extra.is_some());
         let total = kept + extra_len + waiting;
-        if total > N || (waiting > 0 && self.replay_pos < self.len) {
+        if total > buf.len() || (waiting > 0 && self.replay_pos < self.len) {
             return None;
         }
         // The failed frame's bytes first: the waiting ones land where they
         // were (`kept + extra_len <= len <= replay_pos`).
-        let moved = move_within(&mut self.buf, p, kept, 0)
-            && move_within(&mut self.buf, self.replay_pos, waiting, kept + extra_len);
+        let moved = move_within(buf, p, kept, 0)
+            && move_within(buf, self.replay_pos, waiting, kept + extra_len);
         if !moved {
             return None;
         }
-        if let (Some(x), Some(slot)) = (extra, self.buf.get_mut(kept)) {
+        if let (Some(x), Some(slot)) = (extra, buf.get_mut(kept)) {
             *slot = x;
         }
         self.replay_pos = 0;
@@ -335,8 +482,8 @@ impl<const N: usize> FrameDecoder<N> {
         Some(self.fail(e, p))
     }
 
-    fn start(&mut self, byte: u8) {
-        if let Some(slot) = self.buf.first_mut() {
+    fn start(&mut self, buf: &mut [u8], byte: u8) {
+        if let Some(slot) = buf.first_mut() {
             *slot = byte;
             self.len = 1;
             self.state = State::InFrame;
@@ -350,14 +497,14 @@ impl<const N: usize> FrameDecoder<N> {
     }
 
     /// Appends a byte of the frame in progress; `false` if the buffer is full.
-    fn store(&mut self, byte: u8) -> bool {
-        match self.buf.get_mut(self.len) {
+    fn store(&mut self, buf: &mut [u8], byte: u8) -> bool {
+        match buf.get_mut(self.len) {
             Some(slot) => {
                 *slot = byte;
                 self.len += 1;
                 if self.text.is_none() && (ENVELOPE_LEN..=TEXT_PROBE_MAX).contains(&self.len) {
-                    let head = self.buf.first().copied().and_then(Header::from_byte);
-                    let prefix = self.buf.get(..self.len).unwrap_or(&[]);
+                    let head = buf.first().copied().and_then(Header::from_byte);
+                    let prefix = buf.get(..self.len).unwrap_or(&[]);
                     self.text = head.and_then(|h| frame::text_span(h, prefix));
                 }
                 true
@@ -366,7 +513,7 @@ impl<const N: usize> FrameDecoder<N> {
         }
     }
 
-    fn step(&mut self, byte: u8) -> Step {
+    fn step(&mut self, buf: &mut [u8], byte: u8) -> Step {
         self.failed = None;
         if self.state == State::Done {
             self.len = 0;
@@ -376,7 +523,7 @@ impl<const N: usize> FrameDecoder<N> {
         match self.state {
             State::Hunting | State::Done => {
                 if is_header {
-                    self.start(byte);
+                    self.start(buf, byte);
                 } else {
                     self.discard(1);
                 }
@@ -389,14 +536,15 @@ impl<const N: usize> FrameDecoder<N> {
                 if is_header && !in_text {
                     let cut = self.len;
                     let e = Error::Truncated { len: cut };
-                    if let Some(step) = self.recover(e, Some(byte)) {
+                    if let Some(step) = self.recover(buf, e, Some(byte)) {
                         return step;
                     }
-                    self.start(byte);
+                    self.start(buf, byte);
                     return self.fail(e, cut);
                 }
                 if byte == b'\n' && !in_text {
-                    if let Some(step) = self.recover(Error::MissingCarriageReturn, Some(byte)) {
+                    if let Some(step) = self.recover(buf, Error::MissingCarriageReturn, Some(byte))
+                    {
                         return step;
                     }
                     let dropped = self.len + 1;
@@ -406,14 +554,14 @@ impl<const N: usize> FrameDecoder<N> {
                 if byte == b'\r' && !in_text {
                     self.state = State::SawCr;
                 }
-                self.store_or_overflow(byte)
+                self.store_or_overflow(buf, byte)
             }
             State::SawCr => {
                 if byte == b'\n' {
-                    if let Step::Error(e) = self.store_or_overflow(byte) {
+                    if let Step::Error(e) = self.store_or_overflow(buf, byte) {
                         return Step::Error(e);
                     }
-                    let bytes = self.buf.get(..self.len).unwrap_or(&[]);
+                    let bytes = buf.get(..self.len).unwrap_or(&[]);
                     match frame::validate(bytes, self.policy) {
                         Ok(env) => {
                             self.state = State::Done;
@@ -423,7 +571,7 @@ impl<const N: usize> FrameDecoder<N> {
                         }
                         Err(e) => {
                             self.failed = envelope_of(bytes);
-                            if let Some(step) = self.recover(e, None) {
+                            if let Some(step) = self.recover(buf, e, None) {
                                 return step;
                             }
                             self.state = State::Hunting;
@@ -432,12 +580,12 @@ impl<const N: usize> FrameDecoder<N> {
                     }
                 } else {
                     let e = Error::MissingLineFeed { byte };
-                    if let Some(step) = self.recover(e, Some(byte)) {
+                    if let Some(step) = self.recover(buf, e, Some(byte)) {
                         return step;
                     }
                     if is_header {
                         let dropped = self.len;
-                        self.start(byte);
+                        self.start(buf, byte);
                         self.fail(e, dropped)
                     } else {
                         let dropped = self.len + 1;
@@ -449,12 +597,12 @@ impl<const N: usize> FrameDecoder<N> {
         }
     }
 
-    fn store_or_overflow(&mut self, byte: u8) -> Step {
-        if self.store(byte) {
+    fn store_or_overflow(&mut self, buf: &mut [u8], byte: u8) -> Step {
+        if self.store(buf, byte) {
             Step::More
         } else {
-            let e = Error::FrameTooLong { limit: N };
-            if let Some(step) = self.recover(e, Some(byte)) {
+            let e = Error::FrameTooLong { limit: buf.len() };
+            if let Some(step) = self.recover(buf, e, Some(byte)) {
                 return step;
             }
             let dropped = self.len + 1;
@@ -497,6 +645,87 @@ mod tests {
     use std::vec::Vec;
 
     const SERVO_REPLY: &[u8] = b"#992322C\r\n";
+
+    /// A [`SliceDecoder`] over a 64-byte buffer gives what a
+    /// `FrameDecoder<64>` gives, pushed byte by byte and decoded in pieces:
+    /// frames, errors (an over-long frame, a bad checksum, a cut 200H whose
+    /// text swallowed a reply) and counters.
+    #[test]
+    fn a_slice_decoder_decodes_as_a_frame_decoder_of_its_buffer() {
+        let mut input = Vec::new();
+        input.extend_from_slice(b"xx#992322C\r\n");
+        input.extend_from_slice(b"!99200AB!99200CD#992322C\r\n");
+        input.push(b'!');
+        input.extend_from_slice(&[b'0'; 80]);
+        input.extend_from_slice(b"\r\n#992322D\r\n");
+        input.extend_from_slice(SERVO_REPLY);
+
+        let mut owned: FrameDecoder<64> = FrameDecoder::new();
+        let mut state = SliceDecoder::new();
+        let mut buf = [0u8; 64];
+        for &b in &input {
+            let a = owned.push(b).map_frame(|f| f.as_bytes().to_vec());
+            let c = state.push(&mut buf, b).map_frame(|f| f.as_bytes().to_vec());
+            assert_eq!(a, c);
+            assert_eq!(
+                owned.last_frame().map(|f| f.as_bytes().to_vec()),
+                state.last_frame(&buf).map(|f| f.as_bytes().to_vec())
+            );
+            loop {
+                let a = owned.decode(b"").event.map_frame(|f| f.as_bytes().to_vec());
+                let c = state
+                    .decode(&mut buf, b"")
+                    .event
+                    .map_frame(|f| f.as_bytes().to_vec());
+                assert_eq!(a, c);
+                if a == Err(None) {
+                    break;
+                }
+            }
+            assert_eq!(owned.pending(), state.pending());
+            assert_eq!(owned.failed_envelope(), state.failed_envelope());
+        }
+        assert_eq!(owned.stats(), state.stats());
+        assert_eq!(state.stats().frames, 3);
+        assert!(state.stats().errors >= 3);
+
+        // In pieces.
+        let mut owned: FrameDecoder<64> = FrameDecoder::new();
+        let mut state = SliceDecoder::new();
+        let mut buf = [0u8; 64];
+        for piece in input.chunks(7) {
+            let (mut x, mut y) = (piece, piece);
+            loop {
+                let a = owned.decode(x);
+                let c = state.decode(&mut buf, y);
+                assert_eq!(a.consumed, c.consumed);
+                let (ea, ec) = (
+                    a.event.map_frame(|f| f.as_bytes().to_vec()),
+                    c.event.map_frame(|f| f.as_bytes().to_vec()),
+                );
+                assert_eq!(ea, ec);
+                x = &x[a.consumed..];
+                y = &y[c.consumed..];
+                if ea == Err(None) {
+                    break;
+                }
+            }
+        }
+        assert_eq!(owned.stats(), state.stats());
+        state.reset();
+        assert_eq!(state.pending(), 0);
+    }
+
+    impl<'d> Event<'d> {
+        /// `Ok(frame)`, `Err(Some(error))` or `Err(None)` (need more).
+        fn map_frame<T>(self, f: impl FnOnce(Frame<'d>) -> T) -> Result<T, Option<Error>> {
+            match self {
+                Event::NeedMore => Err(None),
+                Event::Frame(fr) => Ok(f(fr)),
+                Event::Error(e) => Err(Some(e)),
+            }
+        }
+    }
 
     #[test]
     fn golden_frame_after_noise() {

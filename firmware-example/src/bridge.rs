@@ -85,15 +85,18 @@
 //!
 //! # Buffers
 //!
-//! One 2,051-byte area serves both paths: in pass-through it is the frame
-//! decoder (the command, then the reply); in a 26DH it is the transfer's
-//! chunk buffer. The two never run at once.
+//! One 2,051-byte area serves both paths: it is the frame buffer of the
+//! 26DH transfer, which the bridge builds once and restarts in place for
+//! each 26DH ([`Transfer::restart`]: a transfer is about 3 KB, too much to
+//! build on the stack and move); between 26DHs the pass-through decoder (a
+//! [`SliceDecoder`]) decodes the command, then the reply, in it. The two
+//! never run at once.
 
-use embedded_io::{Read, ReadReady, Write, WriteReady};
+use embedded_io::{Write, WriteReady};
 use iai_protocol_b::catalogue::{self, Reply, Resend};
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::clock::reached;
-use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::decoder::{Event, SliceDecoder};
 use iai_protocol_b::exchange::{Due, Exchange, ExchangeConfig, Finish, Offer, Quarantine};
 use iai_protocol_b::field::{decode_unsigned, FieldSpec};
 use iai_protocol_b::frame::{emit_frame, Header, Station, ENVELOPE_LEN};
@@ -109,6 +112,11 @@ use crate::config::{Config, Source};
 use crate::log;
 use crate::serial::{self, FlowControl, UPSTREAM_MARKS, XOFF, XON};
 use crate::status;
+
+// Defined in the layers below; re-exported where the bridge's users
+// have always found them.
+pub use crate::serial::Port;
+pub use crate::status::{LastError, Stats};
 
 /// Upstream silence required before the quit sequence.
 pub const QUIT_GUARD_MS: u32 = 20;
@@ -144,16 +152,6 @@ const IN_CHUNK: usize = 16;
 
 /// The 26DH stream the bridge splits.
 const STREAM: PositionStream = PositionStream::CHANGE_2;
-
-/// A serial port as the bridge sees it: non-blocking `embedded-io` plus an
-/// overrun count.
-pub trait Port: Read + ReadReady + Write + WriteReady {
-    /// Received bytes lost since the last call (receive ring full, or the
-    /// UART's overrun flag). Ports that cannot lose bytes return 0.
-    fn take_overruns(&mut self) -> u32 {
-        0
-    }
-}
 
 /// Why [`Bridge::poll`] failed: a port reported an error.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -213,87 +211,20 @@ pub struct Interest {
     pub down_write: bool,
 }
 
-/// What the bridge counted since start.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Stats {
-    /// Commands forwarded downstream as they were.
-    pub forwarded: u32,
-    /// Replies relayed upstream.
-    pub relayed: u32,
-    /// Forwarded commands that got no valid reply in time.
-    pub reply_timeouts: u32,
-    /// Upstream frames dropped as malformed (never forwarded).
-    pub rejected: u32,
-    /// Commands refused by the policy (answered `&` B06).
-    pub refused: u32,
-    /// Commands for a station other than the controller's and the bridge's.
-    pub other_station: u32,
-    /// Commands the bridge answered itself (its own station).
-    pub own_queries: u32,
-    /// 26DH commands completed (`#` sent).
-    pub streams_ok: u32,
-    /// 26DH commands answered with `&`.
-    pub streams_failed: u32,
-    /// Records confirmed by the controller in 26DH chunks.
-    pub records: u32,
-    /// 26DH chunks sent downstream, retries included.
-    pub chunks_sent: u32,
-    /// Chunks sent again.
-    pub retries: u32,
-    /// Chunk replies that timed out.
-    pub chunk_timeouts: u32,
-    /// `&` replies to chunks.
-    pub chunk_error_replies: u32,
-    /// Upstream bytes lost (receive overruns).
-    pub upstream_overruns: u32,
-    /// Downstream bytes lost (receive overruns).
-    pub downstream_overruns: u32,
-    /// Bytes read from the upstream.
-    pub upstream_in: u64,
-    /// Bytes written to the upstream.
-    pub upstream_out: u64,
-    /// Bytes read from the downstream.
-    pub downstream_in: u64,
-    /// Bytes written to the downstream.
-    pub downstream_out: u64,
-}
-
-/// The last `&` code the bridge sent of its own, and when.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct LastError {
-    /// The code ([`codes`]).
-    pub code: u16,
-    /// The tick (ms) it was sent.
-    pub at_ms: u32,
-}
-
 /// The 26DH transfer: records from the upstream decoder through a bounded
 /// queue to controller-sized commands.
 type Job = Transfer<RecordQueue<QUEUE_LEN>>;
 
-/// The 26DH state: the upstream decoder and, once the count is known, the
-/// transfer.
+/// The 26DH state beside the transfer: the upstream decoder.
 struct StreamWork {
     decoder: PositionStreamDecoder,
-    job: Option<Job>,
+    /// The transfer was restarted for this 26DH (its count is known).
+    started: bool,
     /// The host's last record, held back until its checksum is known: a
     /// 26DH whose checksum fails never completes a write.
     last: Option<PositionRecord>,
     /// Chunk and queue sizes for the downstream rate.
     pipeline: Pipeline,
-}
-
-/// The shared 2,051-byte area (see the module docs). The variants differ
-/// in size by the transfer's record queue; sharing is the point.
-#[allow(clippy::large_enum_variant)]
-enum Work {
-    /// Pass-through and the bridge's own queries: the command, then the
-    /// reply (the command is sent once, so it need not be kept).
-    Frame(FrameDecoder<FRAME_CAP>),
-    /// A 26DH.
-    Stream(StreamWork),
 }
 
 /// The chapter-5 settings of a forwarded command: one send (the host
@@ -344,7 +275,7 @@ enum Up {
     Empty,
 }
 
-/// The bridge's state: about 3 KiB; keep it in a static. It holds no port
+/// The bridge's state: about 4 KiB; keep it in a static. It holds no port
 /// and no clock.
 pub struct Bridge {
     cfg: Config,
@@ -352,7 +283,16 @@ pub struct Bridge {
     mode: Mode,
     head: [u8; ENVELOPE_LEN],
     head_len: usize,
-    work: Work,
+    /// The 26DH transfer, built once and restarted in place for each 26DH.
+    /// Between 26DHs its frame buffer is `frames`' buffer (see the module
+    /// docs).
+    job: Job,
+    /// Pass-through and the bridge's own queries: the command, then the
+    /// reply (the command is sent once, so it need not be kept), decoded
+    /// in the job's frame buffer.
+    frames: SliceDecoder,
+    /// A 26DH's upstream side.
+    stream: StreamWork,
     /// Running checksum of a skipped command and its last two bytes.
     skip_sum: u8,
     skip_tail: [u8; 2],
@@ -377,14 +317,24 @@ pub struct Bridge {
 impl Bridge {
     /// An idle bridge with this configuration (`source` says where it came
     /// from, for the status query).
-    pub const fn new(cfg: Config, source: Source) -> Self {
+    pub fn new(cfg: Config, source: Source) -> Self {
         Self {
             cfg,
             source,
             mode: Mode::Idle,
             head: [0; ENVELOPE_LEN],
             head_len: 0,
-            work: Work::Frame(FrameDecoder::with_policy(BypassPolicy::CommandsOnly)),
+            job: Transfer::new(
+                TransferConfig::tta(cfg.controller_station),
+                RecordQueue::new(),
+            ),
+            frames: SliceDecoder::with_policy(BypassPolicy::CommandsOnly),
+            stream: StreamWork {
+                decoder: PositionStreamDecoder::new(BypassPolicy::CommandsOnly),
+                started: false,
+                last: None,
+                pipeline: pipeline(cfg.downstream_baud),
+            },
             skip_sum: 0,
             skip_tail: [0; 2],
             out_off: 0,
@@ -423,9 +373,8 @@ impl Bridge {
         }
     }
 
-    /// Sets the configuration (at start, before the first [`Bridge::poll`]);
-    /// lets a board keep the bridge in a `static` built by the `const`
-    /// [`Bridge::new`].
+    /// Sets the configuration (at start, before the first [`Bridge::poll`]):
+    /// lets a board build the bridge before its configuration is read.
     pub fn configure(&mut self, cfg: Config, source: Source) {
         self.cfg = cfg;
         self.source = source;
@@ -468,9 +417,9 @@ impl Bridge {
         let lost = down.take_overruns();
         if lost > 0 {
             self.stats.downstream_overruns = self.stats.downstream_overruns.wrapping_add(lost);
-            if let (Mode::AwaitReply, Work::Frame(f)) = (self.mode, &mut self.work) {
+            if self.mode == Mode::AwaitReply {
                 // The reply being decoded lost bytes: start again.
-                f.reset();
+                self.frames.reset();
             }
         }
         let moved = match self.mode {
@@ -628,15 +577,11 @@ impl Bridge {
         self.head_len = 0;
         self.stream_deadline = None;
         self.tx_blocked = false;
-        match &mut self.work {
-            Work::Frame(f) => {
-                f.reset();
-                f.set_policy(BypassPolicy::CommandsOnly);
-            }
-            Work::Stream(_) => {
-                self.work = Work::Frame(FrameDecoder::with_policy(BypassPolicy::CommandsOnly));
-            }
-        }
+        // The job's frame buffer is the decoder's again (a 26DH restarts
+        // the job before it polls it).
+        self.stream.started = false;
+        self.frames.reset();
+        self.frames.set_policy(BypassPolicy::CommandsOnly);
     }
 
     /// Reads and drops whatever the controller sends unasked (late replies,
@@ -712,10 +657,8 @@ impl Bridge {
 
     /// Pass-through (or own query): the envelope goes to the frame decoder.
     fn start_command(&mut self, now: u32) {
-        if let Work::Frame(f) = &mut self.work {
-            f.reset();
-            f.set_policy(BypassPolicy::CommandsOnly);
-        }
+        self.frames.reset();
+        self.frames.set_policy(BypassPolicy::CommandsOnly);
         self.mode = Mode::Command;
         let head = self.head;
         for &b in &head {
@@ -775,10 +718,7 @@ impl Bridge {
 
     /// One byte of a pass-through command (or an own query).
     fn command_byte(&mut self, b: u8, now: u32) {
-        let Work::Frame(frames) = &mut self.work else {
-            return;
-        };
-        match frames.push(b) {
+        match self.frames.push(self.job.frame_buffer(), b) {
             Event::NeedMore => {}
             Event::Frame(f) if f.header() == Header::Command => {
                 let (station, id) = (f.station(), f.code());
@@ -790,12 +730,9 @@ impl Bridge {
                     // Its catalogue entry says what to expect; one outside
                     // the catalogue is sent once and any `#` with its ID
                     // taken.
-                    match catalogue::lookup(id) {
-                        Some(info) => self.exchange.start(info, now),
-                        None => self
-                            .exchange
-                            .start_raw(id, Resend::Unsafe, Reply::Normal, now),
-                    }
+                    let (resend, reply) =
+                        catalogue::request_rules(id).unwrap_or((Resend::Unsafe, Reply::Normal));
+                    self.exchange.start_raw(id, resend, reply, now);
                     self.mode = Mode::SendCommand;
                     self.out_off = 0;
                 }
@@ -848,10 +785,7 @@ impl Bridge {
         down: &mut D,
         now: u32,
     ) -> Result<bool, Error<U::Error, D::Error>> {
-        let Work::Frame(frames) = &mut self.work else {
-            self.go_idle();
-            return Ok(true);
-        };
+        let frames = &mut self.frames;
         let mut moved = false;
         match self.mode {
             Mode::SendCommand => {
@@ -859,7 +793,9 @@ impl Bridge {
                     // The turnaround after the last reply has not passed.
                     return Ok(false);
                 }
-                let bytes = frames.last_frame().map_or(&[][..], |f| f.as_bytes());
+                let bytes = frames
+                    .last_frame(self.job.frame_buffer())
+                    .map_or(&[][..], |f| f.as_bytes());
                 let out = &mut self.stats.downstream_out;
                 let n =
                     write_some(down, bytes, &mut self.out_off, out).map_err(Error::Downstream)?;
@@ -884,7 +820,7 @@ impl Bridge {
                     }
                     self.stats.downstream_in += 1;
                     moved = true;
-                    match frames.push(buf[0]) {
+                    match frames.push(self.job.frame_buffer(), buf[0]) {
                         Event::Frame(f) => {
                             let offer = self.exchange.offer(&f, true, now);
                             if matches!(offer, Offer::Accepted | Offer::Rejected(_)) {
@@ -922,7 +858,9 @@ impl Bridge {
                 }
             }
             Mode::RelayReply => {
-                let bytes = frames.last_frame().map_or(&[][..], |f| f.as_bytes());
+                let bytes = frames
+                    .last_frame(self.job.frame_buffer())
+                    .map_or(&[][..], |f| f.as_bytes());
                 let out = &mut self.stats.upstream_out;
                 let n = write_some(up, bytes, &mut self.out_off, out).map_err(Error::Upstream)?;
                 moved |= n > 0;
@@ -944,17 +882,15 @@ impl Bridge {
 
     /// A 26DH begins: the envelope goes to the stream decoder.
     fn start_stream(&mut self, station: Station, now: u32) {
-        let mut decoder = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
+        let work = &mut self.stream;
+        work.decoder = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
         for &b in &self.head {
             // The envelope alone never completes an event.
-            let _ = decoder.push(b);
+            let _ = work.decoder.push(b);
         }
-        self.work = Work::Stream(StreamWork {
-            decoder,
-            job: None,
-            last: None,
-            pipeline: pipeline(self.cfg.downstream_baud),
-        });
+        work.started = false;
+        work.last = None;
+        work.pipeline = pipeline(self.cfg.downstream_baud);
         self.stream_deadline = None;
         self.tx_blocked = false;
         self.mode = Mode::Stream {
@@ -969,18 +905,12 @@ impl Bridge {
     /// Whether the 26DH queue holds all the records the pipeline allows
     /// (see [`pipeline`]): the bridge then stops reading the host.
     fn queue_full(&mut self) -> bool {
-        match &mut self.work {
-            Work::Stream(StreamWork {
-                job: Some(j),
-                pipeline,
-                ..
-            }) => {
-                let limit = pipeline.queued_records;
-                let q = j.source_mut();
-                q.is_full() || q.len() >= limit
-            }
-            _ => false,
+        if !self.stream.started {
+            return false;
         }
+        let limit = self.stream.pipeline.queued_records;
+        let q = self.job.source_mut();
+        q.is_full() || q.len() >= limit
     }
 
     /// The 26DH mode: decode upstream bytes into the queue, drive the
@@ -1026,10 +956,7 @@ impl Bridge {
             };
             moved = true;
             waiting_since = now;
-            let Work::Stream(work) = &mut self.work else {
-                abort = Some(codes::INTERNAL);
-                break;
-            };
+            let work = &mut self.stream;
             match work.decoder.push(b) {
                 StreamEvent::NeedMore => {}
                 StreamEvent::Start {
@@ -1040,18 +967,18 @@ impl Bridge {
                         max_records: work.pipeline.chunk_records,
                         ..TransferConfig::tta(s)
                     };
-                    let job = Transfer::new(cfg, RecordQueue::new()).with_total(u32::from(count));
-                    work.job = Some(job);
+                    // In place: a transfer is about 3 KB.
+                    self.job.source_mut().clear();
+                    self.job.restart(cfg);
+                    self.job.set_total(u32::from(count));
+                    work.started = true;
                 }
                 StreamEvent::Record(rec) => {
                     if work.decoder.records_done() == work.decoder.records_announced() {
                         // The last record waits for the checksum.
                         work.last = Some(rec);
                     } else {
-                        let pushed = work
-                            .job
-                            .as_mut()
-                            .is_some_and(|job| job.source_mut().push(rec).is_ok());
+                        let pushed = work.started && enqueue(&mut self.job, rec).is_ok();
                         if !pushed {
                             // Cannot happen: the queue had room.
                             abort = Some(codes::INTERNAL);
@@ -1074,21 +1001,15 @@ impl Bridge {
 
         // The checksum was right: the held-back record may go, and the
         // transfer learns that no more come.
-        if upstream_done {
-            if let Work::Stream(StreamWork {
-                job: Some(job),
-                last,
-                ..
-            }) = &mut self.work
-            {
-                if let Some(rec) = last.take() {
-                    if let Err(rec) = job.source_mut().push(rec) {
-                        *last = Some(rec);
-                    }
+        if upstream_done && self.stream.started {
+            let (job, last) = (&mut self.job, &mut self.stream.last);
+            if let Some(rec) = last.take() {
+                if let Err(rec) = enqueue(job, rec) {
+                    *last = Some(rec);
                 }
-                if last.is_none() {
-                    job.source_mut().finish();
-                }
+            }
+            if last.is_none() {
+                job.source_mut().finish();
             }
         }
 
@@ -1097,11 +1018,8 @@ impl Bridge {
         self.tx_blocked = false;
         self.stream_deadline = None;
         let was_full = self.queue_full();
-        let job = match &mut self.work {
-            Work::Stream(StreamWork { job: Some(job), .. }) => Some(job),
-            _ => None,
-        };
-        if let Some(job) = job {
+        if self.stream.started {
+            let job = &mut self.job;
             let mut buf = [0u8; 16];
             while down.read_ready().map_err(Error::Downstream)? {
                 let n = down.read(&mut buf).map_err(Error::Downstream)?;
@@ -1334,6 +1252,15 @@ pub const fn pipeline(baud: u32) -> Pipeline {
     }
 }
 
+/// Appends `rec` to the 26DH transfer's queue; gives it back if the queue
+/// is full. Not inlined: inlined, the move of the held-back record (which
+/// lives beside the queue) becomes a `memmove`, which costs 1.6 KB of
+/// flash that nothing else needs.
+#[inline(never)]
+fn enqueue(job: &mut Job, rec: PositionRecord) -> Result<(), PositionRecord> {
+    job.source_mut().push(rec)
+}
+
 /// The earlier of two optional deadlines, seen from `now`.
 fn earliest(now: u32, a: Option<u32>, b: Option<u32>) -> Option<u32> {
     match (a, b) {
@@ -1443,6 +1370,7 @@ mod tests {
 
     use super::*;
     use crate::config::{AllowList, Policy};
+    use embedded_io::{Read, ReadReady};
     use iai_protocol_b::checksum::ChecksumMode;
     use iai_protocol_b::frame::Frame;
 

@@ -38,5 +38,6 @@ pub mod config;
 pub mod serial;
 pub mod status;
 
-pub use bridge::{Bridge, Poll, Port};
+pub use bridge::{Bridge, Poll};
 pub use config::{Config, Policy};
+pub use serial::Port;

@@ -3,8 +3,8 @@
 //! exit, and the fault handlers. Included by each `src/bin/<board>.rs` with
 //! `#[path]` (it is not part of the host-testable library).
 
-use core::cell::RefCell;
-use core::fmt::Write as _;
+use core::cell::Cell;
+use core::convert::Infallible;
 use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicU32, Ordering};
 
@@ -13,11 +13,12 @@ use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::SYST;
 use cortex_m_rt::{exception, ExceptionFrame};
 use cortex_m_semihosting::{debug, hio};
-use firmware_example::bridge::Bridge;
-use firmware_example::config::{Config, Source, BLOCK_LEN};
+use firmware_example::bridge::{Bridge, Error};
+use firmware_example::config::{BlockError, Config, Source, BLOCK_LEN};
 use firmware_example::serial::{
     DownstreamLine, FlowControl, IsrEnd, ThreadEnd, UpstreamLine, DOWNSTREAM_MARKS, UPSTREAM_MARKS,
 };
+use firmware_example::status::Stats;
 
 /// System tick rate of [`now_ms`].
 pub const TICK_HZ: u32 = 1_000;
@@ -60,11 +61,11 @@ pub fn sleep_unless(ready: &mut dyn FnMut() -> bool) {
 }
 
 /// Where `main` hands a line's interrupt end to its handler.
-pub type Handoff = Mutex<RefCell<Option<IsrEnd<'static>>>>;
+pub type Handoff = Mutex<Cell<Option<IsrEnd<'static>>>>;
 
 /// An empty [`Handoff`].
 pub const fn handoff() -> Handoff {
-    Mutex::new(RefCell::new(None))
+    Mutex::new(Cell::new(None))
 }
 
 /// Runs `f` on a line's interrupt end, taking it from `handoff` on first
@@ -75,7 +76,7 @@ pub fn with_end(
     f: impl FnOnce(&mut IsrEnd<'static>),
 ) {
     if slot.is_none() {
-        *slot = cortex_m::interrupt::free(|cs| handoff.borrow(cs).borrow_mut().take());
+        *slot = cortex_m::interrupt::free(|cs| handoff.borrow(cs).take());
     }
     if let Some(end) = slot {
         f(end);
@@ -116,8 +117,8 @@ pub fn setup(
         .down
         .split(FlowControl::None, DOWNSTREAM_MARKS, s.pend_down);
     cortex_m::interrupt::free(|cs| {
-        s.up_end.borrow(cs).replace(Some(up_isr));
-        s.down_end.borrow(cs).replace(Some(down_isr));
+        s.up_end.borrow(cs).set(Some(up_isr));
+        s.down_end.borrow(cs).set(Some(down_isr));
     });
     (bridge, up, down)
 }
@@ -158,12 +159,91 @@ pub fn stack_peak() -> usize {
     top - p
 }
 
-/// Print to the host through semihosting, ignoring failures (this is also
-/// used on the way down, where a second panic must not happen).
-pub fn host_print(args: core::fmt::Arguments<'_>) {
-    if let Ok(mut stdout) = hio::hstdout() {
-        let _ = stdout.write_fmt(args);
+/// Text to the host through semihosting, without `core::fmt` (its
+/// machinery costs several KiB of flash): strings, decimals and hex, each
+/// written as it comes. Failures are ignored (this also runs on the way
+/// down, where a second panic must not happen).
+pub struct Out(Option<hio::HostStream>);
+
+impl Out {
+    /// The host's standard output (writes go nowhere without a host).
+    pub fn new() -> Self {
+        Self(hio::hstdout().ok())
     }
+
+    /// Writes `s`.
+    pub fn str(&mut self, s: &str) -> &mut Self {
+        self.bytes(s.as_bytes())
+    }
+
+    fn bytes(&mut self, b: &[u8]) -> &mut Self {
+        if let Some(host) = self.0.as_mut() {
+            let _ = host.write_all(b);
+        }
+        self
+    }
+
+    /// Writes `n` in decimal.
+    pub fn dec(&mut self, n: u64) -> &mut Self {
+        let mut digits = [b'0'; 20];
+        let mut at = digits.len();
+        let mut n = n;
+        for d in digits.iter_mut().rev() {
+            *d = b'0' + (n % 10) as u8;
+            at -= 1;
+            n /= 10;
+            if n == 0 {
+                break;
+            }
+        }
+        self.bytes(digits.get(at..).unwrap_or(&[]))
+    }
+
+    /// Writes `n` as `0x` and eight lower-case hex digits (`{:#010x}`).
+    pub fn hex(&mut self, n: u32) -> &mut Self {
+        let mut digits = [0u8; 10];
+        digits[0] = b'0';
+        digits[1] = b'x';
+        for (i, d) in digits[2..].iter_mut().enumerate() {
+            let nibble = (n >> (28 - 4 * i)) & 0xF;
+            *d = b"0123456789abcdef"[nibble as usize];
+        }
+        self.bytes(&digits)
+    }
+}
+
+/// The start-up line the QEMU tests wait for:
+/// `firmware-example: bridge up on <board> (config <source>, flow <flow>)`,
+/// the configuration's source and the flow control spelled as their
+/// `Debug` forms.
+// The stm32g030 prints no banner: it runs without a semihosting host.
+#[cfg_attr(feature = "board-stm32g030", allow(dead_code))]
+pub fn banner(board: &str, source: Source, flow: FlowControl) {
+    let mut out = Out::new();
+    out.str("firmware-example: bridge up on ")
+        .str(board)
+        .str(" (config ");
+    match source {
+        Source::Default => out.str("Default"),
+        Source::Block => out.str("Block"),
+        Source::Blank => out.str("Blank"),
+        Source::Invalid(e) => {
+            out.str("Invalid(");
+            match e {
+                BlockError::TooShort => out.str("TooShort"),
+                BlockError::Crc => out.str("Crc"),
+                BlockError::Version => out.str("Version"),
+                BlockError::Field(at) => out.str("Field(").dec(u64::from(at)).str(")"),
+            };
+            out.str(")")
+        }
+    };
+    out.str(", flow ").str(match flow {
+        FlowControl::None => "None",
+        FlowControl::XonXoff => "XonXoff",
+        FlowControl::RtsCts => "RtsCts",
+    });
+    out.str(")\n");
 }
 
 /// End the QEMU run with the given status.
@@ -175,48 +255,345 @@ pub fn exit(status: debug::ExitStatus) -> ! {
     }
 }
 
-/// The end of a bridge run: print the counters and the stack peak, exit.
-pub fn finish<E: core::fmt::Debug>(
-    result: Result<firmware_example::bridge::Stats, E>,
-    up_pauses: u32,
-) -> ! {
+/// The end of a bridge run: print the counters (in `Stats`'s `Debug`
+/// layout) and the stack peak, exit.
+pub fn finish(result: Result<Stats, Error<Infallible, Infallible>>, up_pauses: u32) -> ! {
     let peak = stack_peak();
-    match result {
-        Ok(stats) => {
-            host_print(format_args!(
-                "firmware-example: quit at {} ms\nfirmware-example: {:?}\nfirmware-example: upstream pauses {}\nfirmware-example: stack peak {} bytes\n",
-                now_ms(),
-                stats,
-                up_pauses,
-                peak
-            ));
-            exit(debug::EXIT_SUCCESS)
+    let stats = match result {
+        Ok(stats) => stats,
+        Err(Error::Upstream(e) | Error::Downstream(e)) => match e {},
+    };
+    let mut out = Out::new();
+    out.str("firmware-example: quit at ")
+        .dec(u64::from(now_ms()))
+        .str(" ms\nfirmware-example: Stats { ");
+    for (i, (name, value)) in Stats::NAMES.iter().zip(stats.values()).enumerate() {
+        if i > 0 {
+            out.str(", ");
         }
-        Err(e) => {
-            host_print(format_args!("firmware-example: bridge error: {:?}\n", e));
-            exit(debug::EXIT_FAILURE)
-        }
+        out.str(name).str(": ").dec(value);
     }
+    out.str(" }\nfirmware-example: upstream pauses ")
+        .dec(u64::from(up_pauses))
+        .str("\nfirmware-example: stack peak ")
+        .dec(peak as u64)
+        .str(" bytes\n");
+    exit(debug::EXIT_SUCCESS)
 }
 
+/// Prints where the panic happened and its message if that is a plain
+/// string (`panicked at <file>:<line>:<column>:` then the message, as
+/// `PanicInfo`'s `Display` would); a message with arguments is not
+/// printed, as formatting it would link `core::fmt`.
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo<'_>) -> ! {
     cortex_m::interrupt::disable();
-    host_print(format_args!("firmware-example: {}\n", info));
+    let mut out = Out::new();
+    out.str("firmware-example: panicked");
+    if let Some(at) = info.location() {
+        out.str(" at ")
+            .str(at.file())
+            .str(":")
+            .dec(u64::from(at.line()))
+            .str(":")
+            .dec(u64::from(at.column()))
+            .str(":");
+    }
+    out.str("\n")
+        .str(
+            info.message()
+                .as_str()
+                .unwrap_or("(message with arguments)"),
+        )
+        .str("\n");
     exit(debug::EXIT_FAILURE)
 }
 
 #[exception]
 unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
-    host_print(format_args!(
-        "firmware-example: HardFault at pc={:#010x} lr={:#010x}\n",
-        frame.pc(),
-        frame.lr()
-    ));
+    Out::new()
+        .str("firmware-example: HardFault at pc=")
+        .hex(frame.pc())
+        .str(" lr=")
+        .hex(frame.lr())
+        .str("\n");
     exit(debug::EXIT_FAILURE)
 }
 
 #[exception]
 unsafe fn DefaultHandler(irqn: i16) {
-    panic!("unexpected interrupt or exception {}", irqn);
+    cortex_m::interrupt::disable();
+    let mut out = Out::new();
+    out.str("firmware-example: unexpected interrupt or exception ");
+    if irqn < 0 {
+        out.str("-");
+    }
+    out.dec(u64::from(irqn.unsigned_abs())).str("\n");
+    exit(debug::EXIT_FAILURE)
+}
+
+/// The memory routines the compiler calls (`memcpy`, `memset`, `memcmp`
+/// and their `__aeabi_*` forms), in place of compiler_builtins' (whose
+/// symbols are weak, so these win at link time). Theirs are unrolled for
+/// speed and take about 1.9 KB of flash; these copy, fill and compare a
+/// byte per step (a word per step where the caller guarantees 4-byte
+/// alignment) in a few dozen bytes. The bridge moves at most a few KB per
+/// frame, at serial-line rates. The stores are volatile so that the
+/// optimiser cannot turn the loops back into calls to these functions, and
+/// no routine calls another by its C name (the optimiser takes a call to
+/// `memmove` for the built-in and lowers it to `__aeabi_memmove`, which
+/// would then call itself).
+pub mod mem {
+    /// Copies `n` bytes forwards.
+    ///
+    /// # Safety
+    /// As `memcpy`: `src` readable and `dst` writable for `n` bytes; if
+    /// they overlap, `dst` is not above `src`.
+    #[inline(always)]
+    unsafe fn forward(dst: *mut u8, src: *const u8, n: usize) {
+        for i in 0..n {
+            // SAFETY: the caller's contract.
+            unsafe { dst.add(i).write_volatile(src.add(i).read()) };
+        }
+    }
+
+    /// Copies `n` bytes, a word per step while at least 4 remain.
+    ///
+    /// # Safety
+    /// As `forward`, and `dst` and `src` 4-byte aligned.
+    #[inline(always)]
+    unsafe fn forward_words(dst: *mut u8, src: *const u8, n: usize) {
+        let words = n / 4;
+        for i in 0..words {
+            // SAFETY: the caller's contract; both are 4-byte aligned.
+            unsafe {
+                (dst as *mut u32)
+                    .add(i)
+                    .write_volatile((src as *const u32).add(i).read())
+            };
+        }
+        let done = words * 4;
+        // SAFETY: the caller's contract, for the rest.
+        unsafe { forward(dst.add(done), src.add(done), n - done) };
+    }
+
+    /// Fills `n` bytes with `c`.
+    ///
+    /// # Safety
+    /// As `memset`: `dst` writable for `n` bytes.
+    #[inline(always)]
+    unsafe fn fill(dst: *mut u8, c: u8, n: usize) {
+        for i in 0..n {
+            // SAFETY: the caller's contract.
+            unsafe { dst.add(i).write_volatile(c) };
+        }
+    }
+
+    /// Copies `n` bytes; `dst` and `src` may overlap.
+    ///
+    /// # Safety
+    /// As `memmove`: `src` readable and `dst` writable for `n` bytes.
+    #[inline(always)]
+    unsafe fn move_bytes(dst: *mut u8, src: *const u8, n: usize) {
+        if (dst as usize) <= (src as usize) {
+            // SAFETY: the caller's contract; `dst` is not above `src`.
+            unsafe { forward(dst, src, n) };
+        } else {
+            for i in (0..n).rev() {
+                // SAFETY: the caller's contract; backwards, as `dst` is
+                // above `src`.
+                unsafe { dst.add(i).write_volatile(src.add(i).read()) };
+            }
+        }
+    }
+
+    /// Compares `n` bytes: 0 if equal, else the difference of the first
+    /// bytes that differ.
+    ///
+    /// # Safety
+    /// As `memcmp`: `a` and `b` readable for `n` bytes.
+    #[inline(always)]
+    unsafe fn compare(a: *const u8, b: *const u8, n: usize) -> i32 {
+        for i in 0..n {
+            // SAFETY: the caller's contract.
+            let (x, y) = unsafe { (a.add(i).read_volatile(), b.add(i).read_volatile()) };
+            if x != y {
+                return i32::from(x) - i32::from(y);
+            }
+        }
+        0
+    }
+
+    /// `memcpy`.
+    ///
+    /// # Safety
+    /// `src` readable and `dst` writable for `n` bytes, not overlapping.
+    #[no_mangle]
+    pub unsafe extern "C" fn memcpy(dst: *mut u8, src: *const u8, n: usize) -> *mut u8 {
+        // SAFETY: the caller's contract.
+        unsafe { forward(dst, src, n) };
+        dst
+    }
+
+    /// `memmove`.
+    ///
+    /// # Safety
+    /// `src` readable and `dst` writable for `n` bytes; they may overlap.
+    #[no_mangle]
+    pub unsafe extern "C" fn memmove(dst: *mut u8, src: *const u8, n: usize) -> *mut u8 {
+        // SAFETY: the caller's contract.
+        unsafe { move_bytes(dst, src, n) };
+        dst
+    }
+
+    /// `memset`.
+    ///
+    /// # Safety
+    /// `dst` writable for `n` bytes.
+    #[no_mangle]
+    pub unsafe extern "C" fn memset(dst: *mut u8, c: i32, n: usize) -> *mut u8 {
+        // SAFETY: the caller's contract.
+        unsafe { fill(dst, c as u8, n) };
+        dst
+    }
+
+    /// `memcmp` (also `bcmp`, which only needs zero or not).
+    ///
+    /// # Safety
+    /// `a` and `b` readable for `n` bytes.
+    #[no_mangle]
+    pub unsafe extern "C" fn memcmp(a: *const u8, b: *const u8, n: usize) -> i32 {
+        // SAFETY: the caller's contract.
+        unsafe { compare(a, b, n) }
+    }
+
+    /// `bcmp`.
+    ///
+    /// # Safety
+    /// As [`memcmp`].
+    #[no_mangle]
+    pub unsafe extern "C" fn bcmp(a: *const u8, b: *const u8, n: usize) -> i32 {
+        // SAFETY: the caller's contract.
+        unsafe { compare(a, b, n) }
+    }
+
+    /// `__aeabi_memcpy`.
+    ///
+    /// # Safety
+    /// As [`memcpy`].
+    #[no_mangle]
+    pub unsafe extern "aapcs" fn __aeabi_memcpy(dst: *mut u8, src: *const u8, n: usize) {
+        // SAFETY: the caller's contract.
+        unsafe { forward(dst, src, n) };
+    }
+
+    /// `__aeabi_memcpy4`.
+    ///
+    /// # Safety
+    /// As [`memcpy`], and both 4-byte aligned.
+    #[no_mangle]
+    pub unsafe extern "aapcs" fn __aeabi_memcpy4(dst: *mut u8, src: *const u8, n: usize) {
+        // SAFETY: the caller's contract.
+        unsafe { forward_words(dst, src, n) };
+    }
+
+    /// `__aeabi_memcpy8`.
+    ///
+    /// # Safety
+    /// As [`memcpy`], and both 8-byte aligned.
+    #[no_mangle]
+    pub unsafe extern "aapcs" fn __aeabi_memcpy8(dst: *mut u8, src: *const u8, n: usize) {
+        // SAFETY: the caller's contract.
+        unsafe { forward_words(dst, src, n) };
+    }
+
+    /// `__aeabi_memmove` (and its aligned forms below).
+    ///
+    /// # Safety
+    /// As [`memmove`].
+    #[no_mangle]
+    pub unsafe extern "aapcs" fn __aeabi_memmove(dst: *mut u8, src: *const u8, n: usize) {
+        // SAFETY: the caller's contract.
+        unsafe { move_bytes(dst, src, n) };
+    }
+
+    /// `__aeabi_memmove4`.
+    ///
+    /// # Safety
+    /// As [`memmove`].
+    #[no_mangle]
+    pub unsafe extern "aapcs" fn __aeabi_memmove4(dst: *mut u8, src: *const u8, n: usize) {
+        // SAFETY: the caller's contract.
+        unsafe { move_bytes(dst, src, n) };
+    }
+
+    /// `__aeabi_memmove8`.
+    ///
+    /// # Safety
+    /// As [`memmove`].
+    #[no_mangle]
+    pub unsafe extern "aapcs" fn __aeabi_memmove8(dst: *mut u8, src: *const u8, n: usize) {
+        // SAFETY: the caller's contract.
+        unsafe { move_bytes(dst, src, n) };
+    }
+
+    /// `__aeabi_memset` (note the argument order: length, then value).
+    ///
+    /// # Safety
+    /// As [`memset`].
+    #[no_mangle]
+    pub unsafe extern "aapcs" fn __aeabi_memset(dst: *mut u8, n: usize, c: i32) {
+        // SAFETY: the caller's contract.
+        unsafe { fill(dst, c as u8, n) };
+    }
+
+    /// `__aeabi_memset4`.
+    ///
+    /// # Safety
+    /// As [`memset`].
+    #[no_mangle]
+    pub unsafe extern "aapcs" fn __aeabi_memset4(dst: *mut u8, n: usize, c: i32) {
+        // SAFETY: the caller's contract.
+        unsafe { fill(dst, c as u8, n) };
+    }
+
+    /// `__aeabi_memset8`.
+    ///
+    /// # Safety
+    /// As [`memset`].
+    #[no_mangle]
+    pub unsafe extern "aapcs" fn __aeabi_memset8(dst: *mut u8, n: usize, c: i32) {
+        // SAFETY: the caller's contract.
+        unsafe { fill(dst, c as u8, n) };
+    }
+
+    /// `__aeabi_memclr`.
+    ///
+    /// # Safety
+    /// As [`memset`].
+    #[no_mangle]
+    pub unsafe extern "aapcs" fn __aeabi_memclr(dst: *mut u8, n: usize) {
+        // SAFETY: the caller's contract.
+        unsafe { fill(dst, 0, n) };
+    }
+
+    /// `__aeabi_memclr4`.
+    ///
+    /// # Safety
+    /// As [`memset`].
+    #[no_mangle]
+    pub unsafe extern "aapcs" fn __aeabi_memclr4(dst: *mut u8, n: usize) {
+        // SAFETY: the caller's contract.
+        unsafe { fill(dst, 0, n) };
+    }
+
+    /// `__aeabi_memclr8`.
+    ///
+    /// # Safety
+    /// As [`memset`].
+    #[no_mangle]
+    pub unsafe extern "aapcs" fn __aeabi_memclr8(dst: *mut u8, n: usize) {
+        // SAFETY: the caller's contract.
+        unsafe { fill(dst, 0, n) };
+    }
 }

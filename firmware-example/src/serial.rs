@@ -7,7 +7,7 @@
 //!   bytes ([`IsrEnd::on_receive`]) and takes bytes to transmit
 //!   ([`IsrEnd::next_tx`]);
 //! * a [`ThreadEnd`], owned by the bridge: it implements the `embedded-io`
-//!   traits and [`crate::bridge::Port`].
+//!   traits and [`Port`].
 //!
 //! The board code only moves bytes between registers and these ends, so
 //! everything below is the same on every board and in the host model
@@ -17,7 +17,7 @@
 //! A byte that arrives while the receive ring is full is dropped and
 //! counted, and so is a byte the UART itself lost (its overrun flag, passed
 //! to [`IsrEnd::on_hw_overrun`]). That is what happens on real hardware; the
-//! bridge reads the count with [`crate::bridge::Port::take_overruns`].
+//! bridge reads the count with [`Port::take_overruns`].
 //!
 //! # Flow control (receive side)
 //! When the receive ring reaches [`Watermarks::pause_at`] bytes the line
@@ -439,7 +439,19 @@ impl embedded_io::Write for ThreadEnd<'_> {
     }
 }
 
-impl crate::bridge::Port for ThreadEnd<'_> {
+/// A serial port as the bridge sees it: non-blocking `embedded-io` plus an
+/// overrun count.
+pub trait Port:
+    embedded_io::Read + embedded_io::ReadReady + embedded_io::Write + embedded_io::WriteReady
+{
+    /// Received bytes lost since the last call (receive ring full, or the
+    /// UART's overrun flag). Ports that cannot lose bytes return 0.
+    fn take_overruns(&mut self) -> u32 {
+        0
+    }
+}
+
+impl Port for ThreadEnd<'_> {
     fn take_overruns(&mut self) -> u32 {
         let total = self.shared.overruns.load(Ordering::Acquire);
         let seen = self.shared.overruns_seen.load(Ordering::Relaxed);
@@ -451,7 +463,6 @@ impl crate::bridge::Port for ThreadEnd<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bridge::Port;
     use embedded_io::{Read, Write};
 
     #[test]

@@ -18,16 +18,125 @@
 //! | `flow_control` | 1 | 0 none, 1 XON/XOFF, 2 RTS/CTS |
 //! | `policy` | 1 | 0 forward all, 1 read-only, 2 allow-list |
 //! | `allow_list_len` | 3 | IDs in the allow-list |
-//! | 16 counters | 8 each | see [`crate::bridge::Stats`], in its field order up to `downstream_overruns` |
+//! | 16 counters | 8 each | see [`Stats`], in its field order up to `downstream_overruns` |
 //! | `last_error` | 3 | the last `&` code the bridge sent itself, 000 if none |
 //! | `last_error_ms` | 8 | when (tick), 0 if none |
 
 use iai_protocol_b::field::{FieldSpec, Writer};
 use iai_protocol_b::frame::{emit_frame, Header, Station, ENVELOPE_LEN};
 
-use crate::bridge::{LastError, Stats};
 use crate::codes;
 use crate::config::{Config, Policy, Source};
+
+/// What the bridge counted since start.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Stats {
+    /// Commands forwarded downstream as they were.
+    pub forwarded: u32,
+    /// Replies relayed upstream.
+    pub relayed: u32,
+    /// Forwarded commands that got no valid reply in time.
+    pub reply_timeouts: u32,
+    /// Upstream frames dropped as malformed (never forwarded).
+    pub rejected: u32,
+    /// Commands refused by the policy (answered `&` B06).
+    pub refused: u32,
+    /// Commands for a station other than the controller's and the bridge's.
+    pub other_station: u32,
+    /// Commands the bridge answered itself (its own station).
+    pub own_queries: u32,
+    /// 26DH commands completed (`#` sent).
+    pub streams_ok: u32,
+    /// 26DH commands answered with `&`.
+    pub streams_failed: u32,
+    /// Records confirmed by the controller in 26DH chunks.
+    pub records: u32,
+    /// 26DH chunks sent downstream, retries included.
+    pub chunks_sent: u32,
+    /// Chunks sent again.
+    pub retries: u32,
+    /// Chunk replies that timed out.
+    pub chunk_timeouts: u32,
+    /// `&` replies to chunks.
+    pub chunk_error_replies: u32,
+    /// Upstream bytes lost (receive overruns).
+    pub upstream_overruns: u32,
+    /// Downstream bytes lost (receive overruns).
+    pub downstream_overruns: u32,
+    /// Bytes read from the upstream.
+    pub upstream_in: u64,
+    /// Bytes written to the upstream.
+    pub upstream_out: u64,
+    /// Bytes read from the downstream.
+    pub downstream_in: u64,
+    /// Bytes written to the downstream.
+    pub downstream_out: u64,
+}
+
+impl Stats {
+    /// The field names, in declaration order: with [`Stats::values`], what
+    /// a board prints at the end of a run in the `Debug` layout without
+    /// linking `core::fmt`.
+    pub const NAMES: [&'static str; 20] = [
+        "forwarded",
+        "relayed",
+        "reply_timeouts",
+        "rejected",
+        "refused",
+        "other_station",
+        "own_queries",
+        "streams_ok",
+        "streams_failed",
+        "records",
+        "chunks_sent",
+        "retries",
+        "chunk_timeouts",
+        "chunk_error_replies",
+        "upstream_overruns",
+        "downstream_overruns",
+        "upstream_in",
+        "upstream_out",
+        "downstream_in",
+        "downstream_out",
+    ];
+
+    /// Every counter, in declaration order (see [`Stats::NAMES`]).
+    pub fn values(&self) -> [u64; 20] {
+        [
+            u64::from(self.forwarded),
+            u64::from(self.relayed),
+            u64::from(self.reply_timeouts),
+            u64::from(self.rejected),
+            u64::from(self.refused),
+            u64::from(self.other_station),
+            u64::from(self.own_queries),
+            u64::from(self.streams_ok),
+            u64::from(self.streams_failed),
+            u64::from(self.records),
+            u64::from(self.chunks_sent),
+            u64::from(self.retries),
+            u64::from(self.chunk_timeouts),
+            u64::from(self.chunk_error_replies),
+            u64::from(self.upstream_overruns),
+            u64::from(self.downstream_overruns),
+            self.upstream_in,
+            self.upstream_out,
+            self.downstream_in,
+            self.downstream_out,
+        ]
+    }
+}
+
+/// The last `&` code the bridge sent of its own, and when.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LastError {
+    /// The code ([`codes`]).
+    pub code: u16,
+    /// The tick (ms) it was sent.
+    pub at_ms: u32,
+}
 
 /// Name and width (hex digits) of every field of the reply, in order.
 pub const FIELDS: [(&str, u8); 28] = [
@@ -60,6 +169,20 @@ pub const FIELDS: [(&str, u8); 28] = [
     ("last_error", 3),
     ("last_error_ms", 8),
 ];
+
+/// The widths of [`FIELDS`] alone: what the bridge needs to write the
+/// reply, without linking the names into the firmware.
+// Indexing in a const initialiser is checked at compile time.
+#[allow(clippy::indexing_slicing)]
+const WIDTHS: [u8; FIELDS.len()] = {
+    let mut w = [0; FIELDS.len()];
+    let mut i = 0;
+    while i < FIELDS.len() {
+        w[i] = FIELDS[i].1;
+        i += 1;
+    }
+    w
+};
 
 /// Digits of the reply's data.
 // Evaluated at compile time: an index out of bounds is a build error.
@@ -146,7 +269,7 @@ impl Report<'_> {
             codes::STATUS_QUERY,
             Default::default(),
             |w: &mut Writer<'_>| {
-                for (&(_, width), &v) in FIELDS.iter().zip(values.iter()) {
+                for (&width, &v) in WIDTHS.iter().zip(values.iter()) {
                     // Counters wrap to their width.
                     let max = FieldSpec::hex(width).max_unsigned();
                     w.unsigned(FieldSpec::hex(width), v & max)?;
@@ -174,4 +297,33 @@ pub fn parse(body: &[u8]) -> Option<[(&'static str, u64); 28]> {
         at += w;
     }
     Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+
+    use super::*;
+
+    #[test]
+    fn stats_fields_spell_the_debug_text() {
+        use std::format;
+        use std::string::String;
+        let stats = Stats {
+            forwarded: 1,
+            streams_ok: 7,
+            upstream_in: u64::MAX,
+            downstream_out: 42,
+            ..Stats::default()
+        };
+        let mut text = String::from("Stats { ");
+        for (i, (name, value)) in Stats::NAMES.iter().zip(stats.values()).enumerate() {
+            if i > 0 {
+                text.push_str(", ");
+            }
+            text.push_str(&format!("{name}: {value}"));
+        }
+        text.push_str(" }");
+        assert_eq!(text, format!("{stats:?}"));
+    }
 }

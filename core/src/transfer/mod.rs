@@ -530,6 +530,74 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         self
     }
 
+    /// [`Transfer::with_total`] in place.
+    pub fn set_total(&mut self, total: u32) {
+        self.total = Some(total);
+    }
+
+    /// Starts over with `cfg` and the source as it is now, in place: the
+    /// same as `*self = Transfer::new(cfg, source)` without building a
+    /// second transfer (about 3 KB, most of it the frame buffer) on the
+    /// stack. Counters start from zero; the frame buffer's bytes are left
+    /// as they are (a frame is written before it is read).
+    pub fn restart(&mut self, cfg: TransferConfig) {
+        let total = self.source.total();
+        // Every field, so that a new one cannot be forgotten here.
+        let Transfer {
+            cfg: c,
+            source: _,
+            held,
+            source_done,
+            total: t,
+            frame: _,
+            fill,
+            packed,
+            chunk,
+            guard,
+            pending_fault,
+            frame_limit,
+            window_limit,
+            exchange,
+            replies,
+            verifier,
+            state,
+            stats,
+        } = self;
+        *c = cfg;
+        *held = None;
+        *source_done = false;
+        *t = total;
+        *fill = 0;
+        *packed = 0;
+        *chunk = None;
+        *guard = Guard::new(cfg.exchange.horizon());
+        *pending_fault = false;
+        *frame_limit = cfg.max_records.clamp(1, MAX_FRAME_RECORDS);
+        *window_limit = cfg.stream.read_back().window(cfg.max_response);
+        *exchange = Exchange::new(
+            ExchangeConfig {
+                duplicate_window_ms: 0,
+                ..cfg.exchange
+            },
+            Quarantine::ByContent,
+        );
+        *replies = FrameDecoder::with_policy(BypassPolicy::Reject);
+        *verifier = Verifier::new(cfg.stream.read_back());
+        *state = State::Build { not_before: None };
+        *stats = TransferStats::default();
+    }
+
+    /// The frame buffer, lent out between transfers (a bridge decodes
+    /// single frames in it while no 26DH runs). Its bytes are the
+    /// transfer's from the first [`Transfer::poll`] after
+    /// [`Transfer::new`] or [`Transfer::restart`] until the transfer ends
+    /// (and through a [`Transfer::resume`]): write it only outside that
+    /// span, and restart before polling again. Bytes written inside it go
+    /// out as they are (never a panic: every access is checked).
+    pub fn frame_buffer(&mut self) -> &mut [u8; N] {
+        &mut self.frame
+    }
+
     /// Counters so far.
     pub fn stats(&self) -> TransferStats {
         self.stats
@@ -692,9 +760,12 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             let dup = now.wrapping_add(self.cfg.exchange.duplicate_window_ms);
             self.verifier.hold = Some(later(self.exchange.quiet_from(now), dup));
         }
-        match catalogue::lookup(self.cfg.stream.id) {
-            Some(info) => {
-                self.exchange.start(info, now);
+        // The resend rules, not the entry: `lookup` would link every
+        // entry and its name into a program.
+        match catalogue::request_rules(self.cfg.stream.id) {
+            Some((resend, reply)) => {
+                self.exchange
+                    .start_raw(self.cfg.stream.id, resend, reply, now);
                 self.state = State::Write;
             }
             None => {
@@ -1273,6 +1344,73 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
+    }
+
+    /// Runs a queue-fed transfer of `recs` (Verify::Off) to its end,
+    /// answering every chunk: what it sent and its report.
+    fn run_queued(
+        t: &mut Transfer<RecordQueue<4>>,
+        recs: &[PositionRecord],
+        mut now: u32,
+    ) -> (Vec<Vec<u8>>, TransferReport) {
+        let mut rest = recs.iter();
+        let mut sent = Vec::new();
+        loop {
+            while !t.source_mut().is_full() {
+                match rest.next() {
+                    Some(r) => t.source_mut().push(r.clone()).unwrap(),
+                    None => {
+                        t.source_mut().finish();
+                        break;
+                    }
+                }
+            }
+            match t.poll(now) {
+                Step::Transmit(b) => {
+                    let n =
+                        u16::from_str_radix(std::str::from_utf8(&b[6..10]).unwrap(), 16).unwrap();
+                    sent.push(b.to_vec());
+                    t.sent(now);
+                    t.received_all(&reply_26dh(n), now + 1);
+                }
+                Step::WaitUntil(d) => now = d,
+                Step::NeedRecords => now += 1,
+                Step::Complete(r) => return (sent, r),
+                other => panic!("{other:?}"),
+            }
+        }
+    }
+
+    #[test]
+    fn a_restarted_transfer_runs_as_a_new_one() {
+        let first = TransferConfig::tta(ST).with_verify(Verify::Off);
+        let second = TransferConfig {
+            max_records: 5,
+            ..TransferConfig::tta(ST).with_verify(Verify::Off)
+        };
+        let recs = records(17, 3);
+
+        let mut fresh = Transfer::<_>::new(second, RecordQueue::<4>::new()).with_total(17);
+        let expected = run_queued(&mut fresh, &recs, 1_000);
+
+        // A transfer left half way (a chunk sent, never answered, records
+        // queued), its buffer then used for something else.
+        let mut t = Transfer::<_>::new(first, RecordQueue::<4>::new());
+        for r in &recs[..4] {
+            t.source_mut().push(r.clone()).unwrap();
+        }
+        t.source_mut().finish();
+        assert!(matches!(t.poll(0), Step::Transmit(_)));
+        t.sent(0);
+        t.frame_buffer().fill(b'%');
+        t.source_mut().clear();
+        assert!(t.source_mut().is_empty() && !t.source_mut().is_finished());
+        t.restart(second);
+        t.set_total(17);
+        assert_eq!(t.progress(), (0, Some(17)));
+        assert_eq!(t.stats(), TransferStats::default());
+        assert_eq!(run_queued(&mut t, &recs, 1_000), expected);
+        assert_eq!(expected.1.stats.records_confirmed, 17);
     }
 
     #[test]

@@ -62,6 +62,11 @@ impl<const Q: usize> RecordQueue<Q> {
     pub fn push(&mut self, rec: PositionRecord) -> core::result::Result<(), PositionRecord> {
         self.items.push_back(rec)
     }
+    /// Empties the queue for another transfer (not finished any more).
+    pub fn clear(&mut self) {
+        self.items.clear();
+        self.finished = false;
+    }
     /// No more records will come.
     pub fn finish(&mut self) {
         self.finished = true;

@@ -173,15 +173,16 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             }
             _ => now,
         };
-        match (built, catalogue::lookup(self.verifier.stream.id)) {
-            (Ok(()), Some(info)) => {
-                self.exchange.start(info, at);
+        // As in `start_write`: the rules, not the entry.
+        let id = self.verifier.stream.id;
+        match (built, catalogue::request_rules(id)) {
+            (Ok(()), Some((resend, reply))) => {
+                self.exchange.start_raw(id, resend, reply, at);
                 self.verifier.queried = true;
                 self.state = State::Verify;
             }
             (Err(e), _) => self.state = State::Failed(TransferError::Config(e), Resume::Nothing),
             (_, None) => {
-                let id = self.verifier.stream.id;
                 self.state = State::Failed(
                     TransferError::Config(Error::UnknownMessageId { id }),
                     Resume::Nothing,

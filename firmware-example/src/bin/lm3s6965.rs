@@ -237,14 +237,11 @@ fn main() -> ! {
         NVIC::unmask(Interrupt::UART1);
     }
     start_watchdog();
-    runtime::host_print(format_args!(
-        "firmware-example: bridge up on {NAME} (config {:?}, flow {:?})\n",
-        source, cfg.flow
-    ));
+    runtime::banner(NAME, source, cfg.flow);
 
     #[cfg(feature = "stall")]
     {
-        runtime::host_print(format_args!("firmware-example: stalling the loop\n"));
+        runtime::Out::new().str("firmware-example: stalling the loop\n");
         #[allow(clippy::empty_loop)]
         loop {}
     }

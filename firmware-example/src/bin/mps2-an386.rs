@@ -50,7 +50,7 @@ fn uart_regs(i: usize) -> &'static RegisterBlock {
     // bridge (their interrupt handlers and `init`).
     match unsafe { mps2_an386::uart(i) } {
         Some(r) => r,
-        None => panic!("no UART{}", i),
+        None => panic!("no such UART"),
     }
 }
 
@@ -186,14 +186,11 @@ fn main() -> ! {
         NVIC::unmask(Interrupt::UART1TX);
     }
     start_watchdog();
-    runtime::host_print(format_args!(
-        "firmware-example: bridge up on {NAME} (config {:?}, flow {:?})\n",
-        source, cfg.flow
-    ));
+    runtime::banner(NAME, source, cfg.flow);
 
     #[cfg(feature = "stall")]
     {
-        runtime::host_print(format_args!("firmware-example: stalling the loop\n"));
+        runtime::Out::new().str("firmware-example: stalling the loop\n");
         #[allow(clippy::empty_loop)]
         loop {}
     }

@@ -1,5 +1,7 @@
-//! The bridge on an STM32G030x6 (Cortex-M0+, 8 KiB RAM, 32 KiB flash):
-//! the small part the size goal aims at.
+//! The bridge on an STM32G030x8 (Cortex-M0+, 8 KiB RAM, 64 KiB flash; e.g.
+//! STM32G030C8): the small part the size goal aims at. Its RAM is the 8 KiB
+//! the goal names; its flash is the x8's, as the Cortex-M0 image does not
+//! fit the x6's 32 KiB (see `memory-stm32g030.x`).
 //!
 //! Built and linked for its size figures only: QEMU has no model of it, and
 //! it has not run on silicon. Pins: USART2 (PA2 TX, PA3 RX) faces the host,
