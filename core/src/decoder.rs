@@ -1024,7 +1024,7 @@ mod golden {
         );
 
         // 216H response: the message length is known at offset 90.
-        // The recorded 94-byte response (EXAMPLES.md 5) up to its message
+        // The recorded 94-byte response (fixture `ex5-216H-response-94-bytes`) up to its message
         // count, then a 5-character message.
         let recorded = b"#99216C74000000010000000500000002FFFFFFFD0000000000000000000000000000000000000000000000000C2";
         let mut msg = [0u8; 95];
