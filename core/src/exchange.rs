@@ -291,6 +291,23 @@ impl Exchange {
         }
     }
 
+    /// The exchange with its horizon widened to `horizon` ms (at most
+    /// [`MAX_HORIZON_MS`]): for an owner that runs it without some of its
+    /// windows (guarding duplicates itself) but passes it holds that
+    /// include them. A hold further ahead than the horizon reads as set
+    /// long ago, i.e. over.
+    pub const fn with_horizon(mut self, horizon: u32) -> Self {
+        let h = if horizon > MAX_HORIZON_MS {
+            MAX_HORIZON_MS
+        } else {
+            horizon
+        };
+        if h > self.horizon {
+            self.horizon = h;
+        }
+        self
+    }
+
     /// How far ahead of `now` a hold may lie (see [`passed`]).
     pub const fn horizon(&self) -> u32 {
         self.horizon

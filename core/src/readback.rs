@@ -279,7 +279,8 @@ impl<const N: usize> ReadBack<N> {
             window_limit: cfg.window(),
             query: [0; 24],
             query_len: 0,
-            exchange: Exchange::new(own_duplicates(cfg.exchange), Quarantine::Wait),
+            exchange: Exchange::new(own_duplicates(cfg.exchange), Quarantine::Wait)
+                .with_horizon(cfg.exchange.horizon()),
             replies: FrameDecoder::with_policy(BypassPolicy::Reject),
             state: State::Query { not_before: None },
             empties: heapless::Deque::new(),

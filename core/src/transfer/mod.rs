@@ -469,6 +469,20 @@ pub struct Transfer<I, const N: usize = { limits::TTA.command }> {
     stats: TransferStats,
 }
 
+/// The transfer's exchange: without the duplicate window, which the
+/// engine's own guard applies (see the module docs), but with the horizon
+/// of the whole configuration, since the engine's holds include it.
+const fn engine_exchange(cfg: &ExchangeConfig) -> Exchange {
+    Exchange::new(
+        ExchangeConfig {
+            duplicate_window_ms: 0,
+            ..*cfg
+        },
+        Quarantine::ByContent,
+    )
+    .with_horizon(cfg.horizon())
+}
+
 impl<I: RecordSource, const N: usize> Transfer<I, N> {
     /// A transfer of the records of `source`.
     pub fn new(cfg: TransferConfig, source: I) -> Self {
@@ -487,14 +501,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             pending_fault: false,
             frame_limit: cfg.max_records.clamp(1, MAX_FRAME_RECORDS),
             window_limit: cfg.stream.read_back().window(cfg.max_response),
-            exchange: Exchange::new(
-                ExchangeConfig {
-                    // Applied by the engine's own guard (see the module docs).
-                    duplicate_window_ms: 0,
-                    ..cfg.exchange
-                },
-                Quarantine::ByContent,
-            ),
+            exchange: engine_exchange(&cfg.exchange),
             replies: FrameDecoder::with_policy(BypassPolicy::Reject),
             verifier: Verifier::new(cfg.stream.read_back()),
             state: State::Build { not_before: None },
@@ -574,13 +581,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         *pending_fault = false;
         *frame_limit = cfg.max_records.clamp(1, MAX_FRAME_RECORDS);
         *window_limit = cfg.stream.read_back().window(cfg.max_response);
-        *exchange = Exchange::new(
-            ExchangeConfig {
-                duplicate_window_ms: 0,
-                ..cfg.exchange
-            },
-            Quarantine::ByContent,
-        );
+        *exchange = engine_exchange(&cfg.exchange);
         *replies = FrameDecoder::with_policy(BypassPolicy::Reject);
         *verifier = Verifier::new(cfg.stream.read_back());
         *state = State::Build { not_before: None };

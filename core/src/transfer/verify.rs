@@ -7,7 +7,7 @@ use super::source::RecordSource;
 use super::{grow, Resume, State, Transfer, TransferError, TransferEvent};
 use crate::catalogue;
 use crate::checksum::BypassPolicy;
-use crate::clock::passed;
+use crate::clock::{later, passed};
 use crate::error::Error;
 use crate::exchange::Offer;
 use crate::field::{FieldSpec, Reader, Writer};
@@ -290,8 +290,16 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 {
                     Offer::Accepted => self.commit_window(),
                     // A reply to another window, or one that came early.
+                    // A copy of it may follow: the chunk's next read-back
+                    // waits until none can come.
                     Offer::Mismatch | Offer::Stale => {
                         self.stats.stale_replies += 1;
+                        let dup = now.wrapping_add(self.cfg.exchange.duplicate_window_ms);
+                        let h = self.exchange.horizon();
+                        self.verifier.hold = Some(match self.verifier.hold {
+                            Some(t) if !passed(now, t, h) => later(t, dup),
+                            _ => dup,
+                        });
                         TransferEvent::Stale
                     }
                     other => self.judged(other, 0),
