@@ -269,6 +269,9 @@ pub struct Exchange {
     /// The furthest ahead of `now` any hold is ever set (see
     /// [`passed`]): a hold further ahead was set long ago.
     horizon: u32,
+    /// Whether a taken reply starts the duplicate window (see
+    /// [`Exchange::owner_guards_reply_copies`]).
+    copies_of_taken: bool,
 }
 
 impl Exchange {
@@ -288,6 +291,7 @@ impl Exchange {
             stale_until: 0,
             faulted: false,
             horizon: cfg.horizon(),
+            copies_of_taken: true,
         }
     }
 
@@ -305,6 +309,16 @@ impl Exchange {
         if h > self.horizon {
             self.horizon = h;
         }
+        self
+    }
+
+    /// The exchange for an owner that guards against copies of the
+    /// replies it *takes* by itself (a read-back knows which of its
+    /// windows a copy could answer, so it need not wait after every
+    /// reply): a taken reply no longer starts the duplicate window. A
+    /// stale reply still does, and the horizon still covers it.
+    pub const fn owner_guards_reply_copies(mut self) -> Self {
+        self.copies_of_taken = false;
         self
     }
 
@@ -362,6 +376,18 @@ impl Exchange {
         }
         self.not_before = Some(at);
         self.phase = Phase::Ready;
+    }
+
+    /// Holds the first send of a command started but not yet sent until
+    /// `t` (an owner that learnt of a reason to wait, such as a stale
+    /// reply whose copy could answer it). No effect once it was sent.
+    pub fn defer(&mut self, t: u32) {
+        if self.phase == Phase::Ready {
+            self.not_before = Some(match self.not_before {
+                Some(nb) if !self.over(t, nb) => later(nb, t),
+                _ => t,
+            });
+        }
     }
 
     /// The ID of the current (or last) command.
@@ -560,7 +586,7 @@ impl Exchange {
                 .wrapping_add(self.cfg.late_window_ms);
         }
         if matches!(f, Finish::Replied | Finish::ErrorReply(_)) {
-            if self.cfg.duplicate_window_ms > 0 {
+            if self.copies_of_taken && self.cfg.duplicate_window_ms > 0 {
                 stale = stale.saturating_add(1);
                 until = later(until, now.wrapping_add(self.cfg.duplicate_window_ms));
             }

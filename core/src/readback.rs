@@ -256,10 +256,6 @@ pub struct ReadBack<const N: usize = { limits::TTA.response }> {
     rereads: heapless::Deque<(u32, u16), 4>,
     /// When the last empty reply came (for the duplicate guard).
     last_empty: Option<u32>,
-    /// When the last stale reply came: a copy of it may follow, and it
-    /// may hold records of the next window (which overlaps a window asked
-    /// before a shrink).
-    last_stale: Option<u32>,
     /// A late or duplicated reply was seen on this line.
     duplicates_seen: bool,
     /// Hash of the window's first reply, awaiting its confirmation.
@@ -279,14 +275,12 @@ impl<const N: usize> ReadBack<N> {
             window_limit: cfg.window(),
             query: [0; 24],
             query_len: 0,
-            exchange: Exchange::new(own_duplicates(cfg.exchange), Quarantine::Wait)
-                .with_horizon(cfg.exchange.horizon()),
+            exchange: Exchange::new(cfg.exchange, Quarantine::Wait).owner_guards_reply_copies(),
             replies: FrameDecoder::with_policy(BypassPolicy::Reject),
             state: State::Query { not_before: None },
             empties: heapless::Deque::new(),
             rereads: heapless::Deque::new(),
             last_empty: None,
-            last_stale: None,
             duplicates_seen: false,
             first_reply: None,
             stats: ReadBackStats::default(),
@@ -317,16 +311,13 @@ impl<const N: usize> ReadBack<N> {
                         Some(t) if !passed(now, t, h) => t,
                         _ => now,
                     };
-                    let empty = self.last_empty.filter(|_| self.duplicates_seen);
-                    let mut guarded = false;
-                    for t in [empty, self.last_stale].into_iter().flatten() {
+                    if let (true, Some(t)) = (self.duplicates_seen, self.last_empty) {
                         let clear = t.wrapping_add(self.cfg.exchange.duplicate_window_ms);
                         if !passed(now, clear, h) && !reached(at, clear) {
-                            guarded = true;
+                            self.stats.guarded_queries += 1;
                             at = later(at, clear);
                         }
                     }
-                    self.stats.guarded_queries += u32::from(guarded);
                     match catalogue::lookup(self.cfg.stream.id) {
                         Some(info) => self.exchange.start(info, at),
                         None => {
@@ -528,26 +519,15 @@ impl<const N: usize> ReadBack<N> {
     }
 
     fn frame(&mut self, seen: Seen, now: u32) -> ReadEvent {
-        let offer = if self.state == State::Exchange {
-            self.exchange.offer_head(
-                seen.header,
-                seen.station,
-                seen.code,
-                seen.check.is_some(),
-                now,
-            )
-        } else if crate::exchange::judge(
-            self.cfg.exchange.station,
-            self.cfg.stream.id,
+        // Between queries the exchange is idle: it reads any reply as
+        // stale, and holds the next query until no copy of it can come.
+        let offer = self.exchange.offer_head(
             seen.header,
             seen.station,
             seen.code,
-        ) == crate::exchange::Verdict::Foreign
-        {
-            Offer::Foreign
-        } else {
-            Offer::Stale
-        };
+            seen.check.is_some(),
+            now,
+        );
         match offer {
             Offer::Accepted => {
                 let records = seen.check.unwrap_or(0);
@@ -561,9 +541,6 @@ impl<const N: usize> ReadBack<N> {
             Offer::Mismatch | Offer::Stale => {
                 self.stats.stale_replies += 1;
                 self.duplicates_seen = true;
-                if self.cfg.exchange.duplicate_window_ms > 0 {
-                    self.last_stale = Some(now);
-                }
                 if let Some(n) = seen.first_record {
                     self.reopen(n, now);
                 }
@@ -655,14 +632,6 @@ impl<const N: usize> ReadBack<N> {
             }
         }
     }
-}
-
-/// The exchange settings without the duplicate window: the read-back
-/// applies that itself, only where a duplicate could pass for an answer
-/// and only once the line has shown one (see the module docs).
-const fn own_duplicates(mut cfg: ExchangeConfig) -> ExchangeConfig {
-    cfg.duplicate_window_ms = 0;
-    cfg
 }
 
 /// 32-bit FNV-1a: tells two replies apart (a confirmed read compares the

@@ -1482,6 +1482,37 @@ mod tests {
         assert_eq!(writes, 2);
     }
 
+    /// The hold after a rewrite lies a whole duplicate window ahead, here
+    /// further than a timeout, a late window and a restart together: it
+    /// must still read as a hold, not as one set long ago (fuzz F11).
+    #[test]
+    fn a_hold_longer_than_the_exchange_windows_is_kept() {
+        let recs = records(2, 1);
+        let mut cfg = TransferConfig::tta(ST);
+        cfg.exchange.duplicate_window_ms = 60_000;
+        let mut t = Transfer::<_>::new(cfg, recs.clone().into_iter());
+        let mut altered = recs.clone();
+        altered[1].positions[0] += 1;
+        let old = {
+            let r = EffectivePositionResponse2 {
+                records: Repeated::from_slice(&altered),
+            };
+            let mut buf = [0u8; 128];
+            let n = r.emit(ST, &mut buf).unwrap();
+            buf[..n].to_vec()
+        };
+        assert!(matches!(t.poll(0), Step::Transmit(b) if b.starts_with(b"!9926D")));
+        t.sent(5);
+        t.received_all(&reply_26dh(2), 6);
+        assert!(matches!(t.poll(8), Step::Transmit(b) if b.starts_with(b"!9921F")));
+        t.sent(10);
+        t.received_all(&old, 11);
+        assert!(matches!(t.poll(13), Step::Transmit(b) if b.starts_with(b"!9926D")));
+        t.sent(20);
+        t.received_all(&reply_26dh(2), 21);
+        assert_eq!(t.poll(23), Step::WaitUntil(60_013));
+    }
+
     /// A read-back reply carries nothing that ties it to its query: after
     /// a rewrite, a copy of the reply from before it would read as the
     /// new state. The next query waits until no such copy can come.
@@ -1516,13 +1547,15 @@ mod tests {
         // The read-back waits out the duplicate window of the old reply
         // (3 s from the verdict at 11).
         assert_eq!(t.poll(23), Step::WaitUntil(3_011));
-        // A copy of the old reply meanwhile is stale, not a comparison.
+        // A copy of the old reply meanwhile is stale, not a comparison; a
+        // copy of it may come until 3,500, so the query waits for that.
         assert_eq!(t.received(&old, 500).event, TransferEvent::Stale,);
-        assert!(matches!(t.poll(3_011), Step::Transmit(b) if b.starts_with(b"!9921F")));
-        t.sent(3_015);
-        t.received_all(&read_back(&recs), 3_016);
-        assert_eq!(t.poll(3_016), Step::WaitUntil(3_018));
-        match t.poll(3_018) {
+        assert_eq!(t.poll(3_011), Step::WaitUntil(3_500));
+        assert!(matches!(t.poll(3_500), Step::Transmit(b) if b.starts_with(b"!9921F")));
+        t.sent(3_505);
+        t.received_all(&read_back(&recs), 3_506);
+        assert_eq!(t.poll(3_506), Step::WaitUntil(3_508));
+        match t.poll(3_508) {
             Step::Complete(r) => {
                 assert_eq!(r.guarantee, Guarantee::Verified);
                 assert_eq!(r.stats.rewrites, 1);

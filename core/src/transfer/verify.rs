@@ -296,10 +296,13 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                         self.stats.stale_replies += 1;
                         let dup = now.wrapping_add(self.cfg.exchange.duplicate_window_ms);
                         let h = self.exchange.horizon();
-                        self.verifier.hold = Some(match self.verifier.hold {
+                        let hold = match self.verifier.hold {
                             Some(t) if !passed(now, t, h) => later(t, dup),
                             _ => dup,
-                        });
+                        };
+                        self.verifier.hold = Some(hold);
+                        // A query already started but not sent waits too.
+                        self.exchange.defer(hold);
                         TransferEvent::Stale
                     }
                     other => self.judged(other, 0),
