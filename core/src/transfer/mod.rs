@@ -485,6 +485,11 @@ const fn engine_exchange(cfg: &ExchangeConfig) -> Exchange {
 
 impl<I: RecordSource, const N: usize> Transfer<I, N> {
     /// A transfer of the records of `source`.
+    ///
+    /// Always inlined, so that a caller building it into its final place
+    /// (a `static`, through `MaybeUninit::write`) writes it there: out of
+    /// line, the 2 KB value was built on the stack and copied.
+    #[inline(always)]
     pub fn new(cfg: TransferConfig, source: I) -> Self {
         let total = source.total();
         Transfer {
