@@ -429,6 +429,9 @@ struct Chunk {
     faulted: bool,
     /// Whether a reply to it was accepted.
     confirmed: bool,
+    /// Times it went out, across resumes (a reply to any of them may
+    /// still come).
+    sends: u8,
 }
 
 /// A frame or window limit after a success: a quarter more, at least one,
@@ -654,6 +657,11 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
     pub fn resume(&mut self, now: u32) {
         if let State::Failed(_, resume) = self.state {
             self.verifier.rewrites = 0;
+            if let Some(c) = self.chunk.as_mut() {
+                // Its earlier sends timed out or were refused: a fault,
+                // whatever the exchange (which starts afresh) sees next.
+                c.faulted = true;
+            }
             match resume {
                 Resume::Nothing => {}
                 Resume::Write => self.start_write(now),
@@ -747,6 +755,9 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         if writing {
             self.stats.frames_sent += 1;
             self.stats.bytes_sent += len as u64;
+            if let Some(c) = self.chunk.as_mut() {
+                c.sends = c.sends.saturating_add(1);
+            }
         } else {
             self.stats.verify_queries += 1;
             self.stats.verify_bytes_sent += len as u64;
@@ -941,6 +952,8 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         };
         c.faulted |= self.exchange.faulted();
         c.confirmed = true;
+        // The sends before a resume count too: their replies may still come.
+        let sends = c.sends.max(self.exchange.sends());
         self.frame_limit = grow(
             self.frame_limit,
             self.cfg.max_records.clamp(1, MAX_FRAME_RECORDS),
@@ -949,8 +962,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         // Duplicates of this reply may come for a while; replies to its
         // other sends until their own late window closes.
         let dup = now.wrapping_add(self.cfg.exchange.duplicate_window_ms);
-        self.guard
-            .answered(c.records, self.exchange.sends(), dup, now);
+        self.guard.answered(c.records, sends, dup, now);
         let verify = match self.cfg.verify {
             Verify::Off => false,
             Verify::AfterFault => c.faulted,
@@ -1100,6 +1112,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             start,
             faulted: core::mem::take(&mut self.pending_fault),
             confirmed: false,
+            sends: 0,
         });
         Ok(Built::Ready)
     }
@@ -1485,6 +1498,53 @@ mod tests {
             }
         }
         assert_eq!(writes, 2);
+    }
+
+    /// A frame resumed after a timeout was sent before the resume too: a
+    /// late reply to that send may still come. The next frame of the same
+    /// count waits for it, and (after a fault) the frame is read back
+    /// (fuzz finding F12).
+    #[test]
+    fn sends_before_a_resume_still_count() {
+        let mut cfg = TransferConfig::tta(ST).with_verify(Verify::Off);
+        cfg.max_records = 1;
+        cfg.exchange.max_sends = 1;
+        cfg.exchange.late_window_ms = 10_000;
+        let mut t = Transfer::<_>::new(cfg, records(2, 1).into_iter());
+        assert!(matches!(t.poll(0), Step::Transmit(b) if b.starts_with(b"!9926D")));
+        t.sent(0);
+        assert!(matches!(
+            t.poll(3_000),
+            Step::Failed(TransferError::Timeout)
+        ));
+        t.resume(3_000);
+        assert!(matches!(t.poll(3_000), Step::Transmit(b) if b.starts_with(b"!9926D")));
+        t.sent(3_005);
+        t.received_all(&reply_26dh(1), 3_006);
+        // Record 2 (count 1 too) waits until the first send's reply can no
+        // longer come: 0 + 3,000 + 10,000 at the earliest.
+        assert_eq!(t.poll(3_010), Step::WaitUntil(3_012)); // the turnaround
+        let mut at = 3_012;
+        while let Step::WaitUntil(w) = t.poll(at) {
+            at = w;
+        }
+        assert!(at >= 13_000, "record 2 went out at {at}");
+
+        let mut cfg = TransferConfig::tta(ST).with_verify(Verify::AfterFault);
+        cfg.exchange.max_sends = 1;
+        let mut t = Transfer::<_>::new(cfg, records(2, 1).into_iter());
+        assert!(matches!(t.poll(0), Step::Transmit(b) if b.starts_with(b"!9926D")));
+        t.sent(0);
+        assert!(matches!(
+            t.poll(3_000),
+            Step::Failed(TransferError::Timeout)
+        ));
+        t.resume(3_000);
+        assert!(matches!(t.poll(3_000), Step::Transmit(b) if b.starts_with(b"!9926D")));
+        t.sent(3_005);
+        t.received_all(&reply_26dh(2), 3_006);
+        // Confirmed after a fault: read back.
+        assert!(matches!(t.poll(3_012), Step::Transmit(b) if b.starts_with(b"!9921F")));
     }
 
     /// The hold after a rewrite lies a whole duplicate window ahead, here
