@@ -1,33 +1,93 @@
-//! The transfer engine (`transfer::Transfer`) against a fuzzed controller.
+//! The transfer engine (`transfer::Transfer`) against a simulated
+//! controller that holds a position table and misbehaves as the input says.
 //!
-//! Input layout: a config (stream kind, station, table size and seed,
-//! frame limit, timeout, tries, late guard, start tick), then a script of
-//! operations the "controller" performs whenever the engine waits: advance
-//! the virtual clock, send arbitrary fuzz bytes, send a (possibly wrong)
-//! normal reply to the frame last sent, send an `&` error reply, or let the
-//! deadline pass. After a `Transmit`, a script byte may also deliver bytes
-//! before the engine is told the frame was sent. When the script is used
-//! up, the controller is silent and the clock jumps to each deadline.
+//! Input layout: a config (write kind 26DH / 245H / 244H / 290H / 291H,
+//! verification policy, station, table size 0-47, seed and shape, range
+//! start, first position number, what the controller holds beforehand,
+//! frame and reply size limits, timeout, sends, rewrites, turnaround, late
+//! and duplicate windows, start tick, resumes 0-3), then a script. The
+//! engine runs on a virtual millisecond clock (the harness keeps a 64-bit
+//! time; the engine sees it wrapped from the start tick).
 //!
-//! Checked: no panic; the engine stops (`Complete`, or `Failed` with no
-//! resumes left) within a bounded number of steps; each frame sent carries
-//! the next unconfirmed records of the table, in order; `records_confirmed`
-//! never exceeds the table size and only grows, by exactly the record count
-//! of the frame sent last, and only after `sent`; `Complete` only when every
-//! record was confirmed.
+//! The controller applies every write it receives to its table and answers
+//! every read-back query (21FH, 22DH, 209H) from that table; replies are
+//! scheduled and delivered in time order. Script bytes choose, per frame
+//! sent: how long the transmission takes (replies due meanwhile arrive
+//! *before* `sent`), whether the frame is lost, corrupted (the SC fails:
+//! the controller stays silent and executes nothing) or, for a write,
+//! altered by an SC-preserving swap of two digits of a coordinate (the
+//! controller stores the wrong value); and for its reply: a delay (up to
+//! far beyond the timeout), a duplicate later on, loss, a corrupted byte,
+//! an `&` reply (controller or bridge code), a partial write (the first k
+//! records stored, count k reported), and for a read-back reply a wrong
+//! record (never the one the source holds), a missing record, a swapped
+//! digit, or a stale reply (an earlier real reply of the controller sent
+//! again). While the engine waits, script bytes advance the clock, deliver
+//! what is due, inject noise (never a LF, so noise cannot complete a
+//! frame), or replay an earlier write or read-back reply. When the script
+//! ends the controller is well-behaved (replies after 1 ms), so every run
+//! ends.
+//!
+//! Checked:
+//! - no panic; it stops (`Complete`, or `Failed` with no resume left)
+//!   within a bounded number of steps; `NeedRecords` never (an iterator is
+//!   never pending);
+//! - every write sent is a valid frame of the kind, within `max_frame`,
+//!   carrying the next unconfirmed records of the source in order (with
+//!   the right start number for a range write); every read-back query is a
+//!   valid query of the matching kind (21FH for 26DH, 22DH for 290H/291H,
+//!   209H for 244H/245H) for a window of at most `window(max_response)`
+//!   positions, starting at a position of the frame being verified; the
+//!   controller's reply to it fits `max_response`;
+//! - `records_confirmed` never exceeds the source, never shrinks, and
+//!   grows only by the record count of the last write frame sent, and only
+//!   after its `sent`; `Confirmed { records }` only for a write reply with
+//!   exactly that count (and start), never before `sent`; `CountMismatch`
+//!   only for a write reply with another count or start, and it never
+//!   confirms; `Rejected { code }` only for an `&` reply with that code;
+//!   `Compared { head, .. }` only for a read-back reply, for the window last
+//!   asked;
+//! - `Complete` only with every record confirmed, the guarantee of the
+//!   policy (`Full` -> `Verified`, `AfterFault` -> `FaultsVerified`, `Off` ->
+//!   `Unverified`), and: with `Verified`, the controller's table holds
+//!   exactly the source at every source position (exact compare, no
+//!   exception: never a false success); with `FaultsVerified` or
+//!   `Unverified`, the same unless an SC-preserving swap was applied to a
+//!   write or a write reply arrived outside the engine's guard windows
+//!   (later than `timeout + late_window` after its send, and later than
+//!   `duplicate_window` after the engine confirmed that frame), which are
+//!   the faults those policies do not claim to catch;
+//! - `Failed` only with `Timeout`, `Controller { code }` (a code the
+//!   controller sent, outside the bridge range), `Bridge { code }` (inside
+//!   it) or `Mismatch { first_position, records }` (a position of the frame
+//!   being verified, `records >= 1`), never with every record confirmed.
+//!
+//! What changed with the verifying engine: an `&` is not resent (the run
+//! fails with `Controller` / `Bridge`, then resumes), frames may carry fewer
+//! records than fit (late-reply count guard) and shrink after timeouts (the
+//! "next records in order" check covers both), and the old "`Complete`
+//! only with every record confirmed" became the exact table compare.
 #![no_main]
 
+#[path = "common/controller.rs"]
+mod controller;
 #[path = "common/records.rs"]
 mod records;
 
-use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
-use iai_protocol_b::frame::{emit_frame, Frame, Header, Station};
-use iai_protocol_b::message::ErrorResponse;
-use iai_protocol_b::position::PositionRecord;
-use iai_protocol_b::stream::PositionStream;
-use iai_protocol_b::transfer::{Step, Transfer, TransferConfig, TransferError};
+use controller::Table;
+use iai_protocol_b::checksum::ChecksumMode;
+use iai_protocol_b::error::BRIDGE_CODES;
+use iai_protocol_b::exchange::ExchangeConfig;
+use iai_protocol_b::frame::Station;
+use iai_protocol_b::position::PositionStream;
+use iai_protocol_b::transfer::{
+    Guarantee, Step, Transfer, TransferConfig, TransferError, TransferEvent, Verify,
+};
 use libfuzzer_sys::fuzz_target;
 use records::Input;
+
+/// The engine's frame buffer: the TTA's receive limit.
+const N: usize = iai_protocol_b::limits::TTA.command;
 
 const WRITES: [PositionStream; 5] = [
     PositionStream::CHANGE_2,
@@ -37,229 +97,676 @@ const WRITES: [PositionStream; 5] = [
     PositionStream::CHANGE_3,
 ];
 
-/// A normal reply to a write: the same prefix with `count`.
-fn reply(kind: PositionStream, station: Station, start: u16, count: u16) -> Vec<u8> {
-    let mut buf = [0u8; 32];
-    let n = emit_frame(
-        &mut buf,
-        Header::Response,
-        station,
-        kind.id,
-        ChecksumMode::Compute,
-        |w| {
-            if kind.reserved {
-                w.put(b"00")?;
-            }
-            if kind.start_width > 0 {
-                w.unsigned(
-                    iai_protocol_b::field::FieldSpec::hex(kind.start_width),
-                    u64::from(start),
-                )?;
-            }
-            w.unsigned(
-                iai_protocol_b::field::FieldSpec::hex(kind.count_width),
-                u64::from(count),
-            )
-        },
-    )
-    .expect("reply fits");
-    buf[..n].to_vec()
+/// What a scheduled delivery is.
+#[derive(Debug, Clone)]
+enum What {
+    /// A write reply: (start, count), the write frame it answers, and
+    /// whether it still lies inside the engine's guard windows is judged
+    /// at delivery from `sent_at`.
+    WriteReply {
+        start: u16,
+        count: u16,
+        frame: usize,
+        sent_at: u64,
+        partial: bool,
+    },
+    /// A read-back reply for the window (head, asked).
+    ReadReply { head: u16, asked: u16 },
+    /// An `&` reply.
+    Error(u16),
+    /// Bytes that cannot complete a frame (noise, a corrupted frame).
+    Noise,
 }
 
-/// What the engine put in a frame: (start, records).
-fn sent_records(kind: PositionStream, bytes: &[u8]) -> (u16, Vec<PositionRecord>) {
-    let f =
-        Frame::new_checked(bytes, BypassPolicy::Reject).expect("the engine sent an invalid frame");
-    assert_eq!((f.header(), f.code()), (Header::Command, kind.id));
-    let mut r = f.reader();
-    let (start, count) = kind.read_prefix(&mut r).expect("prefix");
-    let recs: Vec<_> = (0..count)
-        .map(|_| kind.layout.read_record(&mut r).expect("record"))
-        .collect();
-    r.finish().expect("nothing after the records");
-    (start, recs)
+#[derive(Debug, Clone)]
+struct Delivery {
+    at: u64,
+    bytes: Vec<u8>,
+    what: What,
+}
+
+/// The simulated line and controller.
+struct Sim {
+    kind: PositionStream,
+    rb: PositionStream,
+    station: Station,
+    table: Table,
+    /// Deliveries to the engine, in time order.
+    outbox: Vec<Delivery>,
+    /// Every write reply and read-back reply made, for stale replays.
+    history: Vec<Delivery>,
+    /// Faults the weaker policies do not claim to catch.
+    unguarded: bool,
+    /// Write frames sent (index = frame id): the first source index and
+    /// record count of each, and when the engine confirmed those records.
+    frames: Vec<(usize, u16, Option<u64>)>,
+}
+
+impl Sim {
+    fn schedule(&mut self, d: Delivery) {
+        let i = self.outbox.partition_point(|e| e.at <= d.at);
+        self.outbox.insert(i, d);
+    }
+}
+
+struct Cfg {
+    exchange: ExchangeConfig,
+    max_frame: usize,
+    max_response: usize,
 }
 
 fuzz_target!(|data: &[u8]| {
     let mut input = Input(data);
     let c = input.u8();
     let kind = WRITES[usize::from(c % 5)];
-    let station = Station(if c & 0x80 != 0 { 0x99 } else { input.u8() });
+    let verify = [Verify::Full, Verify::AfterFault, Verify::Off][usize::from(c / 5 % 3)];
+    let rb = kind.read_back();
+    let station = Station(input.u8());
     let size = usize::from(input.u8() % 48);
     let seed = input.u8();
+    let shape = input.u8();
     // Range writes (244H, 290H): the table ends inside the start field's
-    // range, `start + size <= max + 1`, up to exactly its top (which once
-    // failed after every record was confirmed; fixed in the core).
+    // range, up to exactly its top (which once failed; fixed in the core).
     let start_max = match kind.start_width {
         0 => 0u32,
         w => (1u32 << (4 * u32::from(w))) - 1,
     };
     let start =
         (u32::from(input.u16()) & start_max).min((start_max + 1).saturating_sub(size as u32)) as u16;
-    // Between one 8-axis record and ~1 KiB per frame.
+    let first_number = input.u16();
     let min_frame = kind.overhead() + kind.layout.record_len(8);
     let max_frame = min_frame + usize::from(input.u8()) * 4;
-    let cfg = TransferConfig {
-        station,
-        stream: kind,
-        start,
+    let min_response = rb.overhead() + rb.layout.record_len(8);
+    let max_response = min_response + usize::from(input.u8() % 8) * rb.layout.record_len(8);
+    let mut exchange = ExchangeConfig::new(station);
+    exchange.timeout_ms = 1 + u32::from(input.u8()) * 20;
+    let b = input.u8();
+    exchange.max_sends = 1 + b % 4;
+    let rewrites = (b >> 2) % 4;
+    exchange.turnaround_ms = 1 + u32::from(input.u8() % 4);
+    exchange.late_window_ms = u32::from(input.u16());
+    exchange.duplicate_window_ms = u32::from(input.u16());
+    let base = input.u32();
+    let mut resumes = input.u8() % 4;
+
+    // The source: sequential numbers, or reversed, or with a record
+    // repeated (same content), or a number reused with other content.
+    let mut source = records::table(kind.layout, seed, first_number, size);
+    if kind.layout.number_width > 0 && size > 2 {
+        match shape & 3 {
+            1 => source.reverse(),
+            2 => {
+                let r = source[size / 3].clone();
+                source[size - 1] = r;
+            }
+            3 => {
+                let n = source[0].number;
+                source[size / 2].number = n;
+            }
+            _ => {}
+        }
+    }
+    let expected = controller::expected(kind, start, &source);
+
+    let mut cfg = TransferConfig::tta(station).with_verify(verify);
+    cfg.exchange = exchange;
+    cfg.stream = kind;
+    cfg.start = start;
+    cfg.max_frame = max_frame;
+    cfg.max_response = max_response;
+    cfg.checksum = ChecksumMode::Compute;
+    cfg.rewrites = rewrites;
+    let lim = Cfg {
+        exchange,
         max_frame,
-        timeout_ms: 1 + u32::from(input.u8()) * 20,
-        max_tries: 1 + input.u8() % 3,
-        turnaround_ms: 1 + u32::from(input.u8() % 4),
-        checksum: ChecksumMode::Compute,
-        late_guard_ms: u32::from(input.u16()),
+        max_response,
     };
-    let mut now = input.u32();
-    let mut resumes = input.u8() % 3;
 
-    let first_number = input.u16();
-    let table = records::table(kind.layout, seed, first_number, size);
-    let mut t: Transfer<_, 2051> = Transfer::new(cfg, table.clone().into_iter());
-    let max_steps =
-        64 + 8 * data.len() + 16 * size * usize::from(cfg.max_tries) * (1 + usize::from(resumes));
+    // What the controller holds beforehand: nothing, the source itself (a
+    // table uploaded again), or other records at the same positions.
+    let mut table = Table::new();
+    match (shape >> 2) & 3 {
+        1 => table = expected.clone(),
+        2 => {
+            for (i, (&n, r)) in expected.iter().enumerate() {
+                let mut o = r.clone();
+                o.speed = o.speed.wrapping_add(1 + i as u16);
+                table.insert(n, o);
+            }
+        }
+        _ => {}
+    }
+    let mut sim = Sim {
+        kind,
+        rb,
+        station,
+        table,
+        outbox: Vec::new(),
+        history: Vec::new(),
+        unguarded: false,
+        frames: Vec::new(),
+    };
 
-    // The frame last transmitted: (record count, whether `sent` was called).
-    let mut outstanding: Option<(u16, bool)> = None;
-    let mut last_start = 0u16;
+    let mut t: Transfer<_, N> = Transfer::new(cfg, source.clone().into_iter());
+    let max_steps = 2_000
+        + 16 * data.len()
+        + 64 * (size + 1)
+            * usize::from(exchange.max_sends)
+            * (1 + usize::from(rewrites))
+            * (1 + usize::from(resumes));
+
+    let mut clock: u64 = 0;
+    let now = |clock: u64| base.wrapping_add(clock as u32);
+    // The write frame last transmitted: (frame id, first index, records,
+    // start) and whether `sent` was called for it.
+    let mut write: Option<(usize, usize, u16, u16)> = None;
+    let mut write_sent = false;
+    // The read-back query last transmitted (head, asked) and its frame.
+    let mut query: Option<(u16, u16)> = None;
     let mut confirmed = 0u32;
     let mut steps = 0usize;
-
-    // Checks the counters after anything the engine was told.
-    macro_rules! check {
-        ($t:expr, $outstanding:expr, $confirmed:expr) => {{
-            let s = $t.stats();
-            assert!(
-                s.records_confirmed as usize <= table.len(),
-                "more confirmed than the table"
-            );
-            if s.records_confirmed != $confirmed {
-                let grew = s
-                    .records_confirmed
-                    .checked_sub($confirmed)
-                    .expect("confirmed shrank");
-                match $outstanding {
-                    Some((n, true)) => {
-                        assert_eq!(grew, u32::from(n), "confirmed grew by a count never sent")
-                    }
-                    other => panic!("confirmed grew by {grew} with frame {other:?}"),
-                }
-                $outstanding = None;
-                $confirmed = s.records_confirmed;
-            }
-        }};
-    }
 
     loop {
         steps += 1;
         assert!(steps <= max_steps, "no end after {steps} steps");
-        match t.poll(now) {
+        let step = t.poll(now(clock));
+        match step {
             Step::Transmit(bytes) => {
-                let (s, recs) = sent_records(kind, bytes);
-                assert!(bytes.len() <= max_frame);
-                assert!(!recs.is_empty());
-                let from = confirmed as usize;
-                assert_eq!(
-                    &recs[..],
-                    &table[from..from + recs.len()],
-                    "records out of order"
-                );
-                if kind.start_width > 0 {
-                    assert_eq!(
-                        u32::from(s),
-                        u32::from(start) + confirmed,
-                        "wrong start number"
-                    );
-                }
-                last_start = s;
-                outstanding = Some((recs.len() as u16, false));
-                // Bytes that arrive while the frame is still going out.
-                if let Some(op) = input.next() {
-                    if op & 0xC0 == 0xC0 {
-                        let r = reply(kind, station, s, recs.len() as u16);
-                        t.received(&r, now);
-                        check!(t, outstanding, confirmed);
-                        assert_eq!(t.stats().records_confirmed, confirmed);
+                let bytes = bytes.to_vec();
+                let op = input.next();
+                let is_write = bytes.get(3..6) == Some(hex3(kind.id).as_slice());
+                if is_write {
+                    let (s, recs) =
+                        controller::parse_write(kind, &bytes).expect("the engine sent an invalid write");
+                    assert!(bytes.len() <= max_frame, "a frame over max_frame");
+                    assert!(!recs.is_empty(), "a write without records");
+                    let from = confirmed as usize;
+                    assert!(from + recs.len() <= source.len(), "more records than the source");
+                    for (i, r) in recs.iter().enumerate() {
+                        let mut want = source[from + i].clone();
+                        want.number = controller::position_of(kind, start, from + i, &want);
+                        assert_eq!(*r, want, "records out of order (record {})", from + i);
                     }
-                    now = now.wrapping_add(u32::from(op & 0x0F));
+                    if kind.start_width > 0 {
+                        assert_eq!(u32::from(s), u32::from(start) + confirmed, "wrong start number");
+                    }
+                    let id = sim.frames.len();
+                    sim.frames.push((from, recs.len() as u16, None));
+                    write = Some((id, from, recs.len() as u16, s));
+                    write_sent = false;
+                    query = None;
+                } else {
+                    let (head, asked) = controller::parse_query(rb, station, &bytes)
+                        .expect("the engine sent neither a write nor a read-back query");
+                    assert!(asked >= 1 && asked <= rb.window(max_response), "window {asked}");
+                    assert!(
+                        u64::from(head) + u64::from(asked) - 1 <= rb.count_field().max_unsigned(),
+                        "window past the position field"
+                    );
+                    let (_, from, n, _) = write.expect("a read-back before any write");
+                    let positions: Vec<u16> = (0..usize::from(n))
+                        .map(|i| controller::position_of(kind, start, from + i, &source[from + i]))
+                        .collect();
+                    assert!(positions.contains(&head), "a window that starts outside the frame: {head}+{asked} for {positions:?}");
+                    query = Some((head, asked));
                 }
-                t.sent(now);
-                if let Some((_, s)) = outstanding.as_mut() {
-                    *s = true;
+                // The transmission takes `dur` ms; what is due meanwhile
+                // arrives before `sent`.
+                let dur = u64::from(op.map_or(1, |o| o & 7));
+                deliver_until(&mut t, &mut sim, &lim, clock + dur, true, &mut clock, base, write, write_sent, query);
+                clock += dur;
+                t.sent(now(clock));
+                if is_write {
+                    write_sent = true;
                 }
+                check_progress(&t, &mut confirmed, write, write_sent, source.len());
+                controller_answers(&mut sim, &mut input, op, &bytes, is_write, clock, &lim, &expected, write);
             }
             Step::WaitUntil(deadline) => {
-                assert!(
-                    deadline.wrapping_sub(now).wrapping_sub(1) <= 0x7FFF_FFFF,
-                    "waits for the past"
-                );
+                let ahead = deadline.wrapping_sub(now(clock));
+                assert!(ahead.wrapping_sub(1) <= 0x7FFF_FFFF, "waits for the past");
+                let until = clock + u64::from(ahead);
                 match input.next() {
-                    None => now = deadline,
+                    None => {
+                        let next = sim.outbox.first().map_or(until, |d| d.at.min(until));
+                        deliver_until(&mut t, &mut sim, &lim, next, false, &mut clock, base, write, write_sent, query);
+                        clock = clock.max(next);
+                    }
                     Some(op) => match op % 6 {
-                        0 => now = now.wrapping_add(u32::from(input.u16())),
+                        0 => {
+                            let to = clock + u64::from(input.u16());
+                            deliver_until(&mut t, &mut sim, &lim, to, false, &mut clock, base, write, write_sent, query);
+                            clock = to;
+                        }
                         1 => {
-                            let n = usize::from(input.u8());
-                            let bytes = input.take(n);
-                            t.received(bytes, now);
+                            // Noise: anything but LF.
+                            let n = usize::from(input.u8() % 64);
+                            let bytes: Vec<u8> = input
+                                .take(n)
+                                .iter()
+                                .map(|&b| if b == b'\n' { b'?' } else { b })
+                                .collect();
+                            let d = Delivery { at: clock, bytes, what: What::Noise };
+                            feed(&mut t, &mut sim, &lim, &d, false, clock, base, write, write_sent, query);
                         }
-                        2 | 3 => {
-                            // A normal reply, sometimes with a wrong count or station.
-                            let count = match outstanding {
-                                Some((n, _)) if op & 0x80 == 0 => n,
-                                _ => u16::from(input.u8()),
-                            };
-                            let st = if op & 0x40 == 0 {
-                                station
-                            } else {
-                                Station(input.u8())
-                            };
-                            let r = reply(kind, st, last_start, count);
-                            let split = usize::from(input.u8()) % (r.len() + 1);
-                            t.received(&r[..split], now);
-                            now = now.wrapping_add(u32::from(op >> 4 & 3));
-                            t.received(&r[split..], now);
-                        }
-                        4 => {
-                            let mut buf = [0u8; 16];
-                            let n = ErrorResponse {
-                                code: input.u16() & 0xFFF,
+                        2 => {
+                            // An earlier real reply, again (late or stale).
+                            if !sim.history.is_empty() {
+                                let i = usize::from(input.u8()) % sim.history.len();
+                                let mut d = sim.history[i].clone();
+                                d.at = clock;
+                                feed(&mut t, &mut sim, &lim, &d, false, clock, base, write, write_sent, query);
                             }
-                            .emit(station, &mut buf)
-                            .unwrap();
-                            t.received(&buf[..n], now);
                         }
-                        _ => now = deadline,
+                        3 => {
+                            // The next delivery, now or when due.
+                            if let Some(at) = sim.outbox.first().map(|d| d.at) {
+                                deliver_until(&mut t, &mut sim, &lim, at, false, &mut clock, base, write, write_sent, query);
+                                clock = clock.max(at);
+                            }
+                        }
+                        _ => {
+                            deliver_until(&mut t, &mut sim, &lim, until, false, &mut clock, base, write, write_sent, query);
+                            clock = clock.max(until);
+                        }
                     },
                 }
-                check!(t, outstanding, confirmed);
+                check_progress(&t, &mut confirmed, write, write_sent, source.len());
             }
             Step::NeedRecords => panic!("an iterator source is never pending"),
-            Step::Complete(stats) => {
-                assert_eq!(stats, t.stats());
+            Step::Complete(report) => {
+                assert_eq!(report.stats, t.stats());
                 assert_eq!(
-                    stats.records_confirmed as usize,
-                    table.len(),
+                    report.stats.records_confirmed as usize,
+                    source.len(),
                     "Complete before every record was confirmed"
                 );
-                assert!(outstanding.is_none());
+                let want = match verify {
+                    Verify::Full => Guarantee::Verified,
+                    Verify::AfterFault => Guarantee::FaultsVerified,
+                    Verify::Off => Guarantee::Unverified,
+                };
+                assert_eq!(report.guarantee, want);
+                if report.guarantee == Guarantee::Verified || !sim.unguarded {
+                    for (n, r) in &expected {
+                        assert_eq!(
+                            sim.table.get(n),
+                            Some(r),
+                            "false success ({:?}): position {n} differs",
+                            report.guarantee
+                        );
+                    }
+                }
+                let s = report.stats;
+                assert!(s.frames_confirmed <= s.frames_sent);
+                if verify == Verify::Full {
+                    assert!(s.records_verified as usize >= source.len());
+                }
+                if verify == Verify::Off {
+                    assert_eq!((s.verify_queries, s.frames_verified), (0, 0));
+                }
                 break;
             }
             Step::Failed(e) => {
                 match e {
-                    TransferError::Timeout | TransferError::ErrorResponse { .. } => {}
+                    TransferError::Timeout => {}
+                    TransferError::Controller { code } => {
+                        assert!(!BRIDGE_CODES.contains(&code), "a bridge code as Controller")
+                    }
+                    TransferError::Bridge { code } => {
+                        assert!(BRIDGE_CODES.contains(&code), "a controller code as Bridge")
+                    }
+                    TransferError::Mismatch {
+                        first_position,
+                        records,
+                    } => {
+                        assert!(records >= 1);
+                        let (_, from, n, _) = write.expect("a mismatch before any write");
+                        let positions: Vec<u16> = (0..usize::from(n))
+                            .map(|i| controller::position_of(kind, start, from + i, &source[from + i]))
+                            .collect();
+                        assert!(positions.contains(&first_position), "mismatch names {first_position}");
+                        assert!(usize::from(records) <= usize::from(n));
+                    }
                     other => panic!("unexpected failure {other:?}"),
                 }
-                assert!((t.stats().records_confirmed as usize) < table.len());
-                if resumes == 0 || input.is_empty() {
+                assert!((t.stats().records_confirmed as usize) < source.len());
+                if resumes == 0 {
                     break;
                 }
                 resumes -= 1;
-                t.resume(now);
+                t.resume(now(clock));
             }
         }
-        check!(t, outstanding, confirmed);
+        check_progress(&t, &mut confirmed, write, write_sent, source.len());
     }
     let s = t.stats();
     assert!(s.frames_confirmed <= s.frames_sent);
-    assert!(s.retries < s.frames_sent.max(1));
 });
+
+/// The 3 hex digits of a message ID as on the wire.
+fn hex3(id: u16) -> [u8; 3] {
+    let d = |n: u16| b"0123456789ABCDEF"[usize::from(n & 0xF)];
+    [d(id >> 8), d(id >> 4), d(id)]
+}
+
+/// `records_confirmed` grows only by the last write frame's count, after
+/// its `sent`, and never past the source.
+fn check_progress<I: iai_protocol_b::transfer::RecordSource>(
+    t: &Transfer<I, N>,
+    confirmed: &mut u32,
+    write: Option<(usize, usize, u16, u16)>,
+    write_sent: bool,
+    total: usize,
+) {
+    let now = t.stats().records_confirmed;
+    assert!(now as usize <= total, "more confirmed than the source");
+    if now != *confirmed {
+        let grew = now.checked_sub(*confirmed).expect("confirmed shrank");
+        match write {
+            Some((_, from, n, _)) if write_sent && from == *confirmed as usize => {
+                assert_eq!(grew, u32::from(n), "confirmed grew by a count never sent")
+            }
+            other => panic!("confirmed grew by {grew} with frame {other:?} (sent: {write_sent})"),
+        }
+        *confirmed = now;
+    }
+}
+
+/// Delivers everything due up to `to` (moving the clock to each delivery).
+#[allow(clippy::too_many_arguments)]
+fn deliver_until<I: iai_protocol_b::transfer::RecordSource>(
+    t: &mut Transfer<I, N>,
+    sim: &mut Sim,
+    lim: &Cfg,
+    to: u64,
+    before_sent: bool,
+    clock: &mut u64,
+    base: u32,
+    write: Option<(usize, usize, u16, u16)>,
+    write_sent: bool,
+    query: Option<(u16, u16)>,
+) {
+    while sim.outbox.first().is_some_and(|d| d.at <= to) {
+        let d = sim.outbox.remove(0);
+        *clock = (*clock).max(d.at);
+        feed(t, sim, lim, &d, before_sent, *clock, base, write, write_sent, query);
+    }
+}
+
+/// Feeds one delivery, checking each event it causes.
+#[allow(clippy::too_many_arguments)]
+fn feed<I: iai_protocol_b::transfer::RecordSource>(
+    t: &mut Transfer<I, N>,
+    sim: &mut Sim,
+    lim: &Cfg,
+    d: &Delivery,
+    before_sent: bool,
+    clock: u64,
+    base: u32,
+    write: Option<(usize, usize, u16, u16)>,
+    write_sent: bool,
+    query: Option<(u16, u16)>,
+) {
+    let now = base.wrapping_add(clock as u32);
+    // A write reply outside the engine's guard windows.
+    if let What::WriteReply { frame, sent_at, partial, .. } = d.what {
+        let late = clock
+            >= sent_at + u64::from(lim.exchange.timeout_ms) + u64::from(lim.exchange.late_window_ms);
+        let dup_ok = sim.frames[frame]
+            .2
+            .is_some_and(|c| clock < c + u64::from(lim.exchange.duplicate_window_ms));
+        if late && !dup_ok {
+            sim.unguarded = true;
+        }
+        // A partial write's count was never sent by the engine: no guard
+        // can keep it from a later frame with that count.
+        let (from, n, _) = sim.frames[frame];
+        if partial && write.is_some_and(|(_, f, k, _)| (f, k) != (from, n)) {
+            sim.unguarded = true;
+        }
+    }
+    let mut rest = &d.bytes[..];
+    loop {
+        let r = t.received(rest, now);
+        assert!(r.consumed <= rest.len());
+        rest = &rest[r.consumed..];
+        match r.event {
+            TransferEvent::NeedMore => {
+                assert!(rest.is_empty(), "NeedMore with bytes left");
+                break;
+            }
+            TransferEvent::Confirmed { records } => {
+                assert!(!before_sent, "a reply confirmed a frame before it was sent");
+                let (_, from, n, s) = write.expect("confirmed without a write");
+                assert!(write_sent);
+                assert_eq!(records, n, "confirmed another count");
+                match d.what {
+                    What::WriteReply { start, count, .. } => {
+                        assert_eq!(count, n, "a reply with another count confirmed");
+                        if sim.kind.start_width > 0 {
+                            assert_eq!(start, s, "a reply with another start confirmed");
+                        }
+                    }
+                    ref other => panic!("confirmed by {other:?}"),
+                }
+                for f in sim.frames.iter_mut() {
+                    if (f.0, f.1) == (from, n) && f.2.is_none() {
+                        f.2 = Some(clock);
+                    }
+                }
+            }
+            TransferEvent::CountMismatch { sent, reported } => {
+                let (_, _, n, s) = write.expect("a mismatch without a write");
+                assert_eq!(sent, n);
+                match d.what {
+                    What::WriteReply { start, count, .. } => {
+                        assert_eq!(reported, count);
+                        assert!(count != n || (sim.kind.start_width > 0 && start != s));
+                    }
+                    ref other => panic!("count mismatch from {other:?}"),
+                }
+            }
+            TransferEvent::Rejected { code } => match d.what {
+                What::Error(c) => assert_eq!(c, code),
+                ref other => panic!("rejected by {other:?}"),
+            },
+            TransferEvent::Compared { head, equal, differ } => {
+                assert!(!before_sent, "a read-back reply counted before the query was sent");
+                let (qh, qa) = query.expect("compared without a query");
+                assert_eq!(head, qh);
+                // The reply taken holds at most the window's positions, all
+                // inside it (it may be a stale reply to another window).
+                match d.what {
+                    What::ReadReply { head: h, asked: a } => {
+                        let f = iai_protocol_b::frame::Frame::new_checked(
+                            &d.bytes,
+                            iai_protocol_b::checksum::BypassPolicy::Reject,
+                        )
+                        .expect("a read-back reply the controller made");
+                        let mut r = f.reader();
+                        let (_, count) = sim.rb.read_prefix(&mut r).expect("prefix");
+                        assert!(count <= qa, "a reply of {count} records for {qa} positions");
+                        for _ in 0..count {
+                            let rec = sim.rb.layout.read_record(&mut r).expect("record");
+                            let n = u32::from(rec.number);
+                            assert!(
+                                n >= u32::from(qh) && n < u32::from(qh) + u32::from(qa),
+                                "record {n} of a reply to {h}+{a} taken for {qh}+{qa}"
+                            );
+                        }
+                    }
+                    ref other => panic!("compared with {other:?}"),
+                }
+                assert!(u32::from(equal) + u32::from(differ) <= u32::from(qa));
+            }
+            TransferEvent::Stale | TransferEvent::Foreign | TransferEvent::Broken(_) => {}
+        }
+    }
+    let _ = lim.max_frame;
+}
+
+/// The controller receives the frame just sent at `clock` and schedules
+/// its answer.
+#[allow(clippy::too_many_arguments)]
+fn controller_answers(
+    sim: &mut Sim,
+    input: &mut Input<'_>,
+    op: Option<u8>,
+    bytes: &[u8],
+    is_write: bool,
+    clock: u64,
+    lim: &Cfg,
+    expected: &Table,
+    write: Option<(usize, usize, u16, u16)>,
+) {
+    // Fate of the command: bits 3-4 of op (0, 1: arrives; 2: lost or
+    // corrupted, the controller is silent and executes nothing; 3: a write
+    // swapped, SC-preserving).
+    let op = op.unwrap_or(0);
+    let fate = (op >> 3) & 3;
+    if fate == 2 {
+        return;
+    }
+    // Reply faults: bits 5-7 of op and one more byte when there are any.
+    let fault = op >> 5;
+    let extra = if fault != 0 { input.u8() } else { 0 };
+    let delay = if fault == 0 {
+        1
+    } else {
+        u64::from(input.u16()) % (3 * u64::from(lim.exchange.timeout_ms) + u64::from(lim.exchange.late_window_ms) + 2)
+    };
+    let at = clock + delay;
+    let station = sim.station;
+    let mut out: Option<Delivery> = None;
+    if is_write {
+        let (start, mut recs) = controller::parse_write(sim.kind, bytes).expect("checked above");
+        let (frame, ..) = write.expect("a write is in flight");
+        if fate == 3 && controller::swap_digits(&mut recs, u32::from(extra) | u32::from(op) << 8).is_some() {
+            sim.unguarded = true;
+        }
+        let n = recs.len() as u16;
+        match fault {
+            // An `&` reply; how far the write went is not said.
+            5 => {
+                let k = usize::from(extra) % (recs.len() + 1);
+                controller::apply(&mut sim.table, &recs[..k]);
+                let code = if extra & 1 == 0 {
+                    *BRIDGE_CODES.start() + u16::from(extra >> 1) % 0x20
+                } else {
+                    0x0A0 + u16::from(extra)
+                };
+                out = Some(Delivery { at, bytes: controller::error_reply(station, code), what: What::Error(code) });
+            }
+            // A partial write: the first k records stored, k reported.
+            6 if n > 1 => {
+                let k = 1 + usize::from(extra) % (recs.len() - 1);
+                controller::apply(&mut sim.table, &recs[..k]);
+                out = Some(Delivery {
+                    at,
+                    bytes: controller::write_reply(sim.kind, station, start, k as u16),
+                    what: What::WriteReply {
+                        start,
+                        count: k as u16,
+                        frame,
+                        sent_at: clock,
+                        partial: true,
+                    },
+                });
+            }
+            _ => {
+                controller::apply(&mut sim.table, &recs);
+                out = Some(Delivery {
+                    at,
+                    bytes: controller::write_reply(sim.kind, station, start, n),
+                    what: What::WriteReply {
+                        start,
+                        count: n,
+                        frame,
+                        sent_at: clock,
+                        partial: false,
+                    },
+                });
+            }
+        }
+    } else if let Some((head, asked)) = controller::parse_query(sim.rb, station, bytes) {
+        let mut recs = controller::window(&sim.table, head, asked);
+        let reply_fault = (extra >> 4) & 7;
+        if fault == 4 {
+            match reply_fault {
+                // A wrong record: never what the source holds there.
+                0 | 1 if !recs.is_empty() => {
+                    let i = usize::from(extra) % recs.len();
+                    let mut r = recs[i].clone();
+                    r.speed = r.speed.wrapping_add(1);
+                    if expected.get(&r.number) == Some(&r) {
+                        r.speed = r.speed.wrapping_add(1);
+                    }
+                    recs[i] = r;
+                }
+                // A record missing.
+                2 if !recs.is_empty() => {
+                    recs.remove(usize::from(extra) % recs.len());
+                }
+                // A digit swapped, unless that shows what the source holds.
+                3 => {
+                    let mut swapped = recs.clone();
+                    if let Some(i) = controller::swap_digits(&mut swapped, u32::from(extra) << 3 | u32::from(op)) {
+                        if expected.get(&swapped[i].number) != Some(&swapped[i]) {
+                            recs = swapped;
+                        }
+                    }
+                }
+                // A stale reply: an earlier real reply of the controller.
+                4 | 5 => {
+                    let olds: Vec<&Delivery> = sim
+                        .history
+                        .iter()
+                        .filter(|d| matches!(d.what, What::ReadReply { .. }))
+                        .collect();
+                    if !olds.is_empty() {
+                        let mut d = olds[usize::from(extra) % olds.len()].clone();
+                        d.at = at;
+                        sim.schedule(d);
+                        return;
+                    }
+                }
+                _ => {}
+            }
+        }
+        let reply = controller::query_reply(sim.rb, station, &recs);
+        assert!(
+            reply.len() <= lim.max_response,
+            "a read-back reply of {} bytes for a window the engine asked (max {})",
+            reply.len(),
+            lim.max_response
+        );
+        out = Some(Delivery { at, bytes: reply, what: What::ReadReply { head, asked } });
+        if fault == 5 {
+            let code = 0x0A0 + u16::from(extra);
+            out = Some(Delivery { at, bytes: controller::error_reply(station, code), what: What::Error(code) });
+        }
+    }
+    let Some(mut d) = out else { return };
+    if !matches!(d.what, What::Error(_)) {
+        sim.history.push(d.clone());
+    }
+    match fault {
+        // Lost.
+        1 => {}
+        // A corrupted byte: the SC fails.
+        2 => {
+            controller::corrupt_byte(&mut d.bytes, u32::from(extra) * 977 + u32::from(op));
+            d.what = What::Noise;
+            sim.schedule(d);
+        }
+        // Twice: the duplicate later.
+        3 => {
+            let mut dup = d.clone();
+            dup.at += u64::from(extra) * 50;
+            sim.schedule(d);
+            sim.schedule(dup);
+        }
+        _ => sim.schedule(d),
+    }
+}
