@@ -353,7 +353,8 @@ impl Exchange {
 
     fn timed_out(&mut self, now: u32) -> Due {
         if let Reply::None { .. } = self.reply {
-            return self.finish(Finish::NoReplyExpected, now, 0);
+            // Its error response may still come late, like any reply.
+            return self.finish(Finish::NoReplyExpected, now, 1);
         }
         self.faulted = true;
         if self.sends < self.send_limit() {
@@ -652,6 +653,22 @@ mod tests {
         assert_eq!(x.sends(), 1);
         x.start(&catalogue::SYSTEM_STATUS_QUERY, 3_100);
         assert_eq!(x.poll(3_100), Due::WaitUntil(10_100));
+    }
+
+    #[test]
+    fn a_late_error_reply_to_software_reset_is_stale_for_the_next_command() {
+        let mut cfg = ExchangeConfig::new(S);
+        cfg.late_window_ms = 20_000;
+        let mut x = Exchange::new(cfg, Quarantine::Wait);
+        x.start(&catalogue::SOFTWARE_RESET, 0);
+        x.poll(0);
+        x.sent(100);
+        assert_eq!(x.poll(3_100), Due::Done(Finish::NoReplyExpected));
+        // The next command waits out the late window, not only the restart.
+        x.start(&catalogue::SYSTEM_STATUS_QUERY, 3_100);
+        assert_eq!(x.poll(10_100), Due::WaitUntil(23_100));
+        assert_eq!(x.offer(&frame(b"&99C7446\r\n"), true, 12_000), Offer::Stale);
+        assert_eq!(x.poll(23_100), Due::Transmit { fresh: true });
     }
 
     #[test]
