@@ -127,10 +127,7 @@ fn check<const N: usize>(policy: BypassPolicy, cuts: &[u8], stream: &[u8]) {
                     None
                 }
                 ev => {
-                    assert!(
-                        d.consumed > 0 || held > 0,
-                        "an event from nothing: {ev:?}"
-                    );
+                    assert!(d.consumed > 0 || held > 0, "an event from nothing: {ev:?}");
                     let mut k = None;
                     let ran = other.next(|theirs| match (&ev, &theirs) {
                         (Event::Frame(a), Event::Frame(b)) => {

@@ -151,7 +151,10 @@ struct Windows {
 
 impl Windows {
     fn query(&mut self, head: u32, asked: u16, limit: u16) {
-        assert!(asked >= 1 && asked <= limit, "window of {asked} (limit {limit})");
+        assert!(
+            asked >= 1 && asked <= limit,
+            "window of {asked} (limit {limit})"
+        );
         assert!(
             head >= self.first && head + u32::from(asked) - 1 <= self.last,
             "window {head}+{asked} outside {}..={}",
@@ -250,6 +253,7 @@ fuzz_target!(|data: &[u8]| {
     let mut history: Vec<Delivery> = Vec::new();
     let mut line = Line::default();
     let mut held;
+    let mut any_sent = false;
     let mut steps = 0usize;
 
     loop {
@@ -258,9 +262,15 @@ fuzz_target!(|data: &[u8]| {
         held = false;
         match rb.poll(now(clock)) {
             ReadStep::Transmit(q) => {
-                let (head, asked) =
-                    controller::parse_query(kind, station, q).expect("the engine sent an invalid query");
+                trace!(
+                    "t={clock} now={} TX {}",
+                    now(clock),
+                    String::from_utf8_lossy(q).trim_end()
+                );
+                let (head, asked) = controller::parse_query(kind, station, q)
+                    .expect("the engine sent an invalid query");
                 w.query(u32::from(head), asked, cfg.window());
+                any_sent = true;
                 let op = if table_mode { input.next() } else { None };
                 let dur = u64::from(op.map_or(1, |o| o & 7));
                 if table_mode {
@@ -277,14 +287,30 @@ fuzz_target!(|data: &[u8]| {
                 rb.sent(now(clock));
                 if table_mode {
                     answer(
-                        &mut input, op, kind, station, &table, head, asked, clock, &cfg, &mut outbox,
+                        &mut input,
+                        op,
+                        kind,
+                        station,
+                        &table,
+                        head,
+                        asked,
+                        clock,
+                        &cfg,
+                        &mut outbox,
                         &mut history,
                     );
                 }
             }
             ReadStep::WaitUntil(deadline) => {
-                let ahead = deadline.wrapping_sub(now(clock));
-                assert!(ahead.wrapping_sub(1) <= 0x7FFF_FFFF, "waits for the past");
+                trace!("t={clock} now={} WAIT until {deadline}", now(clock));
+                // The longest hold: the quarantine after a resend (timeout
+                // + late window), the duplicate guard and the turnaround.
+                let bound = u64::from(exchange.timeout_ms)
+                    + u64::from(exchange.late_window_ms)
+                    + u64::from(exchange.duplicate_window_ms)
+                    + u64::from(exchange.turnaround_ms)
+                    + 2;
+                let ahead = records::check_wait(now(clock), deadline, bound, !any_sent);
                 let until = clock + u64::from(ahead);
                 if table_mode {
                     match input.next() {
@@ -313,7 +339,9 @@ fuzz_target!(|data: &[u8]| {
                                 }
                                 2 => {
                                     if !history.is_empty() {
-                                        let mut d = history[usize::from(input.u8()) % history.len()].clone();
+                                        let mut d = history
+                                            [usize::from(input.u8()) % history.len()]
+                                        .clone();
                                         if let What::Reply { copy, .. } = &mut d.what {
                                             *copy = true;
                                         }
@@ -347,15 +375,27 @@ fuzz_target!(|data: &[u8]| {
                             2 | 3 => {
                                 let (head, asked) = w.current.map_or((0, 1), |c| (c.0, c.1));
                                 let n = usize::from(input.u8()) % (usize::from(asked) + 2);
-                                let count = if op & 0x80 == 0 { n as u16 } else { u16::from(input.u8()) };
-                                let st = if op & 0x40 == 0 { station } else { Station(input.u8()) };
+                                let count = if op & 0x80 == 0 {
+                                    n as u16
+                                } else {
+                                    u16::from(input.u8())
+                                };
+                                let st = if op & 0x40 == 0 {
+                                    station
+                                } else {
+                                    Station(input.u8())
+                                };
                                 let spread = input.u8();
-                                let r = arbitrary_reply(kind, st, count, &mut input, n, head, spread);
+                                let r =
+                                    arbitrary_reply(kind, st, count, &mut input, n, head, spread);
                                 pending.push((r, What::Other));
                             }
                             4 => {
                                 let code = input.u16() & 0xFFF;
-                                pending.push((controller::error_reply(station, code), What::Error(code)));
+                                pending.push((
+                                    controller::error_reply(station, code),
+                                    What::Error(code),
+                                ));
                             }
                             _ => clock = until,
                         },
@@ -364,6 +404,12 @@ fuzz_target!(|data: &[u8]| {
                 feed(&mut rb, &mut pending, now(clock), &mut held);
             }
             ReadStep::Records(recs) => {
+                trace!(
+                    "t={clock} RECORDS {}+{} reread {}",
+                    recs.head(),
+                    recs.asked(),
+                    recs.reread()
+                );
                 let (head, asked, reread, done) = w.current.expect("records before any query");
                 assert!(!done, "a window delivered twice");
                 assert_eq!(
@@ -390,7 +436,11 @@ fuzz_target!(|data: &[u8]| {
                 if table_mode {
                     // Every record delivered is the controller's, unaltered.
                     for r in &these {
-                        assert_eq!(table.get(&r.number), Some(r), "a record the controller does not hold");
+                        assert_eq!(
+                            table.get(&r.number),
+                            Some(r),
+                            "a record the controller does not hold"
+                        );
                     }
                     let truth = controller::window(&table, head as u16, asked);
                     if !line.out_of_contract && (n > 0 || !line.copies) {
@@ -411,7 +461,11 @@ fuzz_target!(|data: &[u8]| {
             }
             ReadStep::Complete(stats) => {
                 assert_eq!(stats.records, delivered);
-                assert_eq!(w.next_head, u32::from(last) + 1, "Complete before the last window");
+                assert_eq!(
+                    w.next_head,
+                    u32::from(last) + 1,
+                    "Complete before the last window"
+                );
                 if table_mode && !line.out_of_contract && !line.copies {
                     let truth: Table = table
                         .range(first..=last)
@@ -422,6 +476,7 @@ fuzz_target!(|data: &[u8]| {
                 break;
             }
             ReadStep::Failed(e) => {
+                trace!("t={clock} FAILED {e:?}");
                 match e {
                     TransferError::Timeout => {}
                     TransferError::Controller { code } => assert!(!BRIDGE_CODES.contains(&code)),
@@ -452,8 +507,20 @@ struct Line {
 
 /// Queues a delivery's bytes arriving at `clock`; notes replies outside
 /// the contract and copies.
-fn queue(pending: &mut Vec<(Vec<u8>, What)>, d: &Delivery, clock: u64, ex: &ExchangeConfig, line: &mut Line) {
-    if let What::Reply { sent_at, first_at, copy, .. } = d.what {
+fn queue(
+    pending: &mut Vec<(Vec<u8>, What)>,
+    d: &Delivery,
+    clock: u64,
+    ex: &ExchangeConfig,
+    line: &mut Line,
+) {
+    if let What::Reply {
+        sent_at,
+        first_at,
+        copy,
+        ..
+    } = d.what
+    {
         let late = clock >= sent_at + u64::from(ex.timeout_ms) + u64::from(ex.late_window_ms);
         let dup_late = !copy || clock >= first_at + u64::from(ex.duplicate_window_ms);
         if late && dup_late {
@@ -478,6 +545,11 @@ fn feed<const N: usize>(
     }
     while let Some((bytes, what)) = pending.first_mut() {
         let r = rb.received(bytes, now);
+        trace!(
+            "now={now} RX {:?} -> {:?}",
+            String::from_utf8_lossy(&bytes[..r.consumed]),
+            r.event
+        );
         assert!(r.consumed <= bytes.len());
         bytes.drain(..r.consumed);
         match r.event {
@@ -502,13 +574,11 @@ fn feed<const N: usize>(
                 *held = true;
                 return;
             }
-            ReadEvent::Rejected { code } => {
-                match what {
-                    What::Error(c) => assert_eq!(*c, code),
-                    What::Other => {}
-                    other => panic!("rejected by {other:?}"),
-                }
-            }
+            ReadEvent::Rejected { code } => match what {
+                What::Error(c) => assert_eq!(*c, code),
+                What::Other => {}
+                other => panic!("rejected by {other:?}"),
+            },
             ReadEvent::Stale | ReadEvent::Foreign | ReadEvent::Broken(_) => {}
         }
     }
@@ -545,7 +615,10 @@ fn answer(
     };
     let recs = controller::window(table, head, asked);
     let bytes = controller::query_reply(kind, station, &recs);
-    assert!(bytes.len() <= cfg.max_response, "a reply over max_response for an engine window");
+    assert!(
+        bytes.len() <= cfg.max_response,
+        "a reply over max_response for an engine window"
+    );
     let mut d = Delivery {
         at: clock + delay,
         bytes,

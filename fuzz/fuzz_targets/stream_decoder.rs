@@ -172,7 +172,11 @@ fn arbitrary_stream(policy: BypassPolicy, cuts: &[u8], stream: &[u8]) {
             }
         }
     }
-    assert_eq!(other.next(), None, "the byte-by-byte decoder has more events");
+    assert_eq!(
+        other.next(),
+        None,
+        "the byte-by-byte decoder has more events"
+    );
     assert_eq!(dec.offset(), other.dec.offset());
     assert_eq!(dec.records_done(), other.dec.records_done());
 }
@@ -192,8 +196,9 @@ fn round_trip(policy: BypassPolicy, cuts: &[u8], mut input: Input<'_>) {
             w if w >= 4 => start_raw,
             w => start_raw & ((1 << (4 * w)) - 1),
         };
-        let mut enc = PositionStreamEncoder::new(kind, station, start, n as u16, recs.iter().cloned())
-            .expect("encoder start");
+        let mut enc =
+            PositionStreamEncoder::new(kind, station, start, n as u16, recs.iter().cloned())
+                .expect("encoder start");
         let mut frame = [0u8; MAX_FRAME];
         let mut len = 0;
         let mut lens = Lens { cuts, i: 0 };

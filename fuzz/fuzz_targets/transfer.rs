@@ -171,8 +171,8 @@ fuzz_target!(|data: &[u8]| {
         0 => 0u32,
         w => (1u32 << (4 * u32::from(w))) - 1,
     };
-    let start =
-        (u32::from(input.u16()) & start_max).min((start_max + 1).saturating_sub(size as u32)) as u16;
+    let start = (u32::from(input.u16()) & start_max)
+        .min((start_max + 1).saturating_sub(size as u32)) as u16;
     let first_number = input.u16();
     let min_frame = kind.overhead() + kind.layout.record_len(8);
     let max_frame = min_frame + usize::from(input.u8()) * 4;
@@ -273,22 +273,34 @@ fuzz_target!(|data: &[u8]| {
         match step {
             Step::Transmit(bytes) => {
                 let bytes = bytes.to_vec();
+                trace!(
+                    "t={clock} now={} TX {}",
+                    now(clock),
+                    String::from_utf8_lossy(&bytes).trim_end()
+                );
                 let op = input.next();
                 let is_write = bytes.get(3..6) == Some(hex3(kind.id).as_slice());
                 if is_write {
-                    let (s, recs) =
-                        controller::parse_write(kind, &bytes).expect("the engine sent an invalid write");
+                    let (s, recs) = controller::parse_write(kind, &bytes)
+                        .expect("the engine sent an invalid write");
                     assert!(bytes.len() <= max_frame, "a frame over max_frame");
                     assert!(!recs.is_empty(), "a write without records");
                     let from = confirmed as usize;
-                    assert!(from + recs.len() <= source.len(), "more records than the source");
+                    assert!(
+                        from + recs.len() <= source.len(),
+                        "more records than the source"
+                    );
                     for (i, r) in recs.iter().enumerate() {
                         let mut want = source[from + i].clone();
                         want.number = controller::position_of(kind, start, from + i, &want);
                         assert_eq!(*r, want, "records out of order (record {})", from + i);
                     }
                     if kind.start_width > 0 {
-                        assert_eq!(u32::from(s), u32::from(start) + confirmed, "wrong start number");
+                        assert_eq!(
+                            u32::from(s),
+                            u32::from(start) + confirmed,
+                            "wrong start number"
+                        );
                     }
                     let id = sim.frames.len();
                     sim.frames.push((from, recs.len() as u16, None));
@@ -298,7 +310,10 @@ fuzz_target!(|data: &[u8]| {
                 } else {
                     let (head, asked) = controller::parse_query(rb, station, &bytes)
                         .expect("the engine sent neither a write nor a read-back query");
-                    assert!(asked >= 1 && asked <= rb.window(max_response), "window {asked}");
+                    assert!(
+                        asked >= 1 && asked <= rb.window(max_response),
+                        "window {asked}"
+                    );
                     assert!(
                         u64::from(head) + u64::from(asked) - 1 <= rb.count_field().max_unsigned(),
                         "window past the position field"
@@ -307,35 +322,64 @@ fuzz_target!(|data: &[u8]| {
                     let positions: Vec<u16> = (0..usize::from(n))
                         .map(|i| controller::position_of(kind, start, from + i, &source[from + i]))
                         .collect();
-                    assert!(positions.contains(&head), "a window that starts outside the frame: {head}+{asked} for {positions:?}");
+                    assert!(
+                        positions.contains(&head),
+                        "a window that starts outside the frame: {head}+{asked} for {positions:?}"
+                    );
                     query = Some((head, asked));
                 }
                 // The transmission takes `dur` ms; what is due meanwhile
                 // arrives before `sent`.
                 let dur = u64::from(op.map_or(1, |o| o & 7));
-                deliver_until(&mut t, &mut sim, &lim, clock + dur, true, &mut clock, base, write, write_sent, query);
+                deliver_until(
+                    &mut t,
+                    &mut sim,
+                    &lim,
+                    clock + dur,
+                    true,
+                    &mut clock,
+                    base,
+                    write,
+                    write_sent,
+                    query,
+                );
                 clock += dur;
                 t.sent(now(clock));
                 if is_write {
                     write_sent = true;
                 }
                 check_progress(&t, &mut confirmed, write, write_sent, source.len());
-                controller_answers(&mut sim, &mut input, op, &bytes, is_write, clock, &lim, &expected, write);
+                controller_answers(
+                    &mut sim, &mut input, op, &bytes, is_write, clock, &lim, &expected, write,
+                );
             }
             Step::WaitUntil(deadline) => {
-                let ahead = deadline.wrapping_sub(now(clock));
-                assert!(ahead.wrapping_sub(1) <= 0x7FFF_FFFF, "waits for the past");
+                trace!("t={clock} now={} WAIT until {deadline}", now(clock));
+                // The longest hold: the late-reply guard (timeout + late
+                // window, or a duplicate window) and the turnaround.
+                let bound = u64::from(exchange.timeout_ms)
+                    + u64::from(exchange.late_window_ms)
+                    + u64::from(exchange.duplicate_window_ms)
+                    + u64::from(exchange.turnaround_ms)
+                    + 2;
+                let ahead = records::check_wait(now(clock), deadline, bound, sim.frames.is_empty());
                 let until = clock + u64::from(ahead);
                 match input.next() {
                     None => {
                         let next = sim.outbox.first().map_or(until, |d| d.at.min(until));
-                        deliver_until(&mut t, &mut sim, &lim, next, false, &mut clock, base, write, write_sent, query);
+                        deliver_until(
+                            &mut t, &mut sim, &lim, next, false, &mut clock, base, write,
+                            write_sent, query,
+                        );
                         clock = clock.max(next);
                     }
                     Some(op) => match op % 6 {
                         0 => {
                             let to = clock + u64::from(input.u16());
-                            deliver_until(&mut t, &mut sim, &lim, to, false, &mut clock, base, write, write_sent, query);
+                            deliver_until(
+                                &mut t, &mut sim, &lim, to, false, &mut clock, base, write,
+                                write_sent, query,
+                            );
                             clock = to;
                         }
                         1 => {
@@ -346,8 +390,15 @@ fuzz_target!(|data: &[u8]| {
                                 .iter()
                                 .map(|&b| if b == b'\n' { b'?' } else { b })
                                 .collect();
-                            let d = Delivery { at: clock, bytes, what: What::Noise };
-                            feed(&mut t, &mut sim, &lim, &d, false, clock, base, write, write_sent, query);
+                            let d = Delivery {
+                                at: clock,
+                                bytes,
+                                what: What::Noise,
+                            };
+                            feed(
+                                &mut t, &mut sim, &lim, &d, false, clock, base, write, write_sent,
+                                query,
+                            );
                         }
                         2 => {
                             // An earlier real reply, again (late or stale).
@@ -355,18 +406,27 @@ fuzz_target!(|data: &[u8]| {
                                 let i = usize::from(input.u8()) % sim.history.len();
                                 let mut d = sim.history[i].clone();
                                 d.at = clock;
-                                feed(&mut t, &mut sim, &lim, &d, false, clock, base, write, write_sent, query);
+                                feed(
+                                    &mut t, &mut sim, &lim, &d, false, clock, base, write,
+                                    write_sent, query,
+                                );
                             }
                         }
                         3 => {
                             // The next delivery, now or when due.
                             if let Some(at) = sim.outbox.first().map(|d| d.at) {
-                                deliver_until(&mut t, &mut sim, &lim, at, false, &mut clock, base, write, write_sent, query);
+                                deliver_until(
+                                    &mut t, &mut sim, &lim, at, false, &mut clock, base, write,
+                                    write_sent, query,
+                                );
                                 clock = clock.max(at);
                             }
                         }
                         _ => {
-                            deliver_until(&mut t, &mut sim, &lim, until, false, &mut clock, base, write, write_sent, query);
+                            deliver_until(
+                                &mut t, &mut sim, &lim, until, false, &mut clock, base, write,
+                                write_sent, query,
+                            );
                             clock = clock.max(until);
                         }
                     },
@@ -375,6 +435,7 @@ fuzz_target!(|data: &[u8]| {
             }
             Step::NeedRecords => panic!("an iterator source is never pending"),
             Step::Complete(report) => {
+                trace!("t={clock} COMPLETE {report:?}");
                 assert_eq!(report.stats, t.stats());
                 assert_eq!(
                     report.stats.records_confirmed as usize,
@@ -408,6 +469,7 @@ fuzz_target!(|data: &[u8]| {
                 break;
             }
             Step::Failed(e) => {
+                trace!("t={clock} FAILED {e:?}");
                 match e {
                     TransferError::Timeout => {}
                     TransferError::Controller { code } => {
@@ -423,9 +485,14 @@ fuzz_target!(|data: &[u8]| {
                         assert!(records >= 1);
                         let (_, from, n, _) = write.expect("a mismatch before any write");
                         let positions: Vec<u16> = (0..usize::from(n))
-                            .map(|i| controller::position_of(kind, start, from + i, &source[from + i]))
+                            .map(|i| {
+                                controller::position_of(kind, start, from + i, &source[from + i])
+                            })
                             .collect();
-                        assert!(positions.contains(&first_position), "mismatch names {first_position}");
+                        assert!(
+                            positions.contains(&first_position),
+                            "mismatch names {first_position}"
+                        );
                         assert!(usize::from(records) <= usize::from(n));
                     }
                     other => panic!("unexpected failure {other:?}"),
@@ -490,7 +557,18 @@ fn deliver_until<I: iai_protocol_b::transfer::RecordSource>(
     while sim.outbox.first().is_some_and(|d| d.at <= to) {
         let d = sim.outbox.remove(0);
         *clock = (*clock).max(d.at);
-        feed(t, sim, lim, &d, before_sent, *clock, base, write, write_sent, query);
+        feed(
+            t,
+            sim,
+            lim,
+            &d,
+            before_sent,
+            *clock,
+            base,
+            write,
+            write_sent,
+            query,
+        );
     }
 }
 
@@ -510,9 +588,17 @@ fn feed<I: iai_protocol_b::transfer::RecordSource>(
 ) {
     let now = base.wrapping_add(clock as u32);
     // A write reply outside the engine's guard windows.
-    if let What::WriteReply { frame, sent_at, partial, .. } = d.what {
+    if let What::WriteReply {
+        frame,
+        sent_at,
+        partial,
+        ..
+    } = d.what
+    {
         let late = clock
-            >= sent_at + u64::from(lim.exchange.timeout_ms) + u64::from(lim.exchange.late_window_ms);
+            >= sent_at
+                + u64::from(lim.exchange.timeout_ms)
+                + u64::from(lim.exchange.late_window_ms);
         let dup_ok = sim.frames[frame]
             .2
             .is_some_and(|c| clock < c + u64::from(lim.exchange.duplicate_window_ms));
@@ -529,6 +615,11 @@ fn feed<I: iai_protocol_b::transfer::RecordSource>(
     let mut rest = &d.bytes[..];
     loop {
         let r = t.received(rest, now);
+        trace!(
+            "t={clock} RX {:?} -> {:?}",
+            String::from_utf8_lossy(&rest[..r.consumed]),
+            r.event
+        );
         assert!(r.consumed <= rest.len());
         rest = &rest[r.consumed..];
         match r.event {
@@ -571,8 +662,15 @@ fn feed<I: iai_protocol_b::transfer::RecordSource>(
                 What::Error(c) => assert_eq!(c, code),
                 ref other => panic!("rejected by {other:?}"),
             },
-            TransferEvent::Compared { head, equal, differ } => {
-                assert!(!before_sent, "a read-back reply counted before the query was sent");
+            TransferEvent::Compared {
+                head,
+                equal,
+                differ,
+            } => {
+                assert!(
+                    !before_sent,
+                    "a read-back reply counted before the query was sent"
+                );
                 let (qh, qa) = query.expect("compared without a query");
                 assert_eq!(head, qh);
                 // The reply taken holds at most the window's positions, all
@@ -634,7 +732,8 @@ fn controller_answers(
     let delay = if fault == 0 {
         1
     } else {
-        u64::from(input.u16()) % (3 * u64::from(lim.exchange.timeout_ms) + u64::from(lim.exchange.late_window_ms) + 2)
+        u64::from(input.u16())
+            % (3 * u64::from(lim.exchange.timeout_ms) + u64::from(lim.exchange.late_window_ms) + 2)
     };
     let at = clock + delay;
     let station = sim.station;
@@ -642,7 +741,9 @@ fn controller_answers(
     if is_write {
         let (start, mut recs) = controller::parse_write(sim.kind, bytes).expect("checked above");
         let (frame, ..) = write.expect("a write is in flight");
-        if fate == 3 && controller::swap_digits(&mut recs, u32::from(extra) | u32::from(op) << 8).is_some() {
+        if fate == 3
+            && controller::swap_digits(&mut recs, u32::from(extra) | u32::from(op) << 8).is_some()
+        {
             sim.unguarded = true;
         }
         let n = recs.len() as u16;
@@ -656,7 +757,11 @@ fn controller_answers(
                 } else {
                     0x0A0 + u16::from(extra)
                 };
-                out = Some(Delivery { at, bytes: controller::error_reply(station, code), what: What::Error(code) });
+                out = Some(Delivery {
+                    at,
+                    bytes: controller::error_reply(station, code),
+                    what: What::Error(code),
+                });
             }
             // A partial write: the first k records stored, k reported.
             6 if n > 1 => {
@@ -711,7 +816,9 @@ fn controller_answers(
                 // A digit swapped, unless that shows what the source holds.
                 3 => {
                     let mut swapped = recs.clone();
-                    if let Some(i) = controller::swap_digits(&mut swapped, u32::from(extra) << 3 | u32::from(op)) {
+                    if let Some(i) =
+                        controller::swap_digits(&mut swapped, u32::from(extra) << 3 | u32::from(op))
+                    {
                         if expected.get(&swapped[i].number) != Some(&swapped[i]) {
                             recs = swapped;
                         }
@@ -741,10 +848,18 @@ fn controller_answers(
             reply.len(),
             lim.max_response
         );
-        out = Some(Delivery { at, bytes: reply, what: What::ReadReply { head, asked } });
+        out = Some(Delivery {
+            at,
+            bytes: reply,
+            what: What::ReadReply { head, asked },
+        });
         if fault == 5 {
             let code = 0x0A0 + u16::from(extra);
-            out = Some(Delivery { at, bytes: controller::error_reply(station, code), what: What::Error(code) });
+            out = Some(Delivery {
+                at,
+                bytes: controller::error_reply(station, code),
+                what: What::Error(code),
+            });
         }
     }
     let Some(mut d) = out else { return };

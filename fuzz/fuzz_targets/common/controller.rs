@@ -143,7 +143,9 @@ pub fn query_reply(kind: PositionStream, station: Station, recs: &[PositionRecor
     kind.write_prefix(&mut w, 0, recs.len() as u16)
         .expect("count fits");
     for r in recs {
-        kind.layout.write_record(r, &mut w).expect("stored record fits");
+        kind.layout
+            .write_record(r, &mut w)
+            .expect("stored record fits");
     }
     emit_trailer(&mut w, ChecksumMode::Compute).expect("trailer");
     assert_eq!(w.len(), len);

@@ -100,3 +100,47 @@ pub fn table(layout: RecordLayout, seed: u8, first: u16, n: usize) -> Vec<Positi
         })
         .collect()
 }
+
+/// Whether `FUZZ_TRACE` is set: the engine targets then print what they
+/// send and receive (to replay a finding by hand).
+pub fn tracing() -> bool {
+    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *ON.get_or_init(|| std::env::var_os("FUZZ_TRACE").is_some())
+}
+
+/// `eprintln!` when `FUZZ_TRACE` is set.
+#[macro_export]
+macro_rules! trace {
+    ($($t:tt)*) => {
+        if $crate::records::tracing() {
+            eprintln!($($t)*);
+        }
+    };
+}
+
+/// Open finding F1 (fuzz/README.md): the engines' holds (`Exchange`, and
+/// so `Client`; `Transfer`; `ReadBack`) start at tick 0 and never expire;
+/// once the clock is at or past 2^31 (24.8 days after tick 0) while that
+/// initial 0 is still in place, `later(0, t)` keeps 0 and a command is held
+/// until the clock wraps to 0 (up to 24.8 days). Set to `true` once the
+/// core is fixed; until then the checks below tolerate exactly that wait
+/// (until tick 0, from a tick >= 2^31) and nothing else.
+pub const F1_FIXED: bool = false;
+
+/// Checks a `WaitUntil(deadline)` at tick `now`: the deadline lies in the
+/// future, at most `bound` ms ahead; before anything was sent an engine
+/// never waits (but for open finding F1). Returns the wait in ms.
+pub fn check_wait(now: u32, deadline: u32, bound: u64, nothing_sent: bool) -> u32 {
+    let ahead = deadline.wrapping_sub(now);
+    assert!(ahead.wrapping_sub(1) <= 0x7FFF_FFFF, "waits for the past");
+    let f1 = !F1_FIXED && deadline == 0 && now >= 0x8000_0000;
+    if nothing_sent {
+        assert!(f1, "waits {ahead} ms before the first send (now {now})");
+    } else {
+        assert!(
+            u64::from(ahead) <= bound || f1,
+            "waits {ahead} ms (now {now}), more than any hold ({bound} ms)"
+        );
+    }
+    ahead
+}
