@@ -441,7 +441,10 @@ impl Exchange {
     fn finish(&mut self, f: Finish, now: u32, pending: u8) -> Due {
         self.phase = Phase::Finished(f);
         // More than one send: the replies to the others may still come.
-        self.faulted |= pending > 0;
+        // (After 25BH, the one pending is its possible error response.)
+        if !matches!(f, Finish::NoReplyExpected) {
+            self.faulted |= pending > 0;
+        }
         let mut until = now;
         let mut stale = 0;
         if pending > 0 {
@@ -501,6 +504,11 @@ impl Exchange {
     /// Forgets the current command (its replies become stale).
     pub fn abandon(&mut self, now: u32) {
         if self.busy() {
+            if self.phase == Phase::Sending {
+                // The command may have gone out by now: its replies can
+                // come until a timeout and a late window from now.
+                self.last_sent = now;
+            }
             let pending = self.sends;
             self.finish(Finish::TimedOut { sends: pending }, now, pending);
         }
@@ -669,6 +677,20 @@ mod tests {
         assert_eq!(x.poll(10_100), Due::WaitUntil(23_100));
         assert_eq!(x.offer(&frame(b"&99C7446\r\n"), true, 12_000), Offer::Stale);
         assert_eq!(x.poll(23_100), Due::Transmit { fresh: true });
+    }
+
+    #[test]
+    fn a_command_abandoned_while_it_is_sent_is_quarantined_from_then() {
+        let mut x = exchange();
+        x.start(&catalogue::AXIS_STATUS_QUERY, 0);
+        x.poll(0);
+        x.sent(50);
+        x.poll(3_050);
+        // The resend is being transmitted when the owner gives up at 4,000.
+        assert_eq!(x.poll(3_050), Due::Transmit { fresh: false });
+        x.abandon(4_000);
+        x.start(&catalogue::AXIS_STATUS_QUERY, 4_000);
+        assert_eq!(x.poll(4_000), Due::WaitUntil(10_000));
     }
 
     #[test]
