@@ -257,6 +257,13 @@ def main():
     write("client", "unsafe-timeout", client_seed(0x03, [1], [0x11, 0x00]))
     write("client", "late-duplicate", client_seed(0x63, [0], [0xC1, 0x10] + list(le(2500, 2)) + [0, 0]))
     write("client", "reset-then-query", client_seed(0x23, [2], [0x01, 0x00]))
+    # Reproducers of the findings (fuzz/README.md): always in the corpora,
+    # so every run replays them.
+    reg = os.path.join(HERE, "regressions")
+    for target in sorted(os.listdir(reg)) if os.path.isdir(reg) else []:
+        for name in sorted(os.listdir(os.path.join(reg, target))):
+            with open(os.path.join(reg, target, name), "rb") as f:
+                write(target, "regression-" + name, f.read())
     print(f"seeded {len(gen)} generated frames, {len(pos_frames)} fixture position frames")
     print(f"seeded {len(frames)} fixture frames into {os.path.join(HERE, 'corpus')}")
 

