@@ -257,6 +257,19 @@ def main():
     write("client", "unsafe-timeout", client_seed(0x03, [1], [0x11, 0x00]))
     write("client", "late-duplicate", client_seed(0x63, [0], [0xC1, 0x10] + list(le(2500, 2)) + [0, 0]))
     write("client", "reset-then-query", client_seed(0x23, [2], [0x01, 0x00]))
+    # exchange: station, timeout byte, sends | resend unsafe 0x08 |
+    # ByContent 0x10, turnaround, late window, duplicate window, start tick,
+    # then operations (0 start + pick, 1 poll, 2 advance + u16, 3 sent,
+    # 4 offer + kind byte, 6 lost/broken, 7 abandon, 8 settings).
+    def exchange_seed(flags, ops):
+        return bytes([0x99, 10, flags, 0]) + le(500, 2) + le(300, 2) + le(1000, 4) + bytes(ops)
+    write("exchange", "reply", exchange_seed(0x03, [0, 10, 1, 3, 4, 0x00, 1]))
+    write("exchange", "timeouts", exchange_seed(0x03, [0, 10, 1, 3]))
+    write("exchange", "error-reply", exchange_seed(0x03, [0, 10, 1, 3, 4, 0x02] + list(le(0xC74, 2)) + [1]))
+    write("exchange", "mismatch-then-reply", exchange_seed(0x03, [0, 10, 1, 3, 4, 0x10, 4, 0x00, 1]))
+    write("exchange", "no-normal-reply", exchange_seed(0x03, [0, 0x82] + list(le(10000, 2)) + [1, 3]))
+    write("exchange", "abandon-while-sending", exchange_seed(0x03, [0, 10, 1, 7, 0, 10, 1]))
+    write("exchange", "by-content", exchange_seed(0x13, [0, 10, 1, 3, 6, 0x00, 1, 1, 3, 4, 0x00, 0, 10, 1]))
     # Reproducers of the findings (fuzz/README.md): always in the corpora,
     # so every run replays them.
     reg = os.path.join(HERE, "regressions")
