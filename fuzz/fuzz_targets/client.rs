@@ -20,7 +20,8 @@
 //! when: at once, late (up to far past the timeout), duplicated later, or
 //! both. While the client waits the script advances the clock, delivers
 //! what is due, injects noise (never a LF, so noise cannot complete a
-//! frame), replays an earlier reply (stale or duplicated), or abandons the
+//! frame; with the raw-noise bit of the config any bytes, a frame in them
+//! counting as an unsolicited one), replays an earlier reply (stale or duplicated), or abandons the
 //! request by starting the next one. When the script ends the controller
 //! answers at once.
 //!
@@ -63,6 +64,7 @@ mod records;
 use iai_protocol_b::catalogue::{self, Resend};
 use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
 use iai_protocol_b::client::{CallError, Client, ClientConfig, ClientStep, Heard, Outcome};
+use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::error::BRIDGE_CODES;
 use iai_protocol_b::exchange::{ExchangeConfig, Offer};
 use iai_protocol_b::frame::{emit_frame, Frame, Header, Station};
@@ -103,6 +105,15 @@ struct Delivery {
     unsolicited: bool,
 }
 
+/// A delivery fed since the client's decoder was last reset: where its
+/// bytes start in `H::stream`, and when a copy of it first arrived before.
+#[derive(Debug, Clone)]
+struct Fed {
+    start: usize,
+    d: Delivery,
+    prior: Option<u64>,
+}
+
 /// What the current command is.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Typed {
@@ -127,6 +138,8 @@ struct Req {
     detail: Option<u16>,
     /// An `&` taken in phase 1.
     detail_rejected: bool,
+    /// A detail reply taken from raw noise (its number unread here).
+    detail_unread: bool,
 }
 
 struct H<'a> {
@@ -142,7 +155,13 @@ struct H<'a> {
     /// first arrival of an earlier copy.
     taken_at: Vec<Option<u64>>,
     arrived_at: Vec<Option<u64>>,
-    prior_arrival: Option<u64>,
+    /// Beside the client's reply decoder: a plain one fed the same bytes
+    /// (reset with it at every send), the bytes since that reset, the
+    /// deliveries they came from, and where the last frame ended.
+    shadow: FrameDecoder<REPLY>,
+    stream: Vec<u8>,
+    fed: Vec<Fed>,
+    cursor: usize,
     req: Option<Req>,
     /// A reply is awaited: `sent` was called and no transmission since.
     awaiting: bool,
@@ -266,6 +285,7 @@ impl H<'_> {
             rejected: None,
             detail: None,
             detail_rejected: false,
+            detail_unread: false,
         });
     }
 
@@ -291,17 +311,27 @@ impl H<'_> {
             return;
         }
         let now = self.now();
-        self.prior_arrival = None;
+        let mut prior = None;
         if let Some(i) = d.copy_of.or(d.id) {
             // When a copy of this reply first arrived (before this one).
-            self.prior_arrival = self.arrived_at[i];
+            prior = self.arrived_at[i];
             if self.arrived_at[i].is_none() {
                 self.arrived_at[i] = Some(self.clock);
             }
         }
+        let index = self.fed.len();
+        self.fed.push(Fed {
+            start: self.stream.len(),
+            d: d.clone(),
+            prior,
+        });
         let mut rest = &d.bytes[..];
         loop {
             let r = self.client.received(rest, now);
+            // The plain decoder beside the client's: the same events from
+            // the same bytes, and the frame's bytes, which the client keeps
+            // to itself.
+            let shadow = self.shadow.decode(rest);
             trace!(
                 "t={} RX {:?} -> {:?} (origin {:?} copy_of {:?} id {:?})",
                 self.clock,
@@ -312,14 +342,48 @@ impl H<'_> {
                 d.id
             );
             assert!(r.consumed <= rest.len());
+            assert_eq!(r.consumed, shadow.consumed, "the client decodes otherwise");
+            self.stream.extend_from_slice(&rest[..r.consumed]);
             rest = &rest[r.consumed..];
-            match r.event {
-                Heard::NeedMore => {
+            let frame = match (&r.event, shadow.event) {
+                (Heard::NeedMore, Event::NeedMore) => {
                     assert!(rest.is_empty());
                     return;
                 }
-                Heard::Broken(_) => self.broken_since_sent = true,
-                Heard::Frame(offer) => self.offered(offer, &d),
+                (Heard::Broken(a), Event::Error(b)) => {
+                    assert_eq!(*a, b, "the client decodes otherwise");
+                    self.broken_since_sent = true;
+                    None
+                }
+                (Heard::Frame(_), Event::Frame(f)) => Some(f.as_bytes().to_vec()),
+                (a, b) => panic!("the client heard {a:?}, the decoder {b:?}"),
+            };
+            if let (Heard::Frame(offer), Some(frame)) = (r.event, frame) {
+                // Which delivery made the frame: frames come out in stream
+                // order (bytes of a failed text frame are decoded again, so
+                // a frame may come from an earlier delivery).
+                let at = self.stream[self.cursor..]
+                    .windows(frame.len())
+                    .position(|w| w == frame)
+                    .expect("a frame that is not in the bytes fed")
+                    + self.cursor;
+                let end = at + frame.len();
+                self.cursor = end;
+                // The delivery that completed it, unless it began in raw
+                // noise: then it is the noise's (forged, unsolicited).
+                let last = self
+                    .fed
+                    .iter()
+                    .rposition(|f| f.start < end)
+                    .unwrap_or(index);
+                let first = self
+                    .fed
+                    .iter()
+                    .rposition(|f| f.start <= at)
+                    .unwrap_or(index);
+                let first_raw = self.fed[first].d.origin.is_none() && self.fed[first].d.unsolicited;
+                let src = self.fed[if first_raw { first } else { last }].clone();
+                self.offered(offer, &src, &frame);
             }
             if self.accepted.is_some() {
                 if !rest.is_empty() {
@@ -327,6 +391,7 @@ impl H<'_> {
                     tail.bytes = rest.to_vec();
                     tail.origin = None;
                     tail.id = None;
+                    tail.copy_of = None;
                     self.held.push(tail);
                 }
                 return;
@@ -334,8 +399,9 @@ impl H<'_> {
         }
     }
 
-    fn offered(&mut self, offer: Offer, d: &Delivery) {
+    fn offered(&mut self, offer: Offer, src: &Fed, frame: &[u8]) {
         let clock = self.clock;
+        let d = &src.d;
         match offer {
             Offer::Accepted | Offer::Rejected(_) => {
                 assert!(
@@ -343,13 +409,17 @@ impl H<'_> {
                     "{offer:?} while no reply was awaited (before sent?)"
                 );
                 let id = self.id_in_flight().expect("a reply with no request");
-                let f = Frame::new_checked(&d.bytes, BypassPolicy::Reject)
-                    .expect("the accepted bytes are one whole frame");
-                assert_eq!(
-                    f.station(),
-                    self.cfg.exchange.station,
-                    "a reply from another station taken"
-                );
+                // The frame taken: the whole delivery, except for raw noise,
+                // where only the client's reply frame (after the poll) and
+                // the offer's code tell.
+                let f = Some(Frame::new_checked(frame, BypassPolicy::Reject).expect("a frame"));
+                if let Some(f) = &f {
+                    assert_eq!(
+                        f.station(),
+                        self.cfg.exchange.station,
+                        "a reply from another station taken"
+                    );
+                }
                 let req = self.req.as_ref().expect("request");
                 let (origin, sent_at) = match d.origin {
                     Some(o) => o,
@@ -379,15 +449,13 @@ impl H<'_> {
                     // back) may still come `duplicate_window` after it: open
                     // finding F6 until the core holds it back too.
                     let in_time = sent_at + u64::from(ex.timeout_ms) + u64::from(ex.late_window_ms);
-                    let f6 = self
-                        .prior_arrival
-                        .is_some_and(|a| a < in_time && clock < a + dup);
+                    let f6 = src.prior.is_some_and(|a| a < in_time && clock < a + dup);
                     assert!(
                         out && !(f6 && records::F6_FIXED),
                         "request {:?} took a reply made for {origin:?} (sent at {sent_at}, now {clock}, \
                          taken before at {taken:?}, arrived before at {:?})",
                         (req.serial, req.phase),
-                        self.prior_arrival
+                        src.prior
                     );
                 }
                 if d.origin.map(|o| o.0) != Some((req.serial, req.phase)) {
@@ -423,22 +491,30 @@ impl H<'_> {
                 req.sends = 0;
                 match offer {
                     Offer::Accepted => {
-                        assert_eq!(
-                            (f.header(), f.code()),
-                            (Header::Response, id),
-                            "accepted another ID"
-                        );
-                        if catalogue::lookup(id).is_some() {
-                            Response::parse(&f).expect("an accepted reply parses");
-                        }
-                        if req.phase == 1 {
-                            let r = ErrorDetailResponse::parse(&f).expect("a 216H reply");
-                            req.detail = Some(r.error_number);
+                        match &f {
+                            Some(f) => {
+                                assert_eq!(
+                                    (f.header(), f.code()),
+                                    (Header::Response, id),
+                                    "accepted another ID"
+                                );
+                                if catalogue::lookup(id).is_some() {
+                                    Response::parse(f).expect("an accepted reply parses");
+                                }
+                                if req.phase == 1 {
+                                    let r = ErrorDetailResponse::parse(f).expect("a 216H reply");
+                                    req.detail = Some(r.error_number);
+                                }
+                            }
+                            None if req.phase == 1 => req.detail_unread = true,
+                            None => {}
                         }
                         self.accepted = Some(req.serial);
                     }
                     Offer::Rejected(code) => {
-                        assert_eq!((f.header(), f.code()), (Header::Error, code));
+                        if let Some(f) = &f {
+                            assert_eq!((f.header(), f.code()), (Header::Error, code));
+                        }
                         if req.phase == 0 {
                             req.rejected = Some(code);
                         } else {
@@ -451,13 +527,18 @@ impl H<'_> {
             }
             Offer::Mismatch => {
                 // Right station and ID, a body that does not parse.
-                let f =
-                    Frame::new_checked(&d.bytes, BypassPolicy::Reject).expect("one whole frame");
-                assert_eq!(f.header(), Header::Response);
-                assert!(
-                    Response::parse(&f).is_err(),
-                    "a reply that parses called malformed"
-                );
+                if let Ok(f) = Frame::new_checked(frame, BypassPolicy::Reject) {
+                    assert_eq!(f.header(), Header::Response);
+                    assert!(
+                        Response::parse(&f).is_err(),
+                        "a reply that parses called malformed"
+                    );
+                } else {
+                    assert!(
+                        d.unsolicited && d.origin.is_none(),
+                        "a mismatch from no frame"
+                    );
+                }
             }
             Offer::Stale | Offer::Foreign => {}
         }
@@ -656,7 +737,8 @@ fuzz_target!(|data: &[u8]| {
     ex.max_sends = b % 5; // 0 is read as 1
     ex.resend_unsafe = b & 0x08 != 0;
     let fetch = b & 0x10 != 0;
-    let requests = 1 + usize::from(b >> 5) % 4;
+    let raw_noise = b & 0x80 != 0;
+    let requests = 1 + usize::from(b >> 5 & 3);
     ex.turnaround_ms = 1 + u32::from(input.u8() % 4);
     ex.late_window_ms = u32::from(input.u16());
     ex.duplicate_window_ms = u32::from(input.u16());
@@ -674,7 +756,10 @@ fuzz_target!(|data: &[u8]| {
         history: Vec::new(),
         taken_at: Vec::new(),
         arrived_at: Vec::new(),
-        prior_arrival: None,
+        shadow: FrameDecoder::with_policy(BypassPolicy::Reject),
+        stream: Vec::new(),
+        fed: Vec::new(),
+        cursor: 0,
         req: None,
         awaiting: false,
         last_sent: 0,
@@ -782,6 +867,11 @@ fuzz_target!(|data: &[u8]| {
                 }
                 h.sends += 1;
                 h.awaiting = false;
+                // The client reset its reply decoder for this send.
+                h.shadow.reset();
+                h.stream.clear();
+                h.fed.clear();
+                h.cursor = 0;
                 let op = h.input.next();
                 let dur = u64::from(op.map_or(1, |o| o & 7));
                 // Replies due while the command goes out arrive before `sent`.
@@ -838,12 +928,15 @@ fuzz_target!(|data: &[u8]| {
                             }
                         }
                         1 => {
+                            // Noise: anything but LF (so it cannot complete a
+                            // frame), or with the raw-noise bit anything at
+                            // all, a frame in it being an unsolicited one.
                             let n = usize::from(h.input.u8() % 64);
                             let bytes: Vec<u8> = h
                                 .input
                                 .take(n)
                                 .iter()
-                                .map(|&b| if b == b'\n' { b'?' } else { b })
+                                .map(|&b| if b == b'\n' && !raw_noise { b'?' } else { b })
                                 .collect();
                             h.feed(Delivery {
                                 at: h.clock,
@@ -851,7 +944,7 @@ fuzz_target!(|data: &[u8]| {
                                 origin: None,
                                 copy_of: None,
                                 id: None,
-                                unsolicited: false,
+                                unsolicited: raw_noise,
                             });
                         }
                         2 => {
@@ -890,7 +983,7 @@ fuzz_target!(|data: &[u8]| {
                 let ended_by_reply = matches!(result, Ok(Outcome::Replied))
                     || req.detail_rejected
                     || (req.rejected.is_some() && req.phase == 0)
-                    || (req.phase == 1 && req.detail.is_some());
+                    || (req.phase == 1 && (req.detail.is_some() || req.detail_unread));
                 match result {
                     Ok(Outcome::Replied) => {
                         assert_eq!(
@@ -966,10 +1059,12 @@ fuzz_target!(|data: &[u8]| {
                         match detail {
                             Some(d) => {
                                 assert!(fetch);
-                                assert_eq!(Some(d.error_number), req.detail);
+                                if !req.detail_unread {
+                                    assert_eq!(Some(d.error_number), req.detail);
+                                }
                                 assert_eq!(d.matches_code, d.error_number == code);
                             }
-                            None => assert!(!fetch || req.detail.is_none()),
+                            None => assert!(!fetch || (req.detail.is_none() && !req.detail_unread)),
                         }
                         if fetch {
                             assert_eq!(req.phase, 1, "no 216H query after an & with the option on");

@@ -24,7 +24,8 @@
 //! digit, or a stale reply (an earlier real reply of the controller sent
 //! again). While the engine waits, script bytes advance the clock, deliver
 //! what is due, inject noise (never a LF, so noise cannot complete a
-//! frame), or replay an earlier write or read-back reply. When the script
+//! frame; with the raw-noise bit of the config any bytes, as the old target
+//! did), or replay an earlier write or read-back reply. When the script
 //! ends the controller is well-behaved (replies after 1 ms), so every run
 //! ends.
 //!
@@ -56,7 +57,9 @@
 //!   write or a write reply arrived outside the engine's guard windows
 //!   (later than `timeout + late_window` after its send, and later than
 //!   `duplicate_window` after the engine confirmed that frame), which are
-//!   the faults those policies do not claim to catch;
+//!   the faults those policies do not claim to catch (and no table claim
+//!   at all once raw noise held a frame that passed for a reply: a forged
+//!   reply can confirm or verify anything);
 //! - `Failed` only with `Timeout`, `Controller { code }` (a code the
 //!   controller sent, outside the bridge range), `Bridge { code }` (inside
 //!   it) or `Mismatch { first_position, records }` (a position of the frame
@@ -122,6 +125,8 @@ enum What {
     Error(u16),
     /// Bytes that cannot complete a frame (noise, a corrupted frame).
     Noise,
+    /// Arbitrary bytes: they may hold a valid frame that passes for a reply.
+    Forged,
 }
 
 #[derive(Debug, Clone)]
@@ -143,6 +148,9 @@ struct Sim {
     history: Vec<Delivery>,
     /// Faults the weaker policies do not claim to catch.
     unguarded: bool,
+    /// Noise may hold LF (config), and a frame in it passed for a reply.
+    raw_noise: bool,
+    forged: bool,
     /// When each position was last written.
     written_at: std::collections::BTreeMap<u16, u64>,
     /// A read-back reply made before the last write to its window was
@@ -262,6 +270,8 @@ fuzz_target!(|data: &[u8]| {
         outbox: Vec::new(),
         history: Vec::new(),
         unguarded: false,
+        raw_noise: shape & 0x10 != 0,
+        forged: false,
         written_at: Default::default(),
         old_compare: false,
         frames: Vec::new(),
@@ -408,17 +418,19 @@ fuzz_target!(|data: &[u8]| {
                             clock = to;
                         }
                         1 => {
-                            // Noise: anything but LF.
+                            // Noise: anything but LF (so it cannot complete a
+                            // frame), or with the raw-noise bit anything at all.
                             let n = usize::from(input.u8() % 64);
+                            let raw = sim.raw_noise;
                             let bytes: Vec<u8> = input
                                 .take(n)
                                 .iter()
-                                .map(|&b| if b == b'\n' { b'?' } else { b })
+                                .map(|&b| if b == b'\n' && !raw { b'?' } else { b })
                                 .collect();
                             let d = Delivery {
                                 at: clock,
                                 bytes,
-                                what: What::Noise,
+                                what: if raw { What::Forged } else { What::Noise },
                             };
                             feed(
                                 &mut t, &mut sim, &lim, &d, false, clock, base, write, write_sent,
@@ -473,7 +485,9 @@ fuzz_target!(|data: &[u8]| {
                     Verify::Off => Guarantee::Unverified,
                 };
                 assert_eq!(report.guarantee, want);
-                if report.guarantee == Guarantee::Verified || !sim.unguarded {
+                // A frame forged by arbitrary bytes can confirm or verify
+                // anything: no claim then.
+                if !sim.forged && (report.guarantee == Guarantee::Verified || !sim.unguarded) {
                     // Open finding F5 (fuzz/README.md): after a rewrite, an
                     // old copy of the window's previous read-back reply can
                     // pass for the new one. Tolerated only with that
@@ -669,6 +683,7 @@ fn feed<I: iai_protocol_b::transfer::RecordSource>(
                             assert_eq!(start, s, "a reply with another start confirmed");
                         }
                     }
+                    What::Forged => sim.forged = true,
                     ref other => panic!("confirmed by {other:?}"),
                 }
                 for f in sim.frames.iter_mut() {
@@ -685,11 +700,13 @@ fn feed<I: iai_protocol_b::transfer::RecordSource>(
                         assert_eq!(reported, count);
                         assert!(count != n || (sim.kind.start_width > 0 && start != s));
                     }
+                    What::Forged => {}
                     ref other => panic!("count mismatch from {other:?}"),
                 }
             }
             TransferEvent::Rejected { code } => match d.what {
                 What::Error(c) => assert_eq!(c, code),
+                What::Forged => {}
                 ref other => panic!("rejected by {other:?}"),
             },
             TransferEvent::Compared {
@@ -739,6 +756,7 @@ fn feed<I: iai_protocol_b::transfer::RecordSource>(
                             );
                         }
                     }
+                    What::Forged => sim.forged = true,
                     ref other => panic!("compared with {other:?}"),
                 }
                 assert!(u32::from(equal) + u32::from(differ) <= u32::from(qa));
