@@ -82,7 +82,7 @@ use iai_protocol_b::checksum::ChecksumMode;
 use iai_protocol_b::error::BRIDGE_CODES;
 use iai_protocol_b::exchange::ExchangeConfig;
 use iai_protocol_b::frame::Station;
-use iai_protocol_b::position::PositionStream;
+use iai_protocol_b::position::{PositionRecord, PositionStream};
 use iai_protocol_b::transfer::{
     Guarantee, Step, Transfer, TransferConfig, TransferError, TransferEvent, Verify,
 };
@@ -150,7 +150,7 @@ struct Sim {
     unguarded: bool,
     /// Deliveries fed since the last transmission (the frame behind an
     /// event may come from one of them, see `made_by`).
-    recent: Vec<Delivery>,
+    recent: Vec<What>,
     /// Noise may hold LF (config), and a frame in it passed for a reply.
     raw_noise: bool,
     forged: bool,
@@ -165,7 +165,7 @@ struct Sim {
 }
 
 impl Sim {
-    fn apply(&mut self, recs: &[iai_protocol_b::position::PositionRecord], clock: u64) {
+    fn apply(&mut self, recs: &[PositionRecord], clock: u64) {
         controller::apply(&mut self.table, recs);
         for r in recs {
             self.written_at.insert(r.number, clock);
@@ -316,6 +316,8 @@ fuzz_target!(|data: &[u8]| {
                 );
                 let op = input.next();
                 let is_write = bytes.get(3..6) == Some(hex3(kind.id).as_slice());
+                // The write as the controller reads it (checked below).
+                let mut parsed = None;
                 if is_write {
                     let (s, recs) = controller::parse_write(kind, &bytes)
                         .expect("the engine sent an invalid write");
@@ -341,6 +343,7 @@ fuzz_target!(|data: &[u8]| {
                     let id = sim.frames.len();
                     sim.frames.push((from, recs.len() as u16, None));
                     write = Some((id, from, recs.len() as u16, s));
+                    parsed = Some((s, recs));
                     write_sent = false;
                     query = None;
                 } else {
@@ -386,7 +389,7 @@ fuzz_target!(|data: &[u8]| {
                 }
                 check_progress(&t, &mut confirmed, write, write_sent, source.len());
                 controller_answers(
-                    &mut sim, &mut input, op, &bytes, is_write, clock, &lim, &expected, write,
+                    &mut sim, &mut input, op, &bytes, parsed, clock, &lim, &expected, write,
                 );
             }
             Step::WaitUntil(deadline) => {
@@ -594,12 +597,7 @@ fn check_progress<I: iai_protocol_b::transfer::RecordSource>(
 /// bytes of a failed text frame are decoded again) an earlier one since the
 /// last transmission; the most recent that `fits`.
 fn made_by(sim: &Sim, fits: impl Fn(&What) -> bool) -> Option<What> {
-    sim.recent
-        .iter()
-        .rev()
-        .map(|d| &d.what)
-        .find(|w| fits(w))
-        .cloned()
+    sim.recent.iter().rev().find(|w| fits(w)).cloned()
 }
 
 /// Delivers everything due up to `to` (moving the clock to each delivery).
@@ -649,7 +647,7 @@ fn feed<I: iai_protocol_b::transfer::RecordSource>(
     query: Option<(u16, u16)>,
 ) {
     let now = base.wrapping_add(clock as u32);
-    sim.recent.push(d.clone());
+    sim.recent.push(d.what.clone());
     // A write reply outside the engine's guard windows.
     if let What::WriteReply {
         frame,
@@ -800,12 +798,13 @@ fn controller_answers(
     input: &mut Input<'_>,
     op: Option<u8>,
     bytes: &[u8],
-    is_write: bool,
+    parsed: Option<(u16, Vec<PositionRecord>)>,
     clock: u64,
     lim: &Cfg,
     expected: &Table,
     write: Option<(usize, usize, u16, u16)>,
 ) {
+    let is_write = parsed.is_some();
     // Fate of the command: bits 3-4 of op (0, 1: arrives; 2: lost or
     // corrupted, the controller is silent and executes nothing; 3: a write
     // swapped, SC-preserving).
@@ -827,7 +826,7 @@ fn controller_answers(
     let station = sim.station;
     let mut out: Option<Delivery> = None;
     if is_write {
-        let (start, mut recs) = controller::parse_write(sim.kind, bytes).expect("checked above");
+        let (start, mut recs) = parsed.expect("a write");
         let (frame, ..) = write.expect("a write is in flight");
         if fate == 3
             && controller::swap_digits(&mut recs, u32::from(extra) | u32::from(op) << 8).is_some()
