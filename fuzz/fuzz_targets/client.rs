@@ -34,21 +34,32 @@
 //!   request (or for the other phase of this one: the command or its 216H
 //!   detail query) is taken only outside the engine's contract: later than
 //!   `timeout + late_window` after the send it answered and, for a copy,
-//!   later than `duplicate_window` after the original was taken. So a
-//!   request never gets a reply that belongs to an earlier request;
+//!   later than `duplicate_window` after the original was taken (or after
+//!   an original that arrived in time but was dropped: open finding F6,
+//!   tolerated with that signature until fixed). So a request never gets a
+//!   reply that belongs to an earlier request. (A command that took another
+//!   command's reply outside the contract leaves its own replies adrift:
+//!   whoever takes them later is not blamed.) Which delivery made a frame
+//!   is known from a plain `FrameDecoder` fed beside the client's, which
+//!   must decode the same events;
 //! - `Done(Ok(Replied))` only after such an acceptance; the reply frame is
 //!   readable and, for a catalogue ID, parses as its response (typed
 //!   requests: `Client::response` succeeds); `Done(Ok(NoReplyExpected))`
-//!   only for 25BH, not before `sent + timeout`, and the next command waits
-//!   for the controller's restart (10 s after that `sent`);
+//!   only for 25BH, not before `sent + timeout` (open finding F3: a broken
+//!   `&` ends it early; tolerated with that signature until fixed), and the
+//!   next command waits for the controller's restart (10 s after that
+//!   `sent`);
 //! - sends per command <= `max_sends`; a command the catalogue marks unsafe
 //!   (and one outside the catalogue) is sent once unless `resend_unsafe`;
 //!   25BH once; nothing is resent after an `&`;
 //! - timeouts run from `sent`: a resend, `Timeout` or `OutcomeUnknown`
 //!   comes no earlier than `sent + timeout`, unless a broken frame arrived
 //!   after that `sent` (a reply that arrived broken is resent after the
-//!   turnaround); every first send of a command waits at least two ticks
-//!   after the reply that ended the previous one;
+//!   turnaround); every first send of a command waits for the turnaround
+//!   after the reply that ended the previous one (two ticks at least), its
+//!   duplicate window, and the late window of sends whose replies are still
+//!   owed (a timeout, an abandon, a reply after resends); no wait before the
+//!   first send or longer than the longest hold (but for open finding F1);
 //! - `Timeout { sends }` for a safe command and `OutcomeUnknown { sends }`
 //!   for an unsafe one, with the sends made; `Controller { code, detail }`
 //!   only after an `&` with that code was taken, and `detail` only when the

@@ -29,19 +29,24 @@
 //! (`head()`, `asked()`, `reread()` agree), hold at most `asked` records,
 //! each inside the window and inside `first..=last`; `stats().records`
 //! adds them up; `Answered`/`Rejected` events only for a reply / an `&`
-//! carrying that count / code; `Complete` only after the last window;
-//! `Failed` only with `Timeout`, `Controller { code }` or `Bridge { code }`
-//! (by the code's range).
+//! carrying that count / code (the one fed, or, since bytes of a failed
+//! text frame are decoded again, one fed earlier since the last query);
+//! `Complete` only after the last window; `Failed` only with `Timeout`,
+//! `Controller { code }` or `Bridge { code }` (by the code's range); no
+//! wait before the first query, none longer than the longest hold (but for
+//! open finding F1, `common/records.rs`).
 //!
 //! Mode 1 also checks the records themselves: every record delivered is
 //! one the controller holds, unaltered; if every reply arrived within the
 //! engine's contract (at most `timeout + late_window` after its query was
-//! sent, a copy at most `duplicate_window` after the original), every
-//! window delivered with records holds exactly the controller's records
-//! of that window; if moreover no reply came twice, every window (empty
-//! ones too: an empty reply is the same for every window, the engine's
-//! documented limit) is exact and at `Complete` the records delivered are
-//! exactly the table's in `first..=last`.
+//! sent, a copy at most `duplicate_window` after an original that was in
+//! time), every window delivered with records holds exactly the
+//! controller's records of that window (open finding F6, a reply made for
+//! another window that does not cover this one, is tolerated only with
+//! that signature until fixed); if moreover no reply came twice, every
+//! window (empty ones too: an empty reply is the same for every window,
+//! the engine's documented limit) is exact and at `Complete` the records
+//! delivered are exactly the table's in `first..=last`.
 //!
 //! What changed with the new engine: windows shrink after a timeout and
 //! windows answered empty by what turns out to be a duplicate are read

