@@ -270,6 +270,19 @@ def main():
     write("exchange", "no-normal-reply", exchange_seed(0x03, [0, 0x82] + list(le(10000, 2)) + [1, 3]))
     write("exchange", "abandon-while-sending", exchange_seed(0x03, [0, 10, 1, 7, 0, 10, 1]))
     write("exchange", "by-content", exchange_seed(0x13, [0, 10, 1, 3, 6, 0x00, 1, 1, 3, 4, 0x00, 0, 10, 1]))
+    # bridge_policy: mode (policy, flow), [allow-list map], tick step, host bytes.
+    allow = bytearray(32)
+    for i in (0x12, 0x16, 0x6D):
+        allow[i // 8] |= 1 << (i % 8)
+    for mode in (0x00, 0x01, 0x11, 0x20):
+        write("bridge_policy", f"fixtures-mode{mode:02x}", bytes([mode, 4]) + stream)
+    write("bridge_policy", "fixtures-allow", bytes([0x02]) + bytes(allow) + bytes([4]) + stream)
+    write("bridge_policy", "status-query", bytes([0x01, 1]) + b"!BBB0047\r\n" + stream)
+    # hex: any bytes; the fixture frames hold digits of both cases and
+    # every kind of non-digit next to them.
+    for name, frame in frames[:8]:
+        write("hex", name, frame)
+    write("hex", "digits-both-cases", b"0123456789ABCDEFabcdef@G`g/:\x00\xff")
     # Reproducers of the findings (fuzz/README.md): always in the corpora,
     # so every run replays them.
     reg = os.path.join(HERE, "regressions")

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # All the checks, as CI runs them: set-up, formatting, lints, no_std builds
-# for three Cortex-M targets, the firmware for both boards, docs, doctests,
-# size figures, then every test (unit, recorded frames, end-to-end, QEMU).
+# for three Cortex-M targets, the bridge firmware for its three boards, docs,
+# doctests, size figures (which build the firmware the QEMU tests run), then
+# every test (unit, recorded frames, host model, end-to-end, QEMU).
 # Ends with the test runner's summary.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -12,8 +13,8 @@ step() { printf '\n==> %s\n' "$*"; }
 step "formatting"
 cargo fmt --all --check
 
-step "clippy (core, host tests) -D warnings"
-cargo clippy -p iai-protocol-b -p host-tests --all-targets -- -D warnings
+step "clippy (core, host tests, iai) -D warnings"
+cargo clippy -p iai-protocol-b -p host-tests -p iai-cli --all-targets -- -D warnings
 cargo clippy -p iai-protocol-b --features defmt -- -D warnings
 
 step "core builds for thumbv6m / thumbv7m / thumbv7em (no std, no alloc)"
@@ -28,25 +29,38 @@ cargo +1.87 build -q -p iai-protocol-b --all-features
 cargo +1.87 build -q -p iai-protocol-b --target thumbv7em-none-eabihf
 echo "ok: core builds with Rust 1.87"
 
-step "firmware: both boards (and the defmt / bench features), clippy -D warnings"
+step "firmware: the bridge library (host), three boards, defmt feature, the icount bench, clippy -D warnings"
+cargo clippy -q -p firmware-example --no-default-features --lib --tests -- -D warnings
 cargo clippy -q -p firmware-example --target thumbv7m-none-eabi -- -D warnings
 cargo clippy -q -p firmware-example --target thumbv7em-none-eabihf \
   --no-default-features --features board-mps2-an386 -- -D warnings
+cargo clippy -q -p firmware-example --target thumbv6m-none-eabi \
+  --no-default-features --features board-stm32g030 -- -D warnings
+cargo clippy -q -p mps2-an386 --target thumbv7em-none-eabihf --features rt -- -D warnings
 cargo clippy -q -p firmware-example --target thumbv7m-none-eabi --features defmt -- -D warnings
 cargo clippy -q -p firmware-example --target thumbv7em-none-eabihf \
-  --no-default-features --features board-mps2-an386,bench -- -D warnings
+  --no-default-features --features rt --bin icount_bench -- -D warnings
+echo "debug build (what a new user types first):"
+cargo build -q -p firmware-example --target thumbv7m-none-eabi
+echo "ok: cargo build -p firmware-example --target thumbv7m-none-eabi"
 
-step "no-panic proof: the decode paths link without a panic handler symbol"
+step "no-panic proof: the decode paths and the bridge library link without a panic handler symbol"
 for t in thumbv7m-none-eabi thumbv7em-none-eabihf; do
-  cargo build -q -p firmware-example --release --bin no_panic_proof --target "$t"
+  cargo build -q -p firmware-example --release --features no-panic-proof --bin no_panic_proof --target "$t"
 done
-echo "ok: no panic path survives in the decoders (see firmware-example/src/bin/no_panic_proof.rs)"
+echo "ok: no panic path survives in the decoders or the bridge (see firmware-example/src/bin/no_panic_proof.rs)"
+
+step "iai builds for Windows (x86_64-pc-windows-gnu, mingw-w64)"
+cargo build -q -p iai-cli --target x86_64-pc-windows-gnu
+echo "ok: iai.exe builds"
 
 step "docs (no warnings) and doctests"
 RUSTDOCFLAGS="-D warnings" cargo doc -q -p iai-protocol-b --no-deps
+RUSTDOCFLAGS="-D warnings" cargo doc -q -p firmware-example --no-deps --no-default-features
+RUSTDOCFLAGS="-D warnings" cargo doc -q -p iai-cli --no-deps
 cargo test -q -p iai-protocol-b --doc
 
-step "size report and instruction counts (figures, not assertions)"
+step "size report (flash, static RAM, stack measured under QEMU) and instruction counts (figures, not assertions)"
 ./tools/size-report.sh
 cargo run -q -p host-tests --bin icount
 
@@ -54,4 +68,4 @@ step "fuzzing smoke run: 30 s per cargo-fuzz target (installs nightly and cargo-
 ./fuzz/smoke.sh 30
 
 step "tests"
-cargo nextest run -p iai-protocol-b -p host-tests --no-fail-fast
+cargo nextest run -p iai-protocol-b -p host-tests -p firmware-example -p iai-cli --no-default-features --no-fail-fast

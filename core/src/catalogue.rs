@@ -236,6 +236,22 @@ macro_rules! catalogue {
         /// Every message, by ascending ID.
         pub const ALL: &[&MessageInfo] = &[ $( &$konst ),* ];
 
+        /// The longest any controller takes to accept commands again after
+        /// a command without normal response (25BH: about 10 s, 2003 p. 50).
+        pub const LONGEST_RESTART_MS: u32 = {
+            let mut rest = ALL;
+            let mut longest = 0;
+            while let Some((info, tail)) = rest.split_first() {
+                if let Reply::None { ready_after_ms } = info.reply {
+                    if ready_after_ms > longest {
+                        longest = ready_after_ms;
+                    }
+                }
+                rest = tail;
+            }
+            longest
+        };
+
         /// The entry of message `id`, if the catalogue has one.
         pub const fn lookup(id: u16) -> Option<&'static MessageInfo> {
             match id {

@@ -40,6 +40,7 @@ use crate::catalogue::{self, Reply, Resend};
 use crate::checksum::{BypassPolicy, ChecksumMode};
 use crate::clock::Clock;
 use crate::decoder::{Event, FrameDecoder};
+use crate::drive::{self, Engine, Stop, Want};
 use crate::error::{Error, BRIDGE_CODES};
 use crate::exchange::{Due, Exchange, ExchangeConfig, Finish, Offer, Quarantine};
 use crate::frame::{Frame, Header, Station};
@@ -544,54 +545,24 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
         C: Clock,
     {
         self.start(req, clock.now_ms())?;
-        loop {
-            match self.poll_nb(uart, clock) {
-                Ok(()) => break,
-                Err(nb::Error::WouldBlock) => clock.idle(),
-                Err(nb::Error::Other(e)) => return Err(e),
-            }
-        }
+        drive::run_blocking(self, uart, clock).map_err(CallError::from_stop)?;
         Ok(self.response::<R>()?)
     }
 
     /// Makes what progress is possible without waiting for the started
     /// request: reads what arrived, sends what is due (taking the time
-    /// after the write), checks the deadline. `Ok(())` once it succeeded.
+    /// after the write), checks the deadline. `Ok` once it is over; then
+    /// [`Client::response`] parses the reply.
     pub fn poll_nb<U, C>(
         &mut self,
         uart: &mut U,
         clock: &mut C,
-    ) -> nb::Result<(), CallError<U::Error>>
+    ) -> nb::Result<Outcome, CallError<U::Error>>
     where
         U: embedded_io::Read + embedded_io::ReadReady + embedded_io::Write,
         C: Clock,
     {
-        let io = |e| nb::Error::Other(CallError::Io(e));
-        let mut buf = [0u8; 32];
-        while uart.read_ready().map_err(io)? {
-            let n = uart.read(&mut buf).map_err(io)?;
-            if n == 0 {
-                break;
-            }
-            self.received_all(buf.get(..n).unwrap_or(&[]), clock.now_ms());
-        }
-        match self.poll(clock.now_ms()) {
-            ClientStep::Transmit(bytes) => {
-                uart.write_all(bytes).map_err(io)?;
-                uart.flush().map_err(io)?;
-                let end = clock.now_ms();
-                self.sent(end);
-                Err(nb::Error::WouldBlock)
-            }
-            ClientStep::WaitUntil(_) => Err(nb::Error::WouldBlock),
-            ClientStep::Idle => Err(nb::Error::Other(CallError::Protocol(
-                Error::UnknownMessageId {
-                    id: self.exchange.id(),
-                },
-            ))),
-            ClientStep::Done(Ok(_)) => Ok(()),
-            ClientStep::Done(Err(e)) => Err(nb::Error::Other(e.widen())),
-        }
+        drive::poll_nb(self, uart, clock).map_err(|e| e.map(CallError::from_stop))
     }
 }
 
@@ -615,39 +586,42 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
         C: crate::clock::AsyncClock,
     {
         self.start(req, clock.now_ms())?;
-        let mut buf = [0u8; 32];
-        loop {
-            while uart.read_ready().map_err(CallError::Io)? {
-                let n = uart.read(&mut buf).await.map_err(CallError::Io)?;
-                if n == 0 {
-                    break;
-                }
-                let now = clock.now_ms();
-                self.received_all(buf.get(..n).unwrap_or(&[]), now);
-            }
-            let now = clock.now_ms();
-            match self.poll(now) {
-                ClientStep::Transmit(bytes) => {
-                    uart.write_all(bytes).await.map_err(CallError::Io)?;
-                    uart.flush().await.map_err(CallError::Io)?;
-                    let end = clock.now_ms();
-                    self.sent(end);
-                }
-                ClientStep::WaitUntil(t) => {
-                    clock
-                        .sleep_ms(t.wrapping_sub(now).clamp(1, poll_ms.max(1)))
-                        .await
-                }
-                ClientStep::Idle => {
-                    return Err(CallError::Protocol(Error::UnknownMessageId {
-                        id: self.exchange.id(),
-                    }))
-                }
-                ClientStep::Done(Ok(_)) => break,
-                ClientStep::Done(Err(e)) => return Err(e.widen()),
+        drive::run_async(self, uart, clock, poll_ms)
+            .await
+            .map_err(CallError::from_stop)?;
+        Ok(self.response::<R>()?)
+    }
+}
+
+impl<const CMD: usize, const REPLY: usize> Engine for Client<CMD, REPLY> {
+    type Output = Outcome;
+    type Error = CallError;
+    fn feed(&mut self, bytes: &[u8], now: u32) {
+        self.received_all(bytes, now);
+    }
+    fn want(&mut self, now: u32) -> Want<'_, Result<Outcome, CallError>> {
+        let id = self.exchange.id();
+        match self.poll(now) {
+            ClientStep::Transmit(bytes) => Want::Transmit(bytes),
+            ClientStep::WaitUntil(t) => Want::WaitUntil(t),
+            ClientStep::Done(r) => Want::Done(r),
+            // Nothing was started: nothing will ever finish.
+            ClientStep::Idle => {
+                Want::Done(Err(CallError::Protocol(Error::UnknownMessageId { id })))
             }
         }
-        Ok(self.response::<R>()?)
+    }
+    fn sent(&mut self, now: u32) {
+        Client::sent(self, now);
+    }
+}
+
+impl<E> CallError<E> {
+    fn from_stop(stop: Stop<CallError, E>) -> Self {
+        match stop {
+            Stop::Engine(e) => e.widen(),
+            Stop::Io(e) => CallError::Io(e),
+        }
     }
 }
 

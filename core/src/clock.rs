@@ -57,3 +57,44 @@ pub const fn later(a: u32, b: u32) -> u32 {
         b
     }
 }
+
+/// Whether the hold `until` is over at `now`, for a hold that was set at
+/// most `horizon` ms (less than 2^31) ahead of the tick it was set at.
+///
+/// Unlike [`reached`], a hold set long ago (more than 2^31 ms, about 24.8
+/// days: an engine idle that long, or a fresh engine's hold of 0 seen
+/// from a clock past 2^31) counts as over: it would otherwise seem to lie
+/// up to 24.8 days ahead.
+///
+/// ```
+/// use iai_protocol_b::clock::passed;
+/// assert!(!passed(100, 3_100, 6_000));
+/// assert!(passed(3_100, 3_100, 6_000));
+/// assert!(passed(3_200, 3_100, 6_000));
+/// // A fresh engine's hold of 0, on a clock 25 days after boot:
+/// assert!(passed(0x8000_0001, 0, 6_000));
+/// ```
+pub const fn passed(now: u32, until: u32, horizon: u32) -> bool {
+    let ahead = until.wrapping_sub(now);
+    ahead == 0 || ahead > horizon
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_hold_is_over_at_its_tick_and_after_whatever_the_wrap() {
+        for set_at in [0u32, 1_000, 0x7FFF_FFFF, 0x8000_0000, u32::MAX - 10] {
+            let until = set_at.wrapping_add(500);
+            assert!(!passed(set_at, until, 500));
+            assert!(!passed(until.wrapping_sub(1), until, 500));
+            assert!(passed(until, until, 500));
+            assert!(passed(until.wrapping_add(1), until, 500));
+            // Long after: half the clock's range later, and just before
+            // the clock comes round to the hold again.
+            assert!(passed(until.wrapping_add(0x8000_0000), until, 500));
+            assert!(passed(until.wrapping_sub(501), until, 500));
+        }
+    }
+}

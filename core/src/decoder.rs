@@ -318,8 +318,10 @@ impl<const N: usize> FrameDecoder<N> {
         if total > N || (waiting > 0 && self.replay_pos < self.len) {
             return None;
         }
-        let moved = move_within(&mut self.buf, self.replay_pos, waiting, kept + extra_len)
-            && move_within(&mut self.buf, p, kept, 0);
+        // The failed frame's bytes first: the waiting ones land where they
+        // were (`kept + extra_len <= len <= replay_pos`).
+        let moved = move_within(&mut self.buf, p, kept, 0)
+            && move_within(&mut self.buf, self.replay_pos, waiting, kept + extra_len);
         if !moved {
             return None;
         }
@@ -575,5 +577,506 @@ mod tests {
         let mut dec: FrameDecoder = FrameDecoder::new();
         let got = events(&mut dec, input);
         assert!(got.contains(&Ok(SERVO_REPLY.to_vec())), "{got:?}");
+    }
+}
+
+#[cfg(test)]
+mod golden {
+    use super::*;
+    use crate::checksum::{Checksum, ChecksumField};
+    use crate::frame::{Header, Station};
+
+    /// 2003 p. 10: a 209H query and its checksum.
+    const P10: &[u8] = b"!9920900100554\r\n";
+    /// A 232H response without data.
+    const R232: &[u8] = b"#992322C\r\n";
+
+    /// `head` + its SC + CR LF, in `buf`; the frame's length.
+    fn framed(head: &[u8], buf: &mut [u8; 128]) -> usize {
+        let n = head.len();
+        buf[..n].copy_from_slice(head);
+        let sc = Checksum::of(head);
+        let hex = b"0123456789ABCDEF";
+        buf[n..n + 4].copy_from_slice(&[
+            hex[usize::from(sc >> 4)],
+            hex[usize::from(sc & 0xF)],
+            b'\r',
+            b'\n',
+        ]);
+        n + 4
+    }
+
+    /// Feeds `input` whole, collecting up to 8 events (frames as their
+    /// lengths) and the bytes consumed by each call.
+    fn events<const N: usize>(
+        dec: &mut FrameDecoder<N>,
+        mut input: &[u8],
+    ) -> ([Option<Result<usize, Error>>; 8], usize) {
+        let mut out = [None; 8];
+        let mut k = 0;
+        while !input.is_empty() {
+            let d = dec.decode(input);
+            assert!(d.consumed >= 1 && d.consumed <= input.len());
+            input = &input[d.consumed..];
+            let ev = match d.event {
+                Event::NeedMore => {
+                    assert!(input.is_empty(), "NeedMore with input left");
+                    break;
+                }
+                Event::Frame(f) => Ok(f.len()),
+                Event::Error(e) => Err(e),
+            };
+            out[k] = Some(ev);
+            k += 1;
+        }
+        (out, k)
+    }
+
+    #[test]
+    fn one_frame_byte_by_byte() {
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        assert_eq!(dec.capacity(), DEFAULT_CAPACITY);
+        let (last, head) = P10.split_last().unwrap();
+        for (i, &b) in head.iter().enumerate() {
+            assert_eq!(dec.push(b), Event::NeedMore);
+            assert_eq!(dec.pending(), i + 1);
+            assert_eq!(dec.last_frame(), None);
+        }
+        match dec.push(*last) {
+            Event::Frame(f) => {
+                assert_eq!(f.as_bytes(), P10);
+                assert_eq!(f.station(), Station(0x99));
+                assert_eq!(f.code(), 0x209);
+                assert_eq!(f.body(), b"001005");
+                assert_eq!(f.checksum(), ChecksumField::Sum(0x54));
+            }
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(dec.pending(), 0);
+        assert_eq!(dec.last_frame().map(|f| f.len()), Some(P10.len()));
+        assert_eq!(
+            dec.stats(),
+            DecoderStats {
+                frames: 1,
+                errors: 0,
+                discarded_bytes: 0
+            }
+        );
+        // The next byte clears the frame.
+        assert_eq!(dec.push(b'x'), Event::NeedMore);
+        assert_eq!(dec.last_frame(), None);
+        assert_eq!(dec.stats().discarded_bytes, 1);
+    }
+
+    #[test]
+    fn frames_back_to_back_after_noise() {
+        let mut input = [0u8; 64];
+        let parts: [&[u8]; 4] = [b"\r\nxyz", P10, R232, P10];
+        let mut n = 0;
+        for p in parts {
+            input[n..n + p.len()].copy_from_slice(p);
+            n += p.len();
+        }
+        let mut dec: FrameDecoder = FrameDecoder::default();
+        let d = dec.decode(&input[..n]);
+        assert_eq!(d.consumed, 5 + P10.len());
+        assert!(matches!(d.event, Event::Frame(f) if f.as_bytes() == P10));
+        let (ev, k) = events(&mut dec, &input[5 + P10.len()..n]);
+        assert_eq!(k, 2);
+        assert_eq!(ev[0], Some(Ok(R232.len())));
+        assert_eq!(ev[1], Some(Ok(P10.len())));
+        assert_eq!(dec.stats().frames, 3);
+        assert_eq!(dec.stats().discarded_bytes, 5);
+        assert_eq!(dec.stats().errors, 0);
+    }
+
+    #[test]
+    fn a_header_inside_a_frame_cuts_it() {
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (ev, k) = events(&mut dec, b"!99209001#992322C\r\n");
+        assert_eq!(k, 2);
+        assert_eq!(ev[0], Some(Err(Error::Truncated { len: 9 })));
+        assert_eq!(ev[1], Some(Ok(R232.len())));
+        assert_eq!(
+            dec.stats(),
+            DecoderStats {
+                frames: 1,
+                errors: 1,
+                discarded_bytes: 9
+            }
+        );
+        for h in [b'!', b'&', b'%'] {
+            let mut dec: FrameDecoder = FrameDecoder::new();
+            let (ev, _) = events(&mut dec, &[b'#', b'9', h]);
+            assert_eq!(ev[0], Some(Err(Error::Truncated { len: 2 })));
+            assert_eq!(dec.pending(), 1, "the new header starts a frame");
+        }
+    }
+
+    #[test]
+    fn line_end_errors() {
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (ev, k) = events(&mut dec, b"!99209\n");
+        assert_eq!((ev[0], k), (Some(Err(Error::MissingCarriageReturn)), 1));
+        assert_eq!(dec.stats().discarded_bytes, 7);
+        assert_eq!(dec.pending(), 0);
+
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (ev, _) = events(&mut dec, b"!99209\rX");
+        assert_eq!(ev[0], Some(Err(Error::MissingLineFeed { byte: b'X' })));
+        assert_eq!(dec.stats().discarded_bytes, 8);
+        assert_eq!(dec.pending(), 0);
+
+        // CR then a header byte: the header starts the next frame.
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (ev, k) = events(&mut dec, b"!99209\r#992322C\r\n");
+        assert_eq!(k, 2);
+        assert_eq!(ev[0], Some(Err(Error::MissingLineFeed { byte: b'#' })));
+        assert_eq!(ev[1], Some(Ok(R232.len())));
+        assert_eq!(dec.stats().discarded_bytes, 7);
+        assert_eq!(dec.stats().errors, 1);
+    }
+
+    #[test]
+    fn checks_of_the_whole_frame() {
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (ev, k) = events(&mut dec, b"!9920900100555\r\n#992322C\r\n");
+        assert_eq!(k, 2);
+        assert_eq!(
+            ev[0],
+            Some(Err(Error::ChecksumMismatch {
+                computed: 0x54,
+                received: 0x55
+            }))
+        );
+        assert_eq!(ev[1], Some(Ok(R232.len())));
+        assert_eq!(dec.stats().discarded_bytes, 16);
+
+        let (ev, _) = events(&mut dec, b"!99\r\n");
+        assert_eq!(ev[0], Some(Err(Error::FrameTooShort { len: 5 })));
+        let (ev, _) = events(&mut dec, b"!992090010G554\r\n");
+        assert_eq!(
+            ev[0],
+            Some(Err(Error::InvalidHexDigit {
+                offset: 10,
+                byte: b'G'
+            }))
+        );
+        assert_eq!(dec.stats().errors, 3);
+    }
+
+    #[test]
+    fn bypass_policy() {
+        let bypass: &[u8] = b"!992000123456789@@\r\n";
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        assert_eq!(dec.policy(), BypassPolicy::CommandsOnly);
+        let (ev, _) = events(&mut dec, bypass);
+        assert_eq!(ev[0], Some(Ok(bypass.len())));
+        dec.set_policy(BypassPolicy::Reject);
+        assert_eq!(dec.policy(), BypassPolicy::Reject);
+        let (ev, _) = events(&mut dec, bypass);
+        assert_eq!(ev[0], Some(Err(Error::ChecksumBypassRejected)));
+        let mut dec: FrameDecoder = FrameDecoder::with_policy(BypassPolicy::Accept);
+        let (ev, _) = events(&mut dec, b"#99232@@\r\n");
+        assert_eq!(ev[0], Some(Ok(10)));
+    }
+
+    #[test]
+    fn text_fields_may_hold_any_byte() {
+        // 200H: ten raw characters, here header bytes, CR and LF.
+        let mut buf = [0u8; 128];
+        let n = framed(b"!99200!#&%\r\n\r\nAB", &mut buf);
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (ev, k) = events(&mut dec, &buf[..n]);
+        assert_eq!((ev[0], k), (Some(Ok(n)), 1));
+        assert_eq!(
+            dec.last_frame().map(|f| f.body()),
+            Some(&b"!#&%\r\n\r\nAB"[..])
+        );
+
+        // 216H response: the message length is known at offset 90.
+        // The recorded 94-byte response (EXAMPLES.md 5) up to its message
+        // count, then a 5-character message.
+        let recorded = b"#99216C74000000010000000500000002FFFFFFFD0000000000000000000000000000000000000000000000000C2";
+        let mut msg = [0u8; 95];
+        msg[..88].copy_from_slice(&recorded[..88]);
+        msg[88..].copy_from_slice(b"05!\r\n#%");
+        let n = framed(&msg, &mut buf);
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (ev, k) = events(&mut dec, &buf[..n]);
+        assert_eq!((ev[0], k), (Some(Ok(n)), 1));
+
+        // After the text a header byte cuts the frame again.
+        let mut msg = [0u8; 96];
+        msg[..95].copy_from_slice(&buf[..95]);
+        msg[95] = b'!';
+        let (ev, _) = events(&mut dec, &msg);
+        assert_eq!(ev[0], Some(Err(Error::Truncated { len: 95 })));
+    }
+
+    #[test]
+    fn a_frame_longer_than_the_buffer() {
+        let mut dec: FrameDecoder<12> = FrameDecoder::new();
+        assert_eq!(dec.capacity(), 12);
+        let (ev, k) = events(&mut dec, b"!9920900100554\r\n#992322C\r\n");
+        assert_eq!(ev[0], Some(Err(Error::FrameTooLong { limit: 12 })));
+        assert_eq!(ev[1], Some(Ok(R232.len())));
+        assert_eq!(k, 2);
+        assert_eq!(dec.stats().discarded_bytes, 16);
+        // Exactly the capacity fits.
+        let mut dec: FrameDecoder<10> = FrameDecoder::new();
+        let (ev, _) = events(&mut dec, R232);
+        assert_eq!(ev[0], Some(Ok(10)));
+        let mut dec: FrameDecoder<9> = FrameDecoder::new();
+        let (ev, _) = events(&mut dec, R232);
+        assert_eq!(ev[0], Some(Err(Error::FrameTooLong { limit: 9 })));
+    }
+
+    #[test]
+    fn the_envelope_of_a_frame_that_failed_its_check() {
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (ev, _) = events(&mut dec, b"!9920900100555\r\n");
+        assert!(matches!(ev[0], Some(Err(Error::ChecksumMismatch { .. }))));
+        assert_eq!(
+            dec.failed_envelope(),
+            Some((Header::Command, Station(0x99), 0x209))
+        );
+        assert_eq!(dec.push(b'x'), Event::NeedMore);
+        assert_eq!(dec.failed_envelope(), None, "forgotten at the next byte");
+        // An unreadable envelope, and errors before CR LF, leave nothing.
+        for bad in [&b"!9G209001005@@\r\n"[..], b"#99232\r\r", b"#99232\n"] {
+            let mut dec: FrameDecoder = FrameDecoder::new();
+            let (ev, _) = events(&mut dec, bad);
+            assert!(matches!(ev[0], Some(Err(_))), "{bad:?}");
+            assert_eq!(dec.failed_envelope(), None, "{bad:?}");
+        }
+    }
+
+    /// A 200H whose ten text characters swallow the start of a valid reply
+    /// fails; the reply is decoded again from its header byte.
+    const SWALLOWED: &[u8] = b"!99200AB#992322C\r\n";
+
+    #[test]
+    fn a_swallowed_reply_is_decoded_again_and_counted_as_pending() {
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let d = dec.decode(SWALLOWED);
+        assert_eq!(d.consumed, SWALLOWED.len());
+        assert_eq!(d.event, Event::Error(Error::BodyTooShort { offset: 14 }));
+        assert_eq!(
+            dec.pending(),
+            R232.len(),
+            "the reply waits to be decoded again"
+        );
+        assert_eq!(dec.stats().discarded_bytes, 8);
+        let d = dec.decode(b"");
+        assert_eq!(d.consumed, 0);
+        assert!(matches!(d.event, Event::Frame(f) if f.as_bytes() == R232));
+        assert_eq!(dec.pending(), 0);
+        assert_eq!(dec.decode(b"").event, Event::NeedMore);
+    }
+
+    #[test]
+    fn a_pushed_byte_joins_the_bytes_decoded_again() {
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (last, head) = SWALLOWED.split_last().unwrap();
+        for &b in head {
+            assert_eq!(dec.push(b), Event::NeedMore);
+        }
+        assert_eq!(
+            dec.push(*last),
+            Event::Error(Error::BodyTooShort { offset: 14 })
+        );
+        // The next byte comes after the waiting reply, which comes out first.
+        assert!(matches!(dec.push(b'!'), Event::Frame(f) if f.as_bytes() == R232));
+        assert_eq!(dec.decode(b"").event, Event::NeedMore);
+        assert_eq!(dec.pending(), 1, "the '!' starts the next frame");
+        let (ev, _) = events(&mut dec, b"99209001005@@\r\n");
+        assert_eq!(ev[0], Some(Ok(16)));
+    }
+
+    #[test]
+    fn a_reply_swallowed_twice_still_comes_out() {
+        // The first 200H's text holds a second 200H whose text holds the
+        // reply's start.
+        let input = b"!99200AB!99200CD#992322C\r\n";
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let (ev, k) = events(&mut dec, input);
+        assert_eq!(k, 2, "{ev:?}");
+        assert_eq!(ev[0], Some(Err(Error::Truncated { len: 16 })));
+        assert_eq!(ev[1], Some(Err(Error::BodyTooShort { offset: 14 })));
+        // The reply waits to be decoded again.
+        assert_eq!(dec.pending(), R232.len());
+        assert!(matches!(dec.decode(b"").event, Event::Frame(f) if f.as_bytes() == R232));
+        assert_eq!(dec.decode(b"").event, Event::NeedMore);
+        assert_eq!(dec.stats().frames, 1);
+        assert_eq!(dec.pending(), 0);
+        // Every byte is accounted for: in the frame or discarded.
+        assert_eq!(
+            dec.stats().discarded_bytes as usize,
+            input.len() - R232.len()
+        );
+        // The same byte by byte.
+        let mut bytewise: FrameDecoder = FrameDecoder::new();
+        let mut frames = 0;
+        for &b in &input[..] {
+            if let Event::Frame(_) = bytewise.push(b) {
+                frames += 1;
+            }
+            while let Event::Frame(_) | Event::Error(_) = bytewise.decode(b"").event {
+                frames += usize::from(bytewise.last_frame().is_some());
+            }
+        }
+        assert_eq!(frames, 1);
+        assert_eq!(bytewise.stats(), dec.stats());
+    }
+
+    /// A cut 216H announcing 255 characters swallows a 200H whose own
+    /// text swallows an error frame's start: the 200H fails while bytes of
+    /// the 216H still wait to be decoded again, and both sets come out in
+    /// order, every byte a frame's or discarded.
+    #[test]
+    fn a_failure_while_bytes_wait_to_be_decoded_again() {
+        let mut input = [0u8; 400];
+        let mut n = 0;
+        let mut put = |b: &[u8]| {
+            input[n..n + b.len()].copy_from_slice(b);
+            n += b.len();
+        };
+        put(b"#99216");
+        put(&[b'0'; 82]);
+        put(b"FF");
+        // The 216H's text (offsets 90..345): a 200H whose ten characters
+        // hold '&', then a header byte that cuts the 200H, then a reply.
+        put(b"!99200AB&DEFGHIJ#992322C\r\n");
+        put(&[b'x'; 345 - 90 - 26]);
+        // After the text: a reply that cuts the 216H.
+        put(R232);
+        let input = &input[..n];
+
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let mut frames = 0;
+        let mut errors = [None; 8];
+        let mut k = 0;
+        let mut rest = input;
+        loop {
+            let d = dec.decode(rest);
+            rest = &rest[d.consumed..];
+            match d.event {
+                Event::NeedMore if rest.is_empty() => break,
+                Event::NeedMore => {}
+                Event::Frame(f) => {
+                    assert_eq!(f.as_bytes(), R232);
+                    frames += 1;
+                }
+                Event::Error(e) => {
+                    errors[k] = Some(e);
+                    k += 1;
+                }
+            }
+        }
+        assert_eq!(frames, 2, "{errors:?}");
+        assert_eq!(
+            &errors[..k],
+            &[
+                Some(Error::Truncated { len: 345 }),
+                Some(Error::Truncated { len: 16 }),
+                Some(Error::Truncated { len: 8 }),
+            ]
+        );
+        assert_eq!(dec.pending(), 0);
+        let s = dec.stats();
+        assert_eq!(s.discarded_bytes as usize, n - 2 * R232.len());
+        assert_eq!((s.frames, s.errors), (2, 3));
+
+        // Byte by byte, draining after each: the same counts.
+        let mut bytewise: FrameDecoder = FrameDecoder::new();
+        for &b in input {
+            let _ = bytewise.push(b);
+            while !matches!(bytewise.decode(b"").event, Event::NeedMore) {}
+        }
+        assert_eq!(bytewise.stats(), s);
+        assert_eq!(bytewise.pending(), 0);
+    }
+
+    /// As above, but the 200H ends with CR LF (and a wrong checksum) inside
+    /// the bytes decoded again: its own failed bytes go back ahead of the
+    /// ones still waiting.
+    #[test]
+    fn a_checked_failure_while_bytes_wait_to_be_decoded_again() {
+        let mut input = [0u8; 400];
+        let mut n = 0;
+        let mut put = |b: &[u8]| {
+            input[n..n + b.len()].copy_from_slice(b);
+            n += b.len();
+        };
+        put(b"#99216");
+        put(&[b'0'; 82]);
+        put(b"FF");
+        put(b"!99200AB&DEFGHIJ00\r\n#992322C\r\n");
+        put(&[b'x'; 345 - 90 - 30]);
+        put(R232);
+        let input = &input[..n];
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let mut seen = [None; 8];
+        let mut k = 0;
+        let mut rest = input;
+        loop {
+            let d = dec.decode(rest);
+            rest = &rest[d.consumed..];
+            let ev = match d.event {
+                Event::NeedMore if rest.is_empty() => break,
+                Event::NeedMore => continue,
+                Event::Frame(f) => Ok(f.len()),
+                Event::Error(e) => Err(e),
+            };
+            seen[k] = Some(ev);
+            k += 1;
+        }
+        assert_eq!(
+            &seen[..k],
+            &[
+                Some(Err(Error::Truncated { len: 345 })),
+                Some(Err(Error::ChecksumMismatch {
+                    computed: Checksum::of(b"!99200AB&DEFGHIJ"),
+                    received: 0
+                })),
+                // "&DEFGHIJ00\r\n": an error frame whose code is not hex.
+                Some(Err(Error::InvalidHexDigit {
+                    offset: 4,
+                    byte: b'G'
+                })),
+                Some(Ok(R232.len())),
+                Some(Ok(R232.len())),
+            ]
+        );
+        assert_eq!(dec.pending(), 0);
+        assert_eq!(dec.stats().discarded_bytes as usize, n - 2 * R232.len());
+    }
+
+    #[test]
+    fn reset_and_an_empty_buffer() {
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        assert_eq!(dec.decode(b"!992").event, Event::NeedMore);
+        assert_eq!(dec.pending(), 4);
+        dec.reset();
+        assert_eq!(dec.pending(), 0);
+        assert_eq!(dec.stats().discarded_bytes, 4);
+        let (ev, _) = events(&mut dec, b"09001005");
+        assert_eq!(ev[0], None, "no frame starts without a header");
+        assert_eq!(dec.stats().discarded_bytes, 12);
+        let (ev, _) = events(&mut dec, P10);
+        assert_eq!(ev[0], Some(Ok(P10.len())));
+        dec.reset();
+        assert_eq!(
+            dec.stats().discarded_bytes,
+            12,
+            "a returned frame is not discarded"
+        );
+
+        let mut none: FrameDecoder<0> = FrameDecoder::new();
+        let (ev, _) = events(&mut none, R232);
+        assert_eq!(ev[0], None);
+        assert_eq!(none.stats().discarded_bytes, 10);
+        assert_eq!(none.pending(), 0);
     }
 }

@@ -202,14 +202,14 @@ impl core::fmt::Display for Error {
 impl core::error::Error for Error {}
 
 /// Error codes (`&` + 3 hex digits) that a protocol bridge between a host
-/// and a controller sends on its own behalf: B00H to B1FH.
+/// and a controller sends on its own behalf: B00H to BFFH.
 ///
 /// The controllers' own code list is in neither protocol document (TTA
 /// p. 15 defers to the controller's manual; 2003 p. 13 only says the number
 /// identifies the cause). That no controller uses this range is an
 /// **assumption**. A client never asks a controller for the 216H detail of
 /// a code in this range: the controller did not raise it.
-pub const BRIDGE_CODES: core::ops::RangeInclusive<u16> = 0xB00..=0xB1F;
+pub const BRIDGE_CODES: core::ops::RangeInclusive<u16> = 0xB00..=0xBFF;
 
 /// Result alias used throughout the crate.
 pub type Result<T, E = Error> = core::result::Result<T, E>;

@@ -41,7 +41,7 @@
 //!   frames different record counts).
 
 use crate::catalogue::{MessageInfo, Reply, Resend};
-use crate::clock::{later, reached};
+use crate::clock::{later, passed, reached};
 use crate::frame::{Frame, Header, Station};
 
 /// How a frame relates to the command whose reply is awaited.
@@ -103,6 +103,10 @@ pub enum Quarantine {
     ByContent,
 }
 
+/// The longest a hold may lie ahead (a quarter of the wrapping clock's
+/// range, about 12 days): settings beyond it are cut to it.
+pub const MAX_HORIZON_MS: u32 = 0x4000_0000;
+
 /// The chapter-5 settings.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -133,6 +137,27 @@ pub struct ExchangeConfig {
 }
 
 impl ExchangeConfig {
+    /// The furthest ahead of the current tick that these settings ever
+    /// place a hold: a timeout plus a late window, a duplicate window, a
+    /// turnaround (their sum, to be safe), or a controller's restart
+    /// ([`Reply::None`]), whichever is longest.
+    pub const fn horizon(&self) -> u32 {
+        let sum = self
+            .timeout_ms
+            .saturating_add(self.late_window_ms)
+            .saturating_add(self.duplicate_window_ms)
+            .saturating_add(self.turnaround_ms)
+            .saturating_add(1);
+        let restart = crate::catalogue::LONGEST_RESTART_MS;
+        let h = if sum > restart { sum } else { restart };
+        // A hold must stay comparable on the wrapping clock.
+        if h > MAX_HORIZON_MS {
+            MAX_HORIZON_MS
+        } else {
+            h
+        }
+    }
+
     /// The spec's settings for `station`: 3 s timeout, 3 sends, 1 ms
     /// turnaround, late replies guarded for another 3 s, no duplicates
     /// expected, unsafe commands sent once.
@@ -234,13 +259,16 @@ pub struct Exchange {
     sends: u8,
     last_sent: u32,
     /// Earliest tick of the next send (turnaround, reset readiness).
-    not_before: u32,
+    not_before: Option<u32>,
     /// Replies of finished commands that may still arrive, and until when.
     stale: u8,
     stale_until: u32,
     /// A fault was seen during the current command (timeout, resend,
     /// mismatch, stale frame): the transfer engine's "after a fault".
     faulted: bool,
+    /// The furthest ahead of `now` any hold is ever set (see
+    /// [`passed`]): a hold further ahead was set long ago.
+    horizon: u32,
 }
 
 impl Exchange {
@@ -255,10 +283,29 @@ impl Exchange {
             phase: Phase::Idle,
             sends: 0,
             last_sent: 0,
-            not_before: 0,
+            not_before: None,
             stale: 0,
             stale_until: 0,
             faulted: false,
+            horizon: cfg.horizon(),
+        }
+    }
+
+    /// How far ahead of `now` a hold may lie (see [`passed`]).
+    pub const fn horizon(&self) -> u32 {
+        self.horizon
+    }
+
+    /// Whether hold `t` is over at `now`.
+    const fn over(&self, now: u32, t: u32) -> bool {
+        passed(now, t, self.horizon)
+    }
+
+    /// The hold on the next send, seen from `now` (`now` if none).
+    const fn next_send(&self, now: u32) -> u32 {
+        match self.not_before {
+            Some(t) if !self.over(now, t) => t,
+            _ => now,
         }
     }
 
@@ -270,6 +317,7 @@ impl Exchange {
     /// Changes the settings (between commands).
     pub fn set_config(&mut self, cfg: ExchangeConfig) {
         self.cfg = cfg;
+        self.horizon = self.horizon.max(cfg.horizon());
     }
 
     /// Begins a command described by `info`: its first send is due from
@@ -286,12 +334,16 @@ impl Exchange {
         self.id = id;
         self.resend = resend;
         self.reply = reply;
+        if let Reply::None { ready_after_ms } = reply {
+            self.horizon = self.horizon.max(ready_after_ms.min(MAX_HORIZON_MS));
+        }
         self.sends = 0;
         self.faulted = false;
-        self.not_before = later(self.not_before, now);
-        if self.quarantine == Quarantine::Wait && self.stale > 0 {
-            self.not_before = later(self.not_before, self.stale_until);
+        let mut at = self.next_send(now);
+        if self.quarantine == Quarantine::Wait && self.stale_possible(now) {
+            at = later(at, self.stale_until);
         }
+        self.not_before = Some(at);
         self.phase = Phase::Ready;
     }
 
@@ -309,6 +361,14 @@ impl Exchange {
     /// timeout, a resend, a reply with the wrong content or a stale one.
     pub const fn faulted(&self) -> bool {
         self.faulted
+    }
+
+    /// How the current command ended, if it has.
+    pub const fn finished(&self) -> Option<Finish> {
+        match self.phase {
+            Phase::Finished(f) => Some(f),
+            _ => None,
+        }
     }
 
     /// Whether a reply is awaited now (the command was completely sent).
@@ -339,14 +399,14 @@ impl Exchange {
         match self.phase {
             Phase::Idle => Due::Idle,
             Phase::Finished(f) => Due::Done(f),
-            Phase::Ready if !reached(now, self.not_before) => Due::WaitUntil(self.not_before),
+            Phase::Ready if self.next_send(now) != now => Due::WaitUntil(self.next_send(now)),
             Phase::Ready => {
                 self.sends = self.sends.saturating_add(1);
                 self.phase = Phase::Sending;
                 Due::Transmit { fresh: true }
             }
             Phase::Sending => Due::Transmit { fresh: false },
-            Phase::Await { deadline } if !reached(now, deadline) => Due::WaitUntil(deadline),
+            Phase::Await { deadline } if !self.over(now, deadline) => Due::WaitUntil(deadline),
             Phase::Await { .. } => self.timed_out(now),
         }
     }
@@ -359,7 +419,7 @@ impl Exchange {
         self.faulted = true;
         if self.sends < self.send_limit() {
             self.phase = Phase::Ready;
-            self.not_before = now;
+            self.not_before = Some(now);
             return self.poll(now);
         }
         let f = match self.resend {
@@ -380,7 +440,7 @@ impl Exchange {
             };
             if let Reply::None { ready_after_ms } = self.reply {
                 // The controller restarts: nothing before it is ready again.
-                self.not_before = now.wrapping_add(ready_after_ms);
+                self.not_before = Some(now.wrapping_add(ready_after_ms));
             }
         }
     }
@@ -416,6 +476,7 @@ impl Exchange {
             if self.busy() {
                 self.faulted = true;
             }
+            self.stale_seen(now);
             return Offer::Stale;
         }
         match verdict {
@@ -434,6 +495,26 @@ impl Exchange {
                 Offer::Rejected(code)
             }
             Verdict::Foreign => Offer::Foreign,
+        }
+    }
+
+    /// A stale reply arrived at `now`: a duplicate of it may follow within
+    /// the duplicate window, like a copy of any reply. The quarantine
+    /// grows by that much (with [`Quarantine::Wait`], a command not yet
+    /// sent waits for it too).
+    fn stale_seen(&mut self, now: u32) {
+        if self.cfg.duplicate_window_ms == 0 {
+            return;
+        }
+        let until = now.wrapping_add(self.cfg.duplicate_window_ms);
+        self.stale_until = if self.stale_possible(now) {
+            later(self.stale_until, until)
+        } else {
+            until
+        };
+        self.stale = self.stale.saturating_add(1);
+        if self.quarantine == Quarantine::Wait && self.phase == Phase::Ready {
+            self.not_before = Some(later(self.next_send(now), self.stale_until));
         }
     }
 
@@ -460,11 +541,11 @@ impl Exchange {
                 until = later(until, now.wrapping_add(self.cfg.duplicate_window_ms));
             }
             let turnaround = now.wrapping_add(self.cfg.turnaround_ms).wrapping_add(1);
-            self.not_before = later(self.not_before, turnaround);
+            self.not_before = Some(later(self.next_send(now), turnaround));
         }
         // Stale replies of older commands are still possible until their
         // own window closes.
-        if self.stale > 0 && !reached(now, self.stale_until) {
+        if self.stale_possible(now) {
             stale = stale.saturating_add(self.stale);
             until = later(until, self.stale_until);
         }
@@ -480,13 +561,32 @@ impl Exchange {
     /// passed, instead of `timeout_ms` later. (Resending before the
     /// timeout is an **inference** from the half-duplex rules, 2003 p. 8:
     /// after its reply the controller is ready for the next command.)
+    ///
+    /// After a resend, or while a reply to an older command may still
+    /// come, a broken frame may be one of those late replies and the
+    /// awaited one may still arrive. Then the timeout is cut short only if
+    /// another send is left (an extra send costs at most a stale reply);
+    /// the last send keeps its full timeout, so that a stranger's broken
+    /// reply cannot end the command as timed out.
+    ///
+    /// A command without normal response (25BH) that gets a broken frame
+    /// was answered with an error whose code cannot be read: it ends as
+    /// [`Finish::OutcomeUnknown`] (not resent, not reported as sent).
     pub fn reply_lost(&mut self, now: u32) {
         if let Phase::Await { deadline } = self.phase {
+            self.faulted = true;
+            if let Reply::None { .. } = self.reply {
+                self.finish(Finish::OutcomeUnknown { sends: self.sends }, now, 0);
+                return;
+            }
+            let ambiguous = self.sends > 1 || self.stale_possible(now);
+            if ambiguous && self.sends >= self.cfg.max_sends {
+                return;
+            }
             let soon = now.wrapping_add(self.cfg.turnaround_ms).wrapping_add(1);
             if reached(deadline, soon) {
                 self.phase = Phase::Await { deadline: soon };
             }
-            self.faulted = true;
         }
     }
 
@@ -516,8 +616,18 @@ impl Exchange {
     }
 
     /// Whether stale replies may still arrive at `now`.
-    pub fn stale_possible(&self, now: u32) -> bool {
-        self.stale > 0 && !reached(now, self.stale_until)
+    pub const fn stale_possible(&self, now: u32) -> bool {
+        self.stale > 0 && !self.over(now, self.stale_until)
+    }
+
+    /// When no reply to an earlier command (or send) can arrive any more:
+    /// `now` if none can.
+    pub const fn quiet_from(&self, now: u32) -> u32 {
+        if self.stale_possible(now) {
+            self.stale_until
+        } else {
+            now
+        }
     }
 }
 
@@ -640,6 +750,29 @@ mod tests {
     }
 
     #[test]
+    fn on_the_last_send_a_broken_frame_may_be_an_earlier_sends_late_reply() {
+        let mut x = exchange();
+        x.start(&catalogue::AXIS_STATUS_QUERY, 0);
+        x.poll(0);
+        x.sent(0);
+        assert_eq!(x.poll(3_000), Due::Transmit { fresh: true });
+        x.sent(3_010);
+        // Broken: a late reply to the first send, or the second's? A third
+        // send is left: resend after the turnaround.
+        x.reply_lost(4_000);
+        assert_eq!(x.poll(4_002), Due::Transmit { fresh: true });
+        x.sent(4_010);
+        // The last send: its timeout stands, and its reply is taken.
+        x.reply_lost(4_500);
+        assert_eq!(x.poll(4_502), Due::WaitUntil(7_010));
+        assert!(x.faulted());
+        assert_eq!(
+            x.offer(&frame(b"#992122A\r\n"), true, 4_600),
+            Offer::Accepted
+        );
+    }
+
+    #[test]
     fn the_turnaround_is_two_ticks() {
         let mut x = exchange();
         x.start(&catalogue::SERVO_ON_OFF, 0);
@@ -691,6 +824,65 @@ mod tests {
         x.abandon(4_000);
         x.start(&catalogue::AXIS_STATUS_QUERY, 4_000);
         assert_eq!(x.poll(4_000), Due::WaitUntil(10_000));
+    }
+
+    #[test]
+    fn a_first_command_after_tick_2_31_goes_out_at_once() {
+        // A bridge idle since boot sends its first command on day 25.
+        for now in [0x8000_0000u32, 0x8000_0001, u32::MAX - 5_000, u32::MAX] {
+            let mut x = exchange();
+            x.start(&catalogue::AXIS_STATUS_QUERY, now);
+            assert_eq!(x.poll(now), Due::Transmit { fresh: true }, "{now:#x}");
+        }
+    }
+
+    #[test]
+    fn holds_set_long_ago_are_over() {
+        let mut x = exchange();
+        x.start(&catalogue::AXIS_STATUS_QUERY, 0);
+        x.poll(0);
+        x.sent(0);
+        assert_eq!(x.offer(&frame(b"#992122A\r\n"), true, 10), Offer::Accepted);
+        // Idle for 30 days: the turnaround hold at 12 now seems to lie
+        // 19 days ahead on the wrapping clock.
+        let later = 12u32.wrapping_add(30 * 86_400_000);
+        x.start(&catalogue::AXIS_STATUS_QUERY, later);
+        assert_eq!(x.poll(later), Due::Transmit { fresh: true });
+    }
+
+    #[test]
+    fn a_broken_error_reply_to_a_reset_is_not_a_sent_reset() {
+        let mut x = exchange();
+        x.start(&catalogue::SOFTWARE_RESET, 0);
+        x.poll(0);
+        x.sent(10);
+        x.broken_frame(Some((Header::Error, S, 0x027)), 11);
+        assert_eq!(x.poll(13), Due::Done(Finish::OutcomeUnknown { sends: 1 }));
+    }
+
+    #[test]
+    fn a_duplicate_of_a_late_reply_is_held_back_too() {
+        let mut cfg = ExchangeConfig::new(S);
+        cfg.duplicate_window_ms = 3_000;
+        let mut x = Exchange::new(cfg, Quarantine::Wait);
+        x.start(&catalogue::AXIS_STATUS_QUERY, 0);
+        x.poll(0);
+        x.sent(0);
+        // No reply in time; the resend's reply is taken at 3,050.
+        assert_eq!(x.poll(3_000), Due::Transmit { fresh: true });
+        x.sent(3_010);
+        let f = frame(b"#992122A\r\n");
+        assert_eq!(x.offer(&f, true, 3_050), Offer::Accepted);
+        // The next command waits for the first send's late reply
+        // (3,010 + 3,000 + 3,000).
+        x.start(&catalogue::AXIS_STATUS_QUERY, 3_060);
+        assert_eq!(x.poll(3_060), Due::WaitUntil(9_010));
+        // It comes at 9,000: a copy of it may come until 12,000.
+        assert_eq!(x.offer(&f, true, 9_000), Offer::Stale);
+        assert_eq!(x.poll(9_010), Due::WaitUntil(12_000));
+        assert_eq!(x.offer(&f, true, 11_000), Offer::Stale);
+        assert_eq!(x.poll(12_000), Due::WaitUntil(14_000));
+        assert_eq!(x.poll(14_000), Due::Transmit { fresh: true });
     }
 
     #[test]

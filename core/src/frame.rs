@@ -265,3 +265,117 @@ pub fn emit_frame(
     emit_trailer(&mut w, mode)?;
     Ok(w.len())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_2003_worked_examples() {
+        // 2003 p. 10: "!99209001005" sums to 254h, SC "54".
+        let f = Frame::new_checked(b"!9920900100554\r\n", BypassPolicy::Reject).unwrap();
+        assert_eq!(f.header(), Header::Command);
+        assert_eq!(f.station(), Station(0x99));
+        assert_eq!(f.message_id(), Some(MessageId(0x209)));
+        assert_eq!(f.body(), b"001005");
+        assert_eq!(f.checksum(), ChecksumField::Sum(0x54));
+        // 2003 p. 66: "!99209000032", SC "53".
+        assert!(Frame::new_checked(b"!9920900003253\r\n", BypassPolicy::Reject).is_ok());
+    }
+
+    #[test]
+    fn emitting_gives_the_same_bytes() {
+        let mut buf = [0u8; 16];
+        let n = emit_frame(
+            &mut buf,
+            Header::Command,
+            Station(0x99),
+            0x209,
+            ChecksumMode::Compute,
+            |w| w.put(b"001005"),
+        )
+        .unwrap();
+        assert_eq!(&buf[..n], b"!9920900100554\r\n");
+        let n = emit_frame(
+            &mut buf,
+            Header::Command,
+            Station(0x99),
+            0x232,
+            ChecksumMode::Bypass,
+            |w| w.put(b"071"),
+        )
+        .unwrap();
+        assert_eq!(&buf[..n], b"!99232071@@\r\n");
+        assert_eq!(
+            emit_frame(
+                &mut buf[..9],
+                Header::Response,
+                Station(0x99),
+                0x232,
+                ChecksumMode::Compute,
+                |_| Ok(())
+            ),
+            Err(Error::BufferTooSmall)
+        );
+    }
+
+    #[test]
+    fn bypass_only_where_the_policy_allows() {
+        let cmd = b"!99232071@@\r\n";
+        assert!(Frame::new_checked(cmd, BypassPolicy::CommandsOnly).is_ok());
+        assert_eq!(
+            Frame::new_checked(cmd, BypassPolicy::Reject),
+            Err(Error::ChecksumBypassRejected)
+        );
+        assert_eq!(
+            Frame::new_checked(b"#99232@@\r\n", BypassPolicy::CommandsOnly),
+            Err(Error::ChecksumBypassRejected)
+        );
+    }
+
+    #[test]
+    fn error_responses_carry_a_code_not_an_id() {
+        for header in [b'&', b'%'] {
+            let mut f = *b"&99C7446\r\n";
+            f[0] = header;
+            let sum = crate::checksum::Checksum::of(&f[..6]);
+            f[6] = hex_digit(sum >> 4);
+            f[7] = hex_digit(sum);
+            let frame = Frame::new_checked(&f, BypassPolicy::Reject).unwrap();
+            assert_eq!(frame.header(), Header::Error);
+            assert_eq!(frame.error_code(), Some(0xC74));
+            assert_eq!(frame.message_id(), None);
+        }
+    }
+
+    #[test]
+    fn every_envelope_fault_has_its_error() {
+        let p = BypassPolicy::Reject;
+        assert_eq!(
+            Frame::new_checked(b"#9923\r\n", p),
+            Err(Error::FrameTooShort { len: 7 })
+        );
+        assert_eq!(
+            Frame::new_checked(b"?992322C\r\n", p),
+            Err(Error::InvalidHeader { byte: b'?' })
+        );
+        assert_eq!(
+            Frame::new_checked(b"#992322D\r\n", p),
+            Err(Error::ChecksumMismatch {
+                computed: 0x2C,
+                received: 0x2D
+            })
+        );
+        assert_eq!(
+            Frame::new_checked(b"#99232x2C\r\n", p),
+            Err(Error::InvalidHexDigit {
+                offset: 6,
+                byte: b'x'
+            })
+        );
+        assert_eq!(
+            Frame::new_checked(b"#992322C\rX", p),
+            Err(Error::MissingLineFeed { byte: b'X' })
+        );
+    }
+}

@@ -31,6 +31,7 @@ use crate::codec::{
 use crate::error::{Error, Result};
 use crate::field::{decode_unsigned, FieldSpec, Reader, Writer};
 use crate::frame::{Frame, Header, ENVELOPE_LEN, TRAILER_LEN};
+use crate::hex;
 
 /// One record of the position table.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
@@ -95,8 +96,35 @@ pub struct RecordLayout {
 
 const AXES: FieldSpec = FieldSpec::hex(2);
 const WORD: FieldSpec = FieldSpec::hex(4);
+
 const COORD: FieldSpec = FieldSpec::signed_hex(8);
+
 const EXT: FieldSpec = FieldSpec::hex(2);
+
+/// The number of axes of every axis pattern (a table: the M4 has no
+/// population count instruction).
+// Indexing in a const initialiser is checked at compile time: it cannot panic at run time.
+#[allow(clippy::indexing_slicing)]
+static AXIS_COUNT: [u8; 256] = {
+    let mut t = [0u8; 256];
+    let mut i = 0;
+    while i < 256 {
+        t[i] = (i as u8).count_ones() as u8;
+        i += 1;
+    }
+    t
+};
+
+/// The number of axes of `axes`, from [`AXIS_COUNT`].
+#[inline(always)]
+pub(crate) fn axis_count(axes: AxisPattern) -> usize {
+    usize::from(
+        AXIS_COUNT
+            .get(usize::from(axes.bits()))
+            .copied()
+            .unwrap_or(0),
+    )
+}
 
 impl RecordLayout {
     /// 3-digit position number (209H, 245H).
@@ -155,14 +183,63 @@ impl RecordLayout {
     /// of the record stays in `w`.
     pub fn write_record(self, rec: &PositionRecord, w: &mut Writer<'_>) -> Result<()> {
         let mark = w.len();
-        let r = self.write_inner(rec, w);
+        let r = match self.put_record(rec, w.spare()) {
+            Ok((len, _)) => w.reserve(len).map(|_| ()),
+            Err(Error::ValueOutOfRange { .. }) => Err(Error::ValueOutOfRange { offset: mark }),
+            Err(e) => Err(e),
+        };
         if r.is_err() {
             w.truncate(mark);
         }
         r
     }
 
-    fn write_inner(self, rec: &PositionRecord, w: &mut Writer<'_>) -> Result<()> {
+    /// Writes `rec` at the start of `out`; returns the bytes written and
+    /// their sum (what they add to the checksum). Checks as
+    /// [`RecordLayout::write_record`]; `ValueOutOfRange` has offset 0. Number
+    /// widths 0, 3 and 4 (every message's) write whole fields at a time
+    /// ([`crate::hex`]), others a digit at a time.
+    #[inline(always)]
+    pub fn put_record(self, rec: &PositionRecord, out: &mut [u8]) -> Result<(usize, u32)> {
+        let n = axis_count(rec.axes);
+        if rec.positions.len() != n {
+            return Err(Error::CountMismatch {
+                expected: n,
+                found: rec.positions.len(),
+            });
+        }
+        let len = self.record_len(n);
+        let out = out.get_mut(..len).ok_or(Error::BufferTooSmall)?;
+        match self.put_fast(rec, out) {
+            Some(Ok(sum)) => Ok((len, sum)),
+            Some(Err(e)) => Err(e),
+            None => {
+                let mut w = Writer::new(out);
+                self.write_record_per_field(rec, &mut w)?;
+                Ok((len, w.written().iter().map(|&b| u32::from(b)).sum()))
+            }
+        }
+    }
+
+    /// The whole-field path of [`RecordLayout::put_record`]: `None` for a
+    /// layout it does not handle. `out` is exactly the record.
+    #[inline(always)]
+    fn put_fast(self, rec: &PositionRecord, out: &mut [u8]) -> Option<Result<u32>> {
+        match (self.number_width, self.extended) {
+            (4, false) => put_fixed::<4, 18, false>(rec, out),
+            (4, true) => put_fixed::<4, 18, true>(rec, out),
+            (3, false) => put_fixed::<3, 17, false>(rec, out),
+            (0, false) => put_fixed::<0, 14, false>(rec, out),
+            (0, true) => put_fixed::<0, 14, true>(rec, out),
+            _ => None,
+        }
+    }
+
+    /// [`RecordLayout::write_record`] a field at a time through the
+    /// [`Writer`] (on error part of the record may stay in `w`): the path
+    /// for other number widths, and the reference the whole-field path is
+    /// tested and fuzzed against.
+    pub fn write_record_per_field(self, rec: &PositionRecord, w: &mut Writer<'_>) -> Result<()> {
         if rec.positions.len() != rec.axes.count() {
             return Err(Error::CountMismatch {
                 expected: rec.axes.count(),
@@ -187,6 +264,36 @@ impl RecordLayout {
 
     /// Reads one record in this layout.
     pub fn read_record(self, r: &mut Reader<'_>) -> Result<PositionRecord> {
+        match self.read_fast(r.rest()) {
+            Some((rec, len, _)) => {
+                r.take(len)?;
+                Ok(rec)
+            }
+            None => self.read_record_per_field(r),
+        }
+    }
+
+    /// Whole fields at a time: `Some((record, length, sum of its bytes))`
+    /// for a complete, well-formed record in the layout of a message
+    /// (number width 0, 3 or 4); `None` otherwise (the per-digit path then
+    /// says what is wrong).
+    #[inline(always)]
+    pub fn read_fast(self, bytes: &[u8]) -> Option<(PositionRecord, usize, u32)> {
+        match (self.number_width, self.extended) {
+            (4, false) => read_fixed::<4, 18, false>(bytes),
+            (4, true) => read_fixed::<4, 18, true>(bytes),
+            (3, false) => read_fixed::<3, 17, false>(bytes),
+            (0, false) => read_fixed::<0, 14, false>(bytes),
+            (0, true) => read_fixed::<0, 14, true>(bytes),
+            _ => None,
+        }
+    }
+
+    /// [`RecordLayout::read_record`] a field at a time through the
+    /// [`Reader`]: the path for other number widths and for malformed
+    /// records (its errors name the offending byte), and the reference the
+    /// whole-field path is tested and fuzzed against.
+    pub fn read_record_per_field(self, r: &mut Reader<'_>) -> Result<PositionRecord> {
         let number_at = r.offset();
         let number = if self.number_width > 0 {
             let n = r.unsigned(FieldSpec::hex(self.number_width))?;
@@ -560,6 +667,110 @@ impl PositionStream {
     }
 }
 
+/// A fixed-size piece of `b` at offset `at` (`None` if `b` is too short:
+/// with constant offsets into an array the check disappears).
+#[inline(always)]
+fn piece<const N: usize>(b: &[u8], at: usize) -> Option<&[u8; N]> {
+    b.get(at..at + N)?.try_into().ok()
+}
+
+#[inline(always)]
+fn piece_mut<const N: usize>(b: &mut [u8], at: usize) -> Option<&mut [u8; N]> {
+    b.get_mut(at..at + N)?.try_into().ok()
+}
+
+/// [`RecordLayout::put_fast`] for one layout: `NW` digits of number (0, 3
+/// or 4), `HEAD` = `NW` + 14 bytes before the coordinates.
+#[inline(always)]
+fn put_fixed<const NW: usize, const HEAD: usize, const EXT: bool>(
+    rec: &PositionRecord,
+    out: &mut [u8],
+) -> Option<Result<u32>> {
+    let (head, rest) = out.split_first_chunk_mut::<HEAD>()?;
+    let mut sum = match NW {
+        4 => hex::put4(rec.number, piece_mut::<4>(head, 0)?),
+        3 => {
+            if rec.number > 0xFFF {
+                return Some(Err(Error::ValueOutOfRange { offset: 0 }));
+            }
+            let mut four = [0u8; 4];
+            let s = hex::put4(rec.number, &mut four);
+            let [_, a, b, c] = four;
+            *piece_mut::<3>(head, 0)? = [a, b, c];
+            s - u32::from(b'0')
+        }
+        _ => 0,
+    };
+    sum += hex::put2(rec.axes.bits(), piece_mut::<2>(head, NW)?);
+    sum += hex::put4(rec.acceleration, piece_mut::<4>(head, NW + 2)?);
+    sum += hex::put4(rec.deceleration, piece_mut::<4>(head, NW + 6)?);
+    sum += hex::put4(rec.speed, piece_mut::<4>(head, NW + 10)?);
+    let mut coords = rest.chunks_exact_mut(8);
+    for (&p, d) in rec.positions.iter().zip(&mut coords) {
+        sum += hex::put8(p as u32, d.try_into().ok()?);
+    }
+    if EXT {
+        sum += hex::put2(rec.extended, coords.into_remainder().try_into().ok()?);
+    }
+    Some(Ok(sum))
+}
+
+/// [`RecordLayout::read_fast`] for one layout (see [`put_fixed`]).
+#[inline(always)]
+fn read_fixed<const NW: usize, const HEAD: usize, const EXT: bool>(
+    bytes: &[u8],
+) -> Option<(PositionRecord, usize, u32)> {
+    let (head, rest) = bytes.split_first_chunk::<HEAD>()?;
+    let mut b = hex::Batch::new();
+    let axes = AxisPattern::from_bits(b.decode2(piece::<2>(head, NW)?));
+    let n = axis_count(axes);
+    let tail = 8 * n + if EXT { 2 } else { 0 };
+    let rest = rest.get(..tail)?;
+    let number = match NW {
+        4 => b.decode4(piece::<4>(head, 0)?),
+        3 => {
+            let [x, y, z] = *piece::<3>(head, 0)?;
+            b.decode4(&[b'0', x, y, z])
+        }
+        _ => 0,
+    };
+    let acceleration = b.decode4(piece::<4>(head, NW + 2)?);
+    let deceleration = b.decode4(piece::<4>(head, NW + 6)?);
+    let speed = b.decode4(piece::<4>(head, NW + 10)?);
+    let mut positions = PerAxis::new();
+    let mut coords = rest.chunks_exact(8);
+    for d in &mut coords {
+        let _ = positions.push(b.decode8(d.try_into().ok()?) as i32);
+    }
+    let extended = if EXT {
+        b.decode2(coords.remainder().try_into().ok()?)
+    } else {
+        0
+    };
+    if !b.is_valid() {
+        return None;
+    }
+    // The '0' put before a 3-digit number is not on the wire.
+    let sum = if NW == 3 {
+        b.sum() - u32::from(b'0')
+    } else {
+        b.sum()
+    };
+    Some((
+        PositionRecord {
+            number,
+            axes,
+            acceleration,
+            deceleration,
+            speed,
+            positions,
+            extended,
+        },
+        HEAD + tail,
+        sum,
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -646,5 +857,219 @@ mod tests {
         let f = Frame::new_checked(b"#9926D00180A\r\n", crate::checksum::BypassPolicy::Reject);
         let f = f.unwrap();
         assert_eq!(PositionStream::CHANGE_2.parse_reply(&f), Ok((0, 0x18)));
+    }
+}
+
+/// The whole-field record codec against the per-field reference.
+#[cfg(test)]
+mod whole_fields {
+    use super::*;
+
+    const LAYOUTS: [RecordLayout; 5] = [
+        RecordLayout::NUMBER_3,
+        RecordLayout::NUMBER_4,
+        RecordLayout::NUMBER_4_EXTENDED,
+        RecordLayout::RANGE,
+        RecordLayout::RANGE_EXTENDED,
+    ];
+
+    fn xorshift(seed: u32) -> impl FnMut() -> u32 {
+        let mut x = seed | 1;
+        move || {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x
+        }
+    }
+
+    /// A record every field of which fits `layout`.
+    fn record(layout: RecordLayout, next: &mut impl FnMut() -> u32) -> PositionRecord {
+        let axes = AxisPattern::from_bits(next() as u8);
+        let mut positions = PerAxis::new();
+        for _ in 0..axes.count() {
+            positions.push(next() as i32).unwrap();
+        }
+        let number = match layout.number_width {
+            0 => 0,
+            3 => (next() & 0xFFF) as u16,
+            _ => next() as u16,
+        };
+        let extended = if layout.extended { next() as u8 } else { 0 };
+        PositionRecord {
+            number,
+            axes,
+            acceleration: next() as u16,
+            deceleration: next() as u16,
+            speed: next() as u16,
+            positions,
+            extended,
+        }
+    }
+
+    fn per_field(layout: RecordLayout, rec: &PositionRecord) -> ([u8; 128], usize) {
+        let mut buf = [0u8; 128];
+        let mut w = Writer::new(&mut buf);
+        layout.write_record_per_field(rec, &mut w).unwrap();
+        let n = w.len();
+        (buf, n)
+    }
+
+    #[test]
+    fn golden_26dh_record() {
+        let rec = PositionRecord::new(1, 30, 30, 100, &[(1, 100_000), (2, -25_500)]).unwrap();
+        let mut out = [0u8; 40];
+        let (len, sum) = RecordLayout::NUMBER_4.put_record(&rec, &mut out).unwrap();
+        let wire = b"000103001E001E0064000186A0FFFF9C64";
+        assert_eq!(&out[..len], wire);
+        assert_eq!(sum, wire.iter().map(|&b| u32::from(b)).sum::<u32>());
+        let (back, n, s) = RecordLayout::NUMBER_4.read_fast(wire).unwrap();
+        assert_eq!((back, n, s), (rec, wire.len(), sum));
+    }
+
+    #[test]
+    fn both_paths_agree_on_every_layout() {
+        let mut next = xorshift(11);
+        for layout in LAYOUTS {
+            for _ in 0..400 {
+                let rec = record(layout, &mut next);
+                let (reference, n) = per_field(layout, &rec);
+                let wire = &reference[..n];
+                let mut out = [0u8; 128];
+                let (len, sum) = layout.put_record(&rec, &mut out).unwrap();
+                assert_eq!(&out[..len], wire, "{layout:?} {rec:?}");
+                assert_eq!(sum & 0xFF, u32::from(hex::sum_bytewise(0, wire)));
+                let mut buf = [0u8; 128];
+                let mut w = Writer::new(&mut buf);
+                layout.write_record(&rec, &mut w).unwrap();
+                assert_eq!(w.written(), wire);
+
+                // Read back, in both cases, with bytes after the record.
+                let mut lower = [b'Z'; 130];
+                lower[..n].copy_from_slice(wire);
+                lower[..n].make_ascii_lowercase();
+                for bytes in [&reference[..n + 2], &lower[..]] {
+                    let (back, used, s) = layout.read_fast(bytes).unwrap();
+                    assert_eq!((&back, used), (&rec, n));
+                    assert_eq!(s, bytes[..n].iter().map(|&b| u32::from(b)).sum::<u32>());
+                    let mut r = Reader::new(bytes, 0);
+                    assert_eq!(layout.read_record_per_field(&mut r).as_ref(), Ok(&rec));
+                    let mut r = Reader::new(bytes, 0);
+                    assert_eq!(layout.read_record(&mut r).as_ref(), Ok(&rec));
+                    assert_eq!(r.offset(), n);
+                }
+            }
+        }
+    }
+
+    /// Every cut and every bad byte: no record from the fast path, and
+    /// `read_record` reports what the per-field path reports.
+    #[test]
+    fn malformed_records_give_the_per_field_error() {
+        let mut next = xorshift(5);
+        for layout in LAYOUTS {
+            for _ in 0..20 {
+                let rec = record(layout, &mut next);
+                let (wire, n) = per_field(layout, &rec);
+                let same_error = |bytes: &[u8]| {
+                    let mut a = Reader::new(bytes, 7);
+                    let mut b = Reader::new(bytes, 7);
+                    let fast = layout.read_record(&mut a);
+                    assert!(fast.is_err());
+                    assert_eq!(fast, layout.read_record_per_field(&mut b));
+                };
+                for cut in 0..n {
+                    assert!(layout.read_fast(&wire[..cut]).is_none());
+                    same_error(&wire[..cut]);
+                }
+                for at in 0..n {
+                    for bad in [b'G', b'g', b' ', b'/', b':', b'@', 0x00, 0xFF] {
+                        let mut w = wire;
+                        w[at] = bad;
+                        match layout.read_fast(&w[..n]) {
+                            // A bad axis-pattern byte can shorten the record
+                            // only if the pattern still decodes: it cannot.
+                            Some(_) => panic!("{layout:?}: {bad:#04X} at {at} accepted"),
+                            None => same_error(&w[..n]),
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn refusals() {
+        let mut rec = PositionRecord::new(0x1000, 1, 2, 3, &[(3, -1)]).unwrap();
+        let mut buf = [b'.'; 40];
+        let mut w = Writer::new(&mut buf);
+        w.put(b"!99").unwrap();
+        assert_eq!(
+            RecordLayout::NUMBER_3.write_record(&rec, &mut w),
+            Err(Error::ValueOutOfRange { offset: 3 })
+        );
+        assert_eq!(w.written(), b"!99", "nothing of the record stays");
+        let mut out = [0u8; 40];
+        assert_eq!(
+            RecordLayout::NUMBER_3.put_record(&rec, &mut out),
+            Err(Error::ValueOutOfRange { offset: 0 })
+        );
+        rec.number = 0xFFF;
+        assert_eq!(
+            RecordLayout::NUMBER_3
+                .put_record(&rec, &mut out)
+                .map(|r| r.0),
+            Ok(25)
+        );
+        assert_eq!(&out[..3], b"FFF");
+        assert_eq!(
+            RecordLayout::NUMBER_3.put_record(&rec, &mut out[..24]),
+            Err(Error::BufferTooSmall)
+        );
+        rec.positions.push(7).unwrap();
+        assert_eq!(
+            RecordLayout::NUMBER_4.put_record(&rec, &mut out),
+            Err(Error::CountMismatch {
+                expected: 1,
+                found: 2
+            })
+        );
+    }
+
+    /// Number widths no message uses still work, a digit at a time.
+    #[test]
+    fn other_number_widths_take_the_per_field_path() {
+        let mut next = xorshift(9);
+        for width in [1u8, 2, 5, 8, 16] {
+            let layout = RecordLayout {
+                number_width: width,
+                extended: width % 2 == 0,
+            };
+            for _ in 0..50 {
+                let mut rec = record(RecordLayout::NUMBER_4_EXTENDED, &mut next);
+                if width < 4 {
+                    rec.number &= (1 << (4 * width)) - 1;
+                }
+                if !layout.extended {
+                    rec.extended = 0;
+                }
+                let (wire, n) = per_field(layout, &rec);
+                let mut out = [0u8; 128];
+                let (len, sum) = layout.put_record(&rec, &mut out).unwrap();
+                assert_eq!(&out[..len], &wire[..n]);
+                assert_eq!(sum, wire[..n].iter().map(|&b| u32::from(b)).sum::<u32>());
+                assert!(layout.read_fast(&wire[..n]).is_none());
+                let mut r = Reader::new(&wire[..n], 0);
+                assert_eq!(layout.read_record(&mut r), Ok(rec));
+            }
+        }
+    }
+
+    #[test]
+    fn axis_counts() {
+        for bits in 0..=255u8 {
+            let p = AxisPattern::from_bits(bits);
+            assert_eq!(axis_count(p), p.count());
+        }
     }
 }

@@ -112,7 +112,9 @@ impl Profile {
     pub const fn real_word_order(self) -> Result<WordOrder> {
         match self.real_word_order {
             Some(o) => Ok(o),
-            None => Err(Error::NotSupportedByProfile { id: 0x20F }),
+            None => Err(Error::NotSupportedByProfile {
+                id: crate::catalogue::REAL_VARIABLE_QUERY.id,
+            }),
         }
     }
 

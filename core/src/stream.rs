@@ -39,7 +39,7 @@ use crate::error::{Error, Result};
 use crate::field::{hex_digit, hex_value, FieldSpec, Reader, Writer};
 use crate::frame::{emit_envelope, Header, Station, ENVELOPE_LEN};
 use crate::io::IoError;
-use crate::position::PositionRecord;
+use crate::position::{axis_count, PositionRecord};
 
 /// Staging buffer size of the streaming encoder and decoder: the longest
 /// record (4 + 2 + 12 + 8 × 8 + 2 = 84 bytes) or the longest envelope and
@@ -134,25 +134,14 @@ impl<I: Iterator<Item = PositionRecord>> PositionStreamEncoder<I> {
     pub fn read(&mut self, out: &mut [u8]) -> Result<usize> {
         let mut n = 0;
         while n < out.len() {
-            if self.stage.pending().is_empty() && !self.refill()? {
-                break;
+            let room = out.get_mut(n..).unwrap_or(&mut []);
+            if self.stage.pos < self.stage.len {
+                let k = copy_words(room, self.stage.pending());
+                self.stage.pos += k;
+                n += k;
+                continue;
             }
-            let src = self.stage.pending();
-            let dst = out.get_mut(n..).unwrap_or(&mut []);
-            let k = src.len().min(dst.len());
-            if let (Some(d), Some(s)) = (dst.get_mut(..k), src.get(..k)) {
-                d.copy_from_slice(s);
-            }
-            self.stage.pos += k;
-            n += k;
-        }
-        Ok(n)
-    }
-
-    /// Loads the next record or the trailer into the stage; `false` when done.
-    fn refill(&mut self) -> Result<bool> {
-        match self.phase {
-            EncPhase::Records if self.emitted < self.count => {
+            if self.phase == EncPhase::Records && self.emitted < self.count {
                 let Some(rec) = self.source.next() else {
                     self.phase = EncPhase::Failed;
                     return Err(Error::CountMismatch {
@@ -160,18 +149,38 @@ impl<I: Iterator<Item = PositionRecord>> PositionStreamEncoder<I> {
                         found: usize::from(self.emitted),
                     });
                 };
-                let mut w = Writer::new(&mut self.stage.buf);
-                if let Err(e) = self.kind.layout.write_record(&rec, &mut w) {
-                    self.phase = EncPhase::Failed;
-                    return Err(e);
+                // Straight into `out` when the record fits, else staged.
+                let fits = room.len() >= self.kind.layout.record_len(axis_count(rec.axes));
+                let dst: &mut [u8] = if fits { room } else { &mut self.stage.buf };
+                match self.kind.layout.put_record(&rec, dst) {
+                    Ok((len, sum)) => {
+                        self.sum.add_sum(sum);
+                        self.emitted += 1;
+                        if fits {
+                            n += len;
+                        } else {
+                            self.stage.len = len;
+                            self.stage.pos = 0;
+                        }
+                    }
+                    Err(e) => {
+                        self.phase = EncPhase::Failed;
+                        return Err(e);
+                    }
                 }
-                let len = w.len();
-                self.stage.len = len;
-                self.stage.pos = 0;
-                self.sum.update(self.stage.pending());
-                self.emitted += 1;
-                Ok(true)
+                continue;
             }
+            if !self.refill()? {
+                break;
+            }
+        }
+        Ok(n)
+    }
+
+    /// After the last record: loads the trailer into the stage; `false`
+    /// when done. (`read` encodes the records.)
+    fn refill(&mut self) -> Result<bool> {
+        match self.phase {
             EncPhase::Records => {
                 if self.source.next().is_some() {
                     self.phase = EncPhase::Failed;
@@ -341,6 +350,18 @@ impl PositionStreamDecoder {
             if rest.is_empty() {
                 break;
             }
+            // A whole well-formed record in the input: read it in place.
+            if self.phase == DecPhase::RecordHead && self.stage.len == 0 {
+                if let Some(kind) = self.kind {
+                    if let Some((rec, len, sum)) = kind.layout.read_fast(rest) {
+                        self.sum.add_sum(sum);
+                        self.offset += len;
+                        self.done += 1;
+                        self.enter_record_or_trailer(kind);
+                        return (used + len, StreamEvent::Record(rec));
+                    }
+                }
+            }
             let want = self.need.saturating_sub(self.stage.len);
             let take = want.min(rest.len());
             let end = self.stage.len + take;
@@ -350,6 +371,17 @@ impl PositionStreamDecoder {
             ) {
                 (Some(dst), Some(src)) if take > 0 => dst.copy_from_slice(src),
                 _ => return (used, self.fail(Error::FrameTooLong { limit: STAGE_LEN })),
+            }
+            // A CR or LF where the unit has none: the frame ended early (a
+            // byte was lost or changed). Say so now, not after waiting for
+            // bytes that will not come.
+            if let Some(at) = self.early_end(self.stage.len, rest.get(..take).unwrap_or(&[])) {
+                return (
+                    used + at + 1,
+                    self.fail(Error::BodyTooShort {
+                        offset: self.offset + self.stage.len + at,
+                    }),
+                );
             }
             self.stage.len = end;
             used += take;
@@ -371,6 +403,20 @@ impl PositionStreamDecoder {
     /// Pushes one byte (ignored after the end of the frame, see [`Self::decode`]).
     pub fn push(&mut self, byte: u8) -> StreamEvent {
         self.decode(&[byte]).1
+    }
+
+    /// The index in `bytes` (which go to the stage at `from`) of the first
+    /// CR or LF out of place: anywhere but the trailer's last two bytes.
+    fn early_end(&self, from: usize, bytes: &[u8]) -> Option<usize> {
+        let trailer = self.phase == DecPhase::Trailer;
+        bytes.iter().enumerate().position(|(i, &b)| {
+            let at = from + i;
+            match b {
+                b'\r' => !(trailer && at == 2),
+                b'\n' => !(trailer && at == 3),
+                _ => false,
+            }
+        })
     }
 
     fn fail(&mut self, error: Error) -> StreamEvent {
@@ -523,5 +569,107 @@ impl PositionStreamDecoder {
             self.phase = DecPhase::Trailer;
             self.need = 4;
         }
+    }
+}
+
+/// Copies as much of `src` as fits into `dst`, a 4-byte word at a time
+/// (the library `memcpy` is slow for the short, unaligned pieces a record
+/// leaves); returns the bytes copied.
+#[inline(always)]
+fn copy_words(dst: &mut [u8], src: &[u8]) -> usize {
+    let n = dst.len().min(src.len());
+    if let (Some(d), Some(s)) = (dst.get_mut(..n), src.get(..n)) {
+        let mut dw = d.chunks_exact_mut(4);
+        let mut sw = s.chunks_exact(4);
+        for (a, b) in (&mut dw).zip(&mut sw) {
+            a.copy_from_slice(b);
+        }
+        for (a, b) in dw.into_remainder().iter_mut().zip(sw.remainder()) {
+            *a = *b;
+        }
+    }
+    n
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+
+    /// Two 26DH records of different length (EXAMPLES 6.2).
+    const WIRE: &[u8] =
+        b"!9926D0002000103001E001E0064000186A0FFFF9C64000201000000000000000030392B\r\n";
+
+    /// Pushes `bytes` one at a time; the events other than `NeedMore`,
+    /// with the index of the byte that gave each.
+    fn push_all(bytes: &[u8]) -> std::vec::Vec<(usize, StreamEvent)> {
+        let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
+        bytes
+            .iter()
+            .enumerate()
+            .map(|(i, &b)| (i, d.push(b)))
+            .filter(|(_, e)| *e != StreamEvent::NeedMore)
+            .collect()
+    }
+
+    #[test]
+    fn the_example_ends_at_its_line_feed() {
+        let events = push_all(WIRE);
+        assert_eq!(events.len(), 4, "{events:?}");
+        assert_eq!(events[3], (WIRE.len() - 1, StreamEvent::End { records: 2 }));
+    }
+
+    #[test]
+    fn a_frame_one_byte_short_fails_at_its_carriage_return() {
+        // A digit of the last coordinate lost (a 0x11 taken for XON by the
+        // UART): the record still decodes, shifted, and the SC's second
+        // digit and the CR stand where the SC should. The CR ends the
+        // frame at once; the decoder does not wait for a fourth byte.
+        let mut short = WIRE.to_vec();
+        short.remove(WIRE.len() - 6);
+        let events = push_all(&short);
+        let cr = short.len() - 2;
+        assert_eq!(
+            events.last(),
+            Some(&(
+                cr,
+                StreamEvent::Error {
+                    error: Error::BodyTooShort { offset: cr },
+                    records_ok: 2,
+                }
+            )),
+            "{events:?}"
+        );
+    }
+
+    #[test]
+    fn a_line_feed_inside_a_record_fails_there() {
+        let mut broken = WIRE.to_vec();
+        broken[30] = b'\n';
+        let events = push_all(&broken);
+        assert_eq!(
+            events.last(),
+            Some(&(
+                30,
+                StreamEvent::Error {
+                    error: Error::BodyTooShort { offset: 30 },
+                    records_ok: 0,
+                }
+            ))
+        );
+        // Fed whole, the same.
+        let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
+        let (used, start) = d.decode(&broken);
+        assert!(matches!(start, StreamEvent::Start { count: 2, .. }));
+        assert_eq!(
+            d.decode(&broken[used..]),
+            (
+                31 - used,
+                StreamEvent::Error {
+                    error: Error::BodyTooShort { offset: 30 },
+                    records_ok: 0,
+                }
+            )
+        );
     }
 }

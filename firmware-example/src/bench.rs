@@ -1,46 +1,157 @@
-//! Instruction counts of the core's position-stream codec (the `bench`
-//! feature): encode an N-record, 8-axis 26DH table into RAM with
-//! [`PositionStreamEncoder`], decode it again with
-//! [`PositionStreamDecoder`], and print instructions per wire byte through
-//! semihosting.
+//! Instructions per wire byte of the core's hex paths, for two 26DH
+//! workloads, on whatever Cortex-M core runs it (M0, M3, M4).
 //!
-//! Counting: run on QEMU `mps2-an386` with `-icount shift=5,sleep=off`.
-//! Each instruction then takes 2^5 ns of virtual time and SysTick counts
-//! the 25 MHz core clock (40 ns), so instructions = SysTick ticks x 1.25,
-//! the same on every run. The DWT cycle counter is not modelled by QEMU.
-//! The count includes the 1 kHz SysTick interrupt (about 20 instructions
-//! every 31,250) and excludes the record generator (measured apart and
-//! subtracted). Instructions, not cycles: no pipeline or wait states.
+//! Self-contained: it needs the core peripherals (SysTick, CPUID) and a
+//! print function, nothing of a board, so the same code runs on every QEMU
+//! machine. `src/bin/icount_bench.rs` is the program around it;
+//! `host-tests/src/bin/icount.rs` builds that for each board, runs it under
+//! QEMU with `-icount` and prints the figures.
+//!
+//! # Counting
+//! Under `-icount shift=S,sleep=off` every instruction advances QEMU's
+//! virtual clock by 2^S ns, and SysTick counts that clock: ticks are
+//! proportional to instructions, identical from run to run. The ratio
+//! depends on the core clock the board model gives SysTick, so the bench
+//! does not assume it: it times a two-instruction loop (`subs`, `bne`) at
+//! two lengths and takes instructions per tick from the difference.
+//! SysTick runs free over its 24 bits with its interrupt off, so no
+//! handler is counted; every timed piece is far shorter than a wrap.
+//! Instructions, not cycles: no pipeline, wait states or flash latency.
+//!
+//! # What is counted, per wire byte of the same frames
+//! - `encode`: `PositionStreamEncoder` pulled in 64-byte chunks into RAM.
+//!   Handing it the records (cloning them out of an array) is timed apart
+//!   and subtracted: that is the caller's work, not the codec's.
+//! - `decode`: `PositionStreamDecoder` over the whole frame, every record out.
+//! - `push`: `FrameDecoder::push`, one byte at a time, the frame out.
+//! - `checksum`: `Checksum::update` over the frame.
+//!
+//! The frames are the ones a bridge writes to a TTA: 26DH commands of at
+//! most 2,051 bytes (24 records of 8 axes, 1,982 bytes; or 78 records of 1
+//! axis, 2,042 bytes), eight of each, every record different.
+//!
+//! # Output
+//! Lines for the host to read (all numbers decimal):
+//! `bench core <name> <cpuid>`, `bench calibration <instructions> <ticks>`,
+//! then per workload and figure `bench <workload> <what> <ticks> <bytes>`
+//! (net ticks, overhead already subtracted), an informative
+//! `bench <workload> source <ticks> <bytes>` (what was subtracted from
+//! `encode`), and `bench ok` or `bench failed <why>` last.
 
 use core::hint::black_box;
-use core::sync::atomic::{AtomicU32, Ordering};
+use core::sync::atomic::{compiler_fence, Ordering};
 
+use cortex_m::peripheral::{CPUID, SYST};
 use iai_protocol_b::axis::{AxisPattern, PerAxis};
+use iai_protocol_b::checksum::Checksum;
+use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::stream::{
     PositionStream, PositionStreamDecoder, PositionStreamEncoder, StreamEvent,
 };
 
-use crate::board;
+/// One workload: 26DH frames of `per_frame` records of `axes` axes.
+struct Workload {
+    name: &'static str,
+    axes: u8,
+    per_frame: u16,
+}
 
-/// Records in the table (8 axes each: 82 bytes per record on the wire).
-pub const RECORDS: u16 = 200;
-/// Axes per record.
-const AXES: u8 = 8;
-/// Wire size of the frame: 14 bytes overhead + 82 per record.
-const FRAME_LEN: usize = 14 + 82 * RECORDS as usize;
+/// Frames per workload.
+const FRAMES: u16 = 8;
+/// The two workloads; both frame sizes fit the decoder's default capacity.
+const WORKLOADS: [Workload; 2] = [
+    Workload {
+        name: "26dh-8axis",
+        axes: 8,
+        per_frame: 24,
+    },
+    Workload {
+        name: "26dh-1axis",
+        axes: 1,
+        per_frame: 78,
+    },
+];
+/// Records of the largest frame.
+const MAX_PER_FRAME: usize = 78;
+/// Largest frame: the TTA's limit.
+const FRAME_CAP: usize = 2051;
+/// Chunk the encoder is pulled in (a UART transmit path's buffer).
+const CHUNK: usize = 64;
 
-/// The encoded frame (only linked in with the `bench` feature).
-struct Buf(core::cell::UnsafeCell<[u8; FRAME_LEN]>);
-// SAFETY: used by thread code only, once.
-unsafe impl Sync for Buf {}
-static FRAME: Buf = Buf(core::cell::UnsafeCell::new([0; FRAME_LEN]));
-static TAKEN: AtomicU32 = AtomicU32::new(0);
+/// The SysTick counter mask (24 bits).
+const SYST_MASK: u32 = 0x00FF_FFFF;
+/// SysTick CSR: counter on, clocked by the core clock, no interrupt.
+const SYST_CSR_ENABLE_CORE_CLOCK: u32 = 0b101;
 
-/// A deterministic record with `AXES` coordinates.
-fn record(i: u32) -> PositionRecord {
-    let mut x = i.wrapping_mul(2_654_435_761) | 1;
+/// Lets SysTick count freely over 24 bits without its interrupt.
+fn start_counter() {
+    // SAFETY: the bench is the only code running; these writes switch the
+    // SysTick interrupt off, so no handler and no other code uses SysTick
+    // while the bench reads it.
+    unsafe {
+        let syst = &*SYST::PTR;
+        syst.csr.write(0);
+        syst.rvr.write(SYST_MASK);
+        syst.cvr.write(0);
+        syst.csr.write(SYST_CSR_ENABLE_CORE_CLOCK);
+    }
+}
+
+/// SysTick ticks `f` took (the counter counts down), and its result.
+#[inline(always)]
+fn timed<R>(f: impl FnOnce() -> R) -> (u32, R) {
+    compiler_fence(Ordering::SeqCst);
+    let t0 = SYST::get_current();
+    compiler_fence(Ordering::SeqCst);
+    let r = f();
+    compiler_fence(Ordering::SeqCst);
+    let t1 = SYST::get_current();
+    compiler_fence(Ordering::SeqCst);
+    (t0.wrapping_sub(t1) & SYST_MASK, r)
+}
+
+/// Runs exactly `2 * n` instructions (`n` >= 1): a `subs`/`bne` loop.
+#[inline(always)]
+fn spin(n: u32) {
+    // SAFETY: register-only arithmetic and a local branch; no memory, no stack.
+    unsafe {
+        core::arch::asm!(
+            "2:",
+            "subs {n}, #1",
+            "bne 2b",
+            n = inout(reg) n.max(1) => _,
+            options(nomem, nostack),
+        );
+    }
+}
+
+/// Instructions and ticks of the calibration loops' difference.
+fn calibrate() -> (u64, u32) {
+    const SHORT: u32 = 50_000;
+    const LONG: u32 = 250_000;
+    let (short, ()) = timed(|| spin(black_box(SHORT)));
+    let (long, ()) = timed(|| spin(black_box(LONG)));
+    (2 * u64::from(LONG - SHORT), long.wrapping_sub(short))
+}
+
+/// Core name from the CPUID part number.
+fn core_name(cpuid: u32) -> &'static str {
+    match (cpuid >> 4) & 0xFFF {
+        0xC20 => "cortex-m0",
+        0xC60 => "cortex-m0plus",
+        0xC23 => "cortex-m3",
+        0xC24 => "cortex-m4",
+        0xC27 => "cortex-m7",
+        _ => "unknown",
+    }
+}
+
+/// A deterministic record: a pure function of `(i, axes)`, coordinates over
+/// ±2,000,000 (±2 m), varied speeds (as `host_tests::table`).
+fn record(i: u32, axes: u8) -> PositionRecord {
+    let mut x = i.wrapping_mul(2_654_435_761) ^ u32::from(axes).wrapping_mul(40_503);
     let mut next = || {
         x ^= x << 13;
         x ^= x >> 17;
@@ -48,12 +159,12 @@ fn record(i: u32) -> PositionRecord {
         x
     };
     let mut positions = PerAxis::new();
-    for _ in 0..AXES {
+    for _ in 0..axes {
         let _ = positions.push((next() % 4_000_001) as i32 - 2_000_000);
     }
     PositionRecord {
-        number: i as u16 + 1,
-        axes: AxisPattern::first(AXES),
+        number: (i % 20_000) as u16 + 1,
+        axes: AxisPattern::first(axes),
         acceleration: (next() % 200) as u16,
         deceleration: (next() % 200) as u16,
         speed: (next() % 2000) as u16,
@@ -62,127 +173,181 @@ fn record(i: u32) -> PositionRecord {
     }
 }
 
-fn records() -> impl Iterator<Item = PositionRecord> {
-    (0..u32::from(RECORDS)).map(record)
-}
-
-/// SysTick ticks since start: ms x reload + elapsed part of the current ms.
-fn ticks() -> u64 {
-    let per_ms = u64::from(board::CORE_CLOCK_HZ / board::TICK_HZ);
+/// Encodes one 26DH frame of `recs` into `out`; its length, or `None`.
+#[inline(never)]
+fn encode(recs: &[PositionRecord], out: &mut [u8]) -> Option<usize> {
+    let count = u16::try_from(recs.len()).ok()?;
+    let mut enc = PositionStreamEncoder::new(
+        PositionStream::CHANGE_2,
+        Station(0x99),
+        0,
+        count,
+        recs.iter().cloned(),
+    )
+    .ok()?;
+    let mut len = 0;
     loop {
-        let ms = board::now_ms();
-        let cvr = cortex_m::peripheral::SYST::get_current();
-        if board::now_ms() == ms {
-            // The counter counts down from `per_ms - 1`.
-            return u64::from(ms) * per_ms + (per_ms - 1 - u64::from(cvr));
+        let end = (len + CHUNK).min(out.len());
+        match enc.read(out.get_mut(len..end)?) {
+            Ok(0) => return Some(len),
+            Ok(n) => len += n,
+            Err(_) => return None,
         }
     }
 }
 
-/// Instructions (x100) from SysTick ticks at `-icount shift=5`.
-fn instructions_x100(ticks: u64) -> u64 {
-    ticks * 125
+/// What handing `recs` to the encoder costs the caller.
+#[inline(never)]
+fn source(recs: &[PositionRecord]) {
+    for r in recs.iter().cloned() {
+        black_box(r);
+    }
 }
 
-fn measure(f: impl FnOnce()) -> u64 {
-    let t0 = ticks();
-    f();
-    ticks() - t0
+/// Decodes one frame with the stream decoder; the records delivered, or
+/// `None` on an error or a missing end.
+#[inline(never)]
+fn decode(frame: &[u8]) -> Option<u16> {
+    let mut dec = PositionStreamDecoder::default();
+    let mut input = frame;
+    let mut records = 0;
+    while !input.is_empty() {
+        let (used, ev) = dec.decode(input);
+        input = input.get(used..)?;
+        match ev {
+            StreamEvent::Record(r) => {
+                black_box(r);
+                records += 1;
+            }
+            StreamEvent::End { .. } => return Some(records),
+            StreamEvent::Error { .. } => return None,
+            StreamEvent::NeedMore | StreamEvent::Start { .. } => {}
+        }
+    }
+    None
 }
 
-/// Run the benchmark and print the figures.
+/// Pushes one frame through the frame decoder byte by byte; its length as
+/// the decoder saw it, or `None`.
+#[inline(never)]
+fn push(dec: &mut FrameDecoder, frame: &[u8]) -> Option<usize> {
+    let mut found = None;
+    for &b in frame {
+        match dec.push(b) {
+            Event::NeedMore => {}
+            Event::Frame(f) => found = Some(black_box(f.len())),
+            Event::Error(_) => return None,
+        }
+    }
+    found
+}
+
+/// The checksum of `frame`.
+#[inline(never)]
+fn checksum(frame: &[u8]) -> u8 {
+    let mut c = Checksum::new();
+    c.update(frame);
+    c.value()
+}
+
+/// Net ticks of each figure of one workload.
+#[derive(Default)]
+struct Figures {
+    encode: u32,
+    source: u32,
+    decode: u32,
+    push: u32,
+    checksum: u32,
+    bytes: usize,
+}
+
+fn run_workload(
+    w: &Workload,
+    frame: &mut [u8; FRAME_CAP],
+    empty: u32,
+) -> Result<Figures, &'static str> {
+    let mut recs: [PositionRecord; MAX_PER_FRAME] =
+        core::array::from_fn(|_| PositionRecord::default());
+    let recs = recs
+        .get_mut(..usize::from(w.per_frame))
+        .ok_or("workload larger than the record array")?;
+    let mut dec: FrameDecoder = FrameDecoder::new();
+    let mut f = Figures::default();
+    let net = |t: u32| t.saturating_sub(empty);
+    for k in 0..u32::from(FRAMES) {
+        for (i, r) in recs.iter_mut().enumerate() {
+            *r = record(k * u32::from(w.per_frame) + i as u32, w.axes);
+        }
+        let recs: &[PositionRecord] = recs;
+
+        let (t, len) = timed(|| encode(black_box(recs), black_box(&mut *frame)));
+        let len = len.ok_or("encode failed")?;
+        f.encode += net(t);
+        let (t, ()) = timed(|| source(black_box(recs)));
+        f.source += net(t);
+        let bytes = frame.get(..len).ok_or("frame longer than its buffer")?;
+        f.bytes += len;
+
+        let (t, n) = timed(|| decode(black_box(bytes)));
+        if n != Some(w.per_frame) {
+            return Err("decode did not give back every record");
+        }
+        f.decode += net(t);
+
+        let (t, n) = timed(|| push(black_box(&mut dec), black_box(bytes)));
+        if n != Some(len) {
+            return Err("the frame decoder did not return the frame");
+        }
+        f.push += net(t);
+
+        let (t, sum) = timed(|| checksum(black_box(bytes)));
+        black_box(sum);
+        f.checksum += net(t);
+    }
+    f.encode = f.encode.saturating_sub(f.source);
+    Ok(f)
+}
+
+/// Runs every workload and prints the figures (see the module docs).
+/// Returns whether every round trip checked out.
 pub fn run(print: fn(core::fmt::Arguments<'_>)) -> bool {
-    if TAKEN.swap(1, Ordering::AcqRel) != 0 {
+    start_counter();
+    let cpuid = CPUID::PTR;
+    // SAFETY: a read of the read-only CPUID base register.
+    let cpuid = unsafe { (*cpuid).base.read() };
+    print(format_args!(
+        "bench core {} {:#010x}\n",
+        core_name(cpuid),
+        cpuid
+    ));
+    let (cal_instr, cal_ticks) = calibrate();
+    if cal_ticks == 0 {
+        print(format_args!("bench failed SysTick does not count\n"));
         return false;
     }
-    // SAFETY: `TAKEN` makes this the only reference ever made.
-    let frame = unsafe { &mut *FRAME.0.get() };
+    print(format_args!("bench calibration {cal_instr} {cal_ticks}\n"));
+    let (empty, ()) = timed(|| ());
 
-    let empty = measure(|| {});
-    let generator = measure(|| {
-        for r in records() {
-            black_box(r);
-        }
-    }) - empty;
-
-    let mut len = 0;
-    let mut ok = true;
-    let encode = measure(|| {
-        match PositionStreamEncoder::new(
-            PositionStream::CHANGE_2,
-            Station(0x99),
-            0,
-            RECORDS,
-            records(),
-        ) {
-            Ok(mut enc) => loop {
-                // UART-sized chunks, as a transmit path would pull them.
-                let end = (len + 64).min(frame.len());
-                match enc.read(&mut frame[len..end]) {
-                    Ok(0) => break,
-                    Ok(n) => len += n,
-                    Err(_) => {
-                        ok = false;
-                        break;
-                    }
+    let mut frame = [0u8; FRAME_CAP];
+    for w in &WORKLOADS {
+        match run_workload(w, &mut frame, empty) {
+            Ok(f) => {
+                for (what, t) in [
+                    ("encode", f.encode),
+                    ("decode", f.decode),
+                    ("push", f.push),
+                    ("checksum", f.checksum),
+                    ("source", f.source),
+                ] {
+                    print(format_args!("bench {} {what} {t} {}\n", w.name, f.bytes));
                 }
-            },
-            Err(_) => ok = false,
-        }
-    })
-    .saturating_sub(empty + generator);
-    ok &= len == FRAME_LEN;
-
-    let mut decoded = 0u32;
-    let decode = measure(|| {
-        let mut dec = PositionStreamDecoder::default();
-        let mut input: &[u8] = &frame[..len];
-        while !input.is_empty() {
-            let (used, ev) = dec.decode(input);
-            input = &input[used..];
-            match ev {
-                StreamEvent::Record(r) => {
-                    black_box(r);
-                    decoded += 1;
-                }
-                StreamEvent::End { .. } => break,
-                StreamEvent::Error { .. } => {
-                    ok = false;
-                    break;
-                }
-                _ => {}
+            }
+            Err(why) => {
+                print(format_args!("bench failed {}: {why}\n", w.name));
+                return false;
             }
         }
-    })
-    .saturating_sub(empty);
-    ok &= decoded == u32::from(RECORDS);
-
-    let per_byte = |t: u64| {
-        let x100 = instructions_x100(t) / len.max(1) as u64;
-        (x100 / 100, x100 % 100)
-    };
-    let (e_int, e_frac) = per_byte(encode);
-    let (d_int, d_frac) = per_byte(decode);
-    print(format_args!(
-        "bench: table {} records x {} axes, {} wire bytes (26DH)\n",
-        RECORDS, AXES, len
-    ));
-    print(format_args!(
-        "bench: encode {} instructions, {}.{:02} per byte\n",
-        instructions_x100(encode) / 100,
-        e_int,
-        e_frac
-    ));
-    print(format_args!(
-        "bench: decode {} instructions, {}.{:02} per byte\n",
-        instructions_x100(decode) / 100,
-        d_int,
-        d_frac
-    ));
-    print(format_args!(
-        "bench: (record generator {} instructions, excluded; ok={})\n",
-        instructions_x100(generator) / 100,
-        ok
-    ));
-    ok
+    }
+    print(format_args!("bench ok\n"));
+    true
 }

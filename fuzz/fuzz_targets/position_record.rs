@@ -1,5 +1,7 @@
 //! Position records: `RecordLayout::read_record` on arbitrary bytes, and
-//! write -> read round trips of arbitrary records.
+//! write -> read round trips of arbitrary records; the whole-field paths
+//! (`read_record`, `read_fast`, `put_record`) against the per-field
+//! reference (`read_record_per_field`, `write_record_per_field`).
 //!
 //! Input layout: byte 0 picks the layout (number width 0-16 from bits 0-4
 //! modulo 17, extended data from bit 7); byte 1 bit 0 picks the mode:
@@ -23,6 +25,28 @@ fn take<const K: usize>(data: &mut &[u8]) -> [u8; K] {
 }
 
 fn read_arbitrary(layout: RecordLayout, data: &[u8]) {
+    // The whole-field path and the per-field reference agree on every
+    // input: the same record and length, or the same error.
+    let mut r = Reader::new(data, 0);
+    let mut reference = Reader::new(data, 0);
+    let got = layout.read_record(&mut r);
+    assert_eq!(got, layout.read_record_per_field(&mut reference));
+    if got.is_ok() {
+        assert_eq!(r.remaining(), reference.remaining());
+        let message_layout = matches!(
+            (layout.number_width, layout.extended),
+            (0 | 4, _) | (3, false)
+        );
+        match layout.read_fast(data) {
+            Some((rec, len, sum)) => {
+                assert!(message_layout);
+                assert_eq!(Ok(&rec), got.as_ref());
+                assert_eq!(len, data.len() - r.remaining());
+                assert_eq!(sum, data[..len].iter().map(|&b| u32::from(b)).sum::<u32>());
+            }
+            None => assert!(!message_layout, "a message layout reads whole fields"),
+        }
+    }
     let mut r = Reader::new(data, 0);
     let Ok(rec) = layout.read_record(&mut r) else {
         return;
@@ -64,6 +88,20 @@ fn round_trip(layout: RecordLayout, mut data: &[u8]) {
         positions,
         extended: ext,
     };
+    // The whole-field writer and the per-field reference write the same
+    // bytes, or fail alike.
+    let mut reference = [0u8; 128];
+    let mut rw = Writer::new(&mut reference);
+    let per_field = layout.write_record_per_field(&rec, &mut rw);
+    let mut direct = [0u8; 128];
+    match layout.put_record(&rec, &mut direct) {
+        Ok((len, sum)) => {
+            assert!(per_field.is_ok());
+            assert_eq!(&direct[..len], rw.written());
+            assert_eq!(sum, direct[..len].iter().map(|&b| u32::from(b)).sum::<u32>());
+        }
+        Err(e) => assert_eq!(Err(e), per_field),
+    }
     let mut buf = [0u8; 128];
     let mut w = Writer::new(&mut buf);
     let fits = layout.number_width == 0

@@ -1,14 +1,22 @@
 //! Host side of the bridge firmware under QEMU: the simulator served on the
 //! downstream socket in a thread (real time), 26DH commands encoded whole,
-//! and a client that sends a command upstream and reads the one reply.
+//! and [`HostLink`], the host's serial port on the upstream socket: it
+//! paces its writes to a line rate and honours XON/XOFF, as a PC's UART
+//! driver does, since QEMU models neither.
 //!
-//! Used by `tests/qemu_bridge.rs` and the `demo` binary.
+//! The virtual-time host model of the same bridge library is in [`model`].
+//!
+//! Used by `tests/qemu_*.rs` and the `demo` binary.
 
-use std::collections::BTreeMap;
+pub mod model;
+
+use std::collections::{BTreeMap, VecDeque};
 use std::io::{self, Read, Write};
 use std::net::TcpStream;
+use std::os::fd::AsRawFd;
+use std::os::unix::net::UnixStream;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant};
 
@@ -20,19 +28,9 @@ use iai_protocol_b::stream::{PositionStream, PositionStreamEncoder};
 
 use crate::sim::{serve_tcp, Simulator};
 
-/// The bridge's `&` codes (see `firmware-example/src/bridge.rs`).
-pub mod codes {
-    /// The upstream 26DH was malformed (checksum, format).
-    pub const UPSTREAM_FRAME: u16 = 0xB01;
-    /// The controller did not confirm a chunk (3 timeouts).
-    pub const CONTROLLER_TIMEOUT: u16 = 0xB02;
-    /// The controller kept answering a chunk with `&`.
-    pub const CONTROLLER_ERROR: u16 = 0xB03;
-    /// The upstream 26DH stopped in its middle.
-    pub const UPSTREAM_STALLED: u16 = 0xB04;
-    /// The transfer could not be set up.
-    pub const INTERNAL: u16 = 0xB05;
-}
+/// The bridge's `&` codes and IDs, from the bridge library itself.
+pub use firmware_example::codes;
+use firmware_example::serial::{XOFF, XON};
 
 /// A simulator running on a socket in its own thread, in real time.
 pub struct SimThread {
@@ -158,81 +156,269 @@ pub fn error_reply(station: Station, code: u16) -> Vec<u8> {
     buf[..n].to_vec()
 }
 
-/// Write `bytes` upstream in chunks, calling `progress` with the bytes
-/// written so far. Blocks while the bridge holds the line back (flow
-/// control); the socket's write timeout bounds each wait.
-pub fn send(up: &mut TcpStream, bytes: &[u8], mut progress: impl FnMut(usize)) -> io::Result<()> {
-    let mut done = 0;
-    for chunk in bytes.chunks(4096) {
-        up.write_all(chunk).map_err(|e| {
-            io::Error::new(
-                e.kind(),
-                format!("writing upstream at byte {done} of {}: {e}", bytes.len()),
-            )
-        })?;
-        done += chunk.len();
-        progress(done);
-    }
-    up.flush()
+/// Bytes the host writes at once: small, so that an XOFF stops it within a
+/// few bytes.
+const HOST_CHUNK: usize = 8;
+
+/// `ioctl` request: bytes written to a socket that its peer has not read
+/// yet (for a Unix stream socket: the memory they take, 0 once all are
+/// read).
+const SIOCOUTQ: u64 = 0x5411;
+/// `ioctl` request: bytes received on a socket and not read yet.
+const FIONREAD: u64 = 0x541B;
+
+extern "C" {
+    fn ioctl(fd: i32, request: u64, ...) -> i32;
 }
 
-/// Read from the upstream until one valid frame arrives (`Some`) or
-/// `timeout` passes (`None`). Noise and broken frames are skipped.
-pub fn read_frame(up: &mut TcpStream, timeout: Duration) -> io::Result<Option<Vec<u8>>> {
-    let deadline = Instant::now() + timeout;
-    let mut dec: FrameDecoder<4096> = FrameDecoder::with_policy(BypassPolicy::Reject);
-    let saved = up.read_timeout()?;
-    let mut buf = [0u8; 256];
-    let result = loop {
-        let now = Instant::now();
-        if now >= deadline {
-            break Ok(None);
-        }
-        up.set_read_timeout(Some((deadline - now).min(Duration::from_millis(100))))?;
-        match up.read(&mut buf) {
-            Ok(0) => {
-                break Err(io::Error::new(
-                    io::ErrorKind::UnexpectedEof,
-                    "upstream closed",
-                ))
-            }
-            Ok(n) => {
-                let mut input = &buf[..n];
-                let mut found = None;
-                while !input.is_empty() {
-                    let d = dec.decode(input);
-                    input = &input[d.consumed..];
-                    if let Event::Frame(f) = d.event {
-                        found = Some(f.as_bytes().to_vec());
-                        break;
+/// What the host's receive thread shares with the writer.
+#[derive(Default)]
+struct LinkRx {
+    data: VecDeque<u8>,
+    /// XOFF received and no XON since.
+    stopped: bool,
+    xoffs: u32,
+    closed: bool,
+}
+
+/// Counters of a [`HostLink`].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct LinkStats {
+    /// Bytes written upstream.
+    pub bytes_sent: u64,
+    /// XOFF bytes received (times the bridge stopped the host).
+    pub xoffs: u32,
+    /// Time spent stopped by XOFF.
+    pub paused: Duration,
+    /// Time spent writing (pacing and pauses included).
+    pub sending: Duration,
+}
+
+/// The host's serial port on the upstream socket.
+///
+/// Writes are paced to `baud` (10 bits a byte, 8N1) when a rate is given;
+/// with `xon_xoff`, received XOFF/XON bytes stop and restart the writer and
+/// never reach the reader (a UART driver with IXON on). Methods take
+/// `&self`: one thread may send while another reads.
+///
+/// A wire holds no bytes: what a host sends reaches the UART one byte time
+/// later. QEMU is not real time: when the machine is busy it may not run
+/// for milliseconds, and would then take in at once all a paced writer
+/// sent meanwhile, a burst no UART sees. So the link writes its next few
+/// bytes only once QEMU has read the previous ones (the socket's unread
+/// count, `SIOCOUTQ`): while QEMU stands still, so does the line.
+pub struct HostLink {
+    writer: UnixStream,
+    rx: Arc<(Mutex<LinkRx>, Condvar)>,
+    baud: Option<u32>,
+    xon_xoff: bool,
+    stats: Mutex<LinkStats>,
+}
+
+impl HostLink {
+    /// A link on `stream` (the session's upstream socket).
+    pub fn new(stream: &UnixStream, baud: Option<u32>, xon_xoff: bool) -> io::Result<Self> {
+        let writer = stream.try_clone()?;
+        let mut reader = stream.try_clone()?;
+        reader.set_read_timeout(None)?;
+        let rx: Arc<(Mutex<LinkRx>, Condvar)> = Arc::default();
+        let shared = Arc::clone(&rx);
+        thread::spawn(move || {
+            let mut buf = [0u8; 512];
+            loop {
+                let n = reader.read(&mut buf).unwrap_or(0);
+                let (state, changed) = &*shared;
+                let mut st = state.lock().unwrap_or_else(PoisonError::into_inner);
+                if n == 0 {
+                    st.closed = true;
+                    changed.notify_all();
+                    return;
+                }
+                for &b in &buf[..n] {
+                    match b {
+                        XOFF if xon_xoff => {
+                            st.stopped = true;
+                            st.xoffs += 1;
+                        }
+                        XON if xon_xoff => st.stopped = false,
+                        _ => st.data.push_back(b),
                     }
                 }
-                if let Some(f) = found {
-                    break Ok(Some(f));
+                changed.notify_all();
+            }
+        });
+        Ok(HostLink {
+            writer,
+            rx,
+            baud,
+            xon_xoff,
+            stats: Mutex::new(LinkStats::default()),
+        })
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> LinkStats {
+        let mut s = *self.stats.lock().unwrap_or_else(PoisonError::into_inner);
+        let (state, _) = &*self.rx;
+        s.xoffs = state.lock().unwrap_or_else(PoisonError::into_inner).xoffs;
+        s
+    }
+
+    /// Whether XON/XOFF is honoured.
+    pub fn xon_xoff(&self) -> bool {
+        self.xon_xoff
+    }
+
+    /// Wait while stopped by XOFF (at most `limit`); returns the time
+    /// waited.
+    fn wait_until_allowed(&self, limit: Duration) -> io::Result<Duration> {
+        let start = Instant::now();
+        let (state, changed) = &*self.rx;
+        let mut st = state.lock().unwrap_or_else(PoisonError::into_inner);
+        if !st.stopped {
+            return Ok(Duration::ZERO);
+        }
+        while st.stopped && !st.closed {
+            let left = limit.saturating_sub(start.elapsed());
+            if left.is_zero() {
+                return Err(io::Error::new(
+                    io::ErrorKind::TimedOut,
+                    format!("stopped by XOFF for more than {limit:?}"),
+                ));
+            }
+            st = changed
+                .wait_timeout(st, left)
+                .unwrap_or_else(PoisonError::into_inner)
+                .0;
+        }
+        Ok(start.elapsed())
+    }
+
+    /// Wait (at most `limit`) until `request` (an `ioctl` count on the
+    /// socket) reads 0; returns the time waited.
+    fn wait_for_zero(&self, request: u64, what: &str, limit: Duration) -> io::Result<Duration> {
+        let start = Instant::now();
+        loop {
+            let mut count: i32 = 0;
+            // SAFETY: both requests write one int through the pointer; the
+            // fd is this link's open socket.
+            let rc = unsafe { ioctl(self.writer.as_raw_fd(), request, &mut count) };
+            if rc != 0 {
+                return Err(io::Error::last_os_error());
+            }
+            if count == 0 {
+                return Ok(start.elapsed());
+            }
+            if start.elapsed() >= limit {
+                return Err(io::Error::new(
+                    io::ErrorKind::TimedOut,
+                    format!("{what} for {limit:?}"),
+                ));
+            }
+            thread::sleep(Duration::from_micros(50));
+        }
+    }
+
+    /// Write `bytes` upstream at the link's rate, honouring XOFF; calls
+    /// `progress` with the bytes written so far.
+    pub fn send(&self, bytes: &[u8], mut progress: impl FnMut(usize)) -> io::Result<()> {
+        let start = Instant::now();
+        let byte_time = self
+            .baud
+            .map(|b| Duration::from_secs_f64(10.0 / f64::from(b.max(1))));
+        // The pacing schedule restarts after every pause (a UART does not
+        // catch up on lost time).
+        let mut base = Instant::now();
+        let mut since_base = 0u32;
+        let mut paused = Duration::ZERO;
+        let mut done = 0;
+        let limit = Duration::from_secs(60);
+        for chunk in bytes.chunks(HOST_CHUNK) {
+            // QEMU has taken what was written before (see the type's docs).
+            let stood = self.wait_for_zero(SIOCOUTQ, "QEMU read nothing", limit)?;
+            if stood > Duration::from_millis(1) {
+                // QEMU stood still: the line restarts from now.
+                base = Instant::now();
+                since_base = 0;
+            }
+            if let Some(bt) = byte_time {
+                let due = base + bt * since_base;
+                let now = Instant::now();
+                if due > now {
+                    thread::sleep(due - now);
                 }
             }
-            Err(e)
-                if matches!(
+            // What the bridge sent is read before the next bytes go (it may
+            // be an XOFF: a UART driver sees it before it queues more).
+            self.wait_for_zero(FIONREAD, "the reader took nothing", limit)?;
+            if self.xon_xoff {
+                let waited = self.wait_until_allowed(limit)?;
+                if !waited.is_zero() {
+                    paused += waited;
+                    base = Instant::now();
+                    since_base = 0;
+                }
+            }
+            (&self.writer).write_all(chunk).map_err(|e| {
+                io::Error::new(
                     e.kind(),
-                    io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
-                ) => {}
-            Err(e) => break Err(e),
+                    format!("writing upstream at byte {done} of {}: {e}", bytes.len()),
+                )
+            })?;
+            done += chunk.len();
+            since_base += chunk.len() as u32;
+            progress(done);
         }
-    };
-    up.set_read_timeout(saved)?;
-    result
-}
+        (&self.writer).flush()?;
+        let mut s = self.stats.lock().unwrap_or_else(PoisonError::into_inner);
+        s.bytes_sent += bytes.len() as u64;
+        s.paused += paused;
+        s.sending += start.elapsed();
+        Ok(())
+    }
 
-/// Send `command` upstream and wait up to `timeout` (after the last byte)
-/// for the bridge's reply.
-pub fn exchange(
-    up: &mut TcpStream,
-    command: &[u8],
-    timeout: Duration,
-    progress: impl FnMut(usize),
-) -> io::Result<Option<Vec<u8>>> {
-    send(up, command, progress)?;
-    read_frame(up, timeout)
+    /// Read until one valid frame arrives (`Some`) or `timeout` passes
+    /// (`None`). Noise and broken frames are skipped.
+    pub fn read_frame(&self, timeout: Duration) -> io::Result<Option<Vec<u8>>> {
+        let deadline = Instant::now() + timeout;
+        let mut dec: FrameDecoder<4096> = FrameDecoder::with_policy(BypassPolicy::Reject);
+        let (state, changed) = &*self.rx;
+        let mut st = state.lock().unwrap_or_else(PoisonError::into_inner);
+        loop {
+            while let Some(b) = st.data.pop_front() {
+                if let Event::Frame(f) = dec.push(b) {
+                    return Ok(Some(f.as_bytes().to_vec()));
+                }
+            }
+            if st.closed {
+                return Err(io::Error::new(
+                    io::ErrorKind::UnexpectedEof,
+                    "upstream closed",
+                ));
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Ok(None);
+            }
+            st = changed
+                .wait_timeout(st, deadline - now)
+                .unwrap_or_else(PoisonError::into_inner)
+                .0;
+        }
+    }
+
+    /// Send `command` and wait up to `timeout` (after the last byte) for
+    /// the bridge's reply.
+    pub fn exchange(&self, command: &[u8], timeout: Duration) -> io::Result<Option<Vec<u8>>> {
+        self.send(command, |_| {})?;
+        self.read_frame(timeout)
+    }
+
+    /// Write raw bytes now, unpaced (the quit sequence).
+    pub fn write_raw(&self, bytes: &[u8]) -> io::Result<()> {
+        (&self.writer).write_all(bytes)?;
+        (&self.writer).flush()
+    }
 }
 
 /// Compare the simulator's table with the source records: `Ok` when every

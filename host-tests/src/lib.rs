@@ -1,9 +1,10 @@
-//! Host-side tools and test support for `iai-protocol-b`: the controller
-//! simulator, generated position tables, the QEMU runner.
+//! Host-side tools and test support for `iai-protocol-b`: generated
+//! position tables, the QEMU runner, the bridge test harness. The
+//! controller simulator lives in `iai-cli` and is re-exported here.
 pub mod bridge;
-pub mod cli;
 pub mod link;
 pub mod naive;
 pub mod qemu;
-pub mod sim;
 pub mod table;
+
+pub use iai_cli::sim;

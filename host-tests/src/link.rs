@@ -98,7 +98,25 @@ where
     let mut now: u32 = 0;
     let mut resumes = 0;
     let (mut up, mut down) = (0u64, 0u64);
+    let mut steps_at_now = (0u32, 0u64);
     loop {
+        // An engine that keeps asking for work without time passing is
+        // stuck: fail loudly instead of spinning.
+        if steps_at_now.0 == now {
+            steps_at_now.1 += 1;
+            assert!(
+                steps_at_now.1 < STUCK_STEPS,
+                "transfer made {STUCK_STEPS} steps at {now} ms without time passing: {:?}",
+                t.stats()
+            );
+        } else {
+            steps_at_now = (now, 0);
+        }
+        assert!(
+            now < MAX_VIRTUAL_MS,
+            "transfer still running after {MAX_VIRTUAL_MS} virtual ms: {:?}",
+            t.stats()
+        );
         feed(t.source_mut());
         let reply = sim.take_output(now);
         if !reply.is_empty() {
@@ -140,6 +158,14 @@ where
         };
     }
 }
+
+/// Steps at one virtual instant after which a runner declares the engine
+/// stuck.
+const STUCK_STEPS: u64 = 1_000_000;
+
+/// Virtual time after which a runner declares the engine stuck: two days,
+/// far beyond the slowest fault class of the suite (about 11 hours).
+const MAX_VIRTUAL_MS: u32 = 48 * 3_600_000;
 
 /// Outcome of a simulated read-back.
 #[derive(Debug)]

@@ -1,11 +1,17 @@
 //! Running the example firmware under QEMU (`qemu-system-arm`).
 //!
-//! [`build_firmware`] builds `firmware-example` for a [`Board`];
+//! [`build_firmware`] builds a [`Board`]'s binary of `firmware-example`
+//! with the `firmware` profile, the one `tools/size-report.sh` builds, so
+//! that the test command builds each board once (building inside a test
+//! made the first test of a board pay for the whole optimised build: the
+//! mps2-an386 pass-through test took about 9 s, nearly all of it cargo).
 //! [`QemuSession::start`] boots an ELF with both serial ports wired to TCP
-//! sockets on the loopback interface: [`QemuSession::upstream`] is the
-//! first serial port (the host side of the bridge), [`QemuSession::downstream`]
-//! the second (the controller side). The firmware ends the run through
-//! semihosting `exit`, which becomes QEMU's exit code (0 on success).
+//! sockets: [`QemuSession::upstream`] is the first serial port (the host
+//! side of the bridge, a Unix socket), [`QemuSession::downstream`] the
+//! second (the controller side, TCP on the loopback interface), and a configuration block (see
+//! `firmware_example::config`) loaded into the flash page at the ELF's
+//! `_bridge_config` symbol. The firmware ends the run through semihosting
+//! `exit`, which becomes QEMU's exit code (0 on success).
 //!
 //! The host side listens and QEMU connects as a client, so nothing the
 //! firmware sends is lost before the test is ready. The session only ever
@@ -16,25 +22,33 @@
 use std::fmt;
 use std::io::{self, Read, Write};
 use std::net::{Ipv4Addr, TcpListener, TcpStream};
+use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::thread;
 use std::time::{Duration, Instant};
 
-/// Name of the firmware package and binary.
+use firmware_example::config::Config;
+
+/// Name of the firmware package.
 pub const FIRMWARE_PACKAGE: &str = "firmware-example";
+
+/// The cargo profile the QEMU tests, the demo and the size report share.
+pub const FIRMWARE_PROFILE: &str = "firmware";
 
 /// The QEMU program.
 pub const QEMU: &str = "qemu-system-arm";
 
-/// Upstream bytes that make the firmware end the run successfully
-/// (ESC 'Q' '!'), accepted after a short upstream silence.
-pub const QUIT_SEQUENCE: [u8; 3] = [0x1B, b'Q', b'!'];
+/// Upstream bytes that make the firmware end the run successfully, when
+/// its configuration allows it.
+pub use firmware_example::codes::QUIT as QUIT_SEQUENCE;
 
-/// Silence kept on the upstream before [`QUIT_SEQUENCE`]; the firmware needs
-/// 20 ms, this leaves a margin.
-pub const QUIT_GUARD: Duration = Duration::from_millis(50);
+/// Silence kept on the upstream before [`QUIT_SEQUENCE`]: the firmware's
+/// guard plus a margin.
+pub const QUIT_GUARD: Duration =
+    Duration::from_millis(firmware_example::bridge::QUIT_GUARD_MS as u64 + 30);
 
 /// Text the firmware prints through semihosting once its serial ports are
 /// set up. [`QemuSession::start`] waits for it before returning, because
@@ -71,6 +85,14 @@ impl Board {
         match self {
             Board::Lm3s6965 => "thumbv7m-none-eabi",
             Board::Mps2An386 => "thumbv7em-none-eabihf",
+        }
+    }
+
+    /// The board's binary in `firmware-example`.
+    pub fn bin(self) -> &'static str {
+        match self {
+            Board::Lm3s6965 => "lm3s6965",
+            Board::Mps2An386 => "mps2-an386",
         }
     }
 
@@ -114,10 +136,10 @@ pub fn target_dir() -> PathBuf {
     }
 }
 
-/// Build the firmware for `board` with the `release` profile and return the
-/// ELF path.
+/// Build the firmware for `board` with [`FIRMWARE_PROFILE`] and return
+/// the ELF path (a no-op when `tools/test.sh` built it already).
 pub fn build_firmware(board: Board) -> io::Result<PathBuf> {
-    build_firmware_with_profile(board, "release")
+    build_firmware_with_profile(board, FIRMWARE_PROFILE)
 }
 
 /// Build the firmware for `board` with a cargo profile (`release`,
@@ -142,7 +164,14 @@ pub fn build_firmware_with(
     let mut command = Command::new(&cargo);
     command
         .current_dir(workspace_root())
-        .args(["build", "--quiet", "-p", FIRMWARE_PACKAGE])
+        .args([
+            "build",
+            "--quiet",
+            "-p",
+            FIRMWARE_PACKAGE,
+            "--bin",
+            board.bin(),
+        ])
         .args(["--profile", profile])
         .args(["--target", board.target()])
         .args(["--no-default-features", "--features"])
@@ -171,7 +200,7 @@ pub fn build_firmware_with(
         .map_or_else(target_dir, Path::to_path_buf)
         .join(board.target())
         .join(profile_dir)
-        .join(FIRMWARE_PACKAGE);
+        .join(board.bin());
     if elf.is_file() {
         Ok(elf)
     } else {
@@ -206,7 +235,7 @@ impl ExitOutcome {
 /// A running QEMU with both serial ports connected.
 pub struct QemuSession {
     /// First serial port: the host side of the bridge.
-    pub upstream: TcpStream,
+    pub upstream: UnixStream,
     /// Second serial port: the controller side of the bridge.
     pub downstream: TcpStream,
     board: Board,
@@ -332,7 +361,7 @@ impl QemuSession {
     }
 
     /// Like [`QemuSession::start_with_marker`], with extra QEMU arguments
-    /// (e.g. `-icount shift=5,sleep=off`).
+    /// (e.g. `-icount shift=5,sleep=off`) and [`test_config`].
     pub fn start_with_args(
         board: Board,
         elf: &Path,
@@ -340,9 +369,44 @@ impl QemuSession {
         ready_marker: Option<&str>,
         extra_args: &[&str],
     ) -> io::Result<Self> {
-        let upstream_listener = TcpListener::bind((Ipv4Addr::LOCALHOST, 0))?;
+        Self::start_configured(
+            board,
+            elf,
+            timeout,
+            ready_marker,
+            extra_args,
+            Some(&test_config()),
+        )
+    }
+
+    /// Like [`QemuSession::start_with_args`], with the configuration block
+    /// `config` in flash (`None`: flash left blank, the firmware's
+    /// defaults).
+    pub fn start_configured(
+        board: Board,
+        elf: &Path,
+        timeout: Duration,
+        ready_marker: Option<&str>,
+        extra_args: &[&str],
+        config: Option<&Config>,
+    ) -> io::Result<Self> {
+        let loader = match config {
+            Some(cfg) => Some(config_loader_arg(elf, cfg)?),
+            None => None,
+        };
+        // The upstream is a Unix socket: its sender can tell how much QEMU
+        // has not read yet (see `HostLink`).
+        static SOCKETS: AtomicU32 = AtomicU32::new(0);
+        let sock_dir = target_dir().join("qemu-sockets");
+        std::fs::create_dir_all(&sock_dir)?;
+        let sock = sock_dir.join(format!(
+            "up-{}-{}.sock",
+            std::process::id(),
+            SOCKETS.fetch_add(1, Ordering::Relaxed)
+        ));
+        let _ = std::fs::remove_file(&sock);
+        let upstream_listener = UnixListener::bind(&sock)?;
         let downstream_listener = TcpListener::bind((Ipv4Addr::LOCALHOST, 0))?;
-        let p0 = upstream_listener.local_addr()?.port();
         let p1 = downstream_listener.local_addr()?.port();
 
         let mut command = Command::new(QEMU);
@@ -351,12 +415,16 @@ impl QemuSession {
             .args(["-nographic", "-monitor", "none"])
             .args(["-semihosting-config", "enable=on,target=native"])
             .arg("-chardev")
-            .arg(format!("socket,id=u0,host=127.0.0.1,port={p0}"))
+            .arg(format!("socket,id=u0,path={}", sock.display()))
             .args(["-serial", "chardev:u0"])
             .arg("-chardev")
             .arg(format!("socket,id=u1,host=127.0.0.1,port={p1}"))
             .args(["-serial", "chardev:u1"])
-            .args(extra_args)
+            .args(extra_args);
+        if let Some(loader) = &loader {
+            command.arg("-device").arg(loader);
+        }
+        command
             .arg("-kernel")
             .arg(elf)
             .stdin(Stdio::null())
@@ -372,7 +440,7 @@ impl QemuSession {
         let stderr = child.stderr.take().map(Capture::spawn).unwrap_or_default();
 
         let deadline = Instant::now() + timeout;
-        let accepted = accept_until(&upstream_listener, &mut child, deadline)
+        let accepted = accept_unix_until(&upstream_listener, &mut child, deadline)
             .and_then(|up| {
                 let down = accept_until(&downstream_listener, &mut child, deadline)?;
                 Ok((up, down))
@@ -384,6 +452,7 @@ impl QemuSession {
                 )),
                 _ => Ok(streams),
             });
+        let _ = std::fs::remove_file(&sock);
         let (upstream, downstream) = match accepted {
             Ok(streams) => streams,
             Err(e) => {
@@ -411,12 +480,14 @@ impl QemuSession {
             stdout,
             stderr,
         };
-        for stream in [&session.upstream, &session.downstream] {
-            stream.set_nonblocking(false)?;
-            stream.set_nodelay(true)?;
-            stream.set_read_timeout(Some(timeout))?;
-            stream.set_write_timeout(Some(timeout))?;
-        }
+        session.upstream.set_nonblocking(false)?;
+        session.upstream.set_read_timeout(Some(timeout))?;
+        session.upstream.set_write_timeout(Some(timeout))?;
+        let down = &session.downstream;
+        down.set_nonblocking(false)?;
+        down.set_nodelay(true)?;
+        down.set_read_timeout(Some(timeout))?;
+        down.set_write_timeout(Some(timeout))?;
         Ok(session)
     }
 
@@ -553,6 +624,65 @@ pub fn run_to_exit(
     }
 }
 
+/// The configuration the QEMU tests run with: the defaults (XON/XOFF,
+/// forward all, controller station 99, bridge station BB) plus the quit
+/// sequence.
+pub fn test_config() -> Config {
+    Config {
+        quit_sequence: true,
+        ..Config::DEFAULT
+    }
+}
+
+/// Address of `symbol` in `elf` (read with `arm-none-eabi-nm`).
+pub fn symbol_address(elf: &Path, symbol: &str) -> io::Result<u64> {
+    let out = Command::new("arm-none-eabi-nm")
+        .arg(elf)
+        .output()
+        .map_err(|e| io::Error::new(e.kind(), format!("running arm-none-eabi-nm: {e}")))?;
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .find_map(|l| {
+            let mut f = l.split_whitespace();
+            let addr = f.next()?;
+            let _kind = f.next()?;
+            (f.next()? == symbol).then(|| u64::from_str_radix(addr, 16).ok())?
+        })
+        .ok_or_else(|| {
+            io::Error::new(
+                io::ErrorKind::NotFound,
+                format!("{symbol} not in {}", elf.display()),
+            )
+        })
+}
+
+/// The `-device loader,...` argument that puts `cfg`'s configuration block
+/// at the ELF's `_bridge_config` (the block is written to a file in the
+/// target directory).
+pub fn config_loader_arg(elf: &Path, cfg: &Config) -> io::Result<String> {
+    static SERIAL: AtomicU32 = AtomicU32::new(0);
+    let addr = symbol_address(elf, "_bridge_config")?;
+    let dir = target_dir().join("qemu-config");
+    std::fs::create_dir_all(&dir)?;
+    let file = dir.join(format!(
+        "config-{}-{}.bin",
+        std::process::id(),
+        SERIAL.fetch_add(1, Ordering::Relaxed)
+    ));
+    std::fs::write(&file, cfg.to_block())?;
+    Ok(format!("loader,file={},addr={addr:#x}", file.display()))
+}
+
+/// [`accept_until`] for a Unix socket.
+fn accept_unix_until(
+    listener: &UnixListener,
+    child: &mut Child,
+    deadline: Instant,
+) -> io::Result<UnixStream> {
+    listener.set_nonblocking(true)?;
+    accept_with(|| listener.accept().map(|(s, _)| s), child, deadline)
+}
+
 /// Accept one connection on `listener` before `deadline`, giving up early
 /// if `child` exits.
 fn accept_until(
@@ -561,9 +691,19 @@ fn accept_until(
     deadline: Instant,
 ) -> io::Result<TcpStream> {
     listener.set_nonblocking(true)?;
+    accept_with(|| listener.accept().map(|(s, _)| s), child, deadline)
+}
+
+/// Polls the non-blocking `accept` until it gives a connection, `child`
+/// exits or `deadline` passes.
+fn accept_with<S>(
+    mut accept: impl FnMut() -> io::Result<S>,
+    child: &mut Child,
+    deadline: Instant,
+) -> io::Result<S> {
     loop {
-        match listener.accept() {
-            Ok((stream, _)) => return Ok(stream),
+        match accept() {
+            Ok(stream) => return Ok(stream),
             Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
             Err(e) => return Err(e),
         }

@@ -787,7 +787,7 @@ fn most_records_that_fit_each_profile_and_one_more() {
             }
         }
     }
-    // The figures of PROTOCOL.md §7 (4 / 8 axes).
+    // The buffer arithmetic of TTA p. 15 and p. 60 (4 / 8 axes).
     let p = Profile::TTA;
     assert_eq!(
         p.max_records_per_command(RecordLayout::NUMBER_4, 4),
@@ -895,7 +895,7 @@ fn profile_differences() {
 
 #[test]
 fn real_and_string_variables() {
-    // EXAMPLES.md §1.3: 0x0123456789ABCDEF in both orders.
+    // TTA p. 24 (2003 p. 23): 0x0123456789ABCDEF in both orders.
     let v = RealValue(0x0123_4567_89AB_CDEF);
     assert_eq!(v.to_wire(WordOrder::LowWordFirst).0, 0x89AB_CDEF_0123_4567);
     let bytes = frame_text('#', "20F", "000010189ABCDEF01234567");

@@ -374,7 +374,7 @@ fn fixture_file_is_well_formed() {
 
 #[test]
 fn fixture_checksums_follow_the_rule_independently_of_the_core() {
-    // The rule of PROTOCOL.md section 5, written out again here.
+    // The checksum rule of 2003 p. 10, written out again here.
     for f in fixture_file::load() {
         let sc_at = f.frame.len() - 4;
         let sc = &f.frame[sc_at..sc_at + 2];
@@ -752,7 +752,7 @@ fn change_position_26dh_two_records_of_different_length() {
 
 #[test]
 fn change_position_26dh_largest_four_axis_write_fits_the_tta_buffer() {
-    // EXAMPLES.md 6.3: 40 records of 4 axes make a 2014-byte frame.
+    // 40 records of 4 axes make a 2014-byte frame (TTA p. 60 arithmetic).
     let records: Vec<PositionRecord> = (0..40)
         .map(|i| PositionRecord::new(i, 30, 30, 100, &[(1, 1), (2, -2), (3, 3), (4, -4)]).unwrap())
         .collect();

@@ -74,7 +74,8 @@ fn with_policy(policy: BypassPolicy, mut c: Case) -> Case {
 
 /// A 212H reply used as a base for body faults.
 const AXIS2: &[u8] = b"#99212021C00000000002715AF\r\n";
-/// The 94-byte 216H reply of EXAMPLES.md 5.2 (without SC, CR, LF).
+/// A 94-byte 216H reply as a TTA sends it (TTA p. 33: no message text),
+/// without SC, CR, LF.
 const DETAIL: &[u8] =
     b"#99216C74000000010000000500000002FFFFFFFD0000000000000000000000000000000000000000000000000";
 

@@ -8,7 +8,7 @@
 
 use std::time::{Duration, Instant};
 
-use host_tests::bridge::{exchange, SimThread};
+use host_tests::bridge::{HostLink, SimThread};
 use host_tests::qemu::{build_firmware, Board, QemuSession};
 use host_tests::sim::Simulator;
 use iai_protocol_b::axis::AxisPattern;
@@ -37,14 +37,11 @@ fn bridges_a_query_and_quits(board: Board) {
     let mut oracle = Simulator::tta(STATION);
     oracle.receive(&buf[..n], 0);
     let want = oracle.take_output(1_000);
-    let got = exchange(
-        &mut qemu.upstream,
-        &buf[..n],
-        Duration::from_secs(5),
-        |_| {},
-    )
-    .expect("exchange")
-    .expect("a reply through the bridge");
+    let link = HostLink::new(&qemu.upstream, Some(115_200), true).expect("host link");
+    let got = link
+        .exchange(&buf[..n], Duration::from_secs(5))
+        .expect("exchange")
+        .expect("a reply through the bridge");
     assert_eq!(got, want);
 
     qemu.quit().expect("send quit sequence");
@@ -89,4 +86,34 @@ fn mps2_an386_firmware_builds_and_links() {
         40,
         "not an ARM ELF"
     );
+}
+
+/// The watchdog (modelled by QEMU on both boards) resets a board whose loop
+/// stalls: a build with the `stall` feature stops feeding it after start,
+/// and the firmware boots again.
+#[test]
+fn the_watchdog_resets_a_stalled_loop() {
+    for board in Board::ALL {
+        let dir = host_tests::qemu::target_dir().join("stall");
+        let elf = host_tests::qemu::build_firmware_with(
+            board,
+            host_tests::qemu::FIRMWARE_PROFILE,
+            &["stall"],
+            Some(&dir),
+        )
+        .unwrap_or_else(|e| panic!("build {board} with the stall feature: {e}"));
+        let qemu = QemuSession::start(board, &elf, Duration::from_secs(10)).expect("start QEMU");
+        // Up to two watchdog periods of 2 s, plus margin for a slow host.
+        let deadline = Instant::now() + Duration::from_secs(30);
+        let boots = loop {
+            let out = qemu.stdout_so_far();
+            let boots = out.matches("bridge up").count();
+            if boots >= 2 || Instant::now() >= deadline {
+                break boots;
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        };
+        assert!(boots >= 2, "{board}: no reset after the loop stalled");
+        eprintln!("{board}: reset by the watchdog");
+    }
 }

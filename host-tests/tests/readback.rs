@@ -34,7 +34,53 @@ fn a_written_table_reads_back_equal() {
     let (got, stats) = read_back(&mut rb, &mut sim);
     let stats = stats.unwrap();
     assert_eq!(got, table(2_000, 8, 31).collect::<Vec<_>>());
-    assert_eq!(stats.queries, 2_000u32.div_ceil(24));
+    // Confirmed reads: every window read twice, the same both times.
+    let windows = 2_000u32.div_ceil(24);
+    assert_eq!(stats.windows_confirmed, windows);
+    assert_eq!(stats.queries, 2 * windows);
+    // Unconfirmed: once each.
+    let cfg = ReadBackConfig {
+        confirm: false,
+        ..ReadBackConfig::tta(ST, 1, 2_000)
+    };
+    let mut rb: ReadBack = ReadBack::new(cfg);
+    let (got, stats) = read_back(&mut rb, &mut sim);
+    assert_eq!(got, table(2_000, 8, 31).collect::<Vec<_>>());
+    assert_eq!(stats.unwrap().queries, windows);
+}
+
+#[test]
+fn a_late_empty_reply_never_stands_in_for_the_next_window() {
+    // Positions 1-24 and 49-72 defined, 25-48 not: window 2 is empty. Its
+    // reply comes late (past the timeout), the resend's at once; the late
+    // copy must not be taken as window 3's answer, which holds records.
+    let mut sim = Simulator::tta(ST).with_faults(
+        Faults {
+            late_every_nth_reply: Some((2, 3_500)),
+            ..Faults::default()
+        },
+        1,
+    );
+    let recs: Vec<_> = (0..72u32)
+        .filter(|i| !(24..48).contains(i))
+        .map(|i| {
+            let mut r = host_tests::table::record(i, 8, 2);
+            r.number = (i + 1) as u16;
+            r
+        })
+        .collect();
+    for r in &recs {
+        sim.table.insert(r.number, r.clone());
+    }
+    let cfg = ReadBackConfig {
+        confirm: false,
+        ..ReadBackConfig::tta(ST, 1, 96)
+    };
+    let mut rb: ReadBack = ReadBack::new(cfg);
+    let (got, stats) = read_back(&mut rb, &mut sim);
+    let stats = stats.unwrap();
+    assert_eq!(got, recs, "records 49-72 are there");
+    assert!(stats.retries > 0);
 }
 
 #[test]
@@ -63,4 +109,103 @@ fn read_back_of_a_sparse_table_with_faults_skips_nothing() {
     let stats = stats.unwrap();
     assert_eq!(got, recs);
     assert!(stats.retries > 0 && stats.timeouts > 0);
+}
+
+/// The simulator behind a blocking `embedded-io` UART on a virtual clock.
+struct SimPort<'s> {
+    sim: &'s mut Simulator,
+    now: std::rc::Rc<std::cell::Cell<u32>>,
+    inbox: std::collections::VecDeque<u8>,
+}
+
+impl embedded_io::ErrorType for SimPort<'_> {
+    type Error = std::convert::Infallible;
+}
+impl embedded_io::ReadReady for SimPort<'_> {
+    fn read_ready(&mut self) -> Result<bool, Self::Error> {
+        self.inbox.extend(self.sim.take_output(self.now.get()));
+        Ok(!self.inbox.is_empty())
+    }
+}
+impl embedded_io::Read for SimPort<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
+        let n = buf.len().min(self.inbox.len());
+        for (slot, b) in buf.iter_mut().zip(self.inbox.drain(..n)) {
+            *slot = b;
+        }
+        Ok(n)
+    }
+}
+impl embedded_io::Write for SimPort<'_> {
+    fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+        self.sim.receive(buf, self.now.get());
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}
+
+#[test]
+fn the_blocking_flavour_hands_every_window_to_the_sink() {
+    let mut sim = Simulator::tta(ST);
+    for r in table(300, 4, 8) {
+        sim.table.insert(r.number, r);
+    }
+    let now = std::rc::Rc::new(std::cell::Cell::new(0u32));
+    let tick = now.clone();
+    // The clock advances a millisecond each time the engine reads it.
+    let mut clock = move || {
+        tick.set(tick.get() + 1);
+        tick.get()
+    };
+    let mut port = SimPort {
+        sim: &mut sim,
+        now,
+        inbox: Default::default(),
+    };
+    let mut rb: ReadBack = ReadBack::new(ReadBackConfig::tta(ST, 1, 300));
+    let mut got = Vec::new();
+    let stats = rb
+        .run_blocking(&mut port, &mut clock, |records| got.extend(records))
+        .unwrap();
+    assert_eq!(got, table(300, 4, 8).collect::<Vec<_>>());
+    assert_eq!(stats.windows_confirmed, 300u32.div_ceil(24));
+}
+
+/// After a window's reply is answered, the engine takes no more bytes until
+/// the next poll has delivered it: a frame fed right behind it would
+/// otherwise overwrite the reply in the decoder and its records be lost.
+#[test]
+fn an_answered_reply_is_held_until_it_is_polled() {
+    use iai_protocol_b::readback::{ReadEvent, ReadStep};
+    let mut sim = Simulator::tta(ST);
+    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(3, 2, 5));
+    run(&mut t, &mut sim, 0).result.unwrap();
+    let cfg = ReadBackConfig {
+        confirm: false,
+        ..ReadBackConfig::tta(ST, 1, 3)
+    };
+    let mut rb: ReadBack = ReadBack::new(cfg);
+    let ReadStep::Transmit(q) = rb.poll(0) else {
+        panic!("a query first")
+    };
+    let q = q.to_vec();
+    rb.sent(1);
+    sim.receive(&q, 1);
+    let mut bytes = sim.take_output(10_000);
+    let reply_len = bytes.len();
+    // A stray copy right behind it.
+    bytes.extend_from_within(..reply_len);
+    let r = rb.received(&bytes, 20);
+    assert_eq!(r.event, ReadEvent::Answered { records: 3 });
+    assert_eq!(r.consumed, reply_len);
+    let r = rb.received(&bytes[reply_len..], 21);
+    assert_eq!((r.consumed, r.event), (0, ReadEvent::NeedMore));
+    match rb.poll(22) {
+        ReadStep::Records(recs) => {
+            assert_eq!(recs.collect::<Vec<_>>(), table(3, 2, 5).collect::<Vec<_>>())
+        }
+        other => panic!("{other:?}"),
+    }
 }

@@ -107,3 +107,30 @@ fn async_transfer_with_faults_writes_the_whole_table() {
         table(5_000, 8, 8).map(|r| (r.number, r)).collect();
     assert!(uart.sim.table == expected);
 }
+
+#[test]
+fn async_client_gets_its_typed_reply_through_a_lossy_line() {
+    use iai_protocol_b::client::{Client, ClientConfig};
+    use iai_protocol_b::message::AxisStatusQuery;
+    let now = Rc::new(Cell::new(0));
+    let faults = Faults {
+        drop_every_nth_reply: Some(2),
+        ..Faults::default()
+    };
+    let mut uart = SimUart {
+        sim: Simulator::tta(Station(0x99)).with_faults(faults, 6),
+        now: now.clone(),
+        inbox: VecDeque::new(),
+    };
+    let mut clock = VirtualClock(now);
+    let mut client: Client = Client::new(ClientConfig::new(Station(0x99)));
+    let q = AxisStatusQuery::of(&[1, 2]).unwrap();
+    for _ in 0..4 {
+        let reply = block_on(client.call_async(&mut uart, &mut clock, 10, &q)).unwrap();
+        assert_eq!(reply.axes.len(), 2);
+    }
+    // Every second reply is dropped (replies 2, 4, 6): requests 2 to 4 were
+    // each sent again after 3 s.
+    assert_eq!(client.stats().resends, 3);
+    assert!(clock.now_ms() >= 9_000);
+}

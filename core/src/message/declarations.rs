@@ -1378,3 +1378,102 @@ bare_responses! {
     /// 2D6H response (no data).
     ScaraPositionNumberMoveResponse;
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::checksum::BypassPolicy;
+    use crate::frame::{Frame, Station};
+    use crate::message::Message;
+
+    const ST: Station = Station(0x99);
+
+    fn parse<'a, M: Message<'a>>(bytes: &'a [u8]) -> crate::Result<M> {
+        M::parse(&Frame::new_checked(bytes, BypassPolicy::CommandsOnly)?)
+    }
+
+    fn emit<'a, M: Message<'a>>(m: &M) -> ([u8; 64], usize) {
+        let mut buf = [0u8; 64];
+        let n = m.emit(ST, &mut buf).unwrap();
+        assert_eq!(n, m.emit_len());
+        (buf, n)
+    }
+
+    #[test]
+    fn a_234h_move_of_two_axes() {
+        // Axes 1 and 2, 0.30 G, 0.30 G, 100 mm/s, +400.000 mm and -400.000 mm.
+        let wire = b"!9923403001E001E006400061A80FFF9E58092\r\n";
+        let m = AbsoluteMove::to(&[(1, 400_000), (2, -400_000)])
+            .unwrap()
+            .with_acceleration(30)
+            .with_deceleration(30)
+            .with_speed(100);
+        let (buf, n) = emit(&m);
+        assert_eq!(&buf[..n], wire);
+        assert_eq!(parse::<AbsoluteMove>(wire).unwrap(), m);
+        assert_eq!(
+            parse::<AbsoluteMoveResponse>(b"#992342E\r\n").unwrap(),
+            AbsoluteMoveResponse {}
+        );
+        // The ID comes from the catalogue, reachable with `use message::*`.
+        assert_eq!(AbsoluteMove::ID, 0x234);
+    }
+
+    #[test]
+    fn the_2003_worked_example_is_a_209h_query() {
+        // 2003 p. 10: query 5 records from point 001, SC 54.
+        let q = parse::<EffectivePositionQuery>(b"!9920900100554\r\n").unwrap();
+        assert_eq!(q.query_head_position_number, 1);
+        assert_eq!(q.number_of_query_records, 5);
+    }
+
+    #[test]
+    fn a_216h_record_number_is_only_for_type_5() {
+        let (buf, n) = emit(&ErrorDetailQuery::latest_system_error());
+        assert_eq!(&buf[..n], b"!992160010004D\r\n");
+        let (buf, n) = emit(&ErrorDetailQuery::list_record_extended(1));
+        assert_eq!(&buf[..n], b"!9921650000152\r\n");
+        // Type 0 with a record number, and type 5 with a type 2: refused.
+        assert_eq!(
+            parse::<ErrorDetailQuery>(b"!992160010014E\r\n"),
+            Err(crate::Error::ValueOutOfRange { offset: 9 })
+        );
+        let bad = ErrorDetailQuery {
+            type_1: 5,
+            type_2: 1,
+            record_number: 1,
+        };
+        assert!(bad.emit(ST, &mut [0u8; 32]).is_err());
+    }
+
+    #[test]
+    fn a_244h_range_write_and_its_reply_echo_the_start() {
+        // One record without axes at position 010H.
+        let rec = PositionRecord::new(0, 30, 30, 100, &[]).unwrap();
+        let recs = [rec];
+        let cmd = RangeWritePositionData {
+            change_start_position_number: 0x10,
+            records: Repeated::from_slice(&recs),
+        };
+        let (buf, n) = emit(&cmd);
+        assert_eq!(&buf[..n], b"!9924401000100001E001E006425\r\n");
+        let reply = parse::<RangeWritePositionDataResponse>(b"#9924401000151\r\n").unwrap();
+        assert_eq!(reply.change_start_position_number, 0x10);
+        assert_eq!(reply.number_of_changed_positions, 1);
+    }
+
+    #[test]
+    fn per_axis_commands_cannot_be_built_wrong() {
+        assert_eq!(
+            AbsoluteMove::to(&[(1, 0), (1, 5)]),
+            Err(crate::Error::InvalidAxis { axis: 1 })
+        );
+        assert_eq!(
+            RelativeMove::by(&[(0, 5)]),
+            Err(crate::Error::InvalidAxis { axis: 0 })
+        );
+        let m = RelativeMove::by(&[(4, -1), (2, 2)]).unwrap();
+        assert_eq!(m.axis_pattern.bits(), 0b1010);
+        assert_eq!(m.relative_distance.as_slice(), &[2, -1]);
+    }
+}

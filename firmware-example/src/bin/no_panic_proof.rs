@@ -9,25 +9,40 @@
 //!
 //! Covered: the frame decoder, `Frame::new_checked`, `decode_any` and the
 //! field visitor of every message, the position-stream decoder, every
-//! record layout, and the request client, the transfer engine (its write
-//! and streamed read-back paths) and the read-back engine fed arbitrary
-//! reply bytes, including a raw command frame passed through the client.
+//! record layout, the request client, the transfer engine (its write and
+//! streamed read-back paths) and the read-back engine fed arbitrary reply
+//! bytes (including a raw command frame passed through the client), the
+//! encoders (`RecordLayout::put_record`, the whole-field record paths, and
+//! `PositionStreamEncoder` for every position stream) on a record made of
+//! those bytes, and the bridge library (`Bridge::poll`, the configuration
+//! block, the serial line) fed arbitrary bytes on both ports.
+//!
+//! Build: `cargo build --release --features no-panic-proof --bin
+//! no_panic_proof --target thumbv7m-none-eabi` (a debug build keeps panic
+//! paths the optimiser would remove, so only release builds prove it).
 #![no_std]
 #![no_main]
 
 use core::hint::black_box;
 
 use cortex_m_rt::entry;
+use iai_protocol_b::axis::{AxisPattern, PerAxis};
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::client::{Client, ClientConfig, ClientStep};
 use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::field::{FieldSpec, Reader};
 use iai_protocol_b::frame::{Frame, Station};
 use iai_protocol_b::message::{decode_any, AxisStatusQuery, Fields, GroupInfo, Value, Visitor};
-use iai_protocol_b::position::RecordLayout;
+use iai_protocol_b::position::{PositionRecord, RecordLayout};
 use iai_protocol_b::readback::{ReadBack, ReadBackConfig, ReadStep};
-use iai_protocol_b::stream::{PositionStreamDecoder, StreamEvent};
+use iai_protocol_b::stream::{
+    PositionStream, PositionStreamDecoder, PositionStreamEncoder, StreamEvent,
+};
 use iai_protocol_b::transfer::{Step, Transfer, TransferConfig};
+
+use firmware_example::bridge::{Bridge, Port};
+use firmware_example::config::Config;
+use firmware_example::serial::{FlowControl, Line, Watermarks};
 
 extern "C" {
     /// Deliberately undefined (see the module docs).
@@ -49,6 +64,48 @@ static __INTERRUPTS: [usize; 1] = [0];
 /// Stand-in for bytes from a UART.
 static INPUT: [u8; 4096] = [0; 4096];
 
+/// A port that reads the given bytes and swallows what is written.
+struct Wire<'a>(&'a [u8]);
+
+impl embedded_io::ErrorType for Wire<'_> {
+    type Error = core::convert::Infallible;
+}
+impl embedded_io::ReadReady for Wire<'_> {
+    fn read_ready(&mut self) -> Result<bool, Self::Error> {
+        Ok(!self.0.is_empty())
+    }
+}
+impl embedded_io::Read for Wire<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
+        let n = buf.len().min(self.0.len());
+        let (head, rest) = self.0.split_at(n);
+        if let Some(dst) = buf.get_mut(..n) {
+            dst.copy_from_slice(head);
+        }
+        self.0 = rest;
+        Ok(n)
+    }
+}
+impl embedded_io::WriteReady for Wire<'_> {
+    fn write_ready(&mut self) -> Result<bool, Self::Error> {
+        Ok(black_box(true))
+    }
+}
+impl embedded_io::Write for Wire<'_> {
+    fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+        black_box(buf);
+        Ok(black_box(buf.len()))
+    }
+    fn flush(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}
+impl Port for Wire<'_> {
+    fn take_overruns(&mut self) -> u32 {
+        black_box(0)
+    }
+}
+
 /// Visits every field and keeps the values alive.
 struct Sink;
 impl Visitor for Sink {
@@ -59,6 +116,32 @@ impl Visitor for Sink {
         black_box((name, info));
     }
     fn leave_group(&mut self) {}
+}
+
+/// A record whose every field comes from `input`.
+fn opaque_record(input: &[u8]) -> PositionRecord {
+    let byte = |i: usize| input.get(i).copied().unwrap_or(0);
+    let word = |i: usize| u16::from_le_bytes([byte(i), byte(i + 1)]);
+    let axes = AxisPattern::from_bits(byte(2));
+    let mut positions = PerAxis::new();
+    for k in 0..axes.count() {
+        let at = 12 + 4 * k;
+        let _ = positions.push(i32::from_le_bytes([
+            byte(at),
+            byte(at + 1),
+            byte(at + 2),
+            byte(at + 3),
+        ]));
+    }
+    PositionRecord {
+        number: word(0),
+        axes,
+        acceleration: word(3),
+        deceleration: word(5),
+        speed: word(7),
+        positions,
+        extended: byte(9),
+    }
 }
 
 fn wire() -> &'static [u8] {
@@ -115,6 +198,38 @@ fn main() -> ! {
     ] {
         let mut r = Reader::new(input, 6);
         let _ = black_box(layout.read_record(&mut r));
+        let _ = black_box(layout.read_fast(input));
+    }
+
+    // The encoders, on a record made of bytes the optimiser cannot see.
+    let rec = opaque_record(input);
+    for layout in [
+        RecordLayout::NUMBER_3,
+        RecordLayout::NUMBER_4,
+        RecordLayout::NUMBER_4_EXTENDED,
+        RecordLayout::RANGE,
+        RecordLayout::RANGE_EXTENDED,
+        black_box(RecordLayout::NUMBER_4),
+    ] {
+        let mut out = [0u8; 96];
+        let end = black_box(out.len());
+        let _ = black_box(layout.put_record(&rec, out.get_mut(..end).unwrap_or(&mut [])));
+    }
+    for kind in PositionStream::ALL {
+        let count = black_box(3u16);
+        let records = core::iter::repeat_n(rec.clone(), usize::from(black_box(count)));
+        if let Ok(mut enc) = PositionStreamEncoder::new(kind, Station(0x99), 0, count, records) {
+            let mut chunk = [0u8; 64];
+            loop {
+                let end = black_box(chunk.len());
+                match enc.read(chunk.get_mut(..end).unwrap_or(&mut [])) {
+                    Ok(0) | Err(_) => break,
+                    Ok(n) => {
+                        black_box((n, &chunk));
+                    }
+                }
+            }
+        }
     }
 
     // The engines, answered with arbitrary bytes.
@@ -151,6 +266,30 @@ fn main() -> ! {
             black_box(r);
         }
     }
+
+    // The bridge, both ports fed arbitrary bytes, under any configuration.
+    let (cfg, source) = Config::from_block(input);
+    let mut bridge = Bridge::new(black_box(cfg), black_box(source));
+    let half = input.len() / 2;
+    let mut up = Wire(input.get(..half).unwrap_or(&[]));
+    let mut down = Wire(input.get(half..).unwrap_or(&[]));
+    for tick in 0..black_box(64u32) {
+        let _ = black_box(bridge.poll(&mut up, &mut down, black_box(tick)));
+    }
+    black_box(bridge.stats());
+
+    // The serial line's interrupt end, fed the same bytes.
+    let mut line: Line<256, 64> = Line::new();
+    let marks = Watermarks::for_latency(black_box(255), black_box(17));
+    let (mut isr, mut thr) = line.split(black_box(FlowControl::XonXoff), marks, &|| {});
+    for &b in input {
+        isr.on_receive(b);
+        isr.service();
+        black_box(isr.next_tx(black_box(true)));
+    }
+    let mut buf = [0u8; 32];
+    let _ = black_box(embedded_io::Read::read(&mut thr, &mut buf));
+    black_box(thr.take_overruns());
 
     loop {
         cortex_m::asm::wfi();

@@ -1,29 +1,45 @@
-//! Demo: the bridge firmware on QEMU `lm3s6965evb` writes a 20,000-record,
-//! 8-axis position table (one 26DH command of 1,640,014 bytes) to the
-//! controller simulator, in controller-sized confirmed commands.
+//! Demo: the bridge firmware under QEMU writes a position table (by
+//! default 20,000 records x 8 axes, one 26DH command of 1,640,014 bytes)
+//! to the controller simulator, in controller-sized confirmed commands.
 //!
-//! Run through `./tools/demo.sh` (it installs QEMU and the targets, builds
-//! the firmware in release). Options: `--records N` (1..=20000),
-//! `--elf PATH` (default: build the release firmware), `--timeout SECS`
-//! (whole-transfer limit, default 300). Exit code 0 only if the simulator's
-//! table equals the source and QEMU exited cleanly.
+//! The host writes at a line rate (`--baud`, default 115,200, 8N1) and
+//! honours the bridge's XON/XOFF, as a PC's serial port does: QEMU models
+//! neither, so without this the run would prove nothing about overruns.
+//! Afterwards it asks the bridge's status query for its counters, ends the
+//! run with the quit sequence and prints the figures: the effective rate
+//! against the line rate, the XOFF pauses, the overruns the bridge counted
+//! and the firmware's measured stack peak. It asserts no timing.
+//!
+//! Run through `./tools/demo.sh`. Options: `--records N` (1..=20000),
+//! `--baud B`, `--processing-ms MS` (the controller's time per command,
+//! default 100), `--board lm3s6965|mps2-an386`, `--faults SEED` (controller
+//! faults: flipped reply bits, dropped and `&` replies), `--elf PATH`,
+//! `--timeout SECS` (whole run, default 600). Exit code 0 only if the
+//! simulator's table equals the source and QEMU exited cleanly.
 
 use std::io::{self, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::Arc;
 use std::thread;
 use std::time::{Duration, Instant};
 
-use host_tests::bridge::{check_table, command_26dh, read_frame, reply_26dh, send, SimThread};
-use host_tests::qemu::{build_firmware, Board, QemuSession};
-use host_tests::sim::Simulator;
+use firmware_example::codes;
+use firmware_example::config::Config;
+use firmware_example::status;
+use host_tests::bridge::{check_table, command_26dh, reply_26dh, HostLink, SimThread};
+use host_tests::qemu::{build_firmware, test_config, Board, QemuSession, READY_MARKER};
+use host_tests::sim::{Faults, Simulator};
 use host_tests::table::table;
-use iai_protocol_b::frame::Station;
-
-const STATION: Station = Station(0x99);
+use iai_protocol_b::checksum::ChecksumMode;
+use iai_protocol_b::frame::{emit_frame, Frame, Header};
 
 struct Options {
     records: u16,
+    processing_ms: u32,
+    baud: u32,
+    board: Board,
+    faults: Option<u64>,
     elf: Option<PathBuf>,
     timeout: Duration,
 }
@@ -31,8 +47,12 @@ struct Options {
 fn parse_args() -> Result<Options, String> {
     let mut o = Options {
         records: 20_000,
+        processing_ms: 100,
+        baud: 115_200,
+        board: Board::Lm3s6965,
+        faults: None,
         elf: None,
-        timeout: Duration::from_secs(300),
+        timeout: Duration::from_secs(600),
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -45,6 +65,32 @@ fn parse_args() -> Result<Options, String> {
                     .filter(|n| (1..=20_000).contains(n))
                     .ok_or("--records takes 1..=20000")?;
             }
+            "--processing-ms" => {
+                o.processing_ms = value()?
+                    .parse()
+                    .map_err(|_| "--processing-ms takes milliseconds".to_owned())?;
+            }
+            "--baud" => {
+                o.baud = value()?
+                    .parse()
+                    .ok()
+                    .filter(|b| firmware_example::config::BAUD_RATES.contains(b))
+                    .ok_or("--baud takes 9600, 19200, 38400, 57600 or 115200")?;
+            }
+            "--board" => {
+                let v = value()?;
+                o.board = Board::ALL
+                    .into_iter()
+                    .find(|b| b.bin() == v || b.machine() == v)
+                    .ok_or(format!("--board takes lm3s6965 or mps2-an386, not {v:?}"))?;
+            }
+            "--faults" => {
+                o.faults = Some(
+                    value()?
+                        .parse()
+                        .map_err(|_| "--faults takes a seed (a number)".to_owned())?,
+                )
+            }
             "--elf" => o.elf = Some(PathBuf::from(value()?)),
             "--timeout" => {
                 o.timeout = Duration::from_secs(
@@ -54,7 +100,7 @@ fn parse_args() -> Result<Options, String> {
                 );
             }
             "-h" | "--help" => {
-                return Err("usage: demo [--records N] [--elf PATH] [--timeout SECS]".to_owned())
+                return Err("usage: demo [--records N] [--baud B] [--processing-ms MS] [--board NAME] [--faults SEED] [--elf PATH] [--timeout SECS]".to_owned())
             }
             other => return Err(format!("unknown argument {other:?} (try --help)")),
         }
@@ -65,6 +111,8 @@ fn parse_args() -> Result<Options, String> {
 /// A text progress bar on stderr: records the controller has written.
 fn progress_bar(done: usize, total: usize, started: Instant) {
     const WIDTH: usize = 40;
+    // Records written again after a re-send count once.
+    let done = done.min(total);
     let filled = (done * WIDTH).checked_div(total).unwrap_or(WIDTH);
     let secs = started.elapsed().as_secs_f64();
     let rate = if secs > 0.0 { done as f64 / secs } else { 0.0 };
@@ -81,76 +129,144 @@ fn progress_bar(done: usize, total: usize, started: Instant) {
     let _ = io::stderr().flush();
 }
 
+/// Ask the bridge's status query; the named counters.
+fn status_query(link: &HostLink, cfg: &Config) -> Result<Vec<(&'static str, u64)>, String> {
+    let mut buf = [0u8; 16];
+    let n = emit_frame(
+        &mut buf,
+        Header::Command,
+        cfg.bridge_station,
+        codes::STATUS_QUERY,
+        ChecksumMode::Compute,
+        |_| Ok(()),
+    )
+    .map_err(|e| e.to_string())?;
+    let reply = link
+        .exchange(&buf[..n], Duration::from_secs(5))
+        .map_err(|e| format!("status query: {e}"))?
+        .ok_or("no reply to the status query")?;
+    let frame = Frame::new_checked(&reply, Default::default()).map_err(|e| e.to_string())?;
+    status::parse(frame.body())
+        .map(|f| f.to_vec())
+        .ok_or_else(|| format!("bad status reply {:?}", String::from_utf8_lossy(&reply)))
+}
+
+fn field(fields: &[(&'static str, u64)], name: &str) -> u64 {
+    fields
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map_or(0, |(_, v)| *v)
+}
+
 fn run() -> Result<(), String> {
     let o = parse_args()?;
+    let board = o.board;
     let elf = match o.elf {
         Some(p) => p,
-        None => build_firmware(Board::Lm3s6965).map_err(|e| format!("building firmware: {e}"))?,
+        None => build_firmware(board).map_err(|e| format!("building firmware: {e}"))?,
     };
+    let cfg = Config {
+        upstream_baud: o.baud,
+        downstream_baud: o.baud,
+        ..test_config()
+    };
+    let station = cfg.controller_station;
     let records: Vec<_> = table(u32::from(o.records), 8, 2024).collect();
-    let command = command_26dh(STATION, &records);
+    let command = command_26dh(station, &records);
     eprintln!(
-        "demo: {} records x 8 axes = one 26DH command of {} bytes",
+        "demo: {} records x 8 axes = one 26DH command of {} bytes, host paced to {} baud with XON/XOFF",
         records.len(),
-        command.len()
+        command.len(),
+        o.baud
     );
 
-    let mut qemu = QemuSession::start(Board::Lm3s6965, &elf, Duration::from_secs(15))
-        .map_err(|e| format!("starting QEMU: {e}"))?;
+    let qemu = QemuSession::start_configured(
+        board,
+        &elf,
+        Duration::from_secs(15),
+        Some(READY_MARKER),
+        &[],
+        Some(&cfg),
+    )
+    .map_err(|e| format!("starting QEMU: {e}"))?;
     eprintln!(
-        "demo: QEMU {} (pid {}) up; simulator on the downstream",
-        Board::Lm3s6965,
-        qemu.pid()
+        "demo: QEMU {board} (pid {}) up; simulator on the downstream{}",
+        qemu.pid(),
+        o.faults
+            .map(|s| format!(" with faults (seed {s})"))
+            .unwrap_or_default()
     );
-    qemu.upstream
-        .set_write_timeout(Some(Duration::from_secs(30)))
-        .map_err(|e| e.to_string())?;
+    let mut sim = Simulator::tta(station);
+    sim.response_delay_ms = o.processing_ms;
+    if let Some(seed) = o.faults {
+        sim = sim.with_faults(
+            Faults {
+                flip_bit_out: 0.001,
+                drop_every_nth_reply: Some(25),
+                error_reply: 0.05,
+                garbage_before_reply: 0.05,
+                ..Faults::default()
+            },
+            seed,
+        );
+    }
     let sim = SimThread::spawn_with(
-        Simulator::tta(STATION),
+        sim,
         qemu.downstream
             .try_clone()
             .map_err(|e| format!("downstream socket: {e}"))?,
         true,
     );
+    let link = Arc::new(
+        HostLink::new(&qemu.upstream, Some(o.baud), true)
+            .map_err(|e| format!("upstream socket: {e}"))?,
+    );
 
-    // Send on a thread (the sockets and QEMU buffer most of the command, so
-    // the bar follows the records the controller has written instead).
+    // Send on a thread while the bar follows the records written; after an
+    // `&` reply send the whole command again (position writes are
+    // idempotent).
     let started = Instant::now();
-    let mut writer = qemu
-        .upstream
-        .try_clone()
-        .map_err(|e| format!("upstream socket: {e}"))?;
-    let sender = {
-        let command = command.clone();
-        thread::spawn(move || send(&mut writer, &command, |_| {}))
-    };
-    // The reply comes only at the end; wait for it while drawing.
-    let mut reader = qemu
-        .upstream
-        .try_clone()
-        .map_err(|e| format!("upstream socket: {e}"))?;
     let deadline = started + o.timeout;
+    let mut sends = 0;
     let reply = loop {
-        progress_bar(sim.records() as usize, records.len(), started);
-        if let Some(f) =
-            read_frame(&mut reader, Duration::from_millis(100)).map_err(|e| e.to_string())?
-        {
-            break Some(f);
+        sends += 1;
+        let sender = {
+            let link = Arc::clone(&link);
+            let command = command.clone();
+            thread::spawn(move || link.send(&command, |_| {}))
+        };
+        let reply = loop {
+            progress_bar(sim.records() as usize, records.len(), started);
+            if let Some(f) = link
+                .read_frame(Duration::from_millis(200))
+                .map_err(|e| e.to_string())?
+            {
+                break Some(f);
+            }
+            if Instant::now() >= deadline {
+                break None;
+            }
+        };
+        match sender.join() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => return Err(format!("sending the command: {e}")),
+            Err(_) => return Err("sender thread panicked".to_owned()),
         }
-        if Instant::now() >= deadline {
-            break None;
+        match reply {
+            Some(r) if r.first() == Some(&b'&') && sends < 4 => {
+                eprintln!(
+                    "\ndemo: the bridge answered {:?}; sending the command again",
+                    String::from_utf8_lossy(&r).trim_end()
+                );
+            }
+            other => break other,
         }
     };
     progress_bar(sim.records() as usize, records.len(), started);
     eprintln!();
     let elapsed = started.elapsed();
-    match sender.join() {
-        Ok(Ok(())) => {}
-        Ok(Err(e)) => return Err(format!("sending the command: {e}")),
-        Err(_) => return Err("sender thread panicked".to_owned()),
-    }
     let reply = reply.ok_or_else(|| format!("no reply from the bridge within {:?}", o.timeout))?;
-    let want = reply_26dh(STATION, o.records);
+    let want = reply_26dh(station, o.records);
     if reply != want {
         return Err(format!(
             "bridge answered {:?}, expected {:?}",
@@ -158,7 +274,10 @@ fn run() -> Result<(), String> {
             String::from_utf8_lossy(&want)
         ));
     }
+    let fields = status_query(&link, &cfg)?;
+    let link_stats = link.stats();
 
+    let mut qemu = qemu;
     qemu.quit().map_err(|e| format!("sending quit: {e}"))?;
     let outcome = qemu
         .wait(Duration::from_secs(10))
@@ -172,22 +291,22 @@ fn run() -> Result<(), String> {
     let sim = sim.join().map_err(|e| e.to_string())?;
     check_table(&sim.table, &records).map_err(|e| format!("table check failed: {e}"))?;
     let s = sim.stats();
-    let firmware = outcome
+    let stack = outcome
         .stdout
         .lines()
-        .find(|l| l.contains("BridgeStats"))
-        .unwrap_or("(no firmware stats)")
-        .trim_start_matches("firmware-example: ");
-    let retries = firmware
-        .split("retries: ")
-        .nth(1)
-        .and_then(|r| r.split(',').next())
-        .unwrap_or("?");
+        .find_map(|l| l.strip_prefix("firmware-example: stack peak "))
+        .and_then(|l| l.split_whitespace().next())
+        .unwrap_or("?")
+        .to_owned();
 
-    println!("demo: OK — the simulator's table equals the source");
+    let line_rate = f64::from(o.baud) / 10.0;
+    let secs = elapsed.as_secs_f64();
+    let upstream = command.len() as f64 * f64::from(sends);
+    println!("demo: OK, the simulator's table equals the source");
+    println!("  board            {board}");
     println!("  records          {}", records.len());
     println!(
-        "  host -> bridge   {} bytes (one 26DH), reply {:?}",
+        "  host -> bridge   {} bytes (one 26DH, sent {sends} time(s)), reply {:?}",
         command.len(),
         String::from_utf8_lossy(&reply).trim_end()
     );
@@ -195,13 +314,32 @@ fn run() -> Result<(), String> {
         "  bridge -> ctrl   {} bytes in {} 26DH commands, {} bytes of replies",
         s.bytes_in, s.commands, s.bytes_out
     );
-    println!("  retries          {retries}");
     println!(
-        "  time             {:.1} s ({:.1} kB/s upstream)",
-        elapsed.as_secs_f64(),
-        command.len() as f64 / elapsed.as_secs_f64() / 1000.0
+        "  rate             {:.0} B/s effective against a line rate of {line_rate:.0} B/s ({} baud): {:.0}%",
+        upstream / secs,
+        o.baud,
+        upstream / secs * 100.0 / line_rate
     );
-    println!("  firmware         {firmware}");
+    println!(
+        "  XOFF pauses      {} ({:.1} s stopped)",
+        link_stats.xoffs,
+        link_stats.paused.as_secs_f64()
+    );
+    println!(
+        "  overruns         {} (upstream, counted by the bridge), {} downstream",
+        field(&fields, "upstream_overruns"),
+        field(&fields, "downstream_overruns")
+    );
+    println!(
+        "  chunks           {} sent, {} retries, {} timeouts, {} & replies",
+        field(&fields, "chunks_sent"),
+        field(&fields, "retries"),
+        field(&fields, "chunk_timeouts"),
+        field(&fields, "chunk_error_replies")
+    );
+    println!("  time             {secs:.1} s");
+    println!("  stack peak       {stack} bytes");
+    println!("stack {} {stack}", board.bin());
     Ok(())
 }
 

@@ -1,0 +1,96 @@
+//! The bridge's own error codes and message IDs.
+//!
+//! Everything the bridge says for itself uses the range [`RANGE`]
+//! (`B00`..`BFF`): `&` error codes, and the message IDs it answers on its
+//! own station ([`STATUS_QUERY`]).
+//!
+//! Assumption: no controller sends an `&` code in this range. The
+//! controllers' own code list is published in neither the TTA manual nor
+//! the 2003 X-SEL specification (both only say that the number identifies
+//! the cause, TTA p. 15, 2003 p. 13), so this cannot be checked; every
+//! message ID either document lists is 2xxH. A host that sees a code in
+//! [`RANGE`] knows the bridge produced it, so it must not ask the
+//! controller for 216H details about it.
+
+use core::ops::RangeInclusive;
+
+/// Codes and IDs reserved for the bridge: the core's
+/// [`iai_protocol_b::error::BRIDGE_CODES`], so that a client never asks a
+/// controller for the 216H detail of one.
+pub const RANGE: RangeInclusive<u16> = iai_protocol_b::error::BRIDGE_CODES;
+
+/// Whether `code` (of an `&` reply) is the bridge's own.
+pub const fn is_bridge_code(code: u16) -> bool {
+    code >= *RANGE.start() && code <= *RANGE.end()
+}
+
+/// Message ID of the status query, sent to the bridge's own station.
+pub const STATUS_QUERY: u16 = 0xB00;
+
+/// `&` B01: the host's 26DH was malformed (wrong checksum, found at its
+/// end; bad digit; bad axis pattern; missing CR LF; count mismatch).
+pub const UPSTREAM_FRAME: u16 = 0xB01;
+/// `&` B02: the controller did not confirm a 26DH chunk after 3 sends.
+pub const CONTROLLER_TIMEOUT: u16 = 0xB02;
+/// B03 is no longer sent: it meant "the controller answered a chunk with
+/// `&` three times". An `&` from the controller is now relayed with the
+/// controller's own code, at once (it is not sent again blindly: 2003
+/// p. 66), so that the host can ask 216H for its detail.
+pub const RETIRED_CONTROLLER_ERROR: u16 = 0xB03;
+/// `&` B04: the host's 26DH stopped in its middle for
+/// [`crate::bridge::UPSTREAM_STALL_MS`].
+pub const UPSTREAM_STALLED: u16 = 0xB04;
+/// `&` B05: the 26DH transfer could not be set up.
+pub const INTERNAL: u16 = 0xB05;
+/// `&` B06: the command policy refuses this message ID; nothing was sent to
+/// the controller.
+pub const REFUSED: u16 = 0xB06;
+/// `&` B07: bytes of the host's 26DH were lost on the way in (receive
+/// overrun: the host sent faster than the bridge could take, e.g. with flow
+/// control off). Chunks sent before the loss hold only records decoded
+/// from bytes received before it.
+pub const UPSTREAM_OVERRUN: u16 = 0xB07;
+/// `&` B08: the controller's reply carries an XON or XOFF byte in its text
+/// (200H, 216H) and XON/XOFF flow control is on: relaying it would stop or
+/// start the host's transmitter, so it is not relayed.
+pub const XON_XOFF_IN_TEXT: u16 = 0xB08;
+/// `&` B09: a command to the bridge's own station with an ID it does not
+/// answer.
+pub const UNKNOWN_QUERY: u16 = 0xB09;
+/// `&` B0A: a 26DH chunk still read back different from what was written
+/// after two rewrites (the bridge reads every chunk back with 21FH before
+/// it takes more from the host).
+pub const VERIFY_MISMATCH: u16 = 0xB0A;
+
+/// Every `&` code the bridge sends, for documentation and tests.
+pub const ALL: [u16; 9] = [
+    UPSTREAM_FRAME,
+    CONTROLLER_TIMEOUT,
+    UPSTREAM_STALLED,
+    INTERNAL,
+    REFUSED,
+    UPSTREAM_OVERRUN,
+    XON_XOFF_IN_TEXT,
+    UNKNOWN_QUERY,
+    VERIFY_MISMATCH,
+];
+
+/// Bytes that end a QEMU test run: ESC `Q` `!` after
+/// [`crate::bridge::QUIT_GUARD_MS`] of upstream silence, outside any frame,
+/// when [`crate::config::Config::quit_sequence`] is on.
+pub const QUIT: [u8; 3] = [0x1B, b'Q', b'!'];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_code_is_in_the_range_and_distinct() {
+        for (i, c) in ALL.iter().enumerate() {
+            assert!(is_bridge_code(*c));
+            assert!(!ALL[..i].contains(c));
+        }
+        assert!(is_bridge_code(STATUS_QUERY));
+        assert!(!is_bridge_code(0x0E1));
+    }
+}

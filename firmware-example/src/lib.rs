@@ -1,0 +1,42 @@
+//! The protocol-B bridge as a `no_std` library: board-independent, never
+//! blocking, allocation-free and panic-free, so that the same code runs on
+//! a Cortex-M board and in the host model of `host-tests` (virtual time).
+//!
+//! - [`bridge`]: the bridge itself ([`Bridge::poll`]) and a board loop
+//!   ([`bridge::run`]);
+//! - [`serial`]: the rings between a UART interrupt handler and the bridge,
+//!   overrun counting and receive-side flow control (XON/XOFF, RTS/CTS);
+//! - [`config`]: the run-time configuration block and the command policy;
+//! - [`status`]: the status query the bridge answers on its own station;
+//! - [`codes`]: the bridge's own `&` codes and message IDs (B00..BFF).
+//!
+//! The boards are the binaries of this package (`src/bin/*.rs`): each only
+//! moves bytes between UART registers and a [`serial::IsrEnd`], reads the
+//! configuration block and runs [`bridge::run`].
+//!
+//! # Panic freedom
+//! Like the core: buffer accesses use `get`, arithmetic on untrusted values
+//! is checked, saturating or wrapping, and the lints below forbid `unwrap`,
+//! `expect`, `panic!` and indexing.
+#![no_std]
+#![deny(missing_docs)]
+#![cfg_attr(
+    not(test),
+    deny(
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic,
+        clippy::indexing_slicing
+    )
+)]
+
+mod log;
+
+pub mod bridge;
+pub mod codes;
+pub mod config;
+pub mod serial;
+pub mod status;
+
+pub use bridge::{Bridge, Poll, Port};
+pub use config::{Config, Policy};
