@@ -35,8 +35,8 @@
 //!   detail query) is taken only outside the engine's contract: later than
 //!   `timeout + late_window` after the send it answered and, for a copy,
 //!   later than `duplicate_window` after the original was taken (or after
-//!   an original that arrived in time but was dropped: open finding F6,
-//!   tolerated with that signature until fixed). So a request never gets a
+//!   an original that arrived in time but was dropped: finding F6, fixed).
+//!   So a request never gets a
 //!   reply that belongs to an earlier request. (A command that took another
 //!   command's reply outside the contract leaves its own replies adrift:
 //!   whoever takes them later is not blamed.) Which delivery made a frame
@@ -45,10 +45,10 @@
 //! - `Done(Ok(Replied))` only after such an acceptance; the reply frame is
 //!   readable and, for a catalogue ID, parses as its response (typed
 //!   requests: `Client::response` succeeds); `Done(Ok(NoReplyExpected))`
-//!   only for 25BH, not before `sent + timeout` (open finding F3: a broken
-//!   `&` ends it early; tolerated with that signature until fixed), and the
-//!   next command waits for the controller's restart (10 s after that
-//!   `sent`);
+//!   only for 25BH, not before `sent + timeout` (finding F3, fixed: a
+//!   broken `&` ended it early; now `OutcomeUnknown`, only after a broken
+//!   frame), and the next command waits for the controller's restart (10 s
+//!   after that `sent`);
 //! - sends per command <= `max_sends`; a command the catalogue marks unsafe
 //!   (and one outside the catalogue) is sent once unless `resend_unsafe`;
 //!   25BH once; nothing is resent after an `&`;
@@ -59,7 +59,8 @@
 //!   after the reply that ended the previous one (two ticks at least), its
 //!   duplicate window, and the late window of sends whose replies are still
 //!   owed (a timeout, an abandon, a reply after resends); no wait before the
-//!   first send or longer than the longest hold (but for open finding F1);
+//!   first send or longer than the longest hold (finding F1, fixed: a first
+//!   command past tick 2^31 waited until the clock wrapped);
 //! - `Timeout { sends }` for a safe command and `OutcomeUnknown { sends }`
 //!   for an unsafe one, with the sends made; `Controller { code, detail }`
 //!   only after an `&` with that code was taken, and `detail` only when the
@@ -89,11 +90,14 @@ use records::Input;
 const CMD: usize = iai_protocol_b::limits::TTA.command;
 const REPLY: usize = iai_protocol_b::limits::TTA.response;
 
-/// Open finding F3 (fuzz/README.md): a software reset (25BH) whose `&`
-/// reply arrives broken is reported as `Ok(NoReplyExpected)` two ticks
-/// later, as if no error response had come. Set to `true` once the core is
-/// fixed; until then only that case is tolerated.
-const F3_FIXED: bool = false;
+/// Open finding F9 (fuzz/README.md): a late reply to a command given up
+/// (abandoned, or timed out) that arrives while a command with another ID
+/// is in progress is `Foreign` to the exchange, which then starts no
+/// duplicate window for it: a copy of it within `duplicate_window` is
+/// taken by the next command with the first one's ID. Set to `true` once
+/// the core is fixed; until then the copy check tolerates exactly a copy
+/// of a reply that was heard as `Foreign` before.
+const F9_FIXED: bool = false;
 
 /// An ID outside the catalogue (a bridge passing on what it does not know).
 const UNKNOWN_ID: u16 = 0x2FE;
@@ -166,6 +170,8 @@ struct H<'a> {
     /// first arrival of an earlier copy.
     taken_at: Vec<Option<u64>>,
     arrived_at: Vec<Option<u64>>,
+    /// Whether a copy of the reply was heard as `Foreign` (open finding F9).
+    heard_foreign: Vec<bool>,
     /// Beside the client's reply decoder: a plain one fed the same bytes
     /// (reset with it at every send), the bytes since that reset, the
     /// deliveries they came from, and where the last frame ended.
@@ -284,6 +290,7 @@ impl H<'_> {
             }
         };
         res.expect("a valid command must start");
+        trace!("t={} START request {serial}: {id:03X}", self.clock);
         self.requests += 1;
         self.awaiting = false;
         self.accepted = None;
@@ -413,6 +420,9 @@ impl H<'_> {
     fn offered(&mut self, offer: Offer, src: &Fed, frame: &[u8]) {
         let clock = self.clock;
         let d = &src.d;
+        if let (Offer::Foreign, Some(i)) = (offer, d.copy_of.or(d.id)) {
+            self.heard_foreign[i] = true;
+        }
         match offer {
             Offer::Accepted | Offer::Rejected(_) => {
                 assert!(
@@ -457,12 +467,15 @@ impl H<'_> {
                     };
                     // A copy of a reply that arrived in time but was not
                     // taken (it came while the client held the next command
-                    // back) may still come `duplicate_window` after it: open
-                    // finding F6 until the core holds it back too.
+                    // back) may still come `duplicate_window` after it: the
+                    // client holds it back too (finding F6, fixed), but for
+                    // open finding F9: not if the original was heard as
+                    // `Foreign` (a command with another ID was in progress).
                     let in_time = sent_at + u64::from(ex.timeout_ms) + u64::from(ex.late_window_ms);
                     let f6 = src.prior.is_some_and(|a| a < in_time && clock < a + dup);
+                    let f9 = !F9_FIXED && hist.is_some_and(|i| self.heard_foreign[i]);
                     assert!(
-                        out && !(f6 && records::F6_FIXED),
+                        out && !(f6 && !f9),
                         "request {:?} took a reply made for {origin:?} (sent at {sent_at}, now {clock}, \
                          taken before at {taken:?}, arrived before at {:?})",
                         (req.serial, req.phase),
@@ -706,6 +719,7 @@ impl H<'_> {
                 self.history.push(d.clone());
                 self.taken_at.push(None);
                 self.arrived_at.push(None);
+                self.heard_foreign.push(false);
             }
             if timing >= 2 {
                 let mut dup = d.clone();
@@ -767,6 +781,7 @@ fuzz_target!(|data: &[u8]| {
         history: Vec::new(),
         taken_at: Vec::new(),
         arrived_at: Vec::new(),
+        heard_foreign: Vec::new(),
         shadow: FrameDecoder::with_policy(BypassPolicy::Reject),
         stream: Vec::new(),
         fed: Vec::new(),
@@ -914,10 +929,7 @@ fuzz_target!(|data: &[u8]| {
                     + u64::from(ex.duplicate_window_ms)
                     + u64::from(ex.turnaround_ms)
                     + 10_002;
-                let Some(ahead) = records::check_wait(now, deadline, bound, h.sends == 0) else {
-                    // Open finding F1: see common/records.rs.
-                    return;
-                };
+                let ahead = records::check_wait(now, deadline, bound, h.sends == 0);
                 let until = h.clock + u64::from(ahead);
                 for d in held {
                     h.feed(d);
@@ -1032,11 +1044,10 @@ fuzz_target!(|data: &[u8]| {
                             req.id
                         );
                         assert_eq!(req.sends, 1);
-                        // Open finding F3 (fuzz/README.md): an `&` to 25BH that
-                        // arrives broken ends it at once as NoReplyExpected.
-                        let f3 = !F3_FIXED && h.broken_since_sent;
+                        // (Finding F3, fixed: an `&` to 25BH that arrived
+                        // broken ended it at once as NoReplyExpected.)
                         assert!(
-                            h.clock >= h.last_sent + u64::from(ex.timeout_ms) || f3,
+                            h.clock >= h.last_sent + u64::from(ex.timeout_ms),
                             "25BH reported done at {} after a send that ended at {} (timeout {})",
                             h.clock,
                             h.last_sent,
@@ -1063,6 +1074,11 @@ fuzz_target!(|data: &[u8]| {
                             h.clock,
                             h.last_sent
                         );
+                        // 25BH ends unknown only on a broken frame after its
+                        // send: its `&`, unreadable (finding F3).
+                        if req.id == SoftwareReset::ID && req.phase == 0 {
+                            assert!(h.broken_since_sent, "25BH unknown without a broken reply");
+                        }
                     }
                     Err(CallError::Controller { code, detail }) => {
                         assert_eq!(req.rejected, Some(code));
@@ -1091,8 +1107,10 @@ fuzz_target!(|data: &[u8]| {
                 if !ended_by_reply
                     && req.sends > 0
                     && !matches!(result, Ok(Outcome::NoReplyExpected))
+                    && !(req.id == SoftwareReset::ID && req.phase == 0)
                 {
-                    // Given up: every send's reply may still come.
+                    // Given up: every send's reply may still come. (A 25BH
+                    // ends unknown only on a broken frame: its answer.)
                     h.not_before = h
                         .not_before
                         .max(h.last_sent + u64::from(ex.timeout_ms) + u64::from(ex.late_window_ms));

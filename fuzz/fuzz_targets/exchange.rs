@@ -50,11 +50,6 @@ use iai_protocol_b::frame::{Header, Station};
 use libfuzzer_sys::fuzz_target;
 use records::Input;
 
-/// Open finding F3 (fuzz/README.md): a reply reported lost for a command
-/// without normal response (25BH) ends it as `NoReplyExpected` after the
-/// turnaround instead of the timeout. Tolerated until fixed.
-const F3_FIXED: bool = false;
-
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Phase {
     Idle,
@@ -214,11 +209,7 @@ fuzz_target!(|data: &[u8]| {
                             + u64::from(cfg.duplicate_window_ms)
                             + u64::from(cfg.turnaround_ms)
                             + 65_537;
-                        let Some(ahead) = records::check_wait(now(clock), deadline, bound, false)
-                        else {
-                            // Open finding F1: see common/records.rs.
-                            return;
-                        };
+                        let ahead = records::check_wait(now(clock), deadline, bound, false);
                         if phase == Phase::Awaiting && lost_at.is_none() {
                             assert_eq!(
                                 clock + u64::from(ahead),
@@ -242,8 +233,14 @@ fuzz_target!(|data: &[u8]| {
                             match f {
                                 Finish::NoReplyExpected => {
                                     assert!(matches!(cmd.reply, Reply::None { .. }));
-                                    let f3 = !F3_FIXED && early;
-                                    assert!(clock >= last_sent + u64::from(cfg.timeout_ms) || f3);
+                                    // Finding F3 (fixed): a lost reply ended
+                                    // it early as if none had come.
+                                    assert!(clock >= last_sent + u64::from(cfg.timeout_ms));
+                                }
+                                Finish::OutcomeUnknown { .. }
+                                    if matches!(cmd.reply, Reply::None { .. }) =>
+                                {
+                                    panic!("25BH-like command unknown without a broken reply")
                                 }
                                 Finish::TimedOut { sends: s } => {
                                     assert_eq!(cmd.resend, Resend::Safe);
@@ -263,9 +260,6 @@ fuzz_target!(|data: &[u8]| {
                             if !matches!(f, Finish::NoReplyExpected) {
                                 faulted = true;
                             }
-                            if let Reply::None { ready_after_ms } = cmd.reply {
-                                not_before = not_before.max(last_sent + u64::from(ready_after_ms));
-                            }
                             phase = Phase::Done;
                         }
                         assert!(!x.busy() && !x.awaiting());
@@ -282,6 +276,10 @@ fuzz_target!(|data: &[u8]| {
                     last_sent = clock;
                     lost_at = None;
                     assert!(x.awaiting());
+                    if let Reply::None { ready_after_ms } = cmd.reply {
+                        // The controller restarts: nothing before it is ready.
+                        not_before = not_before.max(clock + u64::from(ready_after_ms));
+                    }
                 } else {
                     // Nothing in transmission: `sent` changes nothing.
                     assert_eq!(x.awaiting(), phase == Phase::Awaiting);
@@ -315,6 +313,15 @@ fuzz_target!(|data: &[u8]| {
                         assert!(phase != Phase::Awaiting, "a stale verdict while awaited");
                         if matches!(phase, Phase::Running { .. }) {
                             faulted = true;
+                        }
+                        // A duplicate of a stale reply may follow it: the
+                        // stale window grows by the duplicate window.
+                        if cfg.duplicate_window_ms > 0 {
+                            let d = clock + u64::from(cfg.duplicate_window_ms);
+                            stale_until = Some(match stale_until {
+                                Some(u) if clock < u => u.max(d),
+                                _ => d,
+                            });
                         }
                     }
                     (Verdict::Reply, Offer::Accepted) => {
@@ -357,12 +364,10 @@ fuzz_target!(|data: &[u8]| {
             // A broken frame / a lost reply.
             6 => {
                 let awaiting = phase == Phase::Awaiting;
+                let lost;
                 if input.u8() & 1 == 0 {
                     x.reply_lost(now(clock));
-                    if awaiting {
-                        lost_at = Some(clock);
-                        faulted = true;
-                    }
+                    lost = awaiting;
                 } else {
                     let k = input.u8();
                     let header = if k & 1 == 0 {
@@ -377,9 +382,19 @@ fuzz_target!(|data: &[u8]| {
                         input.u16() & 0xFFF
                     };
                     x.broken_frame(Some((header, st, code)), now(clock));
-                    if awaiting && judge(station, cmd.id, header, st, code) != Verdict::Foreign {
-                        lost_at = Some(clock);
-                        faulted = true;
+                    lost = awaiting && judge(station, cmd.id, header, st, code) != Verdict::Foreign;
+                }
+                if lost {
+                    lost_at = Some(clock);
+                    faulted = true;
+                    if let Reply::None { .. } = cmd.reply {
+                        // Answered with an error whose code is unreadable:
+                        // the outcome is unknown, nothing more is owed.
+                        phase = Phase::Done;
+                        assert_eq!(
+                            x.poll(now(clock)),
+                            Due::Done(Finish::OutcomeUnknown { sends })
+                        );
                     }
                 }
             }

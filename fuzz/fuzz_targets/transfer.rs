@@ -51,14 +51,16 @@
 //!   bytes of a failed text frame are decoded again, one fed earlier since
 //!   the last transmission);
 //! - no wait before the first send, none longer than the longest hold
-//!   (timeout + late window + duplicate window + turnaround), but for open
-//!   finding F1 (`common/records.rs`);
+//!   (timeout + late window + duplicate window + turnaround);
 //! - `Complete` only with every record confirmed, the guarantee of the
 //!   policy (`Full` -> `Verified`, `AfterFault` -> `FaultsVerified`, `Off` ->
 //!   `Unverified`), and: with `Verified`, the controller's table holds
 //!   exactly the source at every source position (exact compare: never a
-//!   false success; open finding F5, an old read-back reply taken after a
-//!   rewrite, is tolerated only with its signature until fixed); with
+//!   false success, also when a late or duplicated copy of a read-back
+//!   reply from before a rewrite came within the engine's contract:
+//!   finding F5, fixed; no claim once such a reply came outside it, later
+//!   than `timeout + late_window` after its query and not within
+//!   `duplicate_window` of an original that came in time); with
 //!   `FaultsVerified` or `Unverified`, the same unless an SC-preserving swap
 //!   was applied to a write, a write reply arrived outside the engine's
 //!   guard windows (later than `timeout + late_window` after its send, and
@@ -95,12 +97,6 @@ use iai_protocol_b::transfer::{
 };
 use libfuzzer_sys::fuzz_target;
 use records::Input;
-
-/// Open finding F5 (fuzz/README.md): a `Verified` transfer whose table
-/// differs, after a read-back reply made before the last rewrite of its
-/// window (a late or duplicated copy) was compared. Set to `true` once the
-/// core is fixed.
-const F5_FIXED: bool = false;
 
 /// The engine's frame buffer: the TTA's receive limit.
 const N: usize = iai_protocol_b::limits::TTA.command;
@@ -161,11 +157,23 @@ struct Sim {
     /// Noise may hold LF (config), and a frame in it passed for a reply.
     raw_noise: bool,
     forged: bool,
+    /// When each write frame (first index, count) was sent.
+    sent_at: Vec<((usize, u16), u64)>,
+    /// The frame answered last, and whether the engine has seen a late or
+    /// duplicated reply (a stale one, or a count mismatch).
+    last_answered: Option<(usize, u16)>,
+    line_showed_dups: bool,
     /// When each position was last written.
     written_at: std::collections::BTreeMap<u16, u64>,
     /// A read-back reply made before the last write to its window was
-    /// compared (open finding F5).
-    old_compare: bool,
+    /// compared although it came outside the engine's contract (later than
+    /// `timeout + late_window` after its query, and no copy of an original
+    /// that came in time, within `duplicate_window` of it): nothing can
+    /// tell it from the answer, so no table claim.
+    old_out_of_contract: bool,
+    /// When each read-back reply (made at, head, asked) first arrived
+    /// intact.
+    read_first: std::collections::BTreeMap<(u64, u16, u16), u64>,
     /// Write frames sent (index = frame id): the first source index and
     /// record count of each, and when the engine confirmed those records.
     frames: Vec<(usize, u16, Option<u64>)>,
@@ -280,11 +288,15 @@ fuzz_target!(|data: &[u8]| {
         outbox: Vec::new(),
         history: Vec::new(),
         unguarded: false,
+        sent_at: Vec::new(),
+        last_answered: None,
+        line_showed_dups: false,
         recent: Vec::new(),
         raw_noise: shape & 0x10 != 0,
         forged: false,
         written_at: Default::default(),
-        old_compare: false,
+        old_out_of_contract: false,
+        read_first: Default::default(),
         frames: Vec::new(),
     };
 
@@ -393,6 +405,9 @@ fuzz_target!(|data: &[u8]| {
                 t.sent(now(clock));
                 if is_write {
                     write_sent = true;
+                    if let Some((_, from, n, _)) = write {
+                        sim.sent_at.push(((from, n), clock));
+                    }
                 }
                 check_progress(&t, &mut confirmed, write, write_sent, source.len());
                 controller_answers(
@@ -408,12 +423,7 @@ fuzz_target!(|data: &[u8]| {
                     + u64::from(exchange.duplicate_window_ms)
                     + u64::from(exchange.turnaround_ms)
                     + 2;
-                let Some(ahead) =
-                    records::check_wait(now(clock), deadline, bound, sim.frames.is_empty())
-                else {
-                    // Open finding F1: see common/records.rs.
-                    return;
-                };
+                let ahead = records::check_wait(now(clock), deadline, bound, sim.frames.is_empty());
                 let until = clock + u64::from(ahead);
                 match input.next() {
                     None => {
@@ -503,15 +513,15 @@ fuzz_target!(|data: &[u8]| {
                 assert_eq!(report.guarantee, want);
                 // A frame forged by arbitrary bytes can confirm or verify
                 // anything: no claim then.
-                if !sim.forged && (report.guarantee == Guarantee::Verified || !sim.unguarded) {
-                    // Open finding F5 (fuzz/README.md): after a rewrite, an
-                    // old copy of the window's previous read-back reply can
-                    // pass for the new one. Tolerated only with that
-                    // signature until fixed.
-                    let f5 = !F5_FIXED && sim.old_compare;
+                // (Nor after an old read-back reply that came outside the
+                // engine's contract was compared: see `old_out_of_contract`.)
+                if !sim.forged
+                    && !sim.old_out_of_contract
+                    && (report.guarantee == Guarantee::Verified || !sim.unguarded)
+                {
                     for (n, r) in &expected {
                         assert!(
-                            sim.table.get(n) == Some(r) || f5,
+                            sim.table.get(n) == Some(r),
                             "false success ({:?}): position {n} holds {:?}, the source {r:?}",
                             report.guarantee,
                             sim.table.get(n)
@@ -655,7 +665,23 @@ fn feed<I: iai_protocol_b::transfer::RecordSource>(
 ) {
     let now = base.wrapping_add(clock as u32);
     sim.recent.push(d.what.clone());
-    // A write reply outside the engine's guard windows.
+    if let What::ReadReply {
+        head,
+        asked,
+        made_at,
+    } = d.what
+    {
+        sim.read_first
+            .entry((made_at, head, asked))
+            .or_insert(clock);
+    }
+    // A write reply outside the engine's guard windows (module docs of
+    // `transfer`): a frame's replies are guarded until `timeout +
+    // late_window` after its last send while it is unanswered or was sent
+    // more than once; once answered at its first send, only duplicates of
+    // the reply can come, guarded for `duplicate_window` after the answer
+    // if it was the last frame answered or the line has shown a late or
+    // duplicated reply before (the first duplicate on a line is outside).
     if let What::WriteReply {
         frame,
         sent_at,
@@ -663,19 +689,34 @@ fn feed<I: iai_protocol_b::transfer::RecordSource>(
         ..
     } = d.what
     {
-        let late = clock
-            >= sent_at
-                + u64::from(lim.exchange.timeout_ms)
-                + u64::from(lim.exchange.late_window_ms);
-        let dup_ok = sim.frames[frame]
-            .2
-            .is_some_and(|c| clock < c + u64::from(lim.exchange.duplicate_window_ms));
-        if late && !dup_ok {
+        let ex = &lim.exchange;
+        let (from, n, answered) = sim.frames[frame];
+        let sends = sim
+            .frames
+            .iter()
+            .filter(|f| (f.0, f.1) == (from, n))
+            .count();
+        let last_send = sim
+            .sent_at
+            .iter()
+            .filter(|&&(k, _)| k == (from, n))
+            .map(|&(_, t)| t)
+            .max()
+            .unwrap_or(sent_at);
+        let late_ok = clock < last_send + u64::from(ex.timeout_ms) + u64::from(ex.late_window_ms);
+        let guarded = match answered {
+            None => late_ok,
+            Some(_) if sends > 1 && late_ok => true,
+            Some(a) => {
+                clock < a + u64::from(ex.duplicate_window_ms)
+                    && (sim.last_answered == Some((from, n)) || sim.line_showed_dups)
+            }
+        };
+        if !guarded {
             sim.unguarded = true;
         }
         // A partial write's count was never sent by the engine: no guard
         // can keep it from a later frame with that count.
-        let (from, n, _) = sim.frames[frame];
         if partial && write.is_some_and(|(_, f, k, _)| (f, k) != (from, n)) {
             sim.unguarded = true;
         }
@@ -719,8 +760,10 @@ fn feed<I: iai_protocol_b::transfer::RecordSource>(
                         f.2 = Some(clock);
                     }
                 }
+                sim.last_answered = Some((from, n));
             }
             TransferEvent::CountMismatch { sent, reported } => {
+                sim.line_showed_dups = true;
                 let (_, _, n, s) = write.expect("a mismatch without a write");
                 assert_eq!(sent, n);
                 let by = made_by(sim, |w| match w {
@@ -758,16 +801,27 @@ fn feed<I: iai_protocol_b::transfer::RecordSource>(
                         asked: a,
                         made_at,
                     } => {
-                        // Open finding F5: a reply made before the last write
-                        // to a position of the window (an old copy) passes.
+                        // A reply made before the last write to a position of
+                        // the window (an old copy) is compared. Since F5 was
+                        // fixed the engine holds its query until no such
+                        // reply can come within the contract; one that came
+                        // outside it cannot be told from the answer.
                         let end = u32::from(qh) + u32::from(qa);
-                        if sim
+                        let old = sim
                             .written_at
                             .range(qh..)
                             .take_while(|(&p, _)| u32::from(p) < end)
-                            .any(|(_, &w)| w > made_at)
-                        {
-                            sim.old_compare = true;
+                            .any(|(_, &w)| w > made_at);
+                        let late = made_at
+                            + u64::from(lim.exchange.timeout_ms)
+                            + u64::from(lim.exchange.late_window_ms);
+                        let in_contract = clock <= late
+                            || sim.read_first.get(&(made_at, h, a)).is_some_and(|&f| {
+                                f <= late
+                                    && clock <= f + u64::from(lim.exchange.duplicate_window_ms)
+                            });
+                        if old && !in_contract {
+                            sim.old_out_of_contract = true;
                         }
                         let f = iai_protocol_b::frame::Frame::new_checked(
                             &d.bytes,
@@ -791,7 +845,8 @@ fn feed<I: iai_protocol_b::transfer::RecordSource>(
                 }
                 assert!(u32::from(equal) + u32::from(differ) <= u32::from(qa));
             }
-            TransferEvent::Stale | TransferEvent::Foreign | TransferEvent::Broken(_) => {}
+            TransferEvent::Stale => sim.line_showed_dups = true,
+            TransferEvent::Foreign | TransferEvent::Broken(_) => {}
         }
     }
     let _ = lim.max_frame;

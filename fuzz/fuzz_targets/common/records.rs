@@ -118,27 +118,14 @@ macro_rules! trace {
     };
 }
 
-/// Open finding F1 (fuzz/README.md): the engines' holds (`Exchange`, and
-/// so `Client`; `Transfer`; `ReadBack`) start at tick 0 and never expire;
-/// once the clock is at or past 2^31 (24.8 days after tick 0) while that
-/// initial 0 is still in place, `later(0, t)` keeps 0 and a command is held
-/// until the clock wraps to 0 (up to 24.8 days). Set to `true` once the
-/// core is fixed; until then the checks below tolerate exactly that wait
-/// (until tick 0, from a tick >= 2^31) and nothing else.
-pub const F1_FIXED: bool = false;
-
 /// Checks a `WaitUntil(deadline)` at tick `now`: the deadline lies in the
 /// future, at most `bound` ms ahead; before anything was sent an engine
-/// never waits. Returns the wait in ms, or `None` for the wait of open
-/// finding F1 (until tick 0, from a tick >= 2^31): the run then ends, since
-/// after such a jump every older hold reads as a future tick too.
-pub fn check_wait(now: u32, deadline: u32, bound: u64, nothing_sent: bool) -> Option<u32> {
+/// never waits (finding F1, fixed: holds started at tick 0 and made a first
+/// command past tick 2^31 wait until the clock wrapped). Returns the wait
+/// in ms.
+pub fn check_wait(now: u32, deadline: u32, bound: u64, nothing_sent: bool) -> u32 {
     let ahead = deadline.wrapping_sub(now);
     assert!(ahead.wrapping_sub(1) <= 0x7FFF_FFFF, "waits for the past");
-    let f1 = !F1_FIXED && deadline == 0 && now >= 0x8000_0000;
-    if f1 {
-        return None;
-    }
     assert!(
         !nothing_sent,
         "waits {ahead} ms before the first send (now {now})"
@@ -147,13 +134,5 @@ pub fn check_wait(now: u32, deadline: u32, bound: u64, nothing_sent: bool) -> Op
         u64::from(ahead) <= bound,
         "waits {ahead} ms (now {now}), more than any hold ({bound} ms)"
     );
-    Some(ahead)
+    ahead
 }
-
-/// Open finding F6 (fuzz/README.md): a duplicate of a reply that arrived
-/// late (while the engine was holding the next command back) is not held
-/// back: it arrives after the hold and is taken as the next command's reply
-/// (`client`), or, after a read-back window shrank, as the reply to the
-/// next window, which overlaps the old one (`readback`). Set to `true` once
-/// the core is fixed.
-pub const F6_FIXED: bool = false;
