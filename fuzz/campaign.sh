@@ -1,5 +1,7 @@
 #!/bin/sh
 # Long fuzzing campaign, outside CI: fuzz/campaign.sh RUNS TARGET...
+# (MAX_SECS=N in the environment also stops each target after N seconds,
+# whichever comes first; libFuzzer's final stats say how many runs it made.)
 #
 # For each TARGET, one after the other, at the lowest CPU priority:
 # 1. fuzzes it for RUNS executions (-runs) on fuzz/corpus/TARGET, built
@@ -17,6 +19,7 @@ set -eu
 
 RUNS=${1:?usage: fuzz/campaign.sh RUNS TARGET...}
 shift
+MAX_SECS=${MAX_SECS:-0}
 cd "$(dirname "$0")"
 mkdir -p artifacts/campaign
 failed=0
@@ -26,7 +29,7 @@ for t in "$@"; do
     start=$(date +%s)
     rc=0
     nice -n 19 cargo +nightly fuzz run -s none --target-dir target/campaign "$t" "corpus/$t" -- \
-        -runs="$RUNS" -print_final_stats=1 >"$log" 2>&1 || rc=$?
+        -runs="$RUNS" -max_total_time="$MAX_SECS" -print_final_stats=1 >"$log" 2>&1 || rc=$?
     secs=$(($(date +%s) - start))
     done_line=$(grep -E 'DONE +cov' "$log" | tail -n 1 || true)
     rc2=0
@@ -39,6 +42,7 @@ for t in "$@"; do
     else
         status=ok
     fi
-    echo "$t: $done_line | wall ${secs}s | corpus $(ls "corpus/$t" | wc -l) files | ASan replay: $asan | $status"
+    runs=$(grep -E '^stat::number_of_executed_units' "$log" | tail -n 1 | sed -E 's/.*: *//' || true)
+    echo "$t: $done_line | runs ${runs:--} | wall ${secs}s | corpus $(ls "corpus/$t" | wc -l) files | ASan replay: $asan | $status"
 done
 exit "$failed"
