@@ -107,9 +107,11 @@ const F8_FIXED: bool = false;
 /// reply holding a record of that window queues a re-read of a window
 /// that was never delivered: the window in flight comes out marked
 /// `reread`, and since a re-read does not advance the head, it is read and
-/// delivered again afterwards. Set to `true` once the core is fixed; until
-/// then a window in flight delivered as a re-read is tolerated with
-/// `confirm` (and then counts as a re-read).
+/// delivered again afterwards (or, once delivered with records, read again
+/// as a re-read). Set to `true` once the core is fixed; until then, with
+/// `confirm`, a window in flight delivered as a re-read (it then counts as
+/// one) and a re-read of a window answered empty but not delivered empty
+/// are tolerated.
 const F10_FIXED: bool = false;
 
 const QUERIES: [PositionStream; 3] = [
@@ -195,6 +197,10 @@ struct Windows {
     current: Option<(u32, u16, bool, bool)>,
     /// Windows delivered empty (may be read again).
     empty: Vec<(u32, u16)>,
+    /// Confirmed reads, and the windows a reply answered empty before
+    /// their confirmation (open finding F10).
+    confirm: bool,
+    answered_empty: Vec<(u32, u16)>,
 }
 
 impl Windows {
@@ -217,8 +223,13 @@ impl Windows {
             }
             _ if head == self.next_head => (head, asked, false, false),
             _ => {
+                // Open finding F10: with confirmed reads, a window answered
+                // empty before its confirmation can be read again although
+                // it was not delivered empty.
+                let f10 =
+                    self.confirm && !F10_FIXED && self.answered_empty.contains(&(head, asked));
                 assert!(
-                    self.empty.contains(&(head, asked)),
+                    self.empty.contains(&(head, asked)) || f10,
                     "query {head}+{asked}: neither the window in flight, nor the next \
                      ({}), nor a window answered empty",
                     self.next_head
@@ -296,6 +307,8 @@ fuzz_target!(|data: &[u8]| {
         next_head: u32::from(first),
         current: None,
         empty: Vec::new(),
+        confirm: cfg.confirm,
+        answered_empty: Vec::new(),
     };
     let mut clock: u64 = 0;
     let now = |clock: u64| base.wrapping_add(clock as u32);
@@ -351,6 +364,7 @@ fuzz_target!(|data: &[u8]| {
                             &mut held,
                             &mut taken,
                             &mut answered,
+                            &mut w,
                             &mut recent,
                         );
                     }
@@ -399,6 +413,7 @@ fuzz_target!(|data: &[u8]| {
                                     &mut held,
                                     &mut taken,
                                     &mut answered,
+                                    &mut w,
                                     &mut recent,
                                 );
                             }
@@ -442,6 +457,7 @@ fuzz_target!(|data: &[u8]| {
                                     &mut held,
                                     &mut taken,
                                     &mut answered,
+                                    &mut w,
                                     &mut recent,
                                 );
                             }
@@ -496,6 +512,7 @@ fuzz_target!(|data: &[u8]| {
                     &mut held,
                     &mut taken,
                     &mut answered,
+                    &mut w,
                     &mut recent,
                 );
             }
@@ -577,6 +594,7 @@ fuzz_target!(|data: &[u8]| {
                     &mut held,
                     &mut taken,
                     &mut answered,
+                    &mut w,
                     &mut recent,
                 );
             }
@@ -666,6 +684,7 @@ fn feed<const N: usize>(
     held: &mut bool,
     taken: &mut Option<(u16, u16)>,
     answered: &mut u32,
+    w: &mut Windows,
     recent: &mut Vec<What>,
 ) {
     if *held {
@@ -699,6 +718,9 @@ fn feed<const N: usize>(
             }
             ReadEvent::Answered { records } => {
                 *answered += u32::from(records);
+                if let (0, Some((h, a, ..))) = (records, w.current) {
+                    w.answered_empty.push((h, a));
+                }
                 let by = made_by(&|w| match w {
                     What::Reply { records: k, .. } => *k == records,
                     What::Other => true,
