@@ -109,6 +109,16 @@ use records::Input;
 /// such a duplicate window.
 const F11_FIXED: bool = false;
 
+/// Open finding F8 (fuzz/README.md), as far as `Transfer` goes: its
+/// exchange runs with `duplicate_window_ms = 0`, so the F6 fix (a stale
+/// reply extends the quarantine by the duplicate window) does not apply: a
+/// late read-back reply from before a rewrite that arrives while the next
+/// read-back is held is dropped, and a copy of it after the hold verifies
+/// the rewritten frame. Set to `true` once the core is fixed; until then the
+/// table check tolerates exactly that: a compared old reply that is a copy
+/// of one first heard after the last write to its window.
+const F8_FIXED: bool = false;
+
 /// The engine's frame buffer: the TTA's receive limit.
 const N: usize = iai_protocol_b::limits::TTA.command;
 
@@ -182,8 +192,11 @@ struct Sim {
     /// that came in time, within `duplicate_window` of it): nothing can
     /// tell it from the answer, so no table claim.
     old_out_of_contract: bool,
-    /// ... and one that came within it (open finding F11).
+    /// ... and one that came within it (open finding F11), or a copy of
+    /// a late reply that first arrived after the last write to its window
+    /// (open finding F8, as far as `Transfer` goes).
     old_in_contract: bool,
+    old_copy_of_late: bool,
     /// When each read-back reply (made at, head, asked) first arrived
     /// intact.
     read_first: std::collections::BTreeMap<(u64, u16, u16), u64>,
@@ -310,6 +323,7 @@ fuzz_target!(|data: &[u8]| {
         written_at: Default::default(),
         old_out_of_contract: false,
         old_in_contract: false,
+        old_copy_of_late: false,
         read_first: Default::default(),
         frames: Vec::new(),
     };
@@ -550,9 +564,14 @@ fuzz_target!(|data: &[u8]| {
                     let f11 = !F11_FIXED
                         && sim.old_in_contract
                         && lim.exchange.duplicate_window_ms > short;
+                    // Open finding F8: the transfer's exchange runs without
+                    // a duplicate window, so a late reply that arrives
+                    // while the read-back is held starts none: its copy
+                    // can verify the rewritten frame.
+                    let f8 = !F8_FIXED && sim.old_copy_of_late;
                     for (n, r) in &expected {
                         assert!(
-                            sim.table.get(n) == Some(r) || f11,
+                            sim.table.get(n) == Some(r) || f11 || f8,
                             "false success ({:?}): position {n} holds {:?}, the source {r:?}",
                             report.guarantee,
                             sim.table.get(n)
@@ -854,8 +873,20 @@ fn feed<I: iai_protocol_b::transfer::RecordSource>(
                         if old && !in_contract {
                             sim.old_out_of_contract = true;
                         }
+                        let last_write = sim
+                            .written_at
+                            .range(qh..)
+                            .take_while(|(&p, _)| u32::from(p) < end)
+                            .map(|(_, &w)| w)
+                            .max()
+                            .unwrap_or(0);
+                        let first = sim.read_first.get(&(made_at, h, a)).copied();
                         if old && in_contract {
-                            sim.old_in_contract = true;
+                            if first.is_some_and(|f| f > last_write && f < clock) {
+                                sim.old_copy_of_late = true;
+                            } else {
+                                sim.old_in_contract = true;
+                            }
                         }
                         let f = iai_protocol_b::frame::Frame::new_checked(
                             &d.bytes,
