@@ -120,6 +120,15 @@ const F11_FIXED: bool = false;
 /// window.
 const F8_FIXED: bool = false;
 
+/// Open finding F12 (fuzz/README.md): after `Failed` and `resume`, the
+/// transfer's guard and its `AfterFault` policy see only the sends since
+/// the resume: the frame counts as answered at its first send (no late
+/// window kept for the send before the resume, whose late reply then
+/// confirms the next frame of that count) and as not faulted (no
+/// read-back). Set to `true` once the core is fixed; until then the guard
+/// model counts sends since the last resume, as the engine does.
+const F12_FIXED: bool = false;
+
 /// The engine's frame buffer: the TTA's receive limit.
 const N: usize = iai_protocol_b::limits::TTA.command;
 
@@ -203,6 +212,8 @@ struct Sim {
     read_first: std::collections::BTreeMap<(u64, u16, u16), u64>,
     read_last: std::collections::BTreeMap<(u64, u16, u16), u64>,
     read_prev: Option<u64>,
+    /// When the run was last resumed (open finding F12).
+    resumed_at: Option<u64>,
     /// Write frames sent (index = frame id): the first source index and
     /// record count of each, and when the engine confirmed those records.
     frames: Vec<(usize, u16, Option<u64>)>,
@@ -330,6 +341,7 @@ fuzz_target!(|data: &[u8]| {
         read_first: Default::default(),
         read_last: Default::default(),
         read_prev: None,
+        resumed_at: None,
         frames: Vec::new(),
     };
 
@@ -628,6 +640,7 @@ fuzz_target!(|data: &[u8]| {
                 }
                 resumes -= 1;
                 t.resume(now(clock));
+                sim.resumed_at = Some(clock);
             }
         }
         check_progress(&t, &mut confirmed, write, write_sent, source.len());
@@ -747,10 +760,20 @@ fn feed<I: iai_protocol_b::transfer::RecordSource>(
     {
         let ex = &lim.exchange;
         let (from, n, answered) = sim.frames[frame];
+        // Open finding F12 (fuzz/README.md): the engine's guard counts only
+        // the sends since the last resume, so a frame sent before and after
+        // a resume counts as answered at its first send. Until fixed, the
+        // model counts the same way (a reply to a send before the resume is
+        // then outside the guard windows: no claim).
+        let since = if F12_FIXED {
+            0
+        } else {
+            sim.resumed_at.unwrap_or(0)
+        };
         let sends = sim
-            .frames
+            .sent_at
             .iter()
-            .filter(|f| (f.0, f.1) == (from, n))
+            .filter(|&&(k, t)| k == (from, n) && t >= since)
             .count();
         let last_send = sim
             .sent_at
