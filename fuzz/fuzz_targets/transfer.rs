@@ -894,11 +894,18 @@ fn feed<I: iai_protocol_b::transfer::RecordSource>(
                         let late = made_at
                             + u64::from(lim.exchange.timeout_ms)
                             + u64::from(lim.exchange.late_window_ms);
-                        let in_contract = clock <= late
-                            || sim.read_first.get(&(made_at, h, a)).is_some_and(|&f| {
-                                f <= late
-                                    && clock <= f + u64::from(lim.exchange.duplicate_window_ms)
-                            });
+                        // The first arrival: within `timeout + late_window` of
+                        // its query; a copy: within `duplicate_window` of the
+                        // last copy before it, of an original in time.
+                        let in_contract = match sim.read_prev {
+                            None => clock <= late,
+                            Some(l) => {
+                                sim.read_first
+                                    .get(&(made_at, h, a))
+                                    .is_some_and(|&f| f <= late)
+                                    && clock <= l + u64::from(lim.exchange.duplicate_window_ms)
+                            }
+                        };
                         if old && !in_contract {
                             sim.old_out_of_contract = true;
                         }
