@@ -130,19 +130,24 @@ def le(v, n):
     return (v & ((1 << (8 * n)) - 1)).to_bytes(n, "little")
 
 
-def transfer_seed(kind_index, size, frame_room, script_ops):
-    # config byte: kind (c % 5) with bit 7 = station 99; size; seed; start;
-    # frame room (x4); timeout byte; tries; turnaround; late guard; start
-    # tick; resumes; first number.
-    cfg = bytes([0x80 | kind_index, size, 7]) + le(1, 2) + bytes([frame_room, 10, 2, 0]) + le(500, 2)
-    cfg += le(1000, 4) + bytes([1]) + le(1, 2)
-    return cfg + bytes(script_ops)
+def transfer_seed(kind_index, verify_index, size, frame_room, script, shape=0, resp_room=7):
+    # kind + 5 x verify policy (Full, AfterFault, Off); station; size; table
+    # seed; shape; range start; first number; frame room (x4); reply room
+    # (8-axis records); timeout byte (x20 ms); sends and rewrites;
+    # turnaround; late window; duplicate window; start tick; resumes; then
+    # the script (empty: a well-behaved controller).
+    cfg = bytes([kind_index + 5 * verify_index, 0x99, size, 7, shape]) + le(1, 2) + le(1, 2)
+    cfg += bytes([frame_room, resp_room, 10, 0x06, 0]) + le(500, 2) + le(300, 2)
+    cfg += le(1000, 4) + bytes([2])
+    return cfg + bytes(script)
 
 
 def readback_seed(kind_index, first, span, room, asked_records):
-    # config byte: kind (c % 3) with bit 7 = station 99; first; span; reply
-    # room; timeout; tries; turnaround; start tick.
-    cfg = bytes([0x80 | kind_index]) + le(first, 2) + bytes([span, room, 10, 2, 0]) + le(1000, 4)
+    # mode 0 (arbitrary replies): kind (c % 3) with bit 7 = station 99;
+    # first; span; reply room; timeout; sends; turnaround; late window;
+    # duplicate window; start tick; resumes; then ops.
+    cfg = bytes([0x80 | kind_index]) + le(first, 2) + bytes([span, room, 10, 2, 0])
+    cfg += le(500, 2) + le(300, 2) + le(1000, 4) + bytes([1])
     extended = kind_index == 1
     script = b""
     for n in asked_records:
@@ -155,6 +160,23 @@ def readback_seed(kind_index, first, span, room, asked_records):
             script += le(30, 2) + le(30, 2) + le(100, 2)
         script += bytes([5])  # let the turnaround pass
     return cfg + script
+
+
+def readback_table_seed(kind_index, first, span, room, mask, script):
+    # mode 1 (a controller with a table): bit 6 of the first byte; the
+    # table's seed and the mask of defined positions follow the config.
+    cfg = bytes([0xC0 | kind_index]) + le(first, 2) + bytes([span, room, 10, 3, 0])
+    cfg += le(500, 2) + le(300, 2) + le(1000, 4) + bytes([1]) + bytes([5]) + le(mask, 4)
+    return cfg + bytes(script)
+
+
+def client_seed(flags, picks, script=b"", timeout=10):
+    # station; timeout byte; sends (0-4) | resend unsafe 0x08 | 216H
+    # detail 0x10 | requests - 1 in bits 5-6; turnaround; late window;
+    # duplicate window; start tick; the first request's pick, then the
+    # script (picks of later requests are read when they start).
+    cfg = bytes([0x99, timeout, flags, 0]) + le(500, 2) + le(300, 2) + le(1000, 4)
+    return cfg + bytes(picks) + bytes(script)
 
 
 def main():
@@ -196,21 +218,58 @@ def main():
     for n in (0, 1, 5, 11):
         rec_bytes = bytes(rng.randrange(256) for _ in range(40 * n))
         write("stream_decoder", f"roundtrip-{n}", bytes([0x01, 0x02, 4, 9, 0x99]) + le(0x123, 2) + bytes([n]) + rec_bytes)
-    # transfer: [transmit op 0, reply op 2 + split byte], then per frame
-    # [turnaround op 5, transmit op 0, reply op 2 + split].
-    confirm_all = [0x00, 0x02, 0x07] + [0x05, 0x00, 0x02, 0x07] * 40
+    # transfer: well-behaved controllers (empty script) for every kind and
+    # policy, then faults: an SC-preserving swap, a lost reply, a late
+    # duplicate, an & reply, a partial write, read-back lies, noise.
     for ki in range(5):
-        write("transfer", f"kind{ki}-confirm", transfer_seed(ki, 12, 40, confirm_all))
-        write("transfer", f"kind{ki}-one-frame", transfer_seed(ki, 3, 255, confirm_all))
-    write("transfer", "timeouts", transfer_seed(0, 6, 40, [0x00, 0x05, 0x00, 0x05, 0x00, 0x02, 0x07] + confirm_all[3:]))
-    write("transfer", "error-replies", transfer_seed(0, 6, 40, [0x00, 0x04, 0x21, 0x00, 0x00, 0x02, 0x07] + confirm_all[3:]))
-    write("transfer", "noise", transfer_seed(0, 4, 40, [0x00, 0x01, 12] + list(b"#9926D0001\r\n") + confirm_all[1:]))
-    write("transfer", "empty-table", transfer_seed(0, 0, 40, []))
-    # readback: one reply per window.
+        for vi in range(3):
+            write("transfer", f"kind{ki}-verify{vi}-clean", transfer_seed(ki, vi, 12, 40, []))
+        write("transfer", f"kind{ki}-one-frame", transfer_seed(ki, 0, 3, 255, []))
+    write("transfer", "swap", transfer_seed(0, 0, 6, 40, [0x19]))
+    write("transfer", "swap-reupload", transfer_seed(0, 0, 6, 40, [0x19], shape=0x04))
+    write("transfer", "lost-reply", transfer_seed(0, 1, 6, 40, [0x21, 0x00] + list(le(0, 2))))
+    write("transfer", "late-duplicate", transfer_seed(0, 2, 6, 40, [0x61, 0x20] + list(le(4000, 2))))
+    write("transfer", "error-reply", transfer_seed(0, 0, 6, 40, [0xA1, 0x01] + list(le(2, 2))))
+    write("transfer", "partial-write", transfer_seed(1, 0, 6, 60, [0xC1, 0x01] + list(le(2, 2))))
+    write("transfer", "readback-wrong", transfer_seed(0, 0, 6, 40, [0x01, 0x81, 0x10] + list(le(2, 2))))
+    write("transfer", "readback-stale", transfer_seed(0, 0, 6, 40, [0x01, 0x81, 0x40] + list(le(2, 2))))
+    write("transfer", "noise", transfer_seed(0, 0, 4, 40, [0x01, 0x01, 12] + list(b"#9926D0001\r?")))
+    write("transfer", "repeated-record", transfer_seed(0, 0, 9, 40, [], shape=0x06))
+    write("transfer", "empty-table", transfer_seed(0, 0, 0, 40, []))
+    # readback: one reply per window (mode 0), and a controller's table
+    # (mode 1), clean and with a late duplicate.
     for ki in range(3):
         write("readback", f"kind{ki}-one-window", readback_seed(ki, 1, 5, 7, [3]))
         write("readback", f"kind{ki}-three-windows", readback_seed(ki, 1, 20, 0, [1, 0, 1] + [1] * 20))
+        write("readback", f"kind{ki}-table", readback_table_seed(ki, 1, 60, 1, 0x0F0F00FF, []))
     write("readback", "near-top", readback_seed(0, 0xFFF8, 20, 1, [2, 2, 2, 2, 2]))
+    write("readback", "table-duplicate", readback_table_seed(0, 1, 60, 0, 0x0F0F00FF, [0x61, 0x20] + list(le(100, 2))))
+    write("readback", "table-empty", readback_table_seed(0, 1, 60, 0, 0, []))
+    # client: each kind of request, answered at once; an & with the 216H
+    # detail; a lost reply (resend); 25BH; several requests in a row.
+    for pick in range(5):
+        write("client", f"pick{pick}", client_seed(0x03, [pick]))
+    for i in (0, 10, 20, 30, 40):
+        write("client", f"catalogue{i}", client_seed(0x03, [5, i]))
+    write("client", "error-detail", client_seed(0x13, [0], [0x19, 0x01]))
+    write("client", "bridge-code", client_seed(0x13, [0], [0x19, 0x00]))
+    write("client", "lost-reply", client_seed(0x03, [0], [0x11, 0x00]))
+    write("client", "unsafe-timeout", client_seed(0x03, [1], [0x11, 0x00]))
+    write("client", "late-duplicate", client_seed(0x63, [0], [0xC1, 0x10] + list(le(2500, 2)) + [0, 0]))
+    write("client", "reset-then-query", client_seed(0x23, [2], [0x01, 0x00]))
+    # exchange: station, timeout byte, sends | resend unsafe 0x08 |
+    # ByContent 0x10, turnaround, late window, duplicate window, start tick,
+    # then operations (0 start + pick, 1 poll, 2 advance + u16, 3 sent,
+    # 4 offer + kind byte, 6 lost/broken, 7 abandon, 8 settings).
+    def exchange_seed(flags, ops):
+        return bytes([0x99, 10, flags, 0]) + le(500, 2) + le(300, 2) + le(1000, 4) + bytes(ops)
+    write("exchange", "reply", exchange_seed(0x03, [0, 10, 1, 3, 4, 0x00, 1]))
+    write("exchange", "timeouts", exchange_seed(0x03, [0, 10, 1, 3]))
+    write("exchange", "error-reply", exchange_seed(0x03, [0, 10, 1, 3, 4, 0x02] + list(le(0xC74, 2)) + [1]))
+    write("exchange", "mismatch-then-reply", exchange_seed(0x03, [0, 10, 1, 3, 4, 0x10, 4, 0x00, 1]))
+    write("exchange", "no-normal-reply", exchange_seed(0x03, [0, 0x82] + list(le(10000, 2)) + [1, 3]))
+    write("exchange", "abandon-while-sending", exchange_seed(0x03, [0, 10, 1, 7, 0, 10, 1]))
+    write("exchange", "by-content", exchange_seed(0x13, [0, 10, 1, 3, 6, 0x00, 1, 1, 3, 4, 0x00, 0, 10, 1]))
     # bridge_policy: mode (policy, flow), [allow-list map], tick step, host bytes.
     allow = bytearray(32)
     for i in (0x12, 0x16, 0x6D):
@@ -224,6 +283,13 @@ def main():
     for name, frame in frames[:8]:
         write("hex", name, frame)
     write("hex", "digits-both-cases", b"0123456789ABCDEFabcdef@G`g/:\x00\xff")
+    # Reproducers of the findings (fuzz/README.md): always in the corpora,
+    # so every run replays them.
+    reg = os.path.join(HERE, "regressions")
+    for target in sorted(os.listdir(reg)) if os.path.isdir(reg) else []:
+        for name in sorted(os.listdir(os.path.join(reg, target))):
+            with open(os.path.join(reg, target, name), "rb") as f:
+                write(target, "regression-" + name, f.read())
     print(f"seeded {len(gen)} generated frames, {len(pos_frames)} fixture position frames")
     print(f"seeded {len(frames)} fixture frames into {os.path.join(HERE, 'corpus')}")
 

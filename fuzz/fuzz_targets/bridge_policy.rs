@@ -103,7 +103,11 @@ fuzz_target!(|data: &[u8]| {
         if let Event::Frame(f) = dec.push(b) {
             assert_eq!(f.header(), Header::Command);
             assert_eq!(f.station(), cfg.controller_station);
-            assert!(policy.allows(f.code()), "{:03X} reached the controller", f.code());
+            assert!(
+                policy.allows(f.code()),
+                "{:03X} reached the controller",
+                f.code()
+            );
         }
     }
     let mut dec: FrameDecoder<4096> = FrameDecoder::with_policy(BypassPolicy::Reject);

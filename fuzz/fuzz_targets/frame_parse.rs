@@ -13,9 +13,10 @@
 #[path = "common/mod.rs"]
 mod common;
 
+use iai_protocol_b::catalogue;
 use iai_protocol_b::checksum::{BypassPolicy, Checksum, ChecksumField};
 use iai_protocol_b::decoder::{Event, FrameDecoder};
-use iai_protocol_b::frame::{Frame, Header};
+use iai_protocol_b::frame::{text_span, Frame, Header};
 use iai_protocol_b::message::*;
 use libfuzzer_sys::fuzz_target;
 
@@ -53,11 +54,16 @@ fn round_trip(f: &Frame<'_>) {
     match &msg {
         AnyMessage::Command(c) => {
             assert_eq!(c.id(), f.code());
-            assert!(message_name(c.id()).is_some());
+            let info = catalogue::lookup(c.id()).expect("a command outside the catalogue");
+            assert_eq!(info, c.info());
+            assert_eq!(info.id, c.id());
+            assert!(!info.name.is_empty());
         }
         AnyMessage::Response(r) => {
             assert_eq!(r.id(), f.code());
-            assert!(has_normal_response(r.id()));
+            let info = catalogue::lookup(r.id()).expect("a response outside the catalogue");
+            assert_eq!(info, r.info());
+            assert!(info.has_normal_response());
         }
         AnyMessage::Error(e) => assert_eq!(e.code, f.code()),
     }

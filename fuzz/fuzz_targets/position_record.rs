@@ -98,7 +98,10 @@ fn round_trip(layout: RecordLayout, mut data: &[u8]) {
         Ok((len, sum)) => {
             assert!(per_field.is_ok());
             assert_eq!(&direct[..len], rw.written());
-            assert_eq!(sum, direct[..len].iter().map(|&b| u32::from(b)).sum::<u32>());
+            assert_eq!(
+                sum,
+                direct[..len].iter().map(|&b| u32::from(b)).sum::<u32>()
+            );
         }
         Err(e) => assert_eq!(Err(e), per_field),
     }

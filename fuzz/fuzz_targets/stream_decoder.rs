@@ -1,19 +1,29 @@
-//! The position-stream decoder (`stream::PositionStreamDecoder`).
+//! The position-stream decoder (`stream::PositionStreamDecoder`) and
+//! encoder (`stream::PositionStreamEncoder`).
 //!
 //! Input layout: byte 0 bit 0 picks the mode, bits 1-2 the bypass policy;
 //! byte 1: number k of chunk lengths (0-15); k chunk lengths (+1 each; the
 //! last chunk takes the rest, cuts are reused cyclically).
-//! - mode 0: the rest is a byte stream. Checked: no panic; the same events
-//!   whether fed in those chunks through `decode` or byte by byte through
-//!   `push`; `Start` at most once and first, `Record`s no more than
-//!   announced, `End { records }` = records seen = announced, `Error {
-//!   records_ok }` = `Record` events before it; after `End` / `Error`,
-//!   `decode` consumes nothing (and says `NeedMore`) until `reset` (the
-//!   driver then resets and decodes the rest of the stream).
-//! - mode 1: the rest builds records; for every kind of
+//! - mode 0: the rest is a byte stream. Two decoders run side by side: one
+//!   fed in those chunks through `decode`, one byte by byte through `push`;
+//!   each event of the first is compared at once with the next event of the
+//!   second (nothing is stored). Checked: no panic; the same events;
+//!   `Start` at most once and first, `Record`s no more than announced and
+//!   each with one coordinate per axis, `End { records }` = records seen =
+//!   announced, `Error { records_ok }` = `Record` events before it; an event
+//!   consumes at least one byte; `offset()` never goes back; after `End` /
+//!   `Error`, `decode` and `push` consume nothing (and say `NeedMore`) until
+//!   `reset`, which zeroes `offset`, `records_done` and
+//!   `records_announced` (the driver then resets and decodes the rest).
+//! - mode 1: the rest builds up to 11 records; for every kind of
 //!   `PositionStream::ALL`, they are encoded by `PositionStreamEncoder`
-//!   (pulled in chunks), the frame passes `Frame::new_checked`, and the
-//!   decoder (fed in chunks) gives back `Start`, the same records and `End`.
+//!   (pulled in chunks of the cut lengths), the frame has the expected
+//!   length and passes `Frame::new_checked`, and the decoder (fed in
+//!   chunks) gives back `Start` (kind, station, start, count), the same
+//!   records in order and `End`, compared as they come.
+//!
+//! The harness keeps everything on the stack (records, encoded frame,
+//! encoder output chunks): no allocation per input.
 #![no_main]
 
 #[path = "common/records.rs"]
@@ -28,7 +38,13 @@ use iai_protocol_b::stream::{
 use libfuzzer_sys::fuzz_target;
 use records::Input;
 
-/// Checks the per-frame event grammar; returns the events.
+/// Records a round trip builds at most.
+const MAX_RECORDS: usize = 11;
+/// The longest frame of `MAX_RECORDS` records (84-byte records plus at
+/// most 20 bytes of envelope, prefix and trailer), rounded up.
+const MAX_FRAME: usize = 1024;
+
+/// Checks the per-frame event grammar.
 #[derive(Default)]
 struct Grammar {
     started: Option<u16>,
@@ -70,40 +86,74 @@ fn is_final(ev: &StreamEvent) -> bool {
     matches!(ev, StreamEvent::End { .. } | StreamEvent::Error { .. })
 }
 
-fn chunk_lens<'c>(cuts: &'c [u8]) -> impl Iterator<Item = usize> + 'c {
-    let mut i = 0;
-    std::iter::from_fn(move || {
-        if cuts.is_empty() {
-            return Some(usize::MAX);
-        }
-        let c = cuts[i % cuts.len()] as usize + 1;
-        i += 1;
-        Some(c)
-    })
+/// Chunk lengths from the cuts, cyclically (the whole rest without cuts).
+struct Lens<'c> {
+    cuts: &'c [u8],
+    i: usize,
 }
 
-/// Feeds `stream` in chunks; after a final event checks that nothing more
-/// is consumed, then resets. Returns the events.
-fn chunked(policy: BypassPolicy, cuts: &[u8], stream: &[u8]) -> Vec<StreamEvent> {
+impl Lens<'_> {
+    fn next(&mut self) -> usize {
+        if self.cuts.is_empty() {
+            return usize::MAX;
+        }
+        let c = usize::from(self.cuts[self.i % self.cuts.len()]) + 1;
+        self.i += 1;
+        c
+    }
+}
+
+/// The byte-by-byte decoder: the next event of a stream fed through `push`
+/// (reset after each final event).
+struct ByByte<'s> {
+    dec: PositionStreamDecoder,
+    rest: &'s [u8],
+}
+
+impl ByByte<'_> {
+    fn next(&mut self) -> Option<StreamEvent> {
+        while let Some((&b, rest)) = self.rest.split_first() {
+            self.rest = rest;
+            let ev = self.dec.push(b);
+            if ev != StreamEvent::NeedMore {
+                if is_final(&ev) {
+                    // Nothing more is taken until reset.
+                    assert_eq!(self.dec.push(b'!'), StreamEvent::NeedMore);
+                    self.dec.reset();
+                }
+                return Some(ev);
+            }
+        }
+        None
+    }
+}
+
+fn arbitrary_stream(policy: BypassPolicy, cuts: &[u8], stream: &[u8]) {
     let mut dec = PositionStreamDecoder::new(policy);
+    let mut other = ByByte {
+        dec: PositionStreamDecoder::new(policy),
+        rest: stream,
+    };
     let mut g = Grammar::default();
-    let mut out = Vec::new();
     let mut rest = stream;
-    let mut lens = chunk_lens(cuts);
+    let mut lens = Lens { cuts, i: 0 };
     while !rest.is_empty() {
-        let n = lens.next().unwrap().min(rest.len());
+        let n = lens.next().min(rest.len());
         let mut chunk = &rest[..n];
         rest = &rest[n..];
         while !chunk.is_empty() {
             let before = dec.offset();
             let (used, ev) = dec.decode(chunk);
             assert!(used <= chunk.len());
-            assert!(dec.offset() >= before);
+            assert!(dec.offset() >= before, "offset went back");
             if ev == StreamEvent::NeedMore {
                 assert_eq!(used, chunk.len(), "NeedMore with input left");
                 break;
             }
+            assert!(used > 0, "an event without consuming");
             g.see(&ev);
+            let theirs = other.next().expect("the byte-by-byte decoder ran dry");
+            assert_eq!(ev, theirs, "events depend on the chunking");
             chunk = &chunk[used..];
             if is_final(&ev) {
                 // Nothing is consumed until reset, whatever follows.
@@ -118,64 +168,53 @@ fn chunked(policy: BypassPolicy, cuts: &[u8], stream: &[u8]) -> Vec<StreamEvent>
                 );
                 g = Grammar::default();
             } else {
-                assert!(used > 0, "an event without consuming");
+                assert_eq!(dec.records_done(), g.records);
             }
-            out.push(ev);
         }
     }
-    out
-}
-
-fn by_byte(policy: BypassPolicy, stream: &[u8]) -> Vec<StreamEvent> {
-    let mut dec = PositionStreamDecoder::new(policy);
-    let mut out = Vec::new();
-    for &b in stream {
-        let ev = dec.push(b);
-        if ev != StreamEvent::NeedMore {
-            if is_final(&ev) {
-                dec.reset();
-            }
-            out.push(ev);
-        }
-    }
-    out
-}
-
-fn arbitrary_stream(policy: BypassPolicy, cuts: &[u8], stream: &[u8]) {
-    let a = chunked(policy, cuts, stream);
-    let b = by_byte(policy, stream);
-    assert_eq!(a, b, "events depend on the chunking");
+    assert_eq!(
+        other.next(),
+        None,
+        "the byte-by-byte decoder has more events"
+    );
+    assert_eq!(dec.offset(), other.dec.offset());
+    assert_eq!(dec.records_done(), other.dec.records_done());
 }
 
 fn round_trip(policy: BypassPolicy, cuts: &[u8], mut input: Input<'_>) {
     let station = Station(input.u8());
     let start_raw = input.u16();
-    let n = usize::from(input.u8() % 12);
-    let seed_records: Vec<u8> = input.take(400).to_vec();
+    let n = usize::from(input.u8()) % (MAX_RECORDS + 1);
+    let seed_records = input.take(400);
     for kind in PositionStream::ALL {
-        let mut src = Input(&seed_records);
-        let recs: Vec<PositionRecord> = (0..n)
-            .map(|_| records::arbitrary_record(kind.layout, &mut src))
-            .collect();
+        let mut src = Input(seed_records);
+        let recs: [PositionRecord; MAX_RECORDS] =
+            std::array::from_fn(|_| records::arbitrary_record(kind.layout, &mut src));
+        let recs = &recs[..n];
         let start = match kind.start_width {
             0 => 0,
             w if w >= 4 => start_raw,
             w => start_raw & ((1 << (4 * w)) - 1),
         };
         let mut enc =
-            PositionStreamEncoder::new(kind, station, start, n as u16, recs.clone().into_iter())
+            PositionStreamEncoder::new(kind, station, start, n as u16, recs.iter().cloned())
                 .expect("encoder start");
-        let mut frame = Vec::new();
-        let mut lens = chunk_lens(cuts);
+        let mut frame = [0u8; MAX_FRAME];
+        let mut len = 0;
+        let mut lens = Lens { cuts, i: 0 };
         loop {
-            let want = lens.next().unwrap().min(256);
-            let mut buf = vec![0u8; want];
-            let got = enc.read(&mut buf).expect("valid records must encode");
+            let want = lens.next().min(256).min(MAX_FRAME - len);
+            let got = enc
+                .read(&mut frame[len..len + want])
+                .expect("valid records must encode");
+            assert!(got <= want);
             if got == 0 {
+                assert!(want > 0, "the frame outgrew the harness buffer");
                 break;
             }
-            frame.extend_from_slice(&buf[..got]);
+            len += got;
         }
+        let frame = &frame[..len];
         assert_eq!(enc.records_emitted() as usize, n);
         assert_eq!(
             frame.len(),
@@ -185,29 +224,44 @@ fn round_trip(policy: BypassPolicy, cuts: &[u8], mut input: Input<'_>) {
                     .map(|r| kind.layout.record_len(r.axes.count()))
                     .sum::<usize>()
         );
-        Frame::new_checked(&frame, policy).expect("encoded frame must check");
+        Frame::new_checked(frame, policy).expect("encoded frame must check");
 
         let mut dec = PositionStreamDecoder::new(policy);
-        let mut events = Vec::new();
-        let mut rest = &frame[..];
-        let mut lens = chunk_lens(cuts);
+        let mut rest = frame;
+        let mut lens = Lens { cuts, i: 0 };
+        // 0: Start expected, 1..=n: record i-1, n+1: End, n+2: nothing more.
+        let mut at = 0usize;
         while !rest.is_empty() {
-            let k = lens.next().unwrap().min(rest.len());
+            let k = lens.next().min(rest.len());
             let (used, ev) = dec.decode(&rest[..k]);
             rest = &rest[used..];
-            if ev != StreamEvent::NeedMore {
-                events.push(ev);
+            if ev == StreamEvent::NeedMore {
+                assert_eq!(used, k);
+                continue;
             }
+            match at {
+                0 => assert_eq!(
+                    ev,
+                    StreamEvent::Start {
+                        kind,
+                        station,
+                        start,
+                        count: n as u16,
+                    },
+                    "{kind:?}"
+                ),
+                i if i <= n => match &ev {
+                    StreamEvent::Record(r) => assert_eq!(r, &recs[i - 1], "{kind:?} record {i}"),
+                    other => panic!("{kind:?}: {other:?} instead of record {i}"),
+                },
+                i if i == n + 1 => {
+                    assert_eq!(ev, StreamEvent::End { records: n as u16 }, "{kind:?}")
+                }
+                _ => panic!("{kind:?}: an event after End: {ev:?}"),
+            }
+            at += 1;
         }
-        let mut expect = vec![StreamEvent::Start {
-            kind,
-            station,
-            start,
-            count: n as u16,
-        }];
-        expect.extend(recs.iter().cloned().map(StreamEvent::Record));
-        expect.push(StreamEvent::End { records: n as u16 });
-        assert_eq!(events, expect, "{kind:?}");
+        assert_eq!(at, n + 2, "{kind:?}: the frame ended early");
     }
 }
 
@@ -215,15 +269,15 @@ fuzz_target!(|data: &[u8]| {
     let mut input = Input(data);
     let config = input.u8();
     let k = usize::from(input.u8() % 16);
-    let cuts = input.take(k).to_vec();
+    let cuts = input.take(k);
     let policy = match (config >> 1) & 3 {
         0 => BypassPolicy::CommandsOnly,
         1 => BypassPolicy::Reject,
         _ => BypassPolicy::Accept,
     };
     if config & 1 == 0 {
-        arbitrary_stream(policy, &cuts, input.0);
+        arbitrary_stream(policy, cuts, input.0);
     } else {
-        round_trip(policy, &cuts, input);
+        round_trip(policy, cuts, input);
     }
 });

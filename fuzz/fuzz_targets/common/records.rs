@@ -100,3 +100,39 @@ pub fn table(layout: RecordLayout, seed: u8, first: u16, n: usize) -> Vec<Positi
         })
         .collect()
 }
+
+/// Whether `FUZZ_TRACE` is set: the engine targets then print what they
+/// send and receive (to replay a finding by hand).
+pub fn tracing() -> bool {
+    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *ON.get_or_init(|| std::env::var_os("FUZZ_TRACE").is_some())
+}
+
+/// `eprintln!` when `FUZZ_TRACE` is set.
+#[macro_export]
+macro_rules! trace {
+    ($($t:tt)*) => {
+        if $crate::records::tracing() {
+            eprintln!($($t)*);
+        }
+    };
+}
+
+/// Checks a `WaitUntil(deadline)` at tick `now`: the deadline lies in the
+/// future, at most `bound` ms ahead; before anything was sent an engine
+/// never waits (finding F1, fixed: holds started at tick 0 and made a first
+/// command past tick 2^31 wait until the clock wrapped). Returns the wait
+/// in ms.
+pub fn check_wait(now: u32, deadline: u32, bound: u64, nothing_sent: bool) -> u32 {
+    let ahead = deadline.wrapping_sub(now);
+    assert!(ahead.wrapping_sub(1) <= 0x7FFF_FFFF, "waits for the past");
+    assert!(
+        !nothing_sent,
+        "waits {ahead} ms before the first send (now {now})"
+    );
+    assert!(
+        u64::from(ahead) <= bound,
+        "waits {ahead} ms (now {now}), more than any hold ({bound} ms)"
+    );
+    ahead
+}
