@@ -90,14 +90,14 @@ use records::Input;
 const CMD: usize = iai_protocol_b::limits::TTA.command;
 const REPLY: usize = iai_protocol_b::limits::TTA.response;
 
-/// Open finding F9 (fuzz/README.md): a late reply to a command given up
+/// Finding F9 (fixed in the core; the check is strict) (fuzz/README.md): a late reply to a command given up
 /// (abandoned, or timed out) that arrives while a command with another ID
 /// is in progress is `Foreign` to the exchange, which then starts no
 /// duplicate window for it: a copy of it within `duplicate_window` is
-/// taken by the next command with the first one's ID. Set to `true` once
-/// the core is fixed; until then the copy check tolerates exactly a copy
-/// of a reply that was heard as `Foreign` before.
-const F9_FIXED: bool = false;
+/// taken by the next command with the first one's ID. Before the fix the
+/// copy check tolerated exactly a copy of a reply that was heard as
+/// `Foreign` before.
+const F9_FIXED: bool = true;
 
 /// An ID outside the catalogue (a bridge passing on what it does not know).
 const UNKNOWN_ID: u16 = 0x2FE;

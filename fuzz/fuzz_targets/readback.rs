@@ -73,13 +73,13 @@ use iai_protocol_b::transfer::TransferError;
 use libfuzzer_sys::fuzz_target;
 use records::Input;
 
-/// Open finding F7 (fuzz/README.md): `ReadBackStats::records` ("records
+/// Finding F7 (fixed in the core; the check is strict) (fuzz/README.md): `ReadBackStats::records` ("records
 /// received (and delivered)") adds up the records of every reply the
 /// engine takes, so with confirmed reads (`ReadBackConfig::confirm`, the
 /// default) it counts each window's records once per reply (twice or more)
-/// instead of once per delivery. Set to `true` once the core is fixed;
-/// until then, with `confirm`, the count must be exactly that sum.
-const F7_FIXED: bool = false;
+/// instead of once per delivery. Before the fix, with `confirm`, the count
+/// had to be exactly that sum.
+const F7_FIXED: bool = true;
 
 /// What `stats().records` must be after `delivered` records were delivered
 /// from replies that held `answered` records in all.
@@ -91,28 +91,28 @@ fn counted(delivered: u32, answered: u32, confirm: bool) -> u32 {
     }
 }
 
-/// Open finding F8 (fuzz/README.md), what is left of F6 in `ReadBack`:
+/// Finding F8 (fixed in the core; the check is strict) (fuzz/README.md), what is left of F6 in `ReadBack`:
 /// the core now holds back a duplicate of a late reply in `Exchange`, but
 /// a read-back runs its exchange without a duplicate window (it guards
 /// only after empty replies), so a copy of a late reply to a window that
 /// then shrank is still taken for the next window, which overlaps it, and
-/// records are lost. Set to `true` once the core is fixed; until then the
-/// window check tolerates exactly that signature (the reply taken was made
+/// records are lost. Before the fix, the
+/// window check tolerated exactly that signature (the reply taken was made
 /// for a window that does not cover the one delivered).
-const F8_FIXED: bool = false;
+const F8_FIXED: bool = true;
 
-/// Open finding F10 (fuzz/README.md): with confirmed reads, the first
+/// Finding F10 (fixed in the core; the check is strict) (fuzz/README.md): with confirmed reads, the first
 /// (unconfirmed) empty reply of a window already counts as "answered
 /// empty" (`ReadBack::received` registers it in `empties`), so a stale
 /// reply holding a record of that window queues a re-read of a window
 /// that was never delivered: the window in flight comes out marked
 /// `reread`, and since a re-read does not advance the head, it is read and
 /// delivered again afterwards (or, once delivered with records, read again
-/// as a re-read). Set to `true` once the core is fixed; until then, with
+/// as a re-read). Before the fix, with
 /// `confirm`, a window in flight delivered as a re-read (it then counts as
 /// one) and a re-read of a window answered empty but not delivered empty
-/// are tolerated.
-const F10_FIXED: bool = false;
+/// were tolerated.
+const F10_FIXED: bool = true;
 
 const QUERIES: [PositionStream; 3] = [
     PositionStream::QUERY_2_RESPONSE,
@@ -223,7 +223,7 @@ impl Windows {
             }
             _ if head == self.next_head => (head, asked, false, false),
             _ => {
-                // Open finding F10: with confirmed reads, a window answered
+                // Finding F10 (fixed in the core; the check is strict): with confirmed reads, a window answered
                 // empty before its confirmation can be read again although
                 // it was not delivered empty.
                 let f10 =
@@ -525,7 +525,7 @@ fuzz_target!(|data: &[u8]| {
                 );
                 let (head, asked, mut reread, done) = w.current.expect("records before any query");
                 assert!(!done, "a window delivered twice");
-                // Open finding F10: with confirmed reads, a window still
+                // Finding F10 (fixed in the core; the check is strict): with confirmed reads, a window still
                 // being confirmed can be delivered marked `reread`.
                 if cfg.confirm && !F10_FIXED && recs.reread() && !reread {
                     reread = true;
@@ -564,7 +564,7 @@ fuzz_target!(|data: &[u8]| {
                         );
                     }
                     let truth = controller::window(&table, head as u16, asked);
-                    // Open finding F8 (fuzz/README.md), F6 left in `ReadBack`: a
+                    // Finding F8 (fixed in the core; the check is strict) (fuzz/README.md), F6 left in `ReadBack`: a
                     // duplicate of a late reply to a window that then shrank
                     // is taken for the next window, which overlaps it.
                     let f8 = !F8_FIXED

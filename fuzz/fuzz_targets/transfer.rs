@@ -98,36 +98,36 @@ use iai_protocol_b::transfer::{
 use libfuzzer_sys::fuzz_target;
 use records::Input;
 
-/// Open finding F11 (fuzz/README.md): after a rewrite, the read-back hold
+/// Finding F11 (fixed in the core; the check is strict) (fuzz/README.md): after a rewrite, the read-back hold
 /// (the F5 fix: `duplicate_window_ms` after the rewrite) is checked against
 /// the horizon of the transfer's exchange, which runs with
 /// `duplicate_window_ms = 0`; a hold further ahead than that horizon reads
 /// as expired, so with a duplicate window longer than the horizon an old
 /// read-back reply verifies a rewritten frame again (a false `Verified`).
-/// Set to `true` once the core is fixed; until then the table check
+/// Before the fix, the table check
 /// tolerates exactly that: an old reply compared within the contract, with
 /// such a duplicate window.
-const F11_FIXED: bool = false;
+const F11_FIXED: bool = true;
 
-/// Open finding F8 (fuzz/README.md), as far as `Transfer` goes: its
+/// Finding F8 (fixed in the core; the check is strict) (fuzz/README.md), as far as `Transfer` goes: its
 /// exchange runs with `duplicate_window_ms = 0`, so the F6 fix (a stale
 /// reply extends the quarantine by the duplicate window) does not apply: a
 /// late read-back reply from before a rewrite that arrives while the next
 /// read-back is held is dropped, and a copy of it after the hold verifies
-/// the rewritten frame. Set to `true` once the core is fixed; until then the
+/// the rewritten frame. Before the fix, the
 /// table check tolerates exactly that: a compared old reply within the
 /// duplicate window of a copy of it heard after the last write to its
 /// window.
-const F8_FIXED: bool = false;
+const F8_FIXED: bool = true;
 
-/// Open finding F12 (fuzz/README.md): after `Failed` and `resume`, the
+/// Finding F12 (fixed in the core; the check is strict) (fuzz/README.md): after `Failed` and `resume`, the
 /// transfer's guard and its `AfterFault` policy see only the sends since
 /// the resume: the frame counts as answered at its first send (no late
 /// window kept for the send before the resume, whose late reply then
 /// confirms the next frame of that count) and as not faulted (no
-/// read-back). Set to `true` once the core is fixed; until then the guard
+/// read-back). Before the fix, the guard
 /// model counts sends since the last resume, as the engine does.
-const F12_FIXED: bool = false;
+const F12_FIXED: bool = true;
 
 /// The engine's frame buffer: the TTA's receive limit.
 const N: usize = iai_protocol_b::limits::TTA.command;
@@ -569,7 +569,7 @@ fuzz_target!(|data: &[u8]| {
                     && !sim.old_out_of_contract
                     && (report.guarantee == Guarantee::Verified || !sim.unguarded)
                 {
-                    // Open finding F11 (fuzz/README.md): the hold after a
+                    // Finding F11 (fixed in the core; the check is strict) (fuzz/README.md): the hold after a
                     // rewrite lies `duplicate_window` ahead, further than the
                     // horizon of the engine's exchange (which runs without a
                     // duplicate window), so it reads as expired.
@@ -581,7 +581,7 @@ fuzz_target!(|data: &[u8]| {
                     let f11 = !F11_FIXED
                         && sim.old_in_contract
                         && lim.exchange.duplicate_window_ms > short;
-                    // Open finding F8: the transfer's exchange runs without
+                    // Finding F8 (fixed in the core; the check is strict): the transfer's exchange runs without
                     // a duplicate window, so a late reply that arrives
                     // while the read-back is held starts none: its copy
                     // can verify the rewritten frame.
@@ -760,7 +760,7 @@ fn feed<I: iai_protocol_b::transfer::RecordSource>(
     {
         let ex = &lim.exchange;
         let (from, n, answered) = sim.frames[frame];
-        // Open finding F12 (fuzz/README.md): the engine's guard counts only
+        // Finding F12 (fixed in the core; the check is strict) (fuzz/README.md): the engine's guard counts only
         // the sends since the last resume, so a frame sent before and after
         // a resume counts as answered at its first send. Until fixed, the
         // model counts the same way (a reply to a send before the resume is
