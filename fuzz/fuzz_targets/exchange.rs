@@ -308,7 +308,21 @@ fuzz_target!(|data: &[u8]| {
                 let offer = x.offer_head(header, st, code, content_ok, now(clock));
                 trace!("  offer {header:?} {st:?} {code:03X} {content_ok} -> {offer:?}");
                 match (verdict, offer) {
-                    (Verdict::Foreign, o) => assert_eq!(o, Offer::Foreign),
+                    (Verdict::Foreign, o) => {
+                        assert_eq!(o, Offer::Foreign);
+                        // A reply from this station to another ID while
+                        // stale replies may come (F9): a late reply to an
+                        // earlier command, whose copy may follow.
+                        let open = stale_until.is_some_and(|u| clock < u);
+                        if st == station
+                            && header != Header::Command
+                            && open
+                            && cfg.duplicate_window_ms > 0
+                        {
+                            let d = clock + u64::from(cfg.duplicate_window_ms);
+                            stale_until = stale_until.map(|u| u.max(d));
+                        }
+                    }
                     (_, Offer::Stale) => {
                         assert!(phase != Phase::Awaiting, "a stale verdict while awaited");
                         if matches!(phase, Phase::Running { .. }) {
