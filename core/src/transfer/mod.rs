@@ -859,8 +859,22 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                     return TransferEvent::NeedMore;
                 }
                 self.stats.line_errors += 1;
+                let envelope = self.replies.failed_envelope();
+                let read_back = self.verifier.stream;
+                // Outside a read-back, a read-back reply overflows this
+                // decoder (its envelope is then unknown) or arrives broken:
+                // treat either as a stale read-back reply, whose copy may
+                // still come (what it costs is time, never a claim).
+                let read_back_reply = matches!(e, Error::FrameTooLong { .. })
+                    || envelope.is_some_and(|(h, s, id)| {
+                        h == read_back.header
+                            && s == self.cfg.exchange.station
+                            && id == read_back.id
+                    });
+                if read_back_reply && self.state != State::Verify {
+                    self.stale_read_back(now);
+                }
                 if matches!(self.state, State::Write | State::Verify) {
-                    let envelope = self.replies.failed_envelope();
                     self.exchange.broken_frame(envelope, now);
                 }
                 TransferEvent::Broken(e)
@@ -873,6 +887,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                     if self.state != State::Verify {
                         self.stats.stale_replies += 1;
                         self.pending_fault = true;
+                        self.stale_read_back(now);
                         return TransferEvent::Stale;
                     }
                     return TransferEvent::NeedMore;

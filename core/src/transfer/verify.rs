@@ -294,15 +294,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                     // waits until none can come.
                     Offer::Mismatch | Offer::Stale => {
                         self.stats.stale_replies += 1;
-                        let dup = now.wrapping_add(self.cfg.exchange.duplicate_window_ms);
-                        let h = self.exchange.horizon();
-                        let hold = match self.verifier.hold {
-                            Some(t) if !passed(now, t, h) => later(t, dup),
-                            _ => dup,
-                        };
-                        self.verifier.hold = Some(hold);
-                        // A query already started but not sent waits too.
-                        self.exchange.defer(hold);
+                        self.stale_read_back(now);
                         TransferEvent::Stale
                     }
                     other => self.judged(other, 0),
@@ -311,6 +303,11 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             StreamEvent::Error { .. } => {
                 v.hunting = true;
                 if core::mem::take(&mut v.started) {
+                    if !self.exchange.awaiting() {
+                        // A read-back reply, broken, while none is awaited:
+                        // a copy of it may follow intact.
+                        self.stale_read_back(now);
+                    }
                     // The awaited read-back reply arrived broken.
                     self.exchange.reply_lost(now);
                     let v = &mut self.verifier;
@@ -328,6 +325,24 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 }
                 TransferEvent::NeedMore
             }
+        }
+    }
+
+    /// A read-back reply (whole or broken) came that answers no query in
+    /// flight: a copy of it may follow within the duplicate window, and a
+    /// read-back reply names nothing that ties it to one query. The chunk's
+    /// next read-back waits until no copy can come, also one already
+    /// started but not yet sent.
+    pub(super) fn stale_read_back(&mut self, now: u32) {
+        let dup = now.wrapping_add(self.cfg.exchange.duplicate_window_ms);
+        let h = self.exchange.horizon();
+        let hold = match self.verifier.hold {
+            Some(t) if !passed(now, t, h) => later(t, dup),
+            _ => dup,
+        };
+        self.verifier.hold = Some(hold);
+        if self.state == State::Verify {
+            self.exchange.defer(hold);
         }
     }
 
