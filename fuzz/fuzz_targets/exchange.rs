@@ -314,13 +314,8 @@ fuzz_target!(|data: &[u8]| {
                         // stale replies may come (F9): a late reply to an
                         // earlier command, whose copy may follow.
                         let open = stale_until.is_some_and(|u| clock < u);
-                        if st == station
-                            && header != Header::Command
-                            && open
-                            && cfg.duplicate_window_ms > 0
-                        {
-                            let d = clock + u64::from(cfg.duplicate_window_ms);
-                            stale_until = stale_until.map(|u| u.max(d));
+                        if st == station && header != Header::Command && open {
+                            stale_seen(&cfg, &mut stale_until, clock);
                         }
                     }
                     (_, Offer::Stale) => {
@@ -328,15 +323,7 @@ fuzz_target!(|data: &[u8]| {
                         if matches!(phase, Phase::Running { .. }) {
                             faulted = true;
                         }
-                        // A duplicate of a stale reply may follow it: the
-                        // stale window grows by the duplicate window.
-                        if cfg.duplicate_window_ms > 0 {
-                            let d = clock + u64::from(cfg.duplicate_window_ms);
-                            stale_until = Some(match stale_until {
-                                Some(u) if clock < u => u.max(d),
-                                _ => d,
-                            });
-                        }
+                        stale_seen(&cfg, &mut stale_until, clock);
                     }
                     (Verdict::Reply, Offer::Accepted) => {
                         assert_eq!(phase, Phase::Awaiting);
@@ -450,6 +437,18 @@ fuzz_target!(|data: &[u8]| {
         );
     }
 });
+
+/// A stale reply came at `clock`: a duplicate of it may follow, so the
+/// stale window grows by the duplicate window.
+fn stale_seen(cfg: &ExchangeConfig, stale_until: &mut Option<u64>, clock: u64) {
+    if cfg.duplicate_window_ms > 0 {
+        let d = clock + u64::from(cfg.duplicate_window_ms);
+        *stale_until = Some(match *stale_until {
+            Some(u) if clock < u => u.max(d),
+            _ => d,
+        });
+    }
+}
 
 /// A reply (normal or `&`) ended the command at `clock`: the next command
 /// waits for the turnaround (two ticks at least) and a duplicate window;

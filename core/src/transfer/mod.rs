@@ -1521,21 +1521,26 @@ mod tests {
     /// (fuzz finding F12).
     #[test]
     fn sends_before_a_resume_still_count() {
+        // Sent at 0, timed out, resumed and sent again at 3,005: confirmed.
+        let resumed = |cfg: TransferConfig, count: u16| {
+            let mut t = Transfer::<_>::new(cfg, records(2, 1).into_iter());
+            assert!(matches!(t.poll(0), Step::Transmit(b) if b.starts_with(b"!9926D")));
+            t.sent(0);
+            assert!(matches!(
+                t.poll(3_000),
+                Step::Failed(TransferError::Timeout)
+            ));
+            t.resume(3_000);
+            assert!(matches!(t.poll(3_000), Step::Transmit(b) if b.starts_with(b"!9926D")));
+            t.sent(3_005);
+            t.received_all(&reply_26dh(count), 3_006);
+            t
+        };
         let mut cfg = TransferConfig::tta(ST).with_verify(Verify::Off);
         cfg.max_records = 1;
         cfg.exchange.max_sends = 1;
         cfg.exchange.late_window_ms = 10_000;
-        let mut t = Transfer::<_>::new(cfg, records(2, 1).into_iter());
-        assert!(matches!(t.poll(0), Step::Transmit(b) if b.starts_with(b"!9926D")));
-        t.sent(0);
-        assert!(matches!(
-            t.poll(3_000),
-            Step::Failed(TransferError::Timeout)
-        ));
-        t.resume(3_000);
-        assert!(matches!(t.poll(3_000), Step::Transmit(b) if b.starts_with(b"!9926D")));
-        t.sent(3_005);
-        t.received_all(&reply_26dh(1), 3_006);
+        let mut t = resumed(cfg, 1);
         // Record 2 (count 1 too) waits until the first send's reply can no
         // longer come: 0 + 3,000 + 10,000 at the earliest.
         assert_eq!(t.poll(3_010), Step::WaitUntil(3_012)); // the turnaround
@@ -1547,17 +1552,7 @@ mod tests {
 
         let mut cfg = TransferConfig::tta(ST).with_verify(Verify::AfterFault);
         cfg.exchange.max_sends = 1;
-        let mut t = Transfer::<_>::new(cfg, records(2, 1).into_iter());
-        assert!(matches!(t.poll(0), Step::Transmit(b) if b.starts_with(b"!9926D")));
-        t.sent(0);
-        assert!(matches!(
-            t.poll(3_000),
-            Step::Failed(TransferError::Timeout)
-        ));
-        t.resume(3_000);
-        assert!(matches!(t.poll(3_000), Step::Transmit(b) if b.starts_with(b"!9926D")));
-        t.sent(3_005);
-        t.received_all(&reply_26dh(2), 3_006);
+        let mut t = resumed(cfg, 2);
         // Confirmed after a fault: read back.
         assert!(matches!(t.poll(3_012), Step::Transmit(b) if b.starts_with(b"!9921F")));
     }
