@@ -357,6 +357,9 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
                 Phase::Done(r) => return ClientStep::Done(r),
                 Phase::Running { detail_for } => detail_for,
             };
+            if self.exchange.busy() && !self.exchange.awaiting() && self.exchange.sends() == 0 {
+                self.drop_held_bytes(now);
+            }
             match self.exchange.poll(now) {
                 Due::Idle => self.phase = Phase::Idle,
                 Due::Transmit { fresh } => {
@@ -373,6 +376,23 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
                 }
                 Due::WaitUntil(t) => return ClientStep::WaitUntil(t),
                 Due::Done(f) => self.finished(f, detail_for, now),
+            }
+        }
+    }
+
+    /// Before a first send: bytes the decoder still holds (a frame in
+    /// progress, or those of a failed text frame waiting to be decoded
+    /// again) came before the command, so they cannot be its reply, but a
+    /// late reply to an earlier command may be among them (a 200H's text
+    /// takes in any ten bytes), and a copy of it may follow. They are
+    /// dropped, and the send waits out the duplicate window.
+    fn drop_held_bytes(&mut self, now: u32) {
+        if self.replies.pending() > 0 {
+            self.stats.line_errors += 1;
+            self.replies.reset();
+            let dup = self.cfg.exchange.duplicate_window_ms;
+            if dup > 0 {
+                self.exchange.defer(now.wrapping_add(dup));
             }
         }
     }

@@ -176,6 +176,10 @@ struct H<'a> {
     /// (reset with it at every send), the bytes since that reset, the
     /// deliveries they came from, and where the last frame ended.
     shadow: FrameDecoder<REPLY>,
+    /// The client's `line_errors` after the last bytes it was fed: more at
+    /// the next feed means it dropped the bytes its decoder held (before a
+    /// first send), and the shadow decoder must too.
+    line_errors_seen: u32,
     stream: Vec<u8>,
     fed: Vec<Fed>,
     cursor: usize,
@@ -328,6 +332,15 @@ impl H<'_> {
             self.held.push(d);
             return;
         }
+        if self.client.stats().line_errors > self.line_errors_seen {
+            // Before a first send the client dropped the bytes its decoder
+            // held (they came before the command): so does the shadow.
+            trace!("t={} the client dropped the bytes it held", self.clock);
+            self.shadow.reset();
+            self.stream.clear();
+            self.fed.clear();
+            self.cursor = 0;
+        }
         let now = self.now();
         let mut prior = None;
         if let Some(i) = d.copy_of.or(d.id) {
@@ -346,6 +359,7 @@ impl H<'_> {
         let mut rest = &d.bytes[..];
         loop {
             let r = self.client.received(rest, now);
+            self.line_errors_seen = self.client.stats().line_errors;
             // The plain decoder beside the client's: the same events from
             // the same bytes, and the frame's bytes, which the client keeps
             // to itself.
@@ -783,6 +797,7 @@ fuzz_target!(|data: &[u8]| {
         arrived_at: Vec::new(),
         heard_foreign: Vec::new(),
         shadow: FrameDecoder::with_policy(BypassPolicy::Reject),
+        line_errors_seen: 0,
         stream: Vec::new(),
         fed: Vec::new(),
         cursor: 0,
