@@ -462,6 +462,7 @@ impl Inner {
         let waiting = self.replay_len.saturating_sub(self.replay_pos);
         let extra_len = usize::from(extra.is_some());
         let total = kept + extra_len + waiting;
+        // Never holds (equivalent mutants): the header lies 6+ bytes in, and the frame trails the replay cursor.
         if total > buf.len() || (waiting > 0 && self.replay_pos < self.len) {
             return None;
         }
@@ -502,6 +503,7 @@ impl Inner {
             Some(slot) => {
                 *slot = byte;
                 self.len += 1;
+                // Finding the span again finds the same one: `||` here is an equivalent mutant.
                 if self.text.is_none() && (ENVELOPE_LEN..=TEXT_PROBE_MAX).contains(&self.len) {
                     let head = buf.first().copied().and_then(Header::from_byte);
                     let prefix = buf.get(..self.len).unwrap_or(&[]);
@@ -714,6 +716,79 @@ mod tests {
         assert_eq!(owned.stats(), state.stats());
         state.reset();
         assert_eq!(state.pending(), 0);
+    }
+
+    /// A [`SliceDecoder`] keeps its own `@@` policy, as a
+    /// [`FrameDecoder`] does: `#99232@@` (a 232H reply with `@@` for its
+    /// SC) passes only where responses may carry `@@`.
+    #[test]
+    fn a_slice_decoder_keeps_its_bypass_policy() {
+        let reply: &[u8] = b"#99232@@\r\n";
+        let mut buf = [0u8; 16];
+        let decode = |dec: &mut SliceDecoder, buf: &mut [u8]| {
+            dec.decode(buf, reply)
+                .event
+                .map_frame(|f| f.as_bytes().to_vec())
+        };
+        let mut dec = SliceDecoder::default();
+        assert_eq!(dec.policy(), BypassPolicy::CommandsOnly);
+        assert_eq!(
+            decode(&mut dec, &mut buf),
+            Err(Some(Error::ChecksumBypassRejected))
+        );
+        dec.set_policy(BypassPolicy::Accept);
+        assert_eq!(dec.policy(), BypassPolicy::Accept);
+        assert_eq!(decode(&mut dec, &mut buf), Ok(reply.to_vec()));
+        let mut dec = SliceDecoder::with_policy(BypassPolicy::Accept);
+        assert_eq!(dec.policy(), BypassPolicy::Accept);
+        assert_eq!(decode(&mut dec, &mut buf), Ok(reply.to_vec()));
+        assert_eq!(dec.stats().frames, 1);
+        dec.set_policy(BypassPolicy::Reject);
+        assert_eq!(dec.policy(), BypassPolicy::Reject);
+        assert_eq!(
+            decode(&mut dec, &mut buf),
+            Err(Some(Error::ChecksumBypassRejected))
+        );
+    }
+
+    /// `reset` drops the frame in progress (counted as discarded) and
+    /// frees the buffer: the next frame may be decoded in another one.
+    #[test]
+    fn a_reset_slice_decoder_drops_its_frame_and_frees_the_buffer() {
+        let mut dec = SliceDecoder::new();
+        let mut first = [0u8; 16];
+        assert_eq!(dec.decode(&mut first, b"!992").event, Event::NeedMore);
+        assert_eq!(dec.pending(), 4);
+        dec.reset();
+        assert_eq!(dec.pending(), 0);
+        assert_eq!(dec.stats().discarded_bytes, 4);
+        let mut second = [0u8; 16];
+        let d = dec.decode(&mut second, SERVO_REPLY);
+        assert_eq!(d.consumed, SERVO_REPLY.len());
+        assert_eq!(
+            d.event.map_frame(|f| f.as_bytes().to_vec()),
+            Ok(SERVO_REPLY.to_vec())
+        );
+        assert_eq!(dec.stats().discarded_bytes, 4);
+    }
+
+    /// `{:?}` of a decoder shows its buffer and state: after `!9` of a
+    /// frame, two bytes held and the rest of the buffer still zero.
+    #[test]
+    fn a_frame_decoder_debugs_as_its_buffer_and_state() {
+        let mut dec: FrameDecoder<4> = FrameDecoder::new();
+        assert_eq!(dec.decode(b"!9").event, Event::NeedMore);
+        let shown = std::format!("{dec:?}");
+        assert!(
+            shown.starts_with("FrameDecoder { buf: [33, 57, 0, 0], len: 2, state: InFrame, "),
+            "{shown}"
+        );
+        assert!(
+            shown.ends_with(
+                "replay_pos: 0, replay_len: 0, stats: DecoderStats { frames: 0, errors: 0, discarded_bytes: 0 } }"
+            ),
+            "{shown}"
+        );
     }
 
     impl<'d> Event<'d> {

@@ -63,6 +63,7 @@ const fn hex_value(byte: u8) -> Option<u32> {
 const fn positional(shift: u32) -> [u32; 256] {
     let mut t = [MARK; 256];
     let mut i = 0;
+    // `<=` would add a pass for 256, byte 0 as a `u8`: no digit, no write (an equivalent mutant).
     while i < 256 {
         if let Some(v) = hex_value(i as u8) {
             // Disjoint bit fields, so adding them is or-ing them.
@@ -341,6 +342,7 @@ fn halves(d: &[u8; 8]) -> (u32, u32) {
 /// Cortex-M4).
 #[inline(always)]
 fn join(hi: u32, lo: u32) -> u32 {
+    // Disjoint halves, so `^` would give the same word: an equivalent mutant.
     (hi << 16) | (lo & 0xFFFF)
 }
 
@@ -838,6 +840,42 @@ mod tests {
                 assert_eq!(Some(v), decode2(&[b'A', x]));
             }
         }
+    }
+
+    /// Two bad fields in one record: each group's marker is 0xFF in bits
+    /// 16-23, and the batch must keep both rather than let one cancel the
+    /// other (xor-ing markers would: 0xFF ^ 0xFF is 0).
+    #[test]
+    fn a_batch_keeps_the_marks_of_two_bad_fields() {
+        let mut b = Batch::new();
+        b.decode2(b"G0");
+        b.decode2(b"0G");
+        assert!(!b.is_valid(), "two bad 2-digit fields");
+        let mut b = Batch::new();
+        b.decode4(b"0G00");
+        b.decode4(b"000G");
+        assert!(!b.is_valid(), "two bad 4-digit fields");
+        let mut b = Batch::new();
+        b.decode8(b"G0000000");
+        b.decode8(b"FFFF9C6G");
+        assert!(!b.is_valid(), "two bad 8-digit fields");
+        // One bad digit in each half of one 8-digit field.
+        let mut b = Batch::new();
+        b.decode8(b"0G009C6G");
+        assert!(!b.is_valid(), "a bad digit in each half");
+        // Three digits (the record reader's 3-digit fields) through `Digits`.
+        let mut b = Batch::new();
+        assert_eq!(Digits::decode3(&mut b, b"26D"), 0x26D);
+        assert!(Digits::is_valid(&b));
+        assert_eq!(Digits::sum(&b), u32::from(b'2' + b'6' + b'D'));
+        Digits::decode3(&mut b, b"2G6");
+        assert!(!Digits::is_valid(&b), "one bad 3-digit field");
+        Digits::decode3(&mut b, b"G26");
+        assert!(!Digits::is_valid(&b), "two bad 3-digit fields");
+        assert_eq!(
+            Digits::sum(&b),
+            3 * u32::from(b'2' + b'6') + u32::from(b'D' + 2 * b'G')
+        );
     }
 
     #[test]
