@@ -32,6 +32,14 @@
 //! [`BRIDGE_CODES`] come from a bridge, not the controller: they become
 //! [`CallError::Bridge`] and no detail is asked for.
 //!
+//! Replies to earlier commands (late ones, and copies of any reply within
+//! the duplicate window) never answer a later command: the exchange holds
+//! the next first send until none can come. Bytes the reply decoder still
+//! holds when a command is about to go out (a frame in progress, or a
+//! 200H whose ten text bytes took in another frame) came before it: they
+//! are dropped, and with a duplicate window the send waits it out, since a
+//! late reply may have been among them.
+//!
 //! RAM: a command buffer of `CMD` bytes, a reply buffer of `REPLY` bytes
 //! (defaults: the TTA's 2,051 and 2,048), and a few counters. A client for
 //! small commands and replies can be much smaller: `Client<64, 128>`.
