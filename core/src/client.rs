@@ -243,7 +243,8 @@ pub struct ClientStats {
     pub foreign_frames: u32,
     /// Replies whose body did not fit the response's layout.
     pub malformed_replies: u32,
-    /// Broken frames and noise.
+    /// Broken frames and noise, and bytes held by the reply decoder that
+    /// were dropped before a first send.
     pub line_errors: u32,
 }
 

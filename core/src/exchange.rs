@@ -295,27 +295,10 @@ impl Exchange {
         }
     }
 
-    /// The exchange with its horizon widened to `horizon` ms (at most
-    /// [`MAX_HORIZON_MS`]): for an owner that runs it without some of its
-    /// windows (guarding duplicates itself) but passes it holds that
-    /// include them. A hold further ahead than the horizon reads as set
-    /// long ago, i.e. over.
-    pub const fn with_horizon(mut self, horizon: u32) -> Self {
-        let h = if horizon > MAX_HORIZON_MS {
-            MAX_HORIZON_MS
-        } else {
-            horizon
-        };
-        if h > self.horizon {
-            self.horizon = h;
-        }
-        self
-    }
-
     /// The exchange for an owner that guards against copies of the
-    /// replies it *takes* by itself (a read-back knows which of its
-    /// windows a copy could answer, so it need not wait after every
-    /// reply): a taken reply no longer starts the duplicate window. A
+    /// replies it *takes* by itself (the transfer's count guard, the
+    /// read-back's empty-window rule), so that it need not wait after every
+    /// reply: a taken reply no longer starts the duplicate window. A
     /// stale reply still does, and the horizon still covers it.
     pub const fn owner_guards_reply_copies(mut self) -> Self {
         self.copies_of_taken = false;

@@ -472,18 +472,11 @@ pub struct Transfer<I, const N: usize = { limits::TTA.command }> {
     stats: TransferStats,
 }
 
-/// The transfer's exchange: without the duplicate window, which the
-/// engine's own guard applies (see the module docs), but with the horizon
-/// of the whole configuration, since the engine's holds include it.
+/// The transfer's exchange: copies of the replies it takes are the
+/// engine's own guard's business (see the module docs); a stale reply
+/// still starts the duplicate window, and the horizon covers it.
 const fn engine_exchange(cfg: &ExchangeConfig) -> Exchange {
-    Exchange::new(
-        ExchangeConfig {
-            duplicate_window_ms: 0,
-            ..*cfg
-        },
-        Quarantine::ByContent,
-    )
-    .with_horizon(cfg.horizon())
+    Exchange::new(*cfg, Quarantine::ByContent).owner_guards_reply_copies()
 }
 
 impl<I: RecordSource, const N: usize> Transfer<I, N> {
