@@ -255,6 +255,25 @@ pub fn exit(status: debug::ExitStatus) -> ! {
     }
 }
 
+/// Runs the bridge loop over the board's two lines until the host's quit
+/// sequence, calling `idle` on every pass (feed the watchdog there), then
+/// prints the end-of-run report ([`finish`]). With the `stall` feature the
+/// loop never starts, so that the watchdog must reset the board.
+pub fn serve(
+    bridge: &mut Bridge,
+    up: &mut ThreadEnd<'static>,
+    down: &mut ThreadEnd<'static>,
+    idle: impl FnMut(),
+) -> ! {
+    if cfg!(feature = "stall") {
+        Out::new().str("firmware-example: stalling the loop\n");
+        #[allow(clippy::empty_loop)]
+        loop {}
+    }
+    let result = firmware_example::bridge::run(bridge, up, down, now_ms, sleep_unless, idle);
+    finish(result, up.pauses())
+}
+
 /// The end of a bridge run: print the counters (in `Stats`'s `Debug`
 /// layout) and the stack peak, exit.
 pub fn finish(result: Result<Stats, Error<Infallible, Infallible>>, up_pauses: u32) -> ! {

@@ -27,7 +27,7 @@ use core::ptr::{addr_of_mut, read_volatile, write_volatile};
 
 use cortex_m::peripheral::NVIC;
 use cortex_m_rt::entry;
-use firmware_example::bridge::{self, Bridge};
+use firmware_example::bridge::Bridge;
 use firmware_example::serial::{DownstreamLine, FlowControl, IsrEnd, Line, UpstreamLine};
 use lm3s6965::{interrupt, Interrupt};
 use runtime::Handoff;
@@ -238,27 +238,12 @@ fn main() -> ! {
     }
     start_watchdog();
     runtime::banner(NAME, source, cfg.flow);
-
-    #[cfg(feature = "stall")]
-    {
-        runtime::Out::new().str("firmware-example: stalling the loop\n");
-        #[allow(clippy::empty_loop)]
-        loop {}
-    }
     let rts_cts = cfg.flow == FlowControl::RtsCts;
-    let result = bridge::run(
-        bridge,
-        &mut up,
-        &mut down,
-        runtime::now_ms,
-        runtime::sleep_unless,
-        || {
-            feed_watchdog();
-            if rts_cts {
-                // CTS has no interrupt: look at it every pass.
-                pend_up();
-            }
-        },
-    );
-    runtime::finish(result, up.pauses())
+    runtime::serve(bridge, &mut up, &mut down, || {
+        feed_watchdog();
+        if rts_cts {
+            // CTS has no interrupt: look at it every pass.
+            pend_up();
+        }
+    })
 }

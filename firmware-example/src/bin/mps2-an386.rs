@@ -23,7 +23,7 @@ use core::ptr::addr_of_mut;
 
 use cortex_m::peripheral::NVIC;
 use cortex_m_rt::{entry, exception};
-use firmware_example::bridge::{self, Bridge};
+use firmware_example::bridge::Bridge;
 use firmware_example::serial::{DownstreamLine, FlowControl, IsrEnd, Line, UpstreamLine};
 use mps2_an386::uart::{self, RegisterBlock};
 use mps2_an386::{interrupt, watchdog, Interrupt};
@@ -187,20 +187,5 @@ fn main() -> ! {
     }
     start_watchdog();
     runtime::banner(NAME, source, cfg.flow);
-
-    #[cfg(feature = "stall")]
-    {
-        runtime::Out::new().str("firmware-example: stalling the loop\n");
-        #[allow(clippy::empty_loop)]
-        loop {}
-    }
-    let result = bridge::run(
-        bridge,
-        &mut up,
-        &mut down,
-        runtime::now_ms,
-        runtime::sleep_unless,
-        feed_watchdog,
-    );
-    runtime::finish(result, up.pauses())
+    runtime::serve(bridge, &mut up, &mut down, feed_watchdog)
 }

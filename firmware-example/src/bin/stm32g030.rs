@@ -24,7 +24,7 @@ use core::ptr::addr_of_mut;
 
 use cortex_m::peripheral::NVIC;
 use cortex_m_rt::entry;
-use firmware_example::bridge::{self, Bridge};
+use firmware_example::bridge::Bridge;
 use firmware_example::serial::{DownstreamLine, FlowControl, IsrEnd, Line, UpstreamLine};
 use runtime::Handoff;
 use stm32g0::stm32g030::{interrupt, Interrupt, GPIOA, IWDG, RCC, USART1, USART2};
@@ -216,14 +216,5 @@ fn main() -> ! {
         NVIC::unmask(Interrupt::USART2);
     }
     start_watchdog();
-
-    let result = bridge::run(
-        bridge,
-        &mut up,
-        &mut down,
-        runtime::now_ms,
-        runtime::sleep_unless,
-        feed_watchdog,
-    );
-    runtime::finish(result, up.pauses())
+    runtime::serve(bridge, &mut up, &mut down, feed_watchdog)
 }
