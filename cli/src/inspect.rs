@@ -15,7 +15,8 @@ use iai_protocol_b::checksum::{BypassPolicy, ChecksumField};
 use iai_protocol_b::decoder::{Event, FrameDecoder, DEFAULT_CAPACITY};
 use iai_protocol_b::frame::{Frame, Header};
 use iai_protocol_b::message::{decode_any, AnyMessage};
-use iai_protocol_b::stream::{PositionStream, PositionStreamDecoder, StreamEvent};
+use iai_protocol_b::position::PositionStream;
+use iai_protocol_b::stream::{PositionStreamDecoder, StreamEvent};
 
 use super::fields::{json_object, record_tree, text_lines, tree, Node};
 use super::text::{escape, json_str};
@@ -321,7 +322,7 @@ impl Inspector {
         });
         for b in env {
             st.push_copy(b);
-            if let (_, StreamEvent::Error { .. }) = st.dec.decode(&[b]) {
+            if let StreamEvent::Error { .. } = st.dec.decode(&[b]).event {
                 // An envelope the stream decoder refuses: let the frame
                 // decoder report it.
                 self.env = std::mem::take(&mut st.copy);
@@ -336,7 +337,8 @@ impl Inspector {
         let Some(mut st) = self.stream.take() else {
             return;
         };
-        let (used, ev) = st.dec.decode(&[b]);
+        let r = st.dec.decode(&[b]);
+        let (used, ev) = (r.consumed, r.event);
         if used > 0 {
             st.push_copy(b);
         }

@@ -1,11 +1,16 @@
 //! The line to a controller: a serial port or a TCP connection (a
 //! serial-to-Ethernet adapter, or `iai simulate --tcp`), with reads that
-//! wait at most a given time, and a millisecond clock for the core's
-//! sans-IO engines.
+//! wait at most a given time, a millisecond clock, and the core's [`Line`]:
+//! what one command of this process left in flight on it, the next one
+//! knows. [`Link::turn`] moves bytes and time between one of the core's
+//! engines and the line.
 
 use std::io::{self, Read, Write};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
+
+use iai_protocol_b::engine::{feed, Engine, Step};
+use iai_protocol_b::{Failure, Line, LineConfig};
 
 /// Reads from a TCP stream what arrives within `wait`: `None` when nothing
 /// did, `Some(0)` when the peer closed. A socket read timeout overshoots a
@@ -83,15 +88,27 @@ enum Inner {
 pub struct Link {
     inner: Inner,
     t0: Instant,
+    line: Line,
+    /// Bytes received that the engine of the moment did not take yet (it
+    /// held a reply): they go to the next one.
+    pending: Vec<u8>,
+}
+
+/// A seed for the line's fence texts: different at each start.
+fn seed() -> u32 {
+    let t = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64);
+    (t ^ (t >> 32) ^ u64::from(std::process::id()).rotate_left(16)) as u32
 }
 
 /// Baud rates the controllers offer (TTA p. 7).
 pub const BAUD_RATES: &[u32] = &[9600, 19200, 38400, 57600, 115_200];
 
 impl Link {
-    /// Opens `target`. The error names what the user gave and what was
-    /// expected.
-    pub fn open(target: &Target) -> Result<Link, String> {
+    /// Opens `target`, a line with the settings `cfg`. The error names what
+    /// the user gave and what was expected.
+    pub fn open(target: &Target, cfg: LineConfig) -> Result<Link, String> {
         let inner = match target {
             Target::Serial { path, baud } => {
                 if !BAUD_RATES.contains(baud) {
@@ -127,7 +144,57 @@ impl Link {
         Ok(Link {
             inner,
             t0: Instant::now(),
+            line: Line::new(cfg, seed()),
+            pending: Vec::new(),
         })
+    }
+
+    /// The core's memory of this line.
+    pub fn line(&self) -> &Line {
+        &self.line
+    }
+
+    /// The core's memory of this line, to start a command on it.
+    pub fn line_mut(&mut self) -> &mut Line {
+        &mut self.line
+    }
+
+    /// One turn of `engine` on this line: the bytes held back from the
+    /// last turn first, then what is due (a transmission, or a wait of at
+    /// most `cap` reading what arrives). `Some` with the engine's result
+    /// once it has one.
+    pub fn turn<G: Engine>(
+        &mut self,
+        engine: &mut G,
+        cap: Duration,
+    ) -> io::Result<Option<Result<G::Output, Failure>>> {
+        self.feed_pending(engine);
+        let now = self.now();
+        match engine.poll(&mut self.line, now) {
+            Step::Transmit(bytes) => {
+                write_all(&mut self.inner, bytes)?;
+                let end = self.now();
+                engine.sent(&mut self.line, end);
+            }
+            Step::WaitUntil(until) => {
+                let left = Duration::from_millis(u64::from(until.saturating_sub(now)));
+                let mut buf = [0u8; 4096];
+                let n = self.read_for(&mut buf, left.min(cap))?;
+                self.pending.extend_from_slice(buf.get(..n).unwrap_or(&[]));
+                self.feed_pending(engine);
+            }
+            Step::Idle => std::thread::sleep(Duration::from_millis(1)),
+            Step::Done(r) => return Ok(Some(r)),
+        }
+        Ok(None)
+    }
+
+    fn feed_pending<G: Engine>(&mut self, engine: &mut G) {
+        if !self.pending.is_empty() {
+            let now = self.now();
+            let used = feed(engine, &mut self.line, &self.pending, now);
+            self.pending.drain(..used.min(self.pending.len()));
+        }
     }
 
     /// Milliseconds since the link was opened (the engines' clock).
@@ -171,31 +238,16 @@ impl Link {
 
     /// Sends all of `bytes`.
     pub fn write_all(&mut self, bytes: &[u8]) -> io::Result<()> {
-        match &mut self.inner {
-            Inner::Serial(p) => {
-                p.write_all(bytes)?;
-                p.flush()
-            }
-            Inner::Tcp(s) => s.write_all(bytes),
-        }
+        write_all(&mut self.inner, bytes)
     }
+}
 
-    /// Waits until tick `until` (or at most `cap`), feeding whatever
-    /// arrives to `sink`.
-    pub fn wait_until(
-        &mut self,
-        until: u32,
-        cap: Duration,
-        mut sink: impl FnMut(&[u8], u32),
-    ) -> io::Result<()> {
-        let now = self.now();
-        let left = Duration::from_millis(u64::from(until.saturating_sub(now)));
-        let mut buf = [0u8; 4096];
-        let n = self.read_for(&mut buf, left.min(cap))?;
-        if n > 0 {
-            let now = self.now();
-            sink(buf.get(..n).unwrap_or(&[]), now);
+fn write_all(inner: &mut Inner, bytes: &[u8]) -> io::Result<()> {
+    match inner {
+        Inner::Serial(p) => {
+            p.write_all(bytes)?;
+            p.flush()
         }
-        Ok(())
+        Inner::Tcp(s) => s.write_all(bytes),
     }
 }

@@ -19,11 +19,11 @@ use iai_cli::simulate::{self, ServeOptions, Shared};
 use iai_cli::table::{self, Plan, TableError};
 use iai_cli::text::escape;
 use iai_protocol_b::catalogue;
-use iai_protocol_b::client::CallError;
 use iai_protocol_b::frame::{Header, Station};
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::profile::Profile;
 use iai_protocol_b::transfer::{Guarantee, Verify as CoreVerify};
+use iai_protocol_b::Failure as EngineFailure;
 
 /// IAI protocol B tools: captures, messages, position tables, a simulator.
 #[derive(Parser)]
@@ -177,11 +177,11 @@ struct LineArgs {
     /// Controller kind: buffer sizes and messages.
     #[arg(long, value_enum, default_value = "tta")]
     profile: ProfileArg,
-    /// Table commands: how long after a reply a duplicate of it may still
-    /// come, ms, once the line has shown one (the engines then pace
-    /// themselves by it). Default: the engines' 3000.
-    #[arg(long)]
-    duplicate_window_ms: Option<u32>,
+    /// How long after a reply a copy of it may still come, ms, on a line
+    /// that repeats frames (an echoing converter). A command goes out only
+    /// when no copy could pass for its reply. Default 0: a direct line.
+    #[arg(long, default_value_t = 0)]
+    duplicate_window_ms: u32,
 }
 
 impl LineArgs {
@@ -197,10 +197,19 @@ impl LineArgs {
         }
     }
     fn plan(&self) -> Plan {
-        Plan {
-            duplicate_window_ms: self.duplicate_window_ms,
-            ..Plan::new(self.profile.profile(), Station(self.station))
-        }
+        let mut plan = Plan::new(self.profile.profile(), Station(self.station));
+        plan.line = plan.line.with_duplicate_window(self.duplicate_window_ms);
+        plan
+    }
+    /// What a state file records of the line: a resume elsewhere is
+    /// refused.
+    fn identity(&self) -> String {
+        format!(
+            "{} station {:02X} profile {}",
+            self.target(),
+            self.station,
+            self.profile.profile().name()
+        )
     }
 }
 
@@ -444,7 +453,7 @@ fn print_item(out: &mut impl Write, item: &inspect::Item, json: bool) -> io::Res
 }
 
 fn monitor_cmd(line: &LineArgs, json: bool) -> Run {
-    let mut link = Link::open(&line.target())?;
+    let mut link = Link::open(&line.target(), line.plan().line)?;
     let stop = stop_flag();
     let mut ins = inspect::Inspector::new();
     let mut out = io::stdout().lock();
@@ -495,11 +504,10 @@ fn send_cmd(msg: &MessageArgs, line: &LineArgs, output: OutputArg, detail: bool)
             .map_err(|e| format!("{:03X}H: {e}", f.code()))?;
     }
     let target = line.target();
-    let mut link = Link::open(&target)?;
+    let mut link = Link::open(&target, line.plan().line)?;
     let json = output == OutputArg::Json;
     let mut out = io::stdout().lock();
-    let outcome = request(&mut link, Station(line.station), &frame, detail)
-        .map_err(|e| format!("{target}: {e}"))?;
+    let outcome = request(&mut link, &frame, detail).map_err(|e| format!("{target}: {e}"))?;
     let e = match outcome {
         Outcome::Reply(reply) => {
             show_frame(&mut out, &reply, json).map_err(out_err)?;
@@ -516,11 +524,11 @@ fn send_cmd(msg: &MessageArgs, line: &LineArgs, output: OutputArg, detail: bool)
         Outcome::Failed(e) => e,
     };
     Err(match e {
-        CallError::Controller {
+        EngineFailure::Controller {
             code,
             detail: fetched,
         } => {
-            let mut m = format!("the controller answered with error code {code:03X}");
+            let mut m = iai_cli::codes::answered_with(code);
             if let Some(d) = fetched {
                 m.push_str(&format!(
                     "; 216H latest system error {:03X}{}: details {} {} {} {} {:?}",
@@ -541,17 +549,14 @@ fn send_cmd(msg: &MessageArgs, line: &LineArgs, output: OutputArg, detail: bool)
             }
             m
         }
-        CallError::Bridge { code } => {
-            format!("a bridge on the line answered with its error code {code:03X}")
-        }
-        CallError::Timeout { sends } => {
+        EngineFailure::Timeout { sends } => {
             format!("no valid reply from {target} after {sends} send(s), 3 s each")
         }
-        CallError::OutcomeUnknown { sends } => format!(
+        EngineFailure::OutcomeUnknown { sends } => format!(
             "no valid reply from {target} after {sends} send(s); not sent again, since a second send could repeat the operation: check the controller's state (212H)"
         ),
-        CallError::Protocol(e) => format!("the reply does not decode: {e}"),
-        CallError::Io(never) => match never {},
+        EngineFailure::Protocol(e) => format!("the reply does not decode: {e}"),
+        e => format!("{e}"),
     }
     .into())
 }
@@ -565,6 +570,10 @@ struct ResumeState {
     records: u32,
     /// Records confirmed by the controller, in file order.
     confirmed: u32,
+    /// The line they were written over: port or address, station,
+    /// profile.
+    #[serde(default)]
+    line: String,
 }
 
 fn fnv(bytes: &[u8]) -> String {
@@ -605,11 +614,15 @@ fn progress_bar(total: u64, what: &str) -> indicatif::ProgressBar {
     bar
 }
 
+/// Exit status of a write that completed but leaves records confirmed by
+/// an earlier run (`--resume`) unread on this controller.
+const EXIT_RESUMED_UNVERIFIED: u8 = 3;
+
 fn table_write(file: &Path, line: &LineArgs, verify: Verify, resume: bool) -> Run {
     let plan = line.plan();
     let bytes =
         std::fs::read(file).map_err(|e| format!("{}: cannot read it: {e}", file.display()))?;
-    let records = csvtable::read(bytes.as_slice(), plan.write.layout).map_err(|errs| {
+    let records = csvtable::read(bytes.as_slice(), plan.write_stream().layout).map_err(|errs| {
         let mut m = format!(
             "{}: {} error(s); nothing was sent:",
             file.display(),
@@ -623,6 +636,7 @@ fn table_write(file: &Path, line: &LineArgs, verify: Verify, resume: bool) -> Ru
     let total = u32::try_from(records.len()).map_err(|_| "too many records".to_string())?;
     let state_file = state_path(file);
     let hash = fnv(&bytes);
+    let identity = line.identity();
     let mut skip = 0u32;
     if resume {
         let text = std::fs::read_to_string(&state_file).map_err(|e| {
@@ -640,40 +654,76 @@ fn table_write(file: &Path, line: &LineArgs, verify: Verify, resume: bool) -> Ru
             )
             .into());
         }
+        if st.line != identity {
+            return Err(format!(
+                "--resume: the interrupted write went to {}, not to {identity}; its records are not on this line's controller: run without --resume",
+                if st.line.is_empty() { "an unrecorded line" } else { &st.line }
+            )
+            .into());
+        }
         skip = st.confirmed.min(total);
         eprintln!("resuming after record {skip} of {total}");
     }
     let target = line.target();
-    let mut link = Link::open(&target)?;
+    let mut link = Link::open(&target, plan.line)?;
     let stop = stop_flag();
     let stopped = || stop.load(Ordering::SeqCst);
-    let bar = progress_bar(u64::from(total), "writing");
-    bar.set_position(u64::from(skip));
-    let t0 = std::time::Instant::now();
-    let mut last_save = std::time::Instant::now();
+    let hooks = table::Hooks {
+        note: &|m: &str| eprintln!("{m}"),
+        stop: &stopped,
+    };
     let policy = match verify {
         Verify::Off => CoreVerify::Off,
         Verify::AfterFault => CoreVerify::AfterFault,
         Verify::Full => CoreVerify::Full,
     };
-    let (result, confirmed) = table::write(
+    let prefix = records.get(..skip as usize).unwrap_or(&[]);
+    // Full verification covers the records confirmed before the resume too:
+    // read them back here, and write again those this controller lacks.
+    let redo = if skip > 0 && policy == CoreVerify::Full {
+        eprintln!("reading back the {skip} records confirmed before the resume");
+        let redo = table::not_held(&mut link, &plan, prefix, &hooks)
+            .map_err(|e| format!("{target}: {e}; nothing was written"))?;
+        if !redo.is_empty() {
+            eprintln!(
+                "{} of them are not held as the file says (first: position {}); writing them again",
+                redo.len(),
+                redo[0].number
+            );
+        }
+        redo
+    } else {
+        Vec::new()
+    };
+    let redo_len = u32::try_from(redo.len()).unwrap_or(u32::MAX);
+    let bar = progress_bar(u64::from(total), "writing");
+    bar.set_position(u64::from(skip));
+    let t0 = std::time::Instant::now();
+    let mut last_save = std::time::Instant::now();
+    let save = |n: u32| {
+        save_state(
+            &state_file,
+            &ResumeState {
+                csv_hash: hash.clone(),
+                records: total,
+                confirmed: skip + n.saturating_sub(redo_len),
+                line: identity.clone(),
+            },
+        )
+    };
+    let (result, s) = table::write(
         &mut link,
         &plan,
         policy,
-        records.iter().skip(skip as usize).cloned(),
-        total - skip,
+        redo.iter()
+            .cloned()
+            .chain(records.iter().skip(skip as usize).cloned()),
+        redo_len + (total - skip),
         |n| {
-            bar.set_position(u64::from(skip + n));
+            bar.set_position(u64::from(skip + n.saturating_sub(redo_len)));
             if last_save.elapsed() > std::time::Duration::from_millis(500) {
                 last_save = std::time::Instant::now();
-                save_state(
-                    &state_file,
-                    &ResumeState {
-                        csv_hash: hash.clone(),
-                        records: total,
-                        confirmed: skip + n,
-                    },
-                );
+                save(n);
             }
         },
         &table::Hooks {
@@ -681,21 +731,14 @@ fn table_write(file: &Path, line: &LineArgs, verify: Verify, resume: bool) -> Ru
             stop: &stopped,
         },
     );
-    let report = match result {
-        Ok(r) => r,
+    let guarantee = match result {
+        Ok(g) => g,
         Err(e) => {
             bar.abandon();
-            save_state(
-                &state_file,
-                &ResumeState {
-                    csv_hash: hash.clone(),
-                    records: total,
-                    confirmed: skip + confirmed,
-                },
-            );
+            save(s.records_confirmed);
+            let confirmed = skip + s.records_confirmed.saturating_sub(redo_len);
             return Err(format!(
-                "{target}: {e}; {} of {total} records confirmed{}; run again with --resume to continue (state in {})",
-                skip + confirmed,
+                "{target}: {e}; {confirmed} of {total} records confirmed{}; run again with --resume to continue (state in {})",
                 if verify == Verify::Off { "" } else { " and verified" },
                 state_file.display()
             )
@@ -704,9 +747,9 @@ fn table_write(file: &Path, line: &LineArgs, verify: Verify, resume: bool) -> Ru
     };
     bar.finish_and_clear();
     let _ = std::fs::remove_file(&state_file);
-    let s = report.stats;
+    let l = link.line().stats();
     eprintln!(
-        "{total} records in {} frames, {:.1} s: {} bytes written, {} read-back queries ({} bytes), {} resends, {} timeouts, {} error replies, {} line errors, {} stale replies, {} rewrites",
+        "{total} records in {} frames, {:.1} s: {} bytes written, {} read-back queries ({} bytes), {} resends, {} timeouts, {} error replies, {} line errors, {} stale replies, {} fences, {} rewrites",
         s.frames_confirmed,
         t0.elapsed().as_secs_f64(),
         s.bytes_sent,
@@ -717,17 +760,28 @@ fn table_write(file: &Path, line: &LineArgs, verify: Verify, resume: bool) -> Ru
         s.error_replies,
         s.line_errors,
         s.stale_replies,
+        l.fences,
         s.rewrites
     );
-    let resumed = if skip > 0 {
-        format!(" (records 1 to {skip} were written before the resume, as the state file says)")
-    } else {
-        String::new()
+    let unread_prefix = skip > 0 && policy != CoreVerify::Full;
+    let resumed = match (skip, unread_prefix) {
+        (0, _) => String::new(),
+        (_, false) => format!(
+            " (the {skip} records confirmed before the resume were read back on this controller{})",
+            if redo_len > 0 {
+                format!("; {redo_len} of them were written again")
+            } else {
+                String::new()
+            }
+        ),
+        (_, true) => format!(
+            "; records 1 to {skip} of the file were confirmed by an earlier run and NOT read back on this controller (run with --verify full to check them)"
+        ),
     };
-    match report.guarantee {
+    let written = if unread_prefix { total - skip } else { total };
+    match guarantee {
         Guarantee::Verified => println!(
-            "verified: the controller holds all {} records written now (read back and compared){resumed}",
-            total - skip
+            "verified: the controller holds all {written} records written now (read back and compared){resumed}"
         ),
         Guarantee::FaultsVerified => println!(
             "UNVERIFIED in part: every frame was confirmed; the {} frame(s) confirmed after a fault were read back and compared, the others were not (--verify after-fault){resumed}",
@@ -736,6 +790,9 @@ fn table_write(file: &Path, line: &LineArgs, verify: Verify, resume: bool) -> Ru
         Guarantee::Unverified => println!(
             "UNVERIFIED: every frame was confirmed, but the table was not read back (--verify off){resumed}"
         ),
+    }
+    if unread_prefix {
+        return Ok(ExitCode::from(EXIT_RESUMED_UNVERIFIED));
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -753,7 +810,7 @@ fn table_read(
     })?;
     let plan = line.plan();
     let target = line.target();
-    let mut link = Link::open(&target)?;
+    let mut link = Link::open(&target, plan.line)?;
     let stop = stop_flag();
     let stopped = || stop.load(Ordering::SeqCst);
     let mut by_number = std::collections::BTreeMap::new();

@@ -73,8 +73,8 @@ use iai_protocol_b::message::{
     SystemStatusResponse,
 };
 use iai_protocol_b::position::PositionRecord;
+use iai_protocol_b::position::PositionStream;
 use iai_protocol_b::profile::Profile;
-use iai_protocol_b::stream::PositionStream;
 
 /// Error code the simulator sends when it injects an error response.
 pub const INJECTED_ERROR_CODE: u16 = 0x0E1;
@@ -463,6 +463,13 @@ impl Controller {
             return Some(self.query_positions(kind, f));
         }
         match f.code() {
+            0x200 => {
+                let q = iai_protocol_b::message::TestCall::parse(f).ok()?;
+                let r = iai_protocol_b::message::TestCallResponse {
+                    test_string: q.test_string,
+                };
+                Some(self.emit(&r))
+            }
             0x212 => {
                 let q = AxisStatusQuery::parse(f).ok()?;
                 let mut axes = PerAxis::new();

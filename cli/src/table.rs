@@ -2,19 +2,21 @@
 //! engines driven over a [`Link`] in real time.
 //!
 //! Writing: the transfer engine packs the records into controller-sized
-//! commands, confirms each (timeouts, resends and the guards against late
-//! and duplicated replies are the engine's), and reads them back as its
-//! verification policy asks, rewriting a frame that reads back different.
-//! Its report says what the controller is known to hold.
+//! commands, confirms each, and reads them back as its verification policy
+//! asks, rewriting a frame that reads back different; what may still
+//! arrive on the line (late replies, copies) is the link's line's to
+//! settle. Its guarantee says what the controller is known to hold.
 
+use std::collections::BTreeMap;
 use std::time::Duration;
 
-use iai_protocol_b::frame::Station;
+use iai_protocol_b::engine::Engine;
 use iai_protocol_b::position::{PositionRecord, PositionStream};
 use iai_protocol_b::profile::Profile;
-use iai_protocol_b::readback::{ReadBack, ReadBackConfig, ReadStep};
-use iai_protocol_b::transfer::{
-    Step, Transfer, TransferConfig, TransferError, TransferReport, Verify,
+use iai_protocol_b::readback::ReadBackStats;
+use iai_protocol_b::transfer::{Guarantee, TransferStats};
+use iai_protocol_b::{
+    Failure, LineConfig, ReadBack, ReadBackConfig, Station, Transfer, TransferConfig, Verify,
 };
 
 use crate::link::Link;
@@ -22,63 +24,32 @@ use crate::link::Link;
 /// Longest wait for one read, so that an interruption is seen promptly.
 const POLL_CAP: Duration = Duration::from_millis(200);
 
-/// The messages and limits used for a controller profile.
+/// The controller's kind and the line's settings.
 #[derive(Debug, Clone, Copy)]
 pub struct Plan {
-    /// The profile.
+    /// The profile: buffer sizes, the table write (26DH on a TTA, 245H on a
+    /// 2003 X-SEL) and its read-back query (21FH, 209H).
     pub profile: Profile,
-    /// Station addressed.
-    pub station: Station,
-    /// The write message (26DH on a TTA, 245H on a 2003 X-SEL).
-    pub write: PositionStream,
-    /// The query response layout (21FH on a TTA, 209H on a 2003 X-SEL).
-    pub read: PositionStream,
-    /// How long a reply may still come twice (the engines' guard against
-    /// duplicated replies); `None` keeps the engines' default (3 s).
-    pub duplicate_window_ms: Option<u32>,
+    /// Station, timeouts, duplicate window.
+    pub line: LineConfig,
 }
 
 impl Plan {
-    /// The messages a profile supports: the 4-digit ones where it has them.
+    /// The spec's line settings for `station` on a controller of `profile`.
     pub fn new(profile: Profile, station: Station) -> Self {
-        let (write, read) = if profile.supports(PositionStream::CHANGE_2.id) {
-            (PositionStream::CHANGE_2, PositionStream::QUERY_2_RESPONSE)
-        } else {
-            (PositionStream::CHANGE, PositionStream::QUERY_RESPONSE)
-        };
         Plan {
             profile,
-            station,
-            write,
-            read,
-            duplicate_window_ms: None,
+            line: LineConfig::new(station),
         }
     }
 
-    fn transfer_config(&self, verify: Verify) -> TransferConfig {
-        let mut cfg = TransferConfig {
-            stream: self.write,
-            max_frame: self.profile.max_command_frame(),
-            max_response: self.profile.max_response_frame(),
-            ..TransferConfig::tta(self.station)
-        }
-        .with_verify(verify);
-        if let Some(ms) = self.duplicate_window_ms {
-            cfg.exchange.duplicate_window_ms = ms;
-        }
-        cfg
+    /// The write message.
+    pub fn write_stream(&self) -> PositionStream {
+        self.profile.table_write()
     }
 
     fn read_config(&self, first: u16, last: u16) -> ReadBackConfig {
-        let mut cfg = ReadBackConfig {
-            stream: self.read,
-            max_response: self.profile.max_response_frame(),
-            ..ReadBackConfig::tta(self.station, first, last)
-        };
-        if let Some(ms) = self.duplicate_window_ms {
-            cfg.exchange.duplicate_window_ms = ms;
-        }
-        cfg
+        ReadBackConfig::new(self.profile, first, last)
     }
 }
 
@@ -86,7 +57,7 @@ impl Plan {
 #[derive(Debug)]
 pub enum TableError {
     /// The engine gave up (after its retries).
-    Engine(TransferError),
+    Engine(Failure),
     /// The line failed.
     Io(std::io::Error),
     /// The user interrupted.
@@ -96,27 +67,23 @@ pub enum TableError {
 impl std::fmt::Display for TableError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            TableError::Engine(TransferError::Timeout) => {
-                write!(f, "the controller did not answer (3 sends, 3 s each)")
+            TableError::Engine(Failure::Timeout { sends }) => {
+                write!(f, "the controller did not answer ({sends} sends, 3 s each)")
             }
-            TableError::Engine(TransferError::Controller { code }) => {
-                write!(f, "the controller answered with error code {code:03X}")
+            TableError::Engine(Failure::Controller { code, .. }) => {
+                write!(f, "{}", crate::codes::answered_with(*code))
             }
-            TableError::Engine(TransferError::Bridge { code }) => {
-                write!(f, "a bridge on the line answered with its error code {code:03X}")
-            }
-            TableError::Engine(TransferError::Mismatch {
+            TableError::Engine(Failure::Mismatch {
                 first_position,
                 records,
             }) => write!(
                 f,
                 "the controller does NOT hold the table: {records} record(s) of a frame still read back different after rewriting it (first: position {first_position})"
             ),
-            TableError::Engine(TransferError::InvalidRecord { index, error }) => {
+            TableError::Engine(Failure::InvalidRecord { index, error }) => {
                 write!(f, "record {} cannot be encoded: {error}", index + 1)
             }
-            TableError::Engine(TransferError::Config(e)) => write!(f, "{e}"),
-            TableError::Engine(TransferError::Io(never)) => match *never {},
+            TableError::Engine(e) => write!(f, "{e}"),
             TableError::Io(e) => write!(f, "the line failed: {e}"),
             TableError::Interrupted => write!(f, "interrupted"),
         }
@@ -140,13 +107,55 @@ pub struct Hooks<'a> {
 /// leaving the decision to its caller).
 pub const ERROR_RESENDS: u32 = 3;
 
+/// What `run` does to an engine after an error response: resume it.
+type Resume<'r, G> = &'r mut dyn FnMut(&mut G, &mut Link);
+
+/// Runs `engine` on `link` to its result; `between` runs before each turn
+/// (progress) and says whether the engine moved on. An error response is
+/// answered by `resume` up to [`ERROR_RESENDS`] times in a row (moving on
+/// resets the count).
+fn run<G: Engine>(
+    link: &mut Link,
+    engine: &mut G,
+    hooks: &Hooks<'_>,
+    mut between: impl FnMut(&mut G) -> bool,
+    mut resume: Option<Resume<'_, G>>,
+) -> Result<G::Output, TableError> {
+    let mut refusals = 0;
+    loop {
+        if between(engine) {
+            refusals = 0;
+        }
+        if (hooks.stop)() {
+            return Err(TableError::Interrupted);
+        }
+        match link.turn(engine, POLL_CAP).map_err(TableError::Io)? {
+            None => {}
+            Some(Ok(out)) => return Ok(out),
+            Some(Err(Failure::Controller { code, .. })) if refusals < ERROR_RESENDS => {
+                let Some(resume) = resume.as_mut() else {
+                    return Err(TableError::Engine(Failure::Controller {
+                        code,
+                        detail: None,
+                    }));
+                };
+                refusals += 1;
+                (hooks.note)(&format!(
+                    "{}; sending again ({refusals} of {ERROR_RESENDS})",
+                    crate::codes::answered_with(code)
+                ));
+                resume(engine, link);
+            }
+            Some(Err(e)) => return Err(TableError::Engine(e)),
+        }
+    }
+}
+
 /// Writes `records` (in order) over `link`, verified as `verify` asks.
-/// An error response stops the engine; up to [`ERROR_RESENDS`] of them in
-/// a row are answered by resuming (the frame, or its read-back, is sent
-/// again), and `note` is told.
 /// `progress` is called with the number of records confirmed (and
-/// verified as the policy asks) so far; `stop` is polled for an
-/// interruption. The second member is that number when it ended.
+/// verified as the policy asks) so far. Returns the guarantee and the
+/// counters (also after a failure: `records_confirmed` says how far it
+/// went).
 pub fn write(
     link: &mut Link,
     plan: &Plan,
@@ -155,57 +164,33 @@ pub fn write(
     total: u32,
     mut progress: impl FnMut(u32),
     hooks: &Hooks<'_>,
-) -> (Result<TransferReport, TableError>, u32) {
-    let Hooks { note, stop } = *hooks;
-    let mut refusals = 0;
-    let mut t: Transfer<_, FRAME> =
-        Transfer::new(plan.transfer_config(verify), records).with_total(total);
-    let mut buf = [0u8; 4096];
+) -> (Result<Guarantee, TableError>, TransferStats) {
+    let cfg = TransferConfig::new(plan.profile).with_verify(verify);
+    let mut t: Transfer<_, FRAME> = Transfer::new(cfg, records).with_total(total);
     let mut last = u32::MAX;
-    loop {
-        let now = link.now();
-        let done = t.stats().records_confirmed;
-        if done != last {
-            progress(done);
-            last = done;
-            refusals = 0;
-        }
-        if stop() {
-            return (Err(TableError::Interrupted), done);
-        }
-        match t.poll(now) {
-            Step::Transmit(bytes) => {
-                if let Err(e) = link.write_all(bytes) {
-                    return (Err(TableError::Io(e)), done);
-                }
-                t.sent(link.now());
+    let result = run(
+        link,
+        &mut t,
+        hooks,
+        |t| {
+            let done = t.stats().records_confirmed;
+            let moved = done != last;
+            if moved {
+                progress(done);
+                last = done;
             }
-            Step::WaitUntil(until) => {
-                let left = Duration::from_millis(u64::from(until.saturating_sub(now)));
-                match link.read_for(&mut buf, left.min(POLL_CAP)) {
-                    Ok(0) => {}
-                    Ok(n) => t.received_all(buf.get(..n).unwrap_or(&[]), link.now()),
-                    Err(e) => return (Err(TableError::Io(e)), done),
-                }
-            }
-            // The source is a finished iterator: it never waits.
-            Step::NeedRecords => std::thread::sleep(Duration::from_millis(1)),
-            Step::Complete(report) => return (Ok(report), report.stats.records_confirmed),
-            Step::Failed(TransferError::Controller { code }) if refusals < ERROR_RESENDS => {
-                refusals += 1;
-                note(&format!(
-                    "the controller answered with error code {code:03X}; sending again ({refusals} of {ERROR_RESENDS})"
-                ));
-                t.resume(link.now());
-            }
-            Step::Failed(e) => return (Err(TableError::Engine(e)), done),
-        }
-    }
+            moved
+        },
+        Some(&mut |t: &mut Transfer<_, FRAME>, link: &mut Link| {
+            let now = link.now();
+            t.resume(link.line_mut(), now);
+        }),
+    );
+    (result, t.stats())
 }
 
 /// Reads positions `first..=last` over `link`, calling `each` for every
-/// defined record (a window the engine reads again delivers its records
-/// late: key them by number). Error responses are answered as in
+/// defined record, in order. Error responses are answered as in
 /// [`write()`].
 pub fn read(
     link: &mut Link,
@@ -214,57 +199,68 @@ pub fn read(
     last: u16,
     mut each: impl FnMut(PositionRecord),
     hooks: &Hooks<'_>,
-) -> Result<(), TableError> {
-    let Hooks { note, stop } = *hooks;
+) -> Result<ReadBackStats, TableError> {
     let mut rb: ReadBack<FRAME> = ReadBack::new(plan.read_config(first, last));
     let mut refusals = 0;
-    let mut pending: Vec<u8> = Vec::new();
-    let mut buf = [0u8; 4096];
     loop {
-        if stop() {
-            return Err(TableError::Interrupted);
-        }
-        let now = link.now();
-        if !pending.is_empty() {
-            let used = rb.received_all(&pending, now);
-            pending.drain(..used.min(pending.len()));
-        }
-        match rb.poll(now) {
-            ReadStep::Transmit(q) => {
-                link.write_all(q).map_err(TableError::Io)?;
-                rb.sent(link.now());
-            }
-            ReadStep::WaitUntil(until) => {
-                if pending.is_empty() {
-                    let left = Duration::from_millis(u64::from(until.saturating_sub(now)));
-                    let n = link
-                        .read_for(&mut buf, left.min(POLL_CAP))
-                        .map_err(TableError::Io)?;
-                    pending.extend_from_slice(buf.get(..n).unwrap_or(&[]));
-                } else {
-                    // Bytes the engine did not take yet: offer them again
-                    // after the next poll.
-                    let used = rb.received_all(&pending, link.now());
-                    if used == 0 {
-                        pending.clear();
-                    } else {
-                        pending.drain(..used.min(pending.len()));
-                    }
-                }
-            }
-            ReadStep::Records(recs) => {
-                refusals = 0;
+        let mut delivered = false;
+        let result = {
+            let mut engine = rb.delivering(|recs| {
+                delivered = true;
                 recs.for_each(&mut each);
-            }
-            ReadStep::Complete(_) => return Ok(()),
-            ReadStep::Failed(TransferError::Controller { code }) if refusals < ERROR_RESENDS => {
+            });
+            run(link, &mut engine, hooks, |_| false, None)
+        };
+        if delivered {
+            refusals = 0;
+        }
+        match result {
+            Err(TableError::Engine(Failure::Controller { code, .. }))
+                if refusals < ERROR_RESENDS =>
+            {
                 refusals += 1;
-                note(&format!(
-                    "the controller answered with error code {code:03X}; asking again ({refusals} of {ERROR_RESENDS})"
+                (hooks.note)(&format!(
+                    "{}; asking again ({refusals} of {ERROR_RESENDS})",
+                    crate::codes::answered_with(code)
                 ));
-                rb.resume(link.now());
+                rb.resume();
             }
-            ReadStep::Failed(e) => return Err(TableError::Engine(e)),
+            r => return r,
         }
     }
+}
+
+/// Reads back the positions of `records` (records a state file says were
+/// confirmed earlier) and returns those the controller does not hold as
+/// they are: missing, or different.
+pub fn not_held(
+    link: &mut Link,
+    plan: &Plan,
+    records: &[PositionRecord],
+    hooks: &Hooks<'_>,
+) -> Result<Vec<PositionRecord>, TableError> {
+    let (Some(first), Some(last)) = (
+        records.iter().map(|r| r.number).min(),
+        records.iter().map(|r| r.number).max(),
+    ) else {
+        return Ok(Vec::new());
+    };
+    // The last copy of a position in the file is what it holds.
+    let want: BTreeMap<u16, &PositionRecord> = records.iter().map(|r| (r.number, r)).collect();
+    let mut held = BTreeMap::new();
+    read(
+        link,
+        plan,
+        first,
+        last,
+        |r| {
+            held.insert(r.number, r);
+        },
+        hooks,
+    )?;
+    Ok(want
+        .into_values()
+        .filter(|r| held.get(&r.number) != Some(*r))
+        .cloned()
+        .collect())
 }

@@ -10,7 +10,8 @@ use common::{fixture_file, fixtures, iai, iai_stdin, record, stdout, temp, Sim};
 use std::io::Write;
 
 use iai_protocol_b::frame::Station;
-use iai_protocol_b::stream::{PositionStream, PositionStreamEncoder};
+use iai_protocol_b::position::PositionStream;
+use iai_protocol_b::stream::PositionStreamEncoder;
 
 /// The value of `"key":` in a JSON line (strings without quotes).
 fn get<'a>(line: &'a str, key: &str) -> Option<&'a str> {

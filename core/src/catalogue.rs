@@ -396,7 +396,7 @@ catalogue! {
 ///
 /// ```
 /// use iai_protocol_b::catalogue::text_span;
-/// use iai_protocol_b::header::Header;
+/// use iai_protocol_b::frame::Header;
 /// assert_eq!(text_span(Header::Command, b"!99200"), Some((6, 16)));
 /// assert_eq!(text_span(Header::Command, b"!99216"), None);
 /// ```

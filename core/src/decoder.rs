@@ -47,9 +47,12 @@
 
 use crate::checksum::BypassPolicy;
 use crate::error::Error;
-use crate::field::{decode_unsigned, move_within, FieldSpec};
+use crate::field::move_within;
 use crate::frame::{self, Envelope, Frame, Header, Station, ENVELOPE_LEN};
 use crate::limits;
+
+mod skip;
+pub use skip::{FrameSkipper, Skipped};
 
 /// Default capacity: the largest frame a controller sends or receives
 /// ([`limits::LARGEST_FRAME`], the TTA's 2,051-byte receive buffer).
@@ -66,14 +69,16 @@ pub enum Event<'d> {
     Error(Error),
 }
 
-/// The result of [`FrameDecoder::decode`]: how much input was used and
-/// what happened.
+/// The answer of a push decoder (and of an engine's `received`) to a slice
+/// of input: how many bytes it used, and what they completed. Feed the rest
+/// in the next call.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Decoded<'d> {
-    /// Bytes of the input consumed; feed the rest in the next call.
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Received<E> {
+    /// Bytes of the input consumed.
     pub consumed: usize,
-    /// The event that stopped decoding.
-    pub event: Event<'d>,
+    /// What they completed.
+    pub event: E,
 }
 
 /// Counters of what the decoder has seen.
@@ -251,9 +256,9 @@ impl<const N: usize> FrameDecoder<N> {
     /// the input is used up. Call again with the rest of the input until
     /// it answers [`Event::NeedMore`] (bytes being decoded again after a
     /// failed text frame come out before new input, with `consumed` 0).
-    pub fn decode(&mut self, input: &[u8]) -> Decoded<'_> {
+    pub fn decode(&mut self, input: &[u8]) -> Received<Event<'_>> {
         let (consumed, outcome) = self.inner.decode(&mut self.buf, input);
-        Decoded {
+        Received {
             consumed,
             event: self.event(outcome),
         }
@@ -262,95 +267,24 @@ impl<const N: usize> FrameDecoder<N> {
     fn event(&self, outcome: Step) -> Event<'_> {
         self.inner.event(&self.buf, outcome)
     }
-}
 
-/// A push decoder of frames in a buffer it borrows at each call: the
-/// state of a [`FrameDecoder`] without its buffer, so that a program can
-/// decode in an area that serves something else between frames (a bridge
-/// decodes single commands and replies in the frame buffer of its 26DH
-/// transfer).
-///
-/// Pass the same buffer to every call until [`SliceDecoder::reset`]: the
-/// frame in progress lives in it. Its length is the capacity (the largest
-/// frame accepted). Another buffer, or one written in between, gives
-/// wrong frames or errors but never a panic. After `reset` any buffer
-/// may be used. Behaves as a [`FrameDecoder`] of the buffer's length in
-/// every other respect.
-#[derive(Debug, Clone)]
-pub struct SliceDecoder {
-    inner: Inner,
-}
-
-impl Default for SliceDecoder {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl SliceDecoder {
-    /// A decoder with the default `@@` policy ([`BypassPolicy::CommandsOnly`]).
-    pub const fn new() -> Self {
-        Self::with_policy(BypassPolicy::CommandsOnly)
-    }
-
-    /// A decoder with the given `@@` policy.
-    pub const fn with_policy(policy: BypassPolicy) -> Self {
-        SliceDecoder {
-            inner: FrameDecoder::<0>::with_policy(policy).inner,
-        }
-    }
-
-    /// The `@@` policy in force.
-    pub fn policy(&self) -> BypassPolicy {
-        self.inner.policy
-    }
-
-    /// Changes the `@@` policy.
-    pub fn set_policy(&mut self, policy: BypassPolicy) {
-        self.inner.policy = policy;
-    }
-
-    /// Counters since creation.
-    pub fn stats(&self) -> DecoderStats {
-        self.inner.stats
-    }
-
-    /// Bytes held in the buffer: the frame in progress and bytes waiting to
-    /// be decoded again after a failed text frame.
-    pub fn pending(&self) -> usize {
-        self.inner.pending()
-    }
-
-    /// The frame returned by the last call, until the next byte is pushed
-    /// (`buf`: the buffer of that call).
-    pub fn last_frame<'b>(&self, buf: &'b [u8]) -> Option<Frame<'b>> {
-        self.inner.last_frame(buf)
-    }
-
-    /// As [`FrameDecoder::failed_envelope`].
-    pub fn failed_envelope(&self) -> Option<(Header, Station, u16)> {
-        self.inner.failed
-    }
-
-    /// Drops any partial frame and bytes waiting to be decoded again
-    /// (counted as discarded) and starts hunting; the buffer is free.
-    pub fn reset(&mut self) {
+    /// The buffer, for an owner that lends it out between frames (a
+    /// transfer's frame buffer is its decoder's while no transfer runs).
+    /// It resets the decoder: the frame in progress is dropped.
+    pub(crate) fn take_buffer(&mut self) -> &mut [u8; N] {
         self.inner.reset();
+        &mut self.buf
     }
 
-    /// As [`FrameDecoder::push`], in `buf`.
-    pub fn push<'b>(&mut self, buf: &'b mut [u8], byte: u8) -> Event<'b> {
-        let outcome = self.inner.push(buf, byte);
-        self.inner.event(buf, outcome)
+    /// The buffer as it is, for the owner that took it with
+    /// [`FrameDecoder::take_buffer`] and has not decoded since.
+    pub(crate) fn buffer(&mut self) -> &mut [u8; N] {
+        &mut self.buf
     }
 
-    /// As [`FrameDecoder::decode`], in `buf`.
-    pub fn decode<'b>(&mut self, buf: &'b mut [u8], input: &[u8]) -> Decoded<'b> {
-        let (consumed, outcome) = self.inner.decode(buf, input);
-        Decoded {
-            consumed,
-            event: self.inner.event(buf, outcome),
-        }
+    /// [`FrameDecoder::buffer`], to read.
+    pub(crate) fn buffer_ref(&self) -> &[u8; N] {
+        &self.buf
     }
 }
 
@@ -507,7 +441,7 @@ impl Inner {
                 if self.text.is_none() && (ENVELOPE_LEN..=TEXT_PROBE_MAX).contains(&self.len) {
                     let head = buf.first().copied().and_then(Header::from_byte);
                     let prefix = buf.get(..self.len).unwrap_or(&[]);
-                    self.text = head.and_then(|h| frame::text_span(h, prefix));
+                    self.text = head.and_then(|h| crate::catalogue::text_span(h, prefix));
                 }
                 true
             }
@@ -572,7 +506,7 @@ impl Inner {
                             Step::Frame(env)
                         }
                         Err(e) => {
-                            self.failed = envelope_of(bytes);
+                            self.failed = frame::read_envelope(bytes);
                             if let Some(step) = self.recover(buf, e, None) {
                                 return step;
                             }
@@ -614,14 +548,6 @@ impl Inner {
     }
 }
 
-/// Header, station and code of a frame's first six bytes, if readable.
-fn envelope_of(bytes: &[u8]) -> Option<(Header, Station, u16)> {
-    let header = Header::from_byte(*bytes.first()?)?;
-    let station = decode_unsigned(FieldSpec::hex(2), bytes.get(1..3)?, 1).ok()?;
-    let code = decode_unsigned(FieldSpec::hex(3), bytes.get(3..6)?, 3).ok()?;
-    Some((header, Station(station as u8), code as u16))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -648,128 +574,43 @@ mod tests {
 
     const SERVO_REPLY: &[u8] = b"#992322C\r\n";
 
-    /// A [`SliceDecoder`] over a 64-byte buffer gives what a
-    /// `FrameDecoder<64>` gives, pushed byte by byte and decoded in pieces:
-    /// frames, errors (an over-long frame, a bad checksum, a cut 200H whose
-    /// text swallowed a reply) and counters.
+    /// A decoder keeps its `@@` policy: `#99232@@` (a 232H reply with `@@`
+    /// for its SC) passes only where responses may carry `@@`.
     #[test]
-    fn a_slice_decoder_decodes_as_a_frame_decoder_of_its_buffer() {
-        let mut input = Vec::new();
-        input.extend_from_slice(b"xx#992322C\r\n");
-        input.extend_from_slice(b"!99200AB!99200CD#992322C\r\n");
-        input.push(b'!');
-        input.extend_from_slice(&[b'0'; 80]);
-        input.extend_from_slice(b"\r\n#992322D\r\n");
-        input.extend_from_slice(SERVO_REPLY);
-
-        let mut owned: FrameDecoder<64> = FrameDecoder::new();
-        let mut state = SliceDecoder::new();
-        let mut buf = [0u8; 64];
-        for &b in &input {
-            let a = owned.push(b).map_frame(|f| f.as_bytes().to_vec());
-            let c = state.push(&mut buf, b).map_frame(|f| f.as_bytes().to_vec());
-            assert_eq!(a, c);
-            assert_eq!(
-                owned.last_frame().map(|f| f.as_bytes().to_vec()),
-                state.last_frame(&buf).map(|f| f.as_bytes().to_vec())
-            );
-            loop {
-                let a = owned.decode(b"").event.map_frame(|f| f.as_bytes().to_vec());
-                let c = state
-                    .decode(&mut buf, b"")
-                    .event
-                    .map_frame(|f| f.as_bytes().to_vec());
-                assert_eq!(a, c);
-                if a == Err(None) {
-                    break;
-                }
-            }
-            assert_eq!(owned.pending(), state.pending());
-            assert_eq!(owned.failed_envelope(), state.failed_envelope());
-        }
-        assert_eq!(owned.stats(), state.stats());
-        assert_eq!(state.stats().frames, 3);
-        assert!(state.stats().errors >= 3);
-
-        // In pieces.
-        let mut owned: FrameDecoder<64> = FrameDecoder::new();
-        let mut state = SliceDecoder::new();
-        let mut buf = [0u8; 64];
-        for piece in input.chunks(7) {
-            let (mut x, mut y) = (piece, piece);
-            loop {
-                let a = owned.decode(x);
-                let c = state.decode(&mut buf, y);
-                assert_eq!(a.consumed, c.consumed);
-                let (ea, ec) = (
-                    a.event.map_frame(|f| f.as_bytes().to_vec()),
-                    c.event.map_frame(|f| f.as_bytes().to_vec()),
-                );
-                assert_eq!(ea, ec);
-                x = &x[a.consumed..];
-                y = &y[c.consumed..];
-                if ea == Err(None) {
-                    break;
-                }
-            }
-        }
-        assert_eq!(owned.stats(), state.stats());
-        state.reset();
-        assert_eq!(state.pending(), 0);
-    }
-
-    /// A [`SliceDecoder`] keeps its own `@@` policy, as a
-    /// [`FrameDecoder`] does: `#99232@@` (a 232H reply with `@@` for its
-    /// SC) passes only where responses may carry `@@`.
-    #[test]
-    fn a_slice_decoder_keeps_its_bypass_policy() {
+    fn a_decoder_keeps_its_bypass_policy() {
         let reply: &[u8] = b"#99232@@\r\n";
-        let mut buf = [0u8; 16];
-        let decode = |dec: &mut SliceDecoder, buf: &mut [u8]| {
-            dec.decode(buf, reply)
-                .event
-                .map_frame(|f| f.as_bytes().to_vec())
+        let decode = |dec: &mut FrameDecoder<16>| {
+            dec.decode(reply).event.map_frame(|f| f.as_bytes().to_vec())
         };
-        let mut dec = SliceDecoder::default();
+        let mut dec = FrameDecoder::<16>::default();
         assert_eq!(dec.policy(), BypassPolicy::CommandsOnly);
-        assert_eq!(
-            decode(&mut dec, &mut buf),
-            Err(Some(Error::ChecksumBypassRejected))
-        );
+        assert_eq!(decode(&mut dec), Err(Some(Error::ChecksumBypassRejected)));
         dec.set_policy(BypassPolicy::Accept);
         assert_eq!(dec.policy(), BypassPolicy::Accept);
-        assert_eq!(decode(&mut dec, &mut buf), Ok(reply.to_vec()));
-        let mut dec = SliceDecoder::with_policy(BypassPolicy::Accept);
-        assert_eq!(dec.policy(), BypassPolicy::Accept);
-        assert_eq!(decode(&mut dec, &mut buf), Ok(reply.to_vec()));
+        assert_eq!(decode(&mut dec), Ok(reply.to_vec()));
+        let mut dec = FrameDecoder::<16>::with_policy(BypassPolicy::Accept);
+        assert_eq!(decode(&mut dec), Ok(reply.to_vec()));
         assert_eq!(dec.stats().frames, 1);
         dec.set_policy(BypassPolicy::Reject);
-        assert_eq!(dec.policy(), BypassPolicy::Reject);
-        assert_eq!(
-            decode(&mut dec, &mut buf),
-            Err(Some(Error::ChecksumBypassRejected))
-        );
+        assert_eq!(decode(&mut dec), Err(Some(Error::ChecksumBypassRejected)));
     }
 
-    /// `reset` drops the frame in progress (counted as discarded) and
-    /// frees the buffer: the next frame may be decoded in another one.
+    /// A buffer taken by its owner drops the frame in progress (counted as
+    /// discarded); the decoder then decodes in it again from scratch.
     #[test]
-    fn a_reset_slice_decoder_drops_its_frame_and_frees_the_buffer() {
-        let mut dec = SliceDecoder::new();
-        let mut first = [0u8; 16];
-        assert_eq!(dec.decode(&mut first, b"!992").event, Event::NeedMore);
+    fn a_taken_buffer_drops_the_frame_in_progress() {
+        let mut dec = FrameDecoder::<16>::new();
+        assert_eq!(dec.decode(b"!992").event, Event::NeedMore);
         assert_eq!(dec.pending(), 4);
-        dec.reset();
+        dec.take_buffer().fill(b'%');
         assert_eq!(dec.pending(), 0);
         assert_eq!(dec.stats().discarded_bytes, 4);
-        let mut second = [0u8; 16];
-        let d = dec.decode(&mut second, SERVO_REPLY);
+        let d = dec.decode(SERVO_REPLY);
         assert_eq!(d.consumed, SERVO_REPLY.len());
         assert_eq!(
             d.event.map_frame(|f| f.as_bytes().to_vec()),
             Ok(SERVO_REPLY.to_vec())
         );
-        assert_eq!(dec.stats().discarded_bytes, 4);
     }
 
     /// `{:?}` of a decoder shows its buffer and state: after `!9` of a

@@ -201,15 +201,152 @@ impl core::fmt::Display for Error {
 
 impl core::error::Error for Error {}
 
-/// Error codes (`&` + 3 hex digits) that a protocol bridge between a host
-/// and a controller sends on its own behalf: B00H to BFFH.
-///
-/// The controllers' own code list is in neither protocol document (TTA
-/// p. 15 defers to the controller's manual; 2003 p. 13 only says the number
-/// identifies the cause). That no controller uses this range is an
-/// **assumption**. A client never asks a controller for the 216H detail of
-/// a code in this range: the controller did not raise it.
-pub const BRIDGE_CODES: core::ops::RangeInclusive<u16> = 0xB00..=0xBFF;
+/// Why an engine ([`crate::client`], [`crate::transfer`],
+/// [`crate::readback`]) or a driver loop ([`crate::engine`]) stopped. `E`
+/// is the UART driver's error; the engines themselves never produce
+/// [`Failure::Io`] (their `E` is [`Infallible`](core::convert::Infallible)).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Failure<E = core::convert::Infallible> {
+    /// No valid reply after this many sends of a command that is safe to
+    /// repeat: it may or may not have run.
+    Timeout {
+        /// Sends made.
+        sends: u8,
+    },
+    /// No valid reply to a command that is unsafe to repeat (a relative
+    /// move): it may have run, possibly more than once if resending was
+    /// allowed. Check the controller's state (212H) before anything else.
+    OutcomeUnknown {
+        /// Sends made.
+        sends: u8,
+    },
+    /// The controller (or a bridge on the way, with a code of its own)
+    /// answered with an error response. Not resent (2003 pp. 13, 66).
+    Controller {
+        /// The code (the meaning is in the controller's manual).
+        code: u16,
+        /// The 216H detail, if it was asked for and came.
+        detail: Option<ErrorDetail>,
+    },
+    /// A written frame still read back different after the allowed
+    /// rewrites.
+    Mismatch {
+        /// The first differing position.
+        first_position: u16,
+        /// How many of the frame's records differ.
+        records: u16,
+    },
+    /// Record number `index` (0-based, in source order) cannot be encoded.
+    InvalidRecord {
+        /// Index of the record.
+        index: u32,
+        /// Why.
+        error: Error,
+    },
+    /// A command could not be emitted, a reply not parsed as the type
+    /// asked for, or the configuration cannot work.
+    Protocol(Error),
+    /// The link ended: a read returned no bytes although the driver said
+    /// it was ready (a closed socket).
+    Closed,
+    /// The driver failed.
+    Io(E),
+}
+
+impl<E> From<Error> for Failure<E> {
+    fn from(e: Error) -> Self {
+        Failure::Protocol(e)
+    }
+}
+
+impl Failure {
+    /// The same failure under a driver error type (an engine never fails
+    /// with [`Failure::Io`]).
+    pub const fn widen<E>(self) -> Failure<E> {
+        match self {
+            Failure::Timeout { sends } => Failure::Timeout { sends },
+            Failure::OutcomeUnknown { sends } => Failure::OutcomeUnknown { sends },
+            Failure::Controller { code, detail } => Failure::Controller { code, detail },
+            Failure::Mismatch {
+                first_position,
+                records,
+            } => Failure::Mismatch {
+                first_position,
+                records,
+            },
+            Failure::InvalidRecord { index, error } => Failure::InvalidRecord { index, error },
+            Failure::Protocol(e) => Failure::Protocol(e),
+            Failure::Closed => Failure::Closed,
+            Failure::Io(never) => match never {},
+        }
+    }
+}
+
+impl<E: core::fmt::Debug> core::fmt::Display for Failure<E> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Failure::Timeout { sends } => {
+                write!(f, "no valid reply after {sends} send(s)")
+            }
+            Failure::OutcomeUnknown { sends } => write!(
+                f,
+                "no valid reply after {sends} send(s) of a command unsafe to repeat: it may have run"
+            ),
+            Failure::Controller { code, detail: None } => {
+                write!(f, "the controller answered with error {code:03X}")
+            }
+            Failure::Controller {
+                code,
+                detail: Some(d),
+            } => write!(
+                f,
+                "the controller answered with error {code:03X} (216H: error {:03X}, details {}, {}, {}, {})",
+                d.error_number, d.detail_1, d.detail_2, d.detail_3, d.detail_4
+            ),
+            Failure::Mismatch {
+                first_position,
+                records,
+            } => write!(
+                f,
+                "{records} record(s) read back different, the first at position {first_position}"
+            ),
+            Failure::InvalidRecord { index, error } => {
+                write!(f, "record {index} cannot be encoded: {error}")
+            }
+            Failure::Protocol(e) => write!(f, "{e}"),
+            Failure::Closed => f.write_str("the link closed"),
+            Failure::Io(e) => write!(f, "I/O error: {e:?}"),
+        }
+    }
+}
+
+impl<E: core::fmt::Debug> core::error::Error for Failure<E> {}
+
+/// The numbers of a 216H error detail (TTA pp. 32-33), kept with the `&`
+/// code they explain. The message string (always empty on the TTA, TTA
+/// p. 33) is not kept: read 216H yourself for it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ErrorDetail {
+    /// The error number the controller reports.
+    pub error_number: u16,
+    /// Detail 1: program number (system-down errors: type).
+    pub detail_1: u32,
+    /// Detail 2: step number (system-down: error code).
+    pub detail_2: u32,
+    /// Detail 3: axis number (system-down: information 1).
+    pub detail_3: u32,
+    /// Detail 4: position number, negative for an interpolation point
+    /// (system-down: information 2).
+    pub detail_4: i32,
+    /// Details 5 to 8 (meanings undocumented).
+    pub detail_5_to_8: [u32; 4],
+    /// Whether `error_number` equals the code of the error response (the
+    /// latest system error is taken to be the one the `&` reported: an
+    /// **inference**, which this says whether it holds).
+    pub matches_code: bool,
+}
 
 /// Result alias used throughout the crate.
 pub type Result<T, E = Error> = core::result::Result<T, E>;

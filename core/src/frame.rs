@@ -20,7 +20,7 @@
 //! into a caller's buffer and reports [`Error::BufferTooSmall`] instead of
 //! overrunning it.
 
-pub use crate::catalogue::text_span;
+use crate::catalogue::text_span;
 use crate::checksum::{BypassPolicy, Checksum, ChecksumField, ChecksumMode};
 use crate::error::{Error, Result};
 use crate::field::{hex_digit, hex_value, FieldSpec, Reader, Writer};
@@ -211,6 +211,22 @@ impl defmt::Format for Frame<'_> {
     fn format(&self, f: defmt::Formatter) {
         defmt::write!(f, "Frame({=[u8]:a})", self.bytes)
     }
+}
+
+/// Header, station and code (message ID, or error code for `&`) of a
+/// frame's first [`ENVELOPE_LEN`] bytes, if they read as such.
+///
+/// ```
+/// use iai_protocol_b::frame::{read_envelope, Header, Station};
+/// assert_eq!(read_envelope(b"!99212"), Some((Header::Command, Station(0x99), 0x212)));
+/// assert_eq!(read_envelope(b"&99C74"), Some((Header::Error, Station(0x99), 0xC74)));
+/// assert_eq!(read_envelope(b"#9G212"), None);
+/// ```
+pub fn read_envelope(bytes: &[u8]) -> Option<(Header, Station, u16)> {
+    let header = Header::from_byte(*bytes.first()?)?;
+    let station = crate::field::decode_unsigned(FieldSpec::hex(2), bytes.get(1..3)?, 1).ok()?;
+    let code = crate::field::decode_unsigned(FieldSpec::hex(3), bytes.get(3..6)?, 3).ok()?;
+    Some((header, Station(station as u8), code as u16))
 }
 
 /// Writes the envelope start: header, station, code (3 hex digits).

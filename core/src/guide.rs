@@ -77,47 +77,51 @@
 //!
 //! # 2. Sending a command and reading the reply
 //!
-//! [`Client`](crate::client::Client) sends any command and returns its
-//! typed reply. It applies chapter 5 of the X-SEL specification (the
-//! TTA's own chapter is lost): the reply must be complete within 3 s after
-//! the command was sent, or the command is sent again, up to 3 sends; a
-//! reply counts only if its format, checksum, station and message ID are
-//! right, and only for the command it answers (a late reply to an earlier
-//! command is dropped, never handed to the next one). Commands that must
-//! not run twice (235H relative move, 236H inching, program steps) are
-//! sent once unless you opt in: a lost reply then reports
-//! [`CallError::OutcomeUnknown`](crate::client::CallError::OutcomeUnknown).
-//! An `&` error response is [`CallError::Controller`](crate::client::CallError::Controller)
+//! A [`Line`](crate::line::Line) is one line to a controller: the command
+//! on it, its reply, and what may still arrive (late replies, copies).
+//! Every engine borrows it for its calls, so what one engine left in flight
+//! is known to the next. [`Client`](crate::client::Client) sends any
+//! command and returns its typed reply. The line applies chapter 5 of the
+//! X-SEL specification (the TTA's own chapter is lost): the reply must be
+//! complete within 3 s after the command was sent, or the command is sent
+//! again, up to 3 sends; a reply counts only if its format, checksum,
+//! station and message ID are right, and only for the command it answers.
+//! Commands that must not run twice (235H relative move, 236H inching,
+//! program steps) are sent once unless you opt in: a lost reply then
+//! reports [`Failure::OutcomeUnknown`](crate::error::Failure::OutcomeUnknown).
+//! An `&` error response is [`Failure::Controller`](crate::error::Failure::Controller)
 //! with its code (and, if asked for, the 216H error detail); it is not
-//! sent again.
+//! sent again. A line just opened knows nothing of its past: its first
+//! command is preceded by a 200H "fence" whose echo proves that nothing
+//! sent before can still be answered.
 //!
 //! Motion commands are built from `(axis, value)` pairs, so their axis
 //! pattern always matches their values. The UART is anything with the
 //! `embedded-io` `Read`, `ReadReady` and `Write` traits; the clock any
-//! `FnMut() -> u32` in milliseconds. Here a [`Loopback`](crate::client::Loopback)
+//! `FnMut() -> u32` in milliseconds. Here a [`Loopback`](crate::io::Loopback)
 //! plays the controller:
 //!
 //! ```
-//! use iai_protocol_b::client::{CallError, Client, ClientConfig, Loopback};
-//! use iai_protocol_b::frame::Station;
+//! use iai_protocol_b::{Client, Failure, Line, LineConfig, Station};
 //! use iai_protocol_b::message::{AbsoluteMove, AxisStatusQuery};
-//! # let mut uart = Loopback::default();
+//! # let mut uart = iai_protocol_b::io::Loopback::default();
 //! # let mut ms = 0u32;
 //! # let mut now = move || { ms += 1; ms };
 //!
-//! let mut client: Client = Client::new(ClientConfig::new(Station(0x99)));
+//! let mut line = Line::new(LineConfig::new(Station(0x99)), 0x5eed);
+//! let mut client: Client = Client::new();
 //! // 234H: axis 1 to +100.000 mm, axis 2 to -25.500 mm at 100 mm/s.
 //! let go = AbsoluteMove::to(&[(1, 100_000), (2, -25_500)])?.with_speed(100);
-//! client.call(&mut uart, &mut now, &go)?;
+//! client.call(&mut line, &mut uart, &mut now, &go)?;
 //! // 212H: the typed reply, one status block per axis asked.
-//! let status = client.call(&mut uart, &mut now, &AxisStatusQuery::of(&[1, 2])?)?;
+//! let status = client.call(&mut line, &mut uart, &mut now, &AxisStatusQuery::of(&[1, 2])?)?;
 //! assert_eq!(status.axes.len(), 2);
-//! # Ok::<(), CallError<core::convert::Infallible>>(())
+//! # Ok::<(), Failure<core::convert::Infallible>>(())
 //! ```
 //!
-//! Without blocking, drive the same engine yourself:
-//! [`Client::start`](crate::client::Client::start), then
-//! [`Client::poll`](crate::client::Client::poll) tells you to transmit
+//! Without blocking, drive the same engine yourself (every engine has this
+//! shape, [`crate::engine`]): [`Client::start`](crate::client::Client::start),
+//! then [`Client::poll`](crate::client::Client::poll) tells you to transmit
 //! bytes (report [`Client::sent`](crate::client::Client::sent) when the
 //! last one left), to wait until a tick (feeding received bytes to
 //! [`Client::received`](crate::client::Client::received) meanwhile), or
@@ -132,37 +136,39 @@
 //! # 3. Streaming a position table
 //!
 //! A position table can hold 20,000 records of 8 axes: far more than one
-//! command frame may carry. [`Transfer`](crate::transfer::Transfer) is a
-//! sans-IO state machine that pulls records from any source (an iterator
-//! here, a [`RecordQueue`](crate::transfer::RecordQueue) when they arrive
-//! over another link), packs as many as the controller accepts into each
-//! 26DH command, waits for the reply that confirms that count (sending
-//! again after a timeout), then reads the positions back with 21FH and
-//! compares them with what it sent ([`Verify::Full`](crate::transfer::Verify),
-//! the default). The caller moves bytes and time:
+//! command frame may carry. [`Transfer`](crate::transfer::Transfer) pulls
+//! records from any source (an iterator here, a
+//! [`RecordQueue`](crate::transfer::RecordQueue) when they arrive over
+//! another link), packs as many as the controller accepts into each 26DH
+//! command, waits for the reply that confirms that count (sending again
+//! after a timeout), then reads the positions back with 21FH and compares
+//! them with what it sent ([`Verify::Full`](crate::transfer::Verify), the
+//! default). The caller moves bytes and time, as for every engine:
 //!
-//! - [`Step::Transmit`](crate::transfer::Step::Transmit): send these bytes,
+//! - [`Step::Transmit`](crate::engine::Step::Transmit): send these bytes,
 //!   then call [`Transfer::sent`](crate::transfer::Transfer::sent);
-//! - [`Step::WaitUntil`](crate::transfer::Step::WaitUntil): feed received
-//!   bytes to [`Transfer::received_all`](crate::transfer::Transfer::received_all)
-//!   and poll again by that tick;
-//! - [`Step::Complete`](crate::transfer::Step::Complete) (with the
-//!   [`Guarantee`](crate::transfer::Guarantee) the run carries) /
-//!   [`Step::Failed`](crate::transfer::Step::Failed): done.
+//! - [`Step::WaitUntil`](crate::engine::Step::WaitUntil): feed received
+//!   bytes to [`Transfer::received`](crate::transfer::Transfer::received)
+//!   ([`engine::feed`](crate::engine::feed) loops over them) and poll
+//!   again by that tick;
+//! - [`Step::Done`](crate::engine::Step::Done): the
+//!   [`Guarantee`](crate::transfer::Guarantee) the run carries, or why it
+//!   stopped (a failed transfer can be resumed).
 //!
 //! The controller of this example is a map in memory: it reads each 26DH
 //! record by record with the [`PositionStreamDecoder`](crate::stream::PositionStreamDecoder)
-//! and stores the records; it answers 21FH from the map.
+//! and stores the records; it answers 21FH from the map and echoes 200H.
 //!
 //! ```
 //! use std::collections::BTreeMap;
 //! use iai_protocol_b::checksum::BypassPolicy;
 //! use iai_protocol_b::decoder::{Event, FrameDecoder};
-//! use iai_protocol_b::frame::Station;
+//! use iai_protocol_b::engine::{feed, Step};
 //! use iai_protocol_b::message::*;
 //! use iai_protocol_b::position::PositionRecord;
 //! use iai_protocol_b::stream::{PositionStreamDecoder, StreamEvent};
-//! use iai_protocol_b::transfer::{Guarantee, Step, Transfer, TransferConfig};
+//! use iai_protocol_b::transfer::Guarantee;
+//! use iai_protocol_b::{Line, LineConfig, Profile, Station, Transfer, TransferConfig};
 //!
 //! let station = Station(0x99);
 //! // 500 records of 3 axes: more than one 2,051-byte frame holds.
@@ -173,16 +179,16 @@
 //!     })
 //!     .collect();
 //!
-//! /// The controller: stores 26DH records, answers 21FH windows.
+//! /// The controller: stores 26DH records, answers 21FH windows and 200H.
 //! fn controller(map: &mut BTreeMap<u16, PositionRecord>, command: &[u8], st: Station) -> Vec<u8> {
 //!     let mut out = vec![0u8; 2048];
-//!     if command.starts_with(b"!9926D") {
+//!     let n = if command.starts_with(b"!9926D") {
 //!         let mut dec = PositionStreamDecoder::new(BypassPolicy::default());
 //!         let (mut input, mut written) = (command, 0);
 //!         loop {
-//!             let (used, event) = dec.decode(input);
-//!             input = &input[used..];
-//!             match event {
+//!             let r = dec.decode(input);
+//!             input = &input[r.consumed..];
+//!             match r.event {
 //!                 StreamEvent::Record(rec) => { map.insert(rec.number, rec); written += 1 }
 //!                 StreamEvent::End { .. } => break,
 //!                 StreamEvent::Error { error, .. } => panic!("{error}"),
@@ -190,48 +196,52 @@
 //!             }
 //!         }
 //!         let reply = ChangePositionData2Response { number_of_changed_positions: written };
-//!         let n = reply.emit(st, &mut out).unwrap();
-//!         out.truncate(n);
+//!         reply.emit(st, &mut out).unwrap()
 //!     } else {
 //!         let mut dec: FrameDecoder = FrameDecoder::new();
 //!         let Event::Frame(frame) = dec.decode(command).event else { panic!() };
-//!         let q = EffectivePositionQuery2::parse(&frame).unwrap();
-//!         let head = q.query_head_position_number;
-//!         let window = head..head + q.number_of_query_records;
-//!         let found: Vec<_> = map.range(window).map(|(_, r)| r.clone()).collect();
-//!         let reply = EffectivePositionResponse2 { records: Repeated::from_slice(&found) };
-//!         let n = reply.emit(st, &mut out).unwrap();
-//!         out.truncate(n);
-//!     }
+//!         if let Ok(q) = TestCall::parse(&frame) {
+//!             TestCallResponse { test_string: q.test_string }.emit(st, &mut out).unwrap()
+//!         } else {
+//!             let q = EffectivePositionQuery2::parse(&frame).unwrap();
+//!             let head = q.query_head_position_number;
+//!             let window = head..head + q.number_of_query_records;
+//!             let found: Vec<_> = map.range(window).map(|(_, r)| r.clone()).collect();
+//!             let reply = EffectivePositionResponse2 { records: Repeated::from_slice(&found) };
+//!             reply.emit(st, &mut out).unwrap()
+//!         }
+//!     };
+//!     out.truncate(n);
 //!     out
 //! }
 //!
-//! let mut transfer: Transfer<_> = Transfer::new(TransferConfig::tta(station), table.clone().into_iter());
+//! let mut line = Line::new(LineConfig::new(station), 42);
+//! let cfg = TransferConfig::new(Profile::TTA);
+//! let mut transfer: Transfer<_> = Transfer::new(cfg, table.clone().into_iter());
 //! let mut map = BTreeMap::new();
-//! let mut line = Vec::new();
+//! let mut wire = Vec::new();
 //! let mut now = 0u32;
-//! let report = loop {
-//!     match transfer.poll(now) {
+//! let guarantee = loop {
+//!     match transfer.poll(&mut line, now) {
 //!         Step::Transmit(bytes) => {
-//!             line = controller(&mut map, bytes, station);
-//!             transfer.sent(now);
+//!             wire = controller(&mut map, bytes, station);
+//!             transfer.sent(&mut line, now);
 //!         }
 //!         Step::WaitUntil(deadline) => {
-//!             if line.is_empty() {
+//!             if wire.is_empty() {
 //!                 now = deadline; // nothing on the line: let time pass
 //!             } else {
-//!                 transfer.received_all(&line, now);
-//!                 line.clear();
+//!                 feed(&mut transfer, &mut line, &wire, now);
+//!                 wire.clear();
 //!             }
 //!         }
-//!         Step::Complete(report) => break report,
-//!         Step::NeedRecords => unreachable!("an iterator is never pending"),
-//!         Step::Failed(e) => panic!("transfer failed: {e:?}"),
+//!         Step::Done(result) => break result.expect("the transfer completes"),
+//!         Step::Idle => unreachable!("an iterator is never pending"),
 //!     }
 //!     now += 1;
 //! };
-//! assert_eq!(report.guarantee, Guarantee::Verified);
-//! assert_eq!(report.stats.records_verified, 500);
+//! assert_eq!(guarantee, Guarantee::Verified);
+//! assert_eq!(transfer.stats().records_verified, 500);
 //! assert_eq!(map.values().cloned().collect::<Vec<_>>(), table);
 //! ```
 //!

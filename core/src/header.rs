@@ -22,7 +22,7 @@ impl Header {
     /// (2003 p. 65) while every table uses `&`, which is what the core sends.
     ///
     /// ```
-    /// use iai_protocol_b::header::Header;
+    /// use iai_protocol_b::frame::Header;
     /// assert_eq!(Header::from_byte(b'&'), Some(Header::Error));
     /// assert_eq!(Header::from_byte(b'%'), Some(Header::Error));
     /// assert_eq!(Header::from_byte(b'?'), None);

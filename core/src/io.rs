@@ -16,27 +16,9 @@
 //! ```
 
 use crate::decoder::{Event, FrameDecoder};
-use crate::error::Error;
+use crate::error::Failure;
 use crate::frame::{Frame, Station};
 use crate::message::Message;
-
-/// An I/O error of the driver, or a protocol error.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum IoError<E> {
-    /// The driver failed.
-    Io(E),
-    /// The bytes were not a valid frame / message.
-    Protocol(Error),
-    /// The stream ended (read returned 0) before a frame was complete.
-    EndOfStream,
-}
-
-impl<E> From<Error> for IoError<E> {
-    fn from(e: Error) -> Self {
-        IoError::Protocol(e)
-    }
-}
 
 /// Emits `msg` into `scratch` and writes it to `w`; returns the frame length.
 pub fn send<'a, W: embedded_io::Write, M: Message<'a>>(
@@ -44,34 +26,34 @@ pub fn send<'a, W: embedded_io::Write, M: Message<'a>>(
     msg: &M,
     station: Station,
     scratch: &mut [u8],
-) -> Result<usize, IoError<W::Error>> {
+) -> Result<usize, Failure<W::Error>> {
     let n = msg.emit(station, scratch)?;
     w.write_all(scratch.get(..n).unwrap_or(&[]))
-        .map_err(IoError::Io)?;
-    w.flush().map_err(IoError::Io)?;
+        .map_err(Failure::Io)?;
+    w.flush().map_err(Failure::Io)?;
     Ok(n)
 }
 
 /// Reads from `r` one byte at a time until `dec` has a complete frame.
 /// Broken frames are skipped (and counted in the decoder's stats); a read
-/// of 0 bytes ends with [`IoError::EndOfStream`].
+/// of 0 bytes ends with [`Failure::Closed`].
 ///
 /// Reading byte by byte keeps bytes after the frame in the driver for the
 /// next call.
 pub fn receive<'d, R: embedded_io::Read, const N: usize>(
     r: &mut R,
     dec: &'d mut FrameDecoder<N>,
-) -> Result<Frame<'d>, IoError<R::Error>> {
+) -> Result<Frame<'d>, Failure<R::Error>> {
     loop {
         let mut b = [0u8; 1];
-        if r.read(&mut b).map_err(IoError::Io)? == 0 {
-            return Err(IoError::EndOfStream);
+        if r.read(&mut b).map_err(Failure::Io)? == 0 {
+            return Err(Failure::Closed);
         }
         if let Event::Frame(_) = dec.push(b[0]) {
             break;
         }
     }
-    dec.last_frame().ok_or(IoError::EndOfStream)
+    dec.last_frame().ok_or(Failure::Closed)
 }
 
 /// Feeds the decoder from an `nb` byte source (e.g. an `embedded-hal-nb`
@@ -90,4 +72,85 @@ pub fn poll_frame<'d, E, const N: usize>(
         }
     }
     dec.last_frame().ok_or(nb::Error::WouldBlock)
+}
+
+/// A test double for examples and tests: a UART whose "controller" answers
+/// every well-formed command with its default normal response (an axis
+/// status query with one status block per axis asked, a 200H with its own
+/// text), a 25BH with nothing, and anything else with nothing.
+#[derive(Debug, Default)]
+pub struct Loopback {
+    rx: heapless::Deque<u8, 512>,
+    cmd: FrameDecoder<64>,
+}
+
+impl embedded_io::ErrorType for Loopback {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_io::Read for Loopback {
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
+        let mut n = 0;
+        for slot in buf.iter_mut() {
+            match self.rx.pop_front() {
+                Some(b) => {
+                    *slot = b;
+                    n += 1;
+                }
+                None => break,
+            }
+        }
+        Ok(n)
+    }
+}
+
+impl embedded_io::ReadReady for Loopback {
+    fn read_ready(&mut self) -> Result<bool, Self::Error> {
+        Ok(!self.rx.is_empty())
+    }
+}
+
+impl embedded_io::Write for Loopback {
+    fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+        for &b in buf {
+            if let Event::Frame(f) = self.cmd.push(b) {
+                let mut out = [0u8; 256];
+                let n = loopback_reply(&f, &mut out);
+                for &o in out.get(..n).unwrap_or(&[]) {
+                    let _ = self.rx.push_back(o);
+                }
+            }
+        }
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}
+
+fn loopback_reply(cmd: &Frame<'_>, out: &mut [u8]) -> usize {
+    use crate::message::{
+        AxisStatus, AxisStatusQuery, AxisStatusResponse, Command, Response, TestCall,
+        TestCallResponse,
+    };
+    if let Ok(q) = AxisStatusQuery::parse(cmd) {
+        let mut r = AxisStatusResponse {
+            axis_pattern: q.query_axis_pattern,
+            ..Default::default()
+        };
+        for _ in q.query_axis_pattern.iter() {
+            let _ = r.axes.push(AxisStatus::default());
+        }
+        return r.emit(cmd.station(), out).unwrap_or(0);
+    }
+    if let Ok(q) = TestCall::parse(cmd) {
+        let r = TestCallResponse {
+            test_string: q.test_string,
+        };
+        return r.emit(cmd.station(), out).unwrap_or(0);
+    }
+    match Response::default_for(cmd.code()) {
+        Some(r) if Command::parse(cmd).is_ok() => r.emit(cmd.station(), out).unwrap_or(0),
+        _ => 0,
+    }
 }

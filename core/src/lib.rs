@@ -10,25 +10,27 @@
 //! '&' station(2) code(3)       SC(2) CR LF      error reply
 //! ```
 //!
-//! Layers, lowest first:
-//! - [`checksum`], [`field`], [`axis`]: checksum, fixed-width digits, axis patterns;
-//! - [`frame`]: a checked zero-copy view of one frame and the emitter;
+//! Layers, lowest first (each imports only those before it):
+//! - [`checksum`], [`field`], [`hex`], [`axis`]: the checksum, fixed-width
+//!   digits, axis patterns; [`catalogue`]: every message's rules, once;
+//! - [`frame`]: a checked zero-copy view of one frame, and the emitter;
 //! - [`decoder`]: a push decoder that finds frames in a byte stream;
-//! - [`message`]: typed messages declared field by field;
-//! - [`position`]: position-table records shared by the position messages;
-//! - [`stream`]: position tables of any size, encoded and decoded record by
-//!   record through fixed buffers;
-//! - [`transfer`], [`readback`]: write a table in confirmed, controller-sized
-//!   commands and read it back, with timeouts and retries;
-//! - [`profile`]: the limits of each kind of controller;
-//! - [`io`]: glue to `embedded-io` and `nb` drivers.
+//! - [`message`], [`position`]: typed messages declared field by field,
+//!   and the position-table records they share;
+//! - [`stream`]: position tables of any size, record by record;
+//! - [`line`]: one line to a controller, what is on it and what may still
+//!   arrive; [`engine`]: the shape of the engines and their driver loops;
+//! - [`client`], [`transfer`], [`readback`]: any command and its reply; a
+//!   table written in confirmed, verified commands; a table read back;
+//! - [`profile`], [`io`]: what each controller accepts; UART glue.
 //!
 //! Start with the [`guide`]: three runnable walkthroughs (receive a frame,
 //! send a command and read the reply, stream a position table).
 //!
 //! # Cargo features
-//! - `async`: `Transfer::run_async` and the `AsyncClock` trait in
-//!   [`transfer`], the transfer engine over an `embedded-io-async` UART.
+//! - `async`: the engines over an `embedded-io-async` UART
+//!   (`engine::run_async`, `Client::call_async`, `Transfer::run_async`,
+//!   `ReadBack::run_async`) and the `AsyncClock` trait in [`clock`].
 //! - `defmt`: `defmt::Format` for the public types.
 //!
 //! Neither is on by default. The minimum supported Rust version is 1.87.
@@ -54,23 +56,35 @@ pub mod catalogue;
 pub mod checksum;
 pub mod client;
 pub mod clock;
-pub mod codec;
+mod codec;
 pub mod decoder;
-pub mod drive;
+pub mod engine;
 pub mod error;
-pub mod exchange;
 pub mod field;
 pub mod frame;
 pub mod guide;
-pub mod header;
+mod header;
 pub mod hex;
 pub mod io;
 pub mod limits;
+pub mod line;
 pub mod message;
 pub mod position;
 pub mod profile;
 pub mod readback;
 pub mod stream;
 pub mod transfer;
+mod window;
 
-pub use error::{Error, Result};
+#[cfg(test)]
+mod testing;
+
+pub use client::Client;
+pub use decoder::FrameDecoder;
+pub use engine::Step;
+pub use error::{Error, Failure, Result};
+pub use frame::{Frame, Station};
+pub use line::{Line, LineConfig};
+pub use profile::Profile;
+pub use readback::{ReadBack, ReadBackConfig};
+pub use transfer::{Transfer, TransferConfig, Verify};

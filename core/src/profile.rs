@@ -20,15 +20,16 @@ use crate::error::{Error, Result};
 use crate::frame::{Station, MIN_FRAME_LEN};
 use crate::limits;
 use crate::message::{Command, Response, WordOrder};
-use crate::position::RecordLayout;
+use crate::position::{PositionStream, RecordLayout};
 
 /// The limits of one kind of controller.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Profile {
     name: &'static str,
     max_command_frame: usize,
     max_response_frame: usize,
+    table_write: PositionStream,
     generation: Generation,
     families: Families,
     max_unit_type: u8,
@@ -49,6 +50,7 @@ impl Profile {
         name: "TTA",
         max_command_frame: limits::TTA.command,
         max_response_frame: limits::TTA.response,
+        table_write: PositionStream::CHANGE_2,
         generation: Generation::Tta,
         families: Families::CARTESIAN,
         max_unit_type: 3,
@@ -64,6 +66,7 @@ impl Profile {
         name: "X-SEL 2003",
         max_command_frame: limits::XSEL_2003.command,
         max_response_frame: limits::XSEL_2003.response,
+        table_write: PositionStream::CHANGE,
         generation: Generation::Xsel2003,
         families: Families::CARTESIAN,
         max_unit_type: 2,
@@ -116,6 +119,14 @@ impl Profile {
                 id: crate::catalogue::REAL_VARIABLE_QUERY.id,
             }),
         }
+    }
+
+    /// The message that writes position tables of any size: 26DH (4-digit
+    /// numbers, TTA p. 60) on the TTA generation, 245H (3-digit, 2003
+    /// p. 41) on a 2003 X-SEL. It is read back with its
+    /// [`PositionStream::read_back`] query (21FH, 209H).
+    pub const fn table_write(self) -> PositionStream {
+        self.table_write
     }
 
     /// Largest command frame the controller receives, header through LF.

@@ -14,7 +14,8 @@
 //! responses 209H, 21FH, 22DH.
 //!
 //! ```
-//! use iai_protocol_b::stream::{PositionStream, PositionStreamEncoder};
+//! use iai_protocol_b::position::PositionStream;
+//! use iai_protocol_b::stream::PositionStreamEncoder;
 //! use iai_protocol_b::position::PositionRecord;
 //! use iai_protocol_b::frame::Station;
 //! let recs = [PositionRecord::new(1, 30, 30, 100, &[(1, 100_000), (2, -25_500)]).unwrap()];
@@ -32,15 +33,15 @@
 //! assert_eq!(&out[..n], &b"!9926D0001000103001E001E0064000186A0FFFF9C6438\r\n"[..]);
 //! ```
 
-pub use crate::position::PositionStream;
+use crate::position::PositionStream;
 
 use core::borrow::Borrow;
 
 use crate::checksum::{BypassPolicy, Checksum};
-use crate::error::{Error, Result};
+use crate::decoder::Received;
+use crate::error::{Error, Failure, Result};
 use crate::field::{hex_digit, hex_value, FieldSpec, Reader, Writer};
 use crate::frame::{emit_envelope, Header, Station, ENVELOPE_LEN};
-use crate::io::IoError;
 use crate::position::{len_as, put_exact, PositionRecord, PER_FIELD};
 
 /// Staging buffer size of the streaming encoder and decoder: the longest
@@ -298,7 +299,7 @@ where
     pub fn write_to<W: embedded_io::Write>(
         &mut self,
         w: &mut W,
-    ) -> core::result::Result<usize, IoError<W::Error>> {
+    ) -> core::result::Result<usize, Failure<W::Error>> {
         let mut chunk = [0u8; STAGE_LEN];
         let mut total = 0;
         loop {
@@ -307,7 +308,7 @@ where
                 return Ok(total);
             }
             w.write_all(chunk.get(..n).unwrap_or(&[]))
-                .map_err(IoError::Io)?;
+                .map_err(Failure::Io)?;
             total += n;
         }
     }
@@ -425,14 +426,20 @@ impl PositionStreamDecoder {
         self.offset
     }
 
-    /// Consumes bytes until an event; returns `(consumed, event)`.
+    /// Consumes bytes until an event.
     ///
     /// Bytes are copied a whole field group at a time. After
     /// [`StreamEvent::End`] or [`StreamEvent::Error`] nothing more is
-    /// consumed (`(0, NeedMore)`) until [`PositionStreamDecoder::reset`]:
+    /// consumed (0 bytes, `NeedMore`) until [`PositionStreamDecoder::reset`]:
     /// the rest of the input belongs to whatever follows the frame.
     #[inline]
-    pub fn decode(&mut self, input: &[u8]) -> (usize, StreamEvent) {
+    pub fn decode(&mut self, input: &[u8]) -> Received<StreamEvent> {
+        let (consumed, event) = self.decode_inner(input);
+        Received { consumed, event }
+    }
+
+    #[inline]
+    fn decode_inner(&mut self, input: &[u8]) -> (usize, StreamEvent) {
         let mut used = 0;
         while self.phase != DecPhase::Finished {
             let rest = input.get(used..).unwrap_or(&[]);
@@ -493,8 +500,8 @@ impl PositionStreamDecoder {
     /// Consumes bytes as [`Self::decode`] does, but writes the records
     /// into `out` (overwriting them in place) instead of handing them out
     /// one event at a time: the bulk path, for a caller that takes many
-    /// records at once. Returns `(consumed, records, event)`: the records
-    /// are `out[..records]`, and `event` is never [`StreamEvent::Record`].
+    /// records at once. Its event is `(records, event)`: the records are
+    /// `out[..records]`, and `event` is never [`StreamEvent::Record`].
     ///
     /// It stops at `Start`, `End` or `Error` (the event says which, as
     /// `decode` would), and otherwise when the input is used up or `out` is
@@ -511,14 +518,26 @@ impl PositionStreamDecoder {
     /// let wire = b"!9926D0002000103001E001E0064000186A0FFFF9C64000201000000000000000030392B\r\n";
     /// let mut dec = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
     /// let mut recs: [PositionRecord; 8] = Default::default();
-    /// let (used, n, ev) = dec.decode_records(wire, &mut recs);
-    /// assert!(matches!(ev, StreamEvent::Start { count: 2, .. }));
-    /// assert_eq!(n, 0);
-    /// let (rest, n, ev) = dec.decode_records(&wire[used..], &mut recs);
-    /// assert_eq!((used + rest, n, ev), (wire.len(), 2, StreamEvent::End { records: 2 }));
+    /// let r = dec.decode_records(wire, &mut recs);
+    /// assert!(matches!(r.event, (0, StreamEvent::Start { count: 2, .. })));
+    /// let rest = dec.decode_records(&wire[r.consumed..], &mut recs);
+    /// assert_eq!(r.consumed + rest.consumed, wire.len());
+    /// assert_eq!(rest.event, (2, StreamEvent::End { records: 2 }));
     /// assert_eq!(recs[1].position(1), Some(12_345));
     /// ```
     pub fn decode_records(
+        &mut self,
+        input: &[u8],
+        out: &mut [PositionRecord],
+    ) -> Received<(usize, StreamEvent)> {
+        let (consumed, records, event) = self.decode_records_inner(input, out);
+        Received {
+            consumed,
+            event: (records, event),
+        }
+    }
+
+    fn decode_records_inner(
         &mut self,
         input: &[u8],
         out: &mut [PositionRecord],
@@ -547,7 +566,7 @@ impl PositionStreamDecoder {
             if in_records && n >= out.len() {
                 return (used, n, StreamEvent::NeedMore);
             }
-            let (len, ev) = self.decode(input.get(used..).unwrap_or(&[]));
+            let (len, ev) = self.decode_inner(input.get(used..).unwrap_or(&[]));
             used += len;
             match (ev, out.get_mut(n)) {
                 (StreamEvent::Record(rec), Some(slot)) => {
@@ -563,7 +582,7 @@ impl PositionStreamDecoder {
 
     /// Pushes one byte (ignored after the end of the frame, see [`Self::decode`]).
     pub fn push(&mut self, byte: u8) -> StreamEvent {
-        self.decode(&[byte]).1
+        self.decode_inner(&[byte]).1
     }
 
     /// The index in `bytes` (which go to the stage at `from`) of the first
@@ -841,17 +860,18 @@ mod tests {
         );
         // Fed whole, the same.
         let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
-        let (used, start) = d.decode(&broken);
-        assert!(matches!(start, StreamEvent::Start { count: 2, .. }));
+        let start = d.decode(&broken);
+        assert!(matches!(start.event, StreamEvent::Start { count: 2, .. }));
+        let used = start.consumed;
         assert_eq!(
             d.decode(&broken[used..]),
-            (
-                31 - used,
-                StreamEvent::Error {
+            Received {
+                consumed: 31 - used,
+                event: StreamEvent::Error {
                     error: Error::BodyTooShort { offset: 30 },
                     records_ok: 0,
                 }
-            )
+            }
         );
     }
 
@@ -931,7 +951,10 @@ mod tests {
             for piece in bytes.chunks(chunk) {
                 let mut rest = piece;
                 loop {
-                    let (n, ev) = d.decode(rest);
+                    let Received {
+                        consumed: n,
+                        event: ev,
+                    } = d.decode(rest);
                     used += n;
                     rest = &rest[n..];
                     match ev {
@@ -958,7 +981,10 @@ mod tests {
             for piece in bytes.chunks(chunk) {
                 let mut rest = piece;
                 loop {
-                    let (n, k, ev) = d.decode_records(rest, &mut out);
+                    let Received {
+                        consumed: n,
+                        event: (k, ev),
+                    } = d.decode_records(rest, &mut out);
                     assert!(k <= room);
                     assert_ne!(ev, StreamEvent::Record(stale.clone()));
                     assert!(!matches!(ev, StreamEvent::Record(_)));
@@ -1046,6 +1072,16 @@ mod tests {
             }
         }
 
+        /// `decode_records` as a tuple: (consumed, records, event).
+        fn bulk(
+            d: &mut PositionStreamDecoder,
+            input: &[u8],
+            out: &mut [PositionRecord],
+        ) -> (usize, usize, StreamEvent) {
+            let r = d.decode_records(input, out);
+            (r.consumed, r.event.0, r.event.1)
+        }
+
         #[test]
         fn room_is_respected_and_nothing_follows_the_end() {
             let mut next = xorshift(37);
@@ -1054,18 +1090,18 @@ mod tests {
             let wire = frame(kind, &recs, 64);
             let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
             let mut out: [PositionRecord; 2] = Default::default();
-            let (used, n, ev) = d.decode_records(&wire, &mut out);
+            let (used, n, ev) = bulk(&mut d, &wire, &mut out);
             assert!(matches!(ev, StreamEvent::Start { count: 5, .. }));
             assert_eq!((used, n), (10, 0));
             assert_eq!(
-                d.decode_records(&wire[used..], &mut []),
+                bulk(&mut d, &wire[used..], &mut []),
                 (0, 0, StreamEvent::NeedMore),
                 "no room"
             );
             let mut at = used;
             let mut got = Vec::new();
             loop {
-                let (u, n, ev) = d.decode_records(&wire[at..], &mut out);
+                let (u, n, ev) = bulk(&mut d, &wire[at..], &mut out);
                 at += u;
                 got.extend_from_slice(&out[..n]);
                 assert_eq!(d.records_done() as usize, got.len());
@@ -1078,15 +1114,15 @@ mod tests {
             }
             assert_eq!((at, &got), (wire.len(), &recs));
             assert_eq!(
-                d.decode_records(b"!99", &mut out),
+                bulk(&mut d, b"!99", &mut out),
                 (0, 0, StreamEvent::NeedMore)
             );
             // A record cut by the end of the input completes on the next call.
             let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
-            let (u, _, _) = d.decode_records(&wire, &mut out);
-            let (u2, n, ev) = d.decode_records(&wire[u..u + 5], &mut out);
+            let (u, _, _) = bulk(&mut d, &wire, &mut out);
+            let (u2, n, ev) = bulk(&mut d, &wire[u..u + 5], &mut out);
             assert_eq!((u2, n, ev), (5, 0, StreamEvent::NeedMore));
-            let (_, n, _) = d.decode_records(&wire[u + 5..], &mut out);
+            let (_, n, _) = bulk(&mut d, &wire[u + 5..], &mut out);
             assert_eq!(&out[..n], &recs[..2]);
         }
     }

@@ -51,9 +51,8 @@ use iai_protocol_b::checksum::Checksum;
 use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
-use iai_protocol_b::stream::{
-    PositionStream, PositionStreamDecoder, PositionStreamEncoder, StreamEvent,
-};
+use iai_protocol_b::position::PositionStream;
+use iai_protocol_b::stream::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
 
 /// One workload: 26DH frames of `per_frame` records of `axes` axes.
 struct Workload {
@@ -223,7 +222,8 @@ fn decode(frame: &[u8]) -> Option<u16> {
     let mut input = frame;
     let mut records = 0;
     while !input.is_empty() {
-        let (used, ev) = dec.decode(input);
+        let r = dec.decode(input);
+        let (used, ev) = (r.consumed, r.event);
         input = input.get(used..)?;
         match ev {
             StreamEvent::Record(r) => {
@@ -247,7 +247,8 @@ fn decode_records(frame: &[u8], recs: &mut [PositionRecord; BATCH]) -> Option<u1
     let mut input = frame;
     let mut records = 0;
     while !input.is_empty() {
-        let (used, n, ev) = dec.decode_records(input, recs);
+        let r = dec.decode_records(input, recs);
+        let (used, n, ev) = (r.consumed, r.event.0, r.event.1);
         input = input.get(used..)?;
         black_box(recs.get(..n)?);
         records += n as u16;

@@ -14,10 +14,8 @@
 
 use core::ops::RangeInclusive;
 
-/// Codes and IDs reserved for the bridge: the core's
-/// [`iai_protocol_b::error::BRIDGE_CODES`], so that a client never asks a
-/// controller for the 216H detail of one.
-pub const RANGE: RangeInclusive<u16> = iai_protocol_b::error::BRIDGE_CODES;
+/// Codes and IDs reserved for the bridge.
+pub const RANGE: RangeInclusive<u16> = 0xB00..=0xBFF;
 
 /// Whether `code` (of an `&` reply) is the bridge's own.
 pub const fn is_bridge_code(code: u16) -> bool {
@@ -32,11 +30,6 @@ pub const STATUS_QUERY: u16 = 0xB00;
 pub const UPSTREAM_FRAME: u16 = 0xB01;
 /// `&` B02: the controller did not confirm a 26DH chunk after 3 sends.
 pub const CONTROLLER_TIMEOUT: u16 = 0xB02;
-/// B03 is no longer sent: it meant "the controller answered a chunk with
-/// `&` three times". An `&` from the controller is now relayed with the
-/// controller's own code, at once (it is not sent again blindly: 2003
-/// p. 66), so that the host can ask 216H for its detail.
-pub const RETIRED_CONTROLLER_ERROR: u16 = 0xB03;
 /// `&` B04: the host's 26DH stopped in its middle for
 /// [`crate::bridge::UPSTREAM_STALL_MS`].
 pub const UPSTREAM_STALLED: u16 = 0xB04;
@@ -61,6 +54,22 @@ pub const UNKNOWN_QUERY: u16 = 0xB09;
 /// after two rewrites (the bridge reads every chunk back with 21FH before
 /// it takes more from the host).
 pub const VERIFY_MISMATCH: u16 = 0xB0A;
+
+/// What each code says, in a few words (for tools that show them).
+pub const fn meaning(code: u16) -> Option<&'static str> {
+    Some(match code {
+        UPSTREAM_FRAME => "the host's 26DH was malformed",
+        CONTROLLER_TIMEOUT => "the controller did not confirm a chunk after 3 sends",
+        UPSTREAM_STALLED => "the host's 26DH stopped in its middle",
+        INTERNAL => "the transfer could not be set up",
+        REFUSED => "the command policy refuses this message",
+        UPSTREAM_OVERRUN => "bytes of the host's 26DH were lost on the way in",
+        XON_XOFF_IN_TEXT => "the controller's reply carries XON/XOFF in its text",
+        UNKNOWN_QUERY => "the bridge does not answer this message ID",
+        VERIFY_MISMATCH => "a chunk still read back different after two rewrites",
+        _ => return None,
+    })
+}
 
 /// Every `&` code the bridge sends, for documentation and tests.
 pub const ALL: [u16; 9] = [

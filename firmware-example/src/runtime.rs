@@ -111,7 +111,7 @@ pub fn setup(
     cfg: Config,
     source: Source,
 ) -> (&'static mut Bridge, ThreadEnd<'static>, ThreadEnd<'static>) {
-    let bridge = s.bridge.write(Bridge::new(cfg, source));
+    let bridge = s.bridge.write(Bridge::new(cfg, source, boot_seed()));
     let (up_isr, up) = s.up.split(cfg.flow, UPSTREAM_MARKS, s.pend_up);
     let (down_isr, down) = s
         .down
@@ -121,6 +121,33 @@ pub fn setup(
         s.down_end.borrow(cs).set(Some(down_isr));
     });
     (bridge, up, down)
+}
+
+/// A seed for the downstream line's fence texts that differs at each boot:
+/// a word of RAM the runtime never initialises (`.uninit`), read and
+/// stepped at every start. After a reset (the watchdog's) it holds the
+/// last boot's seed, so the next differs; at power-up, whatever the RAM
+/// held.
+fn boot_seed() -> u32 {
+    #[link_section = ".uninit.BOOT_SEED"]
+    static mut BOOT_SEED: MaybeUninit<u32> = MaybeUninit::uninit();
+    let p = core::ptr::addr_of_mut!(BOOT_SEED).cast::<u32>();
+    let last: u32;
+    // SAFETY: `p` is this function's own word of RAM, aligned; the load is
+    // done in assembly so that whatever the word holds is read as plain
+    // bits (the compiler would call an uninitialised read undefined).
+    unsafe {
+        core::arch::asm!(
+            "ldr {last}, [{p}]",
+            p = in(reg) p,
+            last = out(reg) last,
+            options(nostack, readonly, preserves_flags)
+        );
+    }
+    let next = last.wrapping_mul(0x9E37_79B1).wrapping_add(0x7F4A_7C15);
+    // SAFETY: as above; nothing else uses the word.
+    unsafe { p.write_volatile(next) };
+    next
 }
 
 extern "C" {

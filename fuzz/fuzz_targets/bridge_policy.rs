@@ -87,7 +87,7 @@ fuzz_target!(|data: &[u8]| {
         flow,
         ..Config::DEFAULT
     };
-    let mut bridge = Bridge::new(cfg, Source::Default);
+    let mut bridge = Bridge::new(cfg, Source::Default, 0x5EED);
     let (mut up, mut down) = (Fake::default(), Fake::default());
     let mut now = 0u32;
     for piece in host.chunks(16).chain(std::iter::repeat_n(&[][..], 8)) {

@@ -26,9 +26,8 @@ use host_tests::table::table;
 use iai_protocol_b::checksum::{BypassPolicy, Checksum};
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
-use iai_protocol_b::stream::{
-    PositionStream, PositionStreamDecoder, PositionStreamEncoder, StreamEvent,
-};
+use iai_protocol_b::position::PositionStream;
+use iai_protocol_b::stream::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
 
 const RECORDS: u32 = 20_000;
 /// Timed runs per figure (the median is printed) and the least time spent.
@@ -109,7 +108,8 @@ fn decode_core(frame: &[u8]) -> u32 {
     for chunk in frame.chunks(256) {
         let mut rest = chunk;
         while !rest.is_empty() {
-            let (used, ev) = dec.decode(rest);
+            let r = dec.decode(rest);
+            let (used, ev) = (r.consumed, r.event);
             rest = &rest[used..];
             match ev {
                 StreamEvent::Record(r) => {
@@ -132,7 +132,8 @@ fn decode_core_records(frame: &[u8], batch: &mut [PositionRecord; 64]) -> u32 {
     for chunk in frame.chunks(256) {
         let mut rest = chunk;
         while !rest.is_empty() {
-            let (used, k, ev) = dec.decode_records(rest, batch);
+            let r = dec.decode_records(rest, batch);
+            let (used, k, ev) = (r.consumed, r.event.0, r.event.1);
             rest = &rest[used..];
             black_box(&batch[..k]);
             n += k as u32;

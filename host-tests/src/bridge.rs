@@ -23,7 +23,8 @@ use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
-use iai_protocol_b::stream::{PositionStream, PositionStreamEncoder};
+use iai_protocol_b::position::PositionStream;
+use iai_protocol_b::stream::PositionStreamEncoder;
 
 use crate::sim::Simulator;
 

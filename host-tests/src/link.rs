@@ -1,25 +1,26 @@
 //! Runs the core's engines against the simulator on a virtual clock: a
 //! 1.6 MB table with 3-second timeouts takes seconds of real time.
 //!
-//! Each runner moves bytes and time between an engine and a
+//! [`drive`] moves bytes and time between any engine, its [`Line`] and a
 //! [`Simulator`]: replies are fed when the simulator makes them due, and
 //! time jumps to the next deadline or reply. At `baud` 0 bytes take no
 //! time on the line; otherwise each byte takes 10 bit times (8N1) in
 //! either direction, so that the virtual time is the wire time.
 
-use iai_protocol_b::client::{Client, ClientStep, Outcome};
+use iai_protocol_b::engine::{feed, Engine, Step};
 use iai_protocol_b::message::Request;
 use iai_protocol_b::position::PositionRecord;
-use iai_protocol_b::readback::{ReadBack, ReadBackStats, ReadStep};
-use iai_protocol_b::transfer::{RecordSource, Step, Transfer, TransferError, TransferReport};
+use iai_protocol_b::readback::ReadBackStats;
+use iai_protocol_b::transfer::{Guarantee, RecordSource};
+use iai_protocol_b::{Client, Failure, Line, LineConfig, ReadBack, Transfer};
 
 use crate::sim::Simulator;
 
-/// Outcome of a simulated transfer.
+/// How a simulated run ended.
 #[derive(Debug)]
-pub struct LinkRun {
-    /// How the transfer ended.
-    pub result: Result<TransferReport, TransferError>,
+pub struct LinkRun<T = Guarantee> {
+    /// The engine's result.
+    pub result: Result<T, Failure>,
     /// Virtual milliseconds elapsed.
     pub virtual_ms: u32,
     /// Bytes host → controller.
@@ -45,60 +46,34 @@ fn next_tick(sim: &Simulator, now: u32, deadline: u32) -> u32 {
         .max(now + 1)
 }
 
-/// Runs `t` against `sim` until it completes or fails (at most `max_resumes`
-/// resumptions after a failure, to show that resuming loses nothing).
-pub fn run<I, const N: usize>(
-    t: &mut Transfer<I, N>,
-    sim: &mut Simulator,
-    max_resumes: u32,
-) -> LinkRun
-where
-    I: Iterator<Item = PositionRecord>,
-{
-    run_fed(t, sim, max_resumes, |_| {})
+/// Steps at one virtual instant after which a runner declares the engine
+/// stuck.
+const STUCK_STEPS: u64 = 1_000_000;
+
+/// Virtual time after which a runner declares the engine stuck: two days,
+/// far beyond the slowest fault class of the suite.
+const MAX_VIRTUAL_MS: u32 = 48 * 3_600_000;
+
+/// The line of a simulated controller: its station, the spec's settings.
+pub fn line_to(sim: &Simulator) -> Line {
+    Line::new(LineConfig::new(sim.station), 0x5EED)
 }
 
-/// Like [`run`], on a line of `baud` (see the module docs).
-pub fn run_line<I, const N: usize>(
-    t: &mut Transfer<I, N>,
+/// Drives `engine` on `line` against `sim` from tick `now` until it is
+/// done; `between` runs before every step (to feed a source), and after a
+/// failure `resume` may continue the engine (`true`) or end the run.
+pub fn drive<G: Engine>(
+    engine: &mut G,
+    line: &mut Line,
     sim: &mut Simulator,
-    max_resumes: u32,
     baud: u32,
-) -> LinkRun
-where
-    I: Iterator<Item = PositionRecord>,
-{
-    run_with(t, sim, max_resumes, baud, |_| {})
-}
-
-/// Like [`run`], calling `feed` with the transfer's source at every step
-/// (e.g. to push records into a `RecordQueue` as they "arrive").
-pub fn run_fed<I, const N: usize>(
-    t: &mut Transfer<I, N>,
-    sim: &mut Simulator,
-    max_resumes: u32,
-    feed: impl FnMut(&mut I),
-) -> LinkRun
-where
-    I: RecordSource,
-{
-    run_with(t, sim, max_resumes, 0, feed)
-}
-
-fn run_with<I, const N: usize>(
-    t: &mut Transfer<I, N>,
-    sim: &mut Simulator,
-    max_resumes: u32,
-    baud: u32,
-    mut feed: impl FnMut(&mut I),
-) -> LinkRun
-where
-    I: RecordSource,
-{
-    let mut now: u32 = 0;
-    let mut resumes = 0;
+    mut now: u32,
+    mut between: impl FnMut(&mut G),
+    mut resume: impl FnMut(&mut G, &mut Line, u32) -> bool,
+) -> LinkRun<G::Output> {
     let (mut up, mut down) = (0u64, 0u64);
-    let mut steps_at_now = (0u32, 0u64);
+    let mut steps_at_now = (now, 0u64);
+    let mut pending: Vec<u8> = Vec::new();
     loop {
         // An engine that keeps asking for work without time passing is
         // stuck: fail loudly instead of spinning.
@@ -106,49 +81,50 @@ where
             steps_at_now.1 += 1;
             assert!(
                 steps_at_now.1 < STUCK_STEPS,
-                "transfer made {STUCK_STEPS} steps at {now} ms without time passing: {:?}",
-                t.stats()
+                "the engine made {STUCK_STEPS} steps at {now} ms without time passing"
             );
         } else {
             steps_at_now = (now, 0);
         }
         assert!(
             now < MAX_VIRTUAL_MS,
-            "transfer still running after {MAX_VIRTUAL_MS} virtual ms: {:?}",
-            t.stats()
+            "the engine is still running after {MAX_VIRTUAL_MS} virtual ms"
         );
-        feed(t.source_mut());
+        between(engine);
         let reply = sim.take_output(now);
         if !reply.is_empty() {
             down += reply.len() as u64;
             now += wire_ms(reply.len(), baud);
-            t.received_all(&reply, now);
+            pending.extend_from_slice(&reply);
         }
-        let result = match t.poll(now) {
+        if !pending.is_empty() {
+            let used = feed(engine, line, &pending, now);
+            pending.drain(..used);
+        }
+        let result = match engine.poll(line, now) {
             Step::Transmit(bytes) => {
                 up += bytes.len() as u64;
                 let bytes = bytes.to_vec();
                 now += wire_ms(bytes.len(), baud);
                 sim.receive(&bytes, now);
-                t.sent(now);
+                engine.sent(line, now);
                 continue;
             }
             Step::WaitUntil(deadline) => {
                 now = next_tick(sim, now, deadline);
                 continue;
             }
-            Step::NeedRecords => {
+            Step::Idle => {
                 now += 1;
                 continue;
             }
-            Step::Complete(report) => Ok(report),
-            Step::Failed(e) if resumes < max_resumes => {
-                resumes += 1;
-                t.resume(now);
-                let _ = e;
-                continue;
+            Step::Done(Ok(out)) => Ok(out),
+            Step::Done(Err(e)) => {
+                if resume(engine, line, now) {
+                    continue;
+                }
+                Err(e)
             }
-            Step::Failed(e) => Err(e),
         };
         return LinkRun {
             result,
@@ -159,13 +135,50 @@ where
     }
 }
 
-/// Steps at one virtual instant after which a runner declares the engine
-/// stuck.
-const STUCK_STEPS: u64 = 1_000_000;
+/// Runs transfer `t` on `line` against `sim` on a line of `baud` from tick
+/// `from` until it completes or fails (at most `max_resumes` resumptions
+/// after a failure, to show that resuming loses nothing).
+pub fn run_transfer<I: RecordSource, const N: usize>(
+    t: &mut Transfer<I, N>,
+    line: &mut Line,
+    sim: &mut Simulator,
+    max_resumes: u32,
+    baud: u32,
+    from: u32,
+) -> LinkRun {
+    run_fed(t, line, sim, max_resumes, baud, from, |_| {})
+}
 
-/// Virtual time after which a runner declares the engine stuck: two days,
-/// far beyond the slowest fault class of the suite (about 11 hours).
-const MAX_VIRTUAL_MS: u32 = 48 * 3_600_000;
+/// Like [`run_transfer`], calling `feed` with the transfer's source at
+/// every step (e.g. to push records into a `RecordQueue` as they
+/// "arrive").
+pub fn run_fed<I: RecordSource, const N: usize>(
+    t: &mut Transfer<I, N>,
+    line: &mut Line,
+    sim: &mut Simulator,
+    max_resumes: u32,
+    baud: u32,
+    from: u32,
+    mut feed: impl FnMut(&mut I),
+) -> LinkRun {
+    let mut resumes = 0;
+    drive(
+        t,
+        line,
+        sim,
+        baud,
+        from,
+        |t| feed(t.source_mut()),
+        |t, line, now| {
+            if resumes >= max_resumes {
+                return false;
+            }
+            resumes += 1;
+            t.resume(line, now);
+            true
+        },
+    )
+}
 
 /// Outcome of a simulated read-back.
 #[derive(Debug)]
@@ -173,93 +186,57 @@ pub struct ReadRun {
     /// The records delivered, in delivery order.
     pub records: Vec<PositionRecord>,
     /// How it ended.
-    pub result: Result<ReadBackStats, TransferError>,
+    pub result: Result<ReadBackStats, Failure>,
     /// Virtual milliseconds elapsed.
     pub virtual_ms: u32,
 }
 
-/// Drives a read-back against the simulator on a virtual clock.
-pub fn read_back<const N: usize>(rb: &mut ReadBack<N>, sim: &mut Simulator) -> ReadRun {
-    read_back_line(rb, sim, 0, 0)
-}
-
-/// Like [`read_back`], on a line of `baud`, resuming at most
-/// `max_resumes` times after a failure.
-pub fn read_back_line<const N: usize>(
+/// Reads back with `rb` on `line` against `sim` on a line of `baud`,
+/// resuming at most `max_resumes` times after a failure.
+pub fn read_back<const N: usize>(
     rb: &mut ReadBack<N>,
+    line: &mut Line,
     sim: &mut Simulator,
     max_resumes: u32,
     baud: u32,
 ) -> ReadRun {
-    let mut now = 0u32;
-    let mut resumes = 0;
     let mut records = Vec::new();
-    let mut pending: Vec<u8> = Vec::new();
+    let mut now = 0;
+    let mut resumes = 0;
     loop {
-        let reply = sim.take_output(now);
-        now += wire_ms(reply.len(), baud);
-        pending.extend(reply);
-        if !pending.is_empty() {
-            let used = rb.received_all(&pending, now);
-            pending.drain(..used);
-        }
-        let result = match rb.poll(now) {
-            ReadStep::Transmit(q) => {
-                let q = q.to_vec();
-                now += wire_ms(q.len(), baud);
-                sim.receive(&q, now);
-                rb.sent(now);
-                continue;
-            }
-            ReadStep::WaitUntil(t) => {
-                now = next_tick(sim, now, t);
-                continue;
-            }
-            ReadStep::Records(recs) => {
-                records.extend(recs);
-                continue;
-            }
-            ReadStep::Complete(s) => Ok(s),
-            ReadStep::Failed(_) if resumes < max_resumes => {
+        let run = {
+            let mut engine = rb.delivering(|recs| records.extend(recs));
+            drive(&mut engine, line, sim, baud, now, |_| {}, |_, _, _| false)
+        };
+        now = run.virtual_ms;
+        match run.result {
+            Err(_) if resumes < max_resumes => {
                 resumes += 1;
-                rb.resume(now);
-                continue;
+                rb.resume();
             }
-            ReadStep::Failed(e) => Err(e),
-        };
-        return ReadRun {
-            records,
-            result,
-            virtual_ms: now,
-        };
+            result => {
+                return ReadRun {
+                    records,
+                    result,
+                    virtual_ms: now,
+                }
+            }
+        }
     }
 }
 
-/// Runs one request of `client` against `sim` from tick `now`; returns how
-/// it ended and the tick it ended at.
+/// Runs one request of `client` on `line` against `sim` from tick `now`;
+/// returns how it ended and the tick it ended at.
 pub fn call<'a, R: Request<'a>, const C: usize, const P: usize>(
     client: &mut Client<C, P>,
+    line: &mut Line,
     sim: &mut Simulator,
     req: &R,
-    mut now: u32,
-) -> (Result<Outcome, iai_protocol_b::client::CallError>, u32) {
+    now: u32,
+) -> (Result<(), Failure>, u32) {
     client
-        .start(req, now)
+        .start(line, req, now)
         .expect("the request fits the command buffer");
-    loop {
-        let reply = sim.take_output(now);
-        if !reply.is_empty() {
-            client.received_all(&reply, now);
-        }
-        match client.poll(now) {
-            ClientStep::Transmit(bytes) => {
-                let bytes = bytes.to_vec();
-                sim.receive(&bytes, now);
-                client.sent(now);
-            }
-            ClientStep::WaitUntil(t) => now = next_tick(sim, now, t),
-            ClientStep::Done(r) => return (r, now),
-            ClientStep::Idle => panic!("the client lost its request"),
-        }
-    }
+    let run = drive(client, line, sim, 0, now, |_| {}, |_, _, _| false);
+    (run.result, run.virtual_ms)
 }

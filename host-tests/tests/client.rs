@@ -3,17 +3,26 @@
 
 use std::collections::VecDeque;
 
-use host_tests::link::call;
+use host_tests::link::{call, line_to};
 use host_tests::sim::{Faults, Simulator};
-use iai_protocol_b::client::{CallError, Client, ClientConfig, ClientStep, ErrorDetail, Outcome};
 use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::engine::{feed, Step};
+use iai_protocol_b::error::ErrorDetail;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::message::{
     AbsoluteMove, AxisStatus, AxisStatusQuery, AxisStatusResponse, ErrorDetailResponse,
-    ErrorResponse, Message, RelativeMove, Request, SoftwareReset, SystemStatusQuery,
+    ErrorResponse, Message, RelativeMove, Request, SoftwareReset, SystemStatusQuery, TestCall,
+    TestCallResponse,
 };
+use iai_protocol_b::{Client, Failure, Line, LineConfig};
 
 const ST: Station = Station(0x99);
+
+/// A line just opened to the controller at `ST`: its first command is
+/// fenced.
+fn line() -> Line {
+    Line::new(LineConfig::new(ST), 7)
+}
 
 fn frame<'a>(msg: &impl Message<'a>, station: Station) -> Vec<u8> {
     let mut buf = vec![0u8; msg.emit_len()];
@@ -47,12 +56,16 @@ fn status(pos: i32) -> Vec<u8> {
 }
 
 /// A controller that answers the n-th command it receives with the n-th
-/// entry of its script: frames, each after its delay (ms).
+/// entry of its script: frames, each after its delay (ms), in order (a
+/// reply never overtakes one scheduled before it). A 200H (a line's
+/// fence) is echoed 1 ms after it, in order too, and is neither scripted
+/// nor counted in `received`.
 struct Scripted {
     script: VecDeque<Vec<(u32, Vec<u8>)>>,
     commands: FrameDecoder,
     outbox: Vec<(u32, Vec<u8>)>,
     received: Vec<(u32, Vec<u8>)>,
+    fences: u32,
 }
 
 impl Scripted {
@@ -62,14 +75,28 @@ impl Scripted {
             commands: FrameDecoder::new(),
             outbox: Vec::new(),
             received: Vec::new(),
+            fences: 0,
         }
     }
     fn receive(&mut self, bytes: &[u8], now: u32) {
         for &b in bytes {
             if let Event::Frame(f) = self.commands.push(b) {
+                let last = self.outbox.iter().map(|(t, _)| *t).max().unwrap_or(0);
+                if let Ok(q) = TestCall::parse(&f) {
+                    self.fences += 1;
+                    let echo = frame(
+                        &TestCallResponse {
+                            test_string: q.test_string,
+                        },
+                        ST,
+                    );
+                    self.outbox.push(((now + 1).max(last), echo));
+                    continue;
+                }
                 self.received.push((now, f.as_bytes().to_vec()));
                 for (delay, reply) in self.script.pop_front().unwrap_or_default() {
-                    self.outbox.push((now + delay, reply));
+                    let last = self.outbox.iter().map(|(t, _)| *t).max().unwrap_or(0);
+                    self.outbox.push(((now + delay).max(last), reply));
                 }
             }
         }
@@ -84,71 +111,78 @@ impl Scripted {
     }
 }
 
-/// Runs one request against a scripted controller; transmissions take
-/// `tx_ms` each. Returns the outcome and the tick it ended at.
+/// Runs one request on `line` against a scripted controller;
+/// transmissions take `tx_ms` each. Returns the outcome and the tick it
+/// ended at.
 fn run<'a, R: Request<'a>>(
     client: &mut Client,
+    line: &mut Line,
     ctl: &mut Scripted,
     req: &R,
     mut now: u32,
     tx_ms: u32,
-) -> (Result<Outcome, CallError>, u32) {
-    client.start(req, now).unwrap();
+) -> (Result<(), Failure>, u32) {
+    client.start(line, req, now).unwrap();
+    let mut pending = Vec::new();
     loop {
-        let bytes = ctl.take(now);
-        if !bytes.is_empty() {
-            client.received_all(&bytes, now);
-        }
-        match client.poll(now) {
-            ClientStep::Transmit(b) => {
+        pending.extend(ctl.take(now));
+        let used = feed(client, line, &pending, now);
+        pending.drain(..used);
+        match client.poll(line, now) {
+            Step::Transmit(b) => {
                 let b = b.to_vec();
                 now += tx_ms;
                 ctl.receive(&b, now);
-                client.sent(now);
+                client.sent(line, now);
             }
-            ClientStep::WaitUntil(t) => {
+            Step::WaitUntil(t) => {
                 now = ctl.next_at().map_or(t, |r| r.min(t)).max(now + 1);
             }
-            ClientStep::Done(r) => return (r, now),
-            ClientStep::Idle => panic!("idle"),
+            Step::Done(r) => return (r, now),
+            Step::Idle => panic!("idle"),
         }
     }
 }
 
 fn client() -> Client {
-    Client::new(ClientConfig::new(ST))
+    Client::new()
 }
 
 #[test]
 fn no_reply_times_out_after_three_sends_each_timed_from_the_end_of_transmission() {
     let mut c = client();
+    let mut l = line();
     let mut ctl = Scripted::new(vec![]);
     // Each send takes 2 s on the wire (a long command at 9,600 baud).
-    let (r, end) = run(&mut c, &mut ctl, &SystemStatusQuery {}, 0, 2_000);
-    assert_eq!(r, Err(CallError::Timeout { sends: 3 }));
+    let (r, end) = run(&mut c, &mut l, &mut ctl, &SystemStatusQuery {}, 0, 2_000);
+    assert_eq!(r, Err(Failure::Timeout { sends: 3 }));
+    assert_eq!(ctl.fences, 1, "a line just opened fences first");
     let sent_at: Vec<u32> = ctl.received.iter().map(|(t, _)| *t).collect();
-    // Sent at 2,000; timeout 3 s after that end, resend ends at 7,000, ...
-    assert_eq!(sent_at, [2_000, 7_000, 12_000]);
-    assert_eq!(end, 15_000);
-    assert_eq!(c.stats().timeouts, 1);
-    assert_eq!(c.stats().resends, 2);
+    // Its first send ends at s; the timeout runs 3 s from that end, the
+    // resend ends 2 s later, and so on.
+    let s = sent_at[0];
+    assert_eq!(sent_at, [s, s + 5_000, s + 10_000]);
+    assert_eq!(end, s + 13_000);
+    assert_eq!(l.stats().timeouts, 3);
+    assert_eq!(l.stats().resends, 2);
 
     // Four sends when the system allows three re-sends.
-    let mut cfg = ClientConfig::new(ST);
-    cfg.exchange.max_sends = 4;
-    let mut c: Client = Client::new(cfg);
+    let mut cfg = LineConfig::new(ST);
+    cfg.max_sends = 4;
+    let mut l = Line::new(cfg, 7);
     let mut ctl = Scripted::new(vec![]);
-    let (r, _) = run(&mut c, &mut ctl, &SystemStatusQuery {}, 0, 1);
-    assert_eq!(r, Err(CallError::Timeout { sends: 4 }));
+    let (r, _) = run(&mut c, &mut l, &mut ctl, &SystemStatusQuery {}, 0, 1);
+    assert_eq!(r, Err(Failure::Timeout { sends: 4 }));
     assert_eq!(ctl.received.len(), 4);
 }
 
 #[test]
 fn a_late_reply_is_taken_once_and_a_stale_one_never_reads_as_the_next_state() {
     let mut c = client();
+    let mut l = line();
     let q = AxisStatusQuery::of(&[1]).unwrap();
     // Before a move the axis is at 0. The reply to the first 212H comes
-    // 3.5 s late (after the resend), the reply to the resend at once.
+    // 3.5 s late (after the resend), the reply to the resend 2 s after it.
     // Then a 234H moves the axis; the next 212H is answered with 50,000.
     let mut ctl = Scripted::new(vec![
         vec![(3_500, status(0))],
@@ -159,30 +193,36 @@ fn a_late_reply_is_taken_once_and_a_stale_one_never_reads_as_the_next_state() {
         )],
         vec![(5, status(50_000))],
     ]);
-    let (r, t) = run(&mut c, &mut ctl, &q, 0, 1);
-    assert_eq!(r, Ok(Outcome::Replied));
+    let (r, t) = run(&mut c, &mut l, &mut ctl, &q, 0, 1);
+    assert_eq!(r, Ok(()));
     let first = c.response::<AxisStatusQuery>().unwrap();
     assert_eq!(first.axes[0].current_position, 0);
     assert_eq!(ctl.received.len(), 2, "sent twice");
-    // The move: its reply must not be the stale 212H (another ID), and the
-    // client waits until that stale reply can no longer come.
+    // The move: the reply owed to the resend is settled by a fence (the
+    // controller answers in order: it comes before the echo), so it is
+    // never taken for the 234H, and the next 212H reads the new state.
     let go = AbsoluteMove::to(&[(1, 50_000)]).unwrap();
-    let (r, t) = run(&mut c, &mut ctl, &go, t, 1);
-    assert_eq!(r, Ok(Outcome::Replied));
-    let (r, _) = run(&mut c, &mut ctl, &q, t, 1);
-    assert_eq!(r, Ok(Outcome::Replied));
+    let (r, t) = run(&mut c, &mut l, &mut ctl, &go, t, 1);
+    assert_eq!(r, Ok(()));
+    let (r, _) = run(&mut c, &mut l, &mut ctl, &q, t, 1);
+    assert_eq!(r, Ok(()));
     let after = c.response::<AxisStatusQuery>().unwrap();
     assert_eq!(after.axes[0].current_position, 50_000, "not the stale 0");
-    // The 234H was held until the reply owed to the resend could no
-    // longer come (resend ended at 3,002; + 3 s timeout + 3 s late window),
-    // and that reply, arriving meanwhile, was dropped.
-    assert_eq!(ctl.received[2].0, 9_003);
-    assert_eq!(c.stats().foreign_frames, 1);
+    assert_eq!(ctl.fences, 2);
+    let resend_reply_at = ctl.received[1].0 + 2_000;
+    assert!(
+        ctl.received[2].0 > resend_reply_at,
+        "the 234H went after the owed reply, not 6 s later: {:?}",
+        ctl.received[2].0
+    );
+    assert!(ctl.received[2].0 < resend_reply_at + 10);
+    assert_eq!(l.stats().foreign, 1);
 }
 
 #[test]
 fn replies_from_another_station_or_for_another_id_are_ignored() {
     let mut c = client();
+    let mut l = line();
     let ctl_frames = vec![vec![
         (
             1,
@@ -200,13 +240,13 @@ fn replies_from_another_station_or_for_another_id_are_ignored() {
     ]];
     let mut ctl = Scripted::new(ctl_frames);
     let q = AxisStatusQuery::of(&[1]).unwrap();
-    let (r, _) = run(&mut c, &mut ctl, &q, 0, 1);
-    assert_eq!(r, Ok(Outcome::Replied));
+    let (r, _) = run(&mut c, &mut l, &mut ctl, &q, 0, 1);
+    assert_eq!(r, Ok(()));
     assert_eq!(
         c.response::<AxisStatusQuery>().unwrap().axes[0].current_position,
         7
     );
-    assert_eq!(c.stats().foreign_frames, 3);
+    assert_eq!(l.stats().foreign, 3);
     assert_eq!(ctl.received.len(), 1);
 }
 
@@ -220,12 +260,13 @@ fn error_frame_for(station: Station, code: u16) -> Vec<u8> {
 fn an_error_reply_is_a_typed_error_not_resent_with_the_216h_detail_when_asked() {
     // Without the detail.
     let mut c = client();
+    let mut l = line();
     let mut ctl = Scripted::new(vec![vec![(2, error_frame(0xC74))]]);
     let go = AbsoluteMove::to(&[(1, 1_000)]).unwrap();
-    let (r, _) = run(&mut c, &mut ctl, &go, 0, 1);
+    let (r, _) = run(&mut c, &mut l, &mut ctl, &go, 0, 1);
     assert_eq!(
         r,
-        Err(CallError::Controller {
+        Err(Failure::Controller {
             code: 0xC74,
             detail: None
         })
@@ -241,15 +282,17 @@ fn an_error_reply_is_a_typed_error_not_resent_with_the_216h_detail_when_asked() 
         detail_4: -3,
         ..Default::default()
     };
-    let mut c: Client = Client::new(ClientConfig::new(ST).with_error_detail());
+    let bridge_codes = |code: u16| (0xB00..=0xBFF).contains(&code);
+    let mut c: Client = Client::new().with_error_detail_except(bridge_codes);
+    let mut l = line();
     let mut ctl = Scripted::new(vec![
         vec![(2, error_frame(0xC74))],
         vec![(2, frame(&detail, ST))],
     ]);
-    let (r, _) = run(&mut c, &mut ctl, &go, 0, 1);
+    let (r, _) = run(&mut c, &mut l, &mut ctl, &go, 0, 1);
     assert_eq!(
         r,
-        Err(CallError::Controller {
+        Err(Failure::Controller {
             code: 0xC74,
             detail: Some(ErrorDetail {
                 error_number: 0xC74,
@@ -270,35 +313,46 @@ fn an_error_reply_is_a_typed_error_not_resent_with_the_216h_detail_when_asked() 
     );
 
     // A bridge's own code: no 216H is asked for, it would have no detail.
-    let mut c: Client = Client::new(ClientConfig::new(ST).with_error_detail());
+    let mut l = line();
     let mut ctl = Scripted::new(vec![vec![(2, error_frame(0xB02))]]);
-    let (r, _) = run(&mut c, &mut ctl, &go, 0, 1);
-    assert_eq!(r, Err(CallError::Bridge { code: 0xB02 }));
+    let (r, _) = run(&mut c, &mut l, &mut ctl, &go, 0, 1);
+    assert_eq!(
+        r,
+        Err(Failure::Controller {
+            code: 0xB02,
+            detail: None
+        })
+    );
     assert_eq!(ctl.received.len(), 1);
 }
 
 #[test]
 fn software_reset_expects_no_reply_and_holds_the_next_command_10_s() {
     let mut c = client();
+    let mut l = line();
     let mut ctl = Scripted::new(vec![vec![], vec![(2, status(1))]]);
-    let (r, t) = run(&mut c, &mut ctl, &SoftwareReset {}, 0, 1);
-    assert_eq!(r, Ok(Outcome::NoReplyExpected));
-    assert_eq!(t, 3_001, "waited out the timeout for an error reply");
+    let (r, t) = run(&mut c, &mut l, &mut ctl, &SoftwareReset {}, 0, 1);
+    assert_eq!(r, Ok(()));
+    assert_eq!(c.reply_frame(), None, "no normal response");
+    let sent = ctl.received[0].0;
+    assert_eq!(t, sent + 3_000, "waited out the timeout for an error reply");
     assert_eq!(ctl.received.len(), 1, "never resent");
     let q = AxisStatusQuery::of(&[1]).unwrap();
-    let (r, _) = run(&mut c, &mut ctl, &q, t, 1);
-    assert_eq!(r, Ok(Outcome::Replied));
+    let (r, _) = run(&mut c, &mut l, &mut ctl, &q, t, 1);
+    assert_eq!(r, Ok(()));
     assert_eq!(
-        ctl.received[1].0, 10_002,
+        ctl.received[1].0,
+        sent + 10_001,
         "sent 10 s after the reset (+ its 1 ms)"
     );
     // An error reply to the reset is still reported.
     let mut c = client();
+    let mut l = line();
     let mut ctl = Scripted::new(vec![vec![(5, error_frame(0x0E1))]]);
-    let (r, _) = run(&mut c, &mut ctl, &SoftwareReset {}, 0, 1);
+    let (r, _) = run(&mut c, &mut l, &mut ctl, &SoftwareReset {}, 0, 1);
     assert_eq!(
         r,
-        Err(CallError::Controller {
+        Err(Failure::Controller {
             code: 0x0E1,
             detail: None
         })
@@ -310,16 +364,15 @@ fn a_relative_move_without_reply_is_an_unknown_outcome_sent_once_unless_allowed(
     let mv = RelativeMove::by(&[(1, 10_000)]).unwrap();
     let mut c = client();
     let mut ctl = Scripted::new(vec![]);
-    let (r, _) = run(&mut c, &mut ctl, &mv, 0, 1);
-    assert_eq!(r, Err(CallError::OutcomeUnknown { sends: 1 }));
+    let (r, _) = run(&mut c, &mut line(), &mut ctl, &mv, 0, 1);
+    assert_eq!(r, Err(Failure::OutcomeUnknown { sends: 1 }));
     assert_eq!(ctl.received.len(), 1);
 
-    let mut cfg = ClientConfig::new(ST);
-    cfg.exchange.resend_unsafe = true;
-    let mut c: Client = Client::new(cfg);
+    let mut cfg = LineConfig::new(ST);
+    cfg.resend_unsafe = true;
     let mut ctl = Scripted::new(vec![]);
-    let (r, _) = run(&mut c, &mut ctl, &mv, 0, 1);
-    assert_eq!(r, Err(CallError::OutcomeUnknown { sends: 3 }));
+    let (r, _) = run(&mut c, &mut Line::new(cfg, 7), &mut ctl, &mv, 0, 1);
+    assert_eq!(r, Err(Failure::OutcomeUnknown { sends: 3 }));
     assert_eq!(ctl.received.len(), 3);
 }
 
@@ -331,8 +384,8 @@ fn a_reply_that_arrives_broken_is_resent_after_the_turnaround() {
     let mut c = client();
     let mut ctl = Scripted::new(vec![vec![(10, broken)], vec![(10, status(5))]]);
     let q = AxisStatusQuery::of(&[1]).unwrap();
-    let (r, t) = run(&mut c, &mut ctl, &q, 0, 1);
-    assert_eq!(r, Ok(Outcome::Replied));
+    let (r, t) = run(&mut c, &mut line(), &mut ctl, &q, 0, 1);
+    assert_eq!(r, Ok(()));
     assert_eq!(ctl.received.len(), 2);
     assert!(ctl.received[1].0 < 100, "resent at once, not after 3 s");
     assert!(t < 200);
@@ -341,6 +394,7 @@ fn a_reply_that_arrives_broken_is_resent_after_the_turnaround() {
 #[test]
 fn typed_replies_from_the_simulator_and_a_move_built_from_pairs() {
     let mut sim = Simulator::tta(ST);
+    let mut l = line_to(&sim);
     let mut c = client();
     let go = AbsoluteMove::to(&[(2, -25_500), (1, 100_000)])
         .unwrap()
@@ -348,15 +402,16 @@ fn typed_replies_from_the_simulator_and_a_move_built_from_pairs() {
     // EXAMPLES 4: axes 1 + 2, values in ascending axis order.
     assert_eq!(go.axis_pattern.bits(), 0x03);
     assert_eq!(go.absolute_coordinate.as_slice(), &[100_000, -25_500]);
-    let (r, t) = call(&mut c, &mut sim, &go, 0);
-    assert_eq!(r, Ok(Outcome::Replied));
+    let (r, t) = call(&mut c, &mut l, &mut sim, &go, 0);
+    assert_eq!(r, Ok(()));
     let (r, _) = call(
         &mut c,
+        &mut l,
         &mut sim,
         &AxisStatusQuery::of(&[1, 2, 3]).unwrap(),
         t,
     );
-    assert_eq!(r, Ok(Outcome::Replied));
+    assert_eq!(r, Ok(()));
     assert_eq!(c.response::<AxisStatusQuery>().unwrap().axes.len(), 3);
     // A query of another type than the request is refused, not misread.
     assert!(c.response::<SystemStatusQuery>().is_err());
@@ -372,36 +427,38 @@ fn the_simulator_with_faults_answers_every_request_in_the_end() {
         ..Faults::default()
     };
     let mut sim = Simulator::tta(ST).with_faults(faults, 42);
+    let mut l = line_to(&sim);
     let mut c = client();
     let mut now = 0;
     let (mut ok, mut timeouts) = (0, 0);
     for _ in 0..500 {
         let (r, t) = call(
             &mut c,
+            &mut l,
             &mut sim,
             &AxisStatusQuery::of(&[1, 2]).unwrap(),
             now,
         );
         now = t;
         match r {
-            Ok(Outcome::Replied) => {
+            Ok(()) => {
                 ok += 1;
                 assert_eq!(c.response::<AxisStatusQuery>().unwrap().axes.len(), 2);
             }
-            Err(CallError::Timeout { sends: 3 }) => timeouts += 1,
+            Err(Failure::Timeout { sends: 3 }) => timeouts += 1,
             other => panic!("{other:?}"),
         }
     }
     println!(
         "500 x 212H under faults: {ok} answered, {timeouts} timed out, {:?}",
-        c.stats()
+        l.stats()
     );
     assert!(ok > 480);
 }
 
 #[test]
 fn the_blocking_flavour_over_a_uart_and_a_closure_clock() {
-    use iai_protocol_b::client::Loopback;
+    use iai_protocol_b::io::Loopback;
     let mut uart = Loopback::default();
     let mut ms = 0u32;
     let mut clock = move || {
@@ -409,41 +466,78 @@ fn the_blocking_flavour_over_a_uart_and_a_closure_clock() {
         ms
     };
     let mut c = client();
+    let mut l = line();
     let reply = c
         .call(
+            &mut l,
             &mut uart,
             &mut clock,
             &AxisStatusQuery::of(&[1, 4]).unwrap(),
         )
         .unwrap();
     assert_eq!(reply.axes.len(), 2);
-    let none = c.call(&mut uart, &mut clock, &SoftwareReset {});
+    let none = c.call(&mut l, &mut uart, &mut clock, &SoftwareReset {});
     assert!(none.is_ok());
 }
 
-/// Every engine's first command goes out at once whatever the tick: a
-/// bridge idle since boot may send its first command on day 25 (past
-/// 2^31 ms) or just before its clock wraps on day 49.7.
+/// Every engine's first command (after its line's fence) goes out at once
+/// whatever the tick: a bridge idle since boot may send its first command
+/// on day 25 (past 2^31 ms) or just before its clock wraps on day 49.7.
 #[test]
 fn engines_start_at_once_on_any_tick() {
-    use iai_protocol_b::readback::{ReadBack, ReadBackConfig, ReadStep};
-    use iai_protocol_b::transfer::{Step, Transfer, TransferConfig};
+    use iai_protocol_b::{Profile, ReadBack, ReadBackConfig, Transfer, TransferConfig};
     for now in [0u32, 0x8000_0000, 0x8000_0001, u32::MAX - 5_000, u32::MAX] {
+        let fence = |l: &mut Line, bytes: &[u8]| -> bool {
+            bytes.starts_with(b"!99200") && {
+                let echo = {
+                    let mut e = bytes.to_vec();
+                    e[0] = b'#';
+                    let sum: u32 = e[..16].iter().map(|&b| u32::from(b)).sum();
+                    e[16..18].copy_from_slice(format!("{:02X}", sum & 0xFF).as_bytes());
+                    e
+                };
+                let f = iai_protocol_b::Frame::new_checked(&echo, Default::default()).unwrap();
+                l.sent(now);
+                l.offer(&f, true, now);
+                true
+            }
+        };
         let mut c = client();
-        c.start(&AxisStatusQuery::default(), now).unwrap();
+        let mut l = line();
+        c.start(&mut l, &AxisStatusQuery::default(), now).unwrap();
+        let Step::Transmit(b) = c.poll(&mut l, now) else {
+            panic!()
+        };
+        let b = b.to_vec();
+        assert!(fence(&mut l, &b), "client at {now:#x}: the fence");
+        let at = now.wrapping_add(2);
         assert!(
-            matches!(c.poll(now), ClientStep::Transmit(_)),
+            matches!(c.poll(&mut l, at), Step::Transmit(b) if b.starts_with(b"!99212")),
             "client at {now:#x}"
         );
-        let mut t: Transfer<_> =
-            Transfer::new(TransferConfig::tta(ST), host_tests::table::table(3, 1, 1));
+        let mut t: Transfer<_> = Transfer::new(
+            TransferConfig::new(Profile::TTA),
+            host_tests::table::table(3, 1, 1),
+        );
+        let mut l = line();
+        let Step::Transmit(b) = t.poll(&mut l, now) else {
+            panic!()
+        };
+        let b = b.to_vec();
+        assert!(fence(&mut l, &b), "transfer at {now:#x}: the fence");
         assert!(
-            matches!(t.poll(now), Step::Transmit(_)),
+            matches!(t.poll(&mut l, at), Step::Transmit(b) if b.starts_with(b"!9926D")),
             "transfer at {now:#x}"
         );
-        let mut r: ReadBack = ReadBack::new(ReadBackConfig::tta(ST, 1, 100));
+        let mut r: ReadBack = ReadBack::new(ReadBackConfig::new(Profile::TTA, 1, 100));
+        let mut l = line();
+        let Step::Transmit(b) = r.poll(&mut l, now) else {
+            panic!()
+        };
+        let b = b.to_vec();
+        assert!(fence(&mut l, &b), "read-back at {now:#x}: the fence");
         assert!(
-            matches!(r.poll(now), ReadStep::Transmit(_)),
+            matches!(r.poll(&mut l, at), Step::Transmit(b) if b.starts_with(b"!9921F")),
             "read-back at {now:#x}"
         );
     }

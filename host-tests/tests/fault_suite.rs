@@ -10,13 +10,13 @@
 
 use std::collections::BTreeMap;
 
-use host_tests::link::{read_back_line, run_line};
+use host_tests::link::{read_back, run_transfer};
 use host_tests::sim::{Faults, Simulator};
 use host_tests::table::table;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
-use iai_protocol_b::readback::{ReadBack, ReadBackConfig};
-use iai_protocol_b::transfer::{Guarantee, Transfer, TransferConfig, TransferError, Verify};
+use iai_protocol_b::transfer::{Guarantee, Transfer, TransferConfig, Verify};
+use iai_protocol_b::{Failure, Line, LineConfig, Profile, ReadBack, ReadBackConfig};
 
 const ST: Station = Station(0x99);
 const BAUD: u32 = 115_200;
@@ -55,6 +55,16 @@ struct Class {
     name: &'static str,
     faults: Faults,
     must: Must,
+}
+
+impl Class {
+    /// The line the engines use for this class: a line that repeats
+    /// frames is declared so (its duplicate window covers the copies'
+    /// delay), every other is a direct line.
+    fn line(&self) -> Line {
+        let dup = self.faults.dup_reply.map_or(0, |(_, ms)| ms);
+        Line::new(LineConfig::new(ST).with_duplicate_window(dup), 0x5EED)
+    }
 }
 
 fn classes() -> Vec<Class> {
@@ -175,30 +185,30 @@ fn table_writes_under_every_fault_class() {
                 continue;
             }
             let mut sim = Simulator::tta(ST).with_faults(class.faults.clone(), 1000 + i as u64);
-            let cfg = TransferConfig::tta(ST).with_verify(verify);
+            let cfg = TransferConfig::new(Profile::TTA).with_verify(verify);
             let mut t: Transfer<_> = Transfer::new(cfg, table(RECORDS, AXES, 3));
-            let run = run_line(&mut t, &mut sim, RESUMES, BAUD);
+            let run = run_transfer(&mut t, &mut class.line(), &mut sim, RESUMES, BAUD, 0);
             let diff = differences(&sim.table, &expected);
             let s = t.stats();
             match (&run.result, verify) {
-                (Ok(report), Verify::Full) => {
-                    assert_eq!(report.guarantee, Guarantee::Verified, "{}", class.name);
+                (Ok(guarantee), Verify::Full) => {
+                    assert_eq!(*guarantee, Guarantee::Verified, "{}", class.name);
                     assert_eq!(
                         diff, 0,
                         "{}: a verified success with a wrong table",
                         class.name
                     );
                 }
-                (Ok(report), _) => {
-                    assert_eq!(report.guarantee, Guarantee::Unverified);
+                (Ok(guarantee), _) => {
+                    assert_eq!(*guarantee, Guarantee::Unverified);
                 }
                 (Err(e), _) => {
                     assert_eq!(class.must, Must::SucceedOrFail, "{}: {e:?}", class.name);
                     assert!(matches!(
                         e,
-                        TransferError::Timeout
-                            | TransferError::Controller { .. }
-                            | TransferError::Mismatch { .. }
+                        Failure::Timeout { .. }
+                            | Failure::Controller { .. }
+                            | Failure::Mismatch { .. }
                     ));
                 }
             }
@@ -210,7 +220,7 @@ fn table_writes_under_every_fault_class() {
                 class.name,
                 verify,
                 match &run.result {
-                    Ok(r) => format!("{:?}", r.guarantee),
+                    Ok(g) => format!("{g:?}"),
                     Err(e) => format!("failed: {e:?}"),
                 },
                 diff,
@@ -248,10 +258,11 @@ fn without_verification_a_swap_goes_unseen_and_the_engine_says_so() {
     };
     let expected: BTreeMap<_, _> = table(2_000, 8, 9).map(|r| (r.number, r)).collect();
     let mut sim = Simulator::tta(ST).with_faults(faults.clone(), 77);
-    let cfg = TransferConfig::tta(ST).with_verify(Verify::Off);
+    let cfg = TransferConfig::new(Profile::TTA).with_verify(Verify::Off);
     let mut t: Transfer<_> = Transfer::new(cfg, table(2_000, 8, 9));
-    let report = run_line(&mut t, &mut sim, 0, BAUD).result.unwrap();
-    assert_eq!(report.guarantee, Guarantee::Unverified);
+    let line = || Line::new(LineConfig::new(ST), 1);
+    let run = run_transfer(&mut t, &mut line(), &mut sim, 0, BAUD, 0);
+    assert_eq!(run.result, Ok(Guarantee::Unverified));
     assert!(sim.stats().swapped_records > 0);
     assert!(
         differences(&sim.table, &expected) > 0,
@@ -259,9 +270,9 @@ fn without_verification_a_swap_goes_unseen_and_the_engine_says_so() {
     );
     // The same with full verification: every swap is found and rewritten.
     let mut sim = Simulator::tta(ST).with_faults(faults, 77);
-    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(2_000, 8, 9));
-    let report = run_line(&mut t, &mut sim, 0, BAUD).result.unwrap();
-    assert_eq!(report.guarantee, Guarantee::Verified);
+    let mut t: Transfer<_> = Transfer::new(TransferConfig::new(Profile::TTA), table(2_000, 8, 9));
+    let run = run_transfer(&mut t, &mut line(), &mut sim, 0, BAUD, 0);
+    assert_eq!(run.result, Ok(Guarantee::Verified));
     assert_eq!(differences(&sim.table, &expected), 0);
     assert!(t.stats().rewrites > 0);
 }
@@ -279,8 +290,8 @@ fn read_back_under_every_fault_class() {
         std::mem::swap(&mut faults.flip_bit_in, &mut faults.flip_bit_out);
         let mut sim = Simulator::tta(ST).with_faults(faults, 2000 + i as u64);
         sim.table = expected.clone();
-        let mut rb: ReadBack = ReadBack::new(ReadBackConfig::tta(ST, 1, RECORDS as u16));
-        let run = read_back_line(&mut rb, &mut sim, RESUMES, BAUD);
+        let mut rb: ReadBack = ReadBack::new(ReadBackConfig::new(Profile::TTA, 1, RECORDS as u16));
+        let run = read_back(&mut rb, &mut class.line(), &mut sim, RESUMES, BAUD);
         let got: BTreeMap<_, _> = run.records.iter().map(|r| (r.number, r.clone())).collect();
         let s = rb.stats();
         match &run.result {
@@ -320,14 +331,14 @@ fn read_back_under_every_fault_class() {
             differences(&got, &expected),
             s.retries,
             s.stale_replies,
-            s.rereads,
+            s.disagreements,
             f64::from(run.virtual_ms) / 1000.0
         ));
     }
     println!(
         "\nconfirmed read-back of 20,000 x 8 at {BAUD} baud\n\
          | fault class | outcome | records missing or wrong | retries | stale replies | \
-         re-read windows | wire time (s) |\n|---|---|---|---|---|---|---|"
+         disagreeing confirmations | wire time (s) |\n|---|---|---|---|---|---|---|"
     );
     for r in &rows {
         println!("{r}");

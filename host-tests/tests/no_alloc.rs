@@ -9,11 +9,12 @@ use host_tests::sim::Simulator;
 use host_tests::table::table;
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::engine::{feed, Engine, Step};
 use iai_protocol_b::frame::Station;
-use iai_protocol_b::stream::{
-    PositionStream, PositionStreamDecoder, PositionStreamEncoder, StreamEvent,
-};
-use iai_protocol_b::transfer::{Step, Transfer, TransferConfig};
+use iai_protocol_b::position::PositionStream;
+use iai_protocol_b::stream::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
+use iai_protocol_b::transfer::{Transfer, TransferConfig};
+use iai_protocol_b::{Line, LineConfig, Profile};
 
 struct Counting;
 static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
@@ -78,7 +79,8 @@ fn the_core_allocates_nothing() {
     let mut records = 0u32;
     let mut rest = &wire[..];
     let end = core_call(|| loop {
-        let (used, ev) = dec.decode(rest);
+        let r = dec.decode(rest);
+        let (used, ev) = (r.consumed, r.event);
         rest = &rest[used..];
         match ev {
             StreamEvent::Record(_) => records += 1,
@@ -109,68 +111,20 @@ fn the_core_allocates_nothing() {
 
     // The transfer engine against the simulator (only engine calls counted).
     let mut sim = Simulator::tta(Station(0x99));
+    let mut line = core_call(|| Line::new(LineConfig::new(Station(0x99)), 9));
     let mut t: Transfer<_> =
-        core_call(|| Transfer::new(TransferConfig::tta(Station(0x99)), table(2_000, 8, 4)));
-    let mut now = 0u32;
-    let stats = loop {
-        let reply = sim.take_output(now);
-        core_call(|| t.received_all(&reply, now));
-        let mut out = Vec::new();
-        let step = core_call(|| match t.poll(now) {
-            Step::Transmit(b) => {
-                // Copying out is the caller's business: count only the engine.
-                COUNTING.with(|c| c.set(false));
-                out.extend_from_slice(b);
-                None
-            }
-            Step::WaitUntil(d) => Some(Err(d)),
-            Step::Complete(s) => Some(Ok(s)),
-            other => panic!("{other:?}"),
-        });
-        match step {
-            None => {
-                sim.receive(&out, now);
-                core_call(|| t.sent(now));
-            }
-            Some(Err(d)) => now = sim.next_output_at().map_or(d, |r| r.min(d)).max(now + 1),
-            Some(Ok(s)) => break s,
-        }
-    };
-    assert_eq!(stats.stats.records_confirmed, 2_000);
-    assert_eq!(stats.stats.records_verified, 2_000);
+        core_call(|| Transfer::new(TransferConfig::new(Profile::TTA), table(2_000, 8, 4)));
+    let verified = drive_counted(&mut t, &mut line, &mut sim);
+    assert!(verified.is_ok());
+    assert_eq!(t.stats().records_confirmed, 2_000);
+    assert_eq!(t.stats().records_verified, 2_000);
 
     // The request engine: a 212H and its typed reply.
-    let mut client: iai_protocol_b::client::Client = core_call(|| {
-        iai_protocol_b::client::Client::new(iai_protocol_b::client::ClientConfig::new(Station(
-            0x99,
-        )))
-    });
+    let mut client: iai_protocol_b::Client = core_call(iai_protocol_b::Client::new);
     let q = iai_protocol_b::message::AxisStatusQuery::of(&[1, 2]).unwrap();
-    let mut now = 0u32;
-    core_call(|| client.start(&q, now)).unwrap();
-    let outcome = loop {
-        let reply = sim.take_output(now);
-        core_call(|| client.received_all(&reply, now));
-        let mut out = Vec::new();
-        let step = core_call(|| match client.poll(now) {
-            iai_protocol_b::client::ClientStep::Transmit(b) => {
-                COUNTING.with(|c| c.set(false));
-                out.extend_from_slice(b);
-                None
-            }
-            iai_protocol_b::client::ClientStep::WaitUntil(d) => Some(Err(d)),
-            iai_protocol_b::client::ClientStep::Done(r) => Some(Ok(r)),
-            other => panic!("{other:?}"),
-        });
-        match step {
-            None => {
-                sim.receive(&out, now);
-                core_call(|| client.sent(now));
-            }
-            Some(Err(d)) => now = sim.next_output_at().map_or(d, |r| r.min(d)).max(now + 1),
-            Some(Ok(r)) => break r,
-        }
-    };
+    let now = sim.next_output_at().unwrap_or(0) + 10_000;
+    core_call(|| client.start(&mut line, &q, now)).unwrap();
+    let outcome = drive_counted(&mut client, &mut line, &mut sim);
     assert!(outcome.is_ok());
     let status = core_call(|| {
         client
@@ -190,8 +144,43 @@ fn the_core_allocates_nothing() {
         >(),
         std::mem::size_of::<PositionStreamDecoder>(),
         std::mem::size_of::<Transfer<std::iter::Empty<iai_protocol_b::position::PositionRecord>>>(),
-        std::mem::size_of::<iai_protocol_b::readback::ReadBack>(),
-        std::mem::size_of::<iai_protocol_b::client::Client>(),
-        std::mem::size_of::<iai_protocol_b::client::Client<64, 128>>(),
+        std::mem::size_of::<iai_protocol_b::ReadBack>(),
+        std::mem::size_of::<iai_protocol_b::Client>(),
+        std::mem::size_of::<iai_protocol_b::Client<64, 128>>(),
     );
+    println!("RAM (size_of): Line {} B", std::mem::size_of::<Line>());
+}
+
+/// Drives `engine` on `line` against `sim` in virtual time to its result,
+/// counting the allocations of the engine's calls only.
+fn drive_counted<G: Engine>(
+    engine: &mut G,
+    line: &mut Line,
+    sim: &mut Simulator,
+) -> Result<G::Output, iai_protocol_b::Failure> {
+    let mut now = 0u32;
+    loop {
+        let reply = sim.take_output(now);
+        core_call(|| feed(engine, line, &reply, now));
+        let mut out = Vec::new();
+        let step = core_call(|| match engine.poll(line, now) {
+            Step::Transmit(b) => {
+                // Copying out is the caller's business: count only the engine.
+                COUNTING.with(|c| c.set(false));
+                out.extend_from_slice(b);
+                None
+            }
+            Step::WaitUntil(d) => Some(Err(d)),
+            Step::Done(r) => Some(Ok(r)),
+            Step::Idle => panic!("idle"),
+        });
+        match step {
+            None => {
+                sim.receive(&out, now);
+                core_call(|| engine.sent(line, now));
+            }
+            Some(Err(d)) => now = sim.next_output_at().map_or(d, |r| r.min(d)).max(now + 1),
+            Some(Ok(r)) => return r,
+        }
+    }
 }

@@ -327,8 +327,8 @@ fn configuration_block_policy_and_status_query() {
     let (sim, _) = finish(qemu, sim);
     assert_eq!(
         sim.stats().commands,
-        1,
-        "only the 212H reached the controller"
+        2,
+        "only the bridge's opening fence and the 212H reached the controller"
     );
     assert!(sim.table.is_empty());
 }

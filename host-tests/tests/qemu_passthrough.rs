@@ -58,7 +58,8 @@ fn bridges_a_query_and_quits(board: Board) {
         "missing banner: {outcome:#?}"
     );
     let sim = sim.join().expect("simulator");
-    assert_eq!(sim.stats().commands, 1);
+    // The bridge's opening fence (a 200H), then the host's 212H.
+    assert_eq!(sim.stats().commands, 2);
     eprintln!("{board}: bridged and quit in {:?}", started.elapsed());
 }
 

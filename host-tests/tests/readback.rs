@@ -1,33 +1,45 @@
 //! Read-back: a table written through the transfer engine is read back in
 //! windows with 21FH and compared with the source.
 
-use host_tests::link::run;
+use host_tests::link::{line_to, run_transfer};
 use host_tests::sim::{Faults, Simulator};
 use host_tests::table::table;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
-use iai_protocol_b::readback::{ReadBack, ReadBackConfig, ReadBackStats};
-use iai_protocol_b::transfer::{Transfer, TransferConfig, TransferError};
+use iai_protocol_b::readback::ReadBackStats;
+use iai_protocol_b::{Failure, Profile, ReadBack, ReadBackConfig, Transfer, TransferConfig};
 
 const ST: Station = Station(0x99);
 
-/// Drives a read-back against the simulator on a virtual clock.
+/// Reading positions `first..=last` of a TTA.
+const fn tta(first: u16, last: u16) -> ReadBackConfig {
+    ReadBackConfig::new(Profile::TTA, first, last)
+}
+
+/// Drives a read-back against the simulator on a virtual clock, on a line
+/// of its own.
 fn read_back(
     rb: &mut ReadBack,
     sim: &mut Simulator,
-) -> (Vec<PositionRecord>, Result<ReadBackStats, TransferError>) {
-    let r = host_tests::link::read_back(rb, sim);
+) -> (Vec<PositionRecord>, Result<ReadBackStats, Failure>) {
+    let r = host_tests::link::read_back(rb, &mut line_to(sim), sim, 0, 0);
     (r.records, r.result)
+}
+
+/// Writes `t` into `sim`.
+fn write<I: iai_protocol_b::transfer::RecordSource>(t: &mut Transfer<I>, sim: &mut Simulator) {
+    let run = run_transfer(t, &mut line_to(sim), sim, 0, 0, 0);
+    assert!(run.result.is_ok(), "{:?}", run.result);
 }
 
 #[test]
 fn a_written_table_reads_back_equal() {
     let mut sim = Simulator::tta(ST);
-    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(2_000, 8, 31));
-    run(&mut t, &mut sim, 0).result.unwrap();
-    let mut rb: ReadBack = ReadBack::new(ReadBackConfig::tta(ST, 1, 2_000));
+    let mut t: Transfer<_> = Transfer::new(TransferConfig::new(Profile::TTA), table(2_000, 8, 31));
+    write(&mut t, &mut sim);
+    let mut rb: ReadBack = ReadBack::new(tta(1, 2_000));
     assert_eq!(
-        ReadBackConfig::tta(ST, 1, 2_000).window(),
+        tta(1, 2_000).window(),
         24,
         "24 records of 82 bytes fit 2,048"
     );
@@ -42,7 +54,7 @@ fn a_written_table_reads_back_equal() {
     // Unconfirmed: once each.
     let cfg = ReadBackConfig {
         confirm: false,
-        ..ReadBackConfig::tta(ST, 1, 2_000)
+        ..tta(1, 2_000)
     };
     let mut rb: ReadBack = ReadBack::new(cfg);
     let (got, stats) = read_back(&mut rb, &mut sim);
@@ -75,7 +87,7 @@ fn a_late_empty_reply_never_stands_in_for_the_next_window() {
     }
     let cfg = ReadBackConfig {
         confirm: false,
-        ..ReadBackConfig::tta(ST, 1, 96)
+        ..tta(1, 96)
     };
     let mut rb: ReadBack = ReadBack::new(cfg);
     let (got, stats) = read_back(&mut rb, &mut sim);
@@ -105,7 +117,7 @@ fn read_back_of_a_sparse_table_with_faults_skips_nothing() {
     for r in &recs {
         sim.table.insert(r.number, r.clone());
     }
-    let mut rb: ReadBack = ReadBack::new(ReadBackConfig::tta(ST, 1, 1_800));
+    let mut rb: ReadBack = ReadBack::new(tta(1, 1_800));
     let (got, stats) = read_back(&mut rb, &mut sim);
     let stats = stats.unwrap();
     assert_eq!(got, recs);
@@ -165,172 +177,14 @@ fn the_blocking_flavour_hands_every_window_to_the_sink() {
         now,
         inbox: Default::default(),
     };
-    let mut rb: ReadBack = ReadBack::new(ReadBackConfig::tta(ST, 1, 300));
+    let mut rb: ReadBack = ReadBack::new(tta(1, 300));
     let mut got = Vec::new();
+    let mut line = iai_protocol_b::Line::new(iai_protocol_b::LineConfig::new(ST), 1);
     let stats = rb
-        .run_blocking(&mut port, &mut clock, |records| got.extend(records))
+        .run_blocking(&mut line, &mut port, &mut clock, |records| {
+            got.extend(records)
+        })
         .unwrap();
     assert_eq!(got, table(300, 4, 8).collect::<Vec<_>>());
     assert_eq!(stats.windows_confirmed, 300u32.div_ceil(24));
-}
-
-/// After a window's reply is answered, the engine takes no more bytes until
-/// the next poll has delivered it: a frame fed right behind it would
-/// otherwise overwrite the reply in the decoder and its records be lost.
-#[test]
-fn an_answered_reply_is_held_until_it_is_polled() {
-    use iai_protocol_b::readback::{ReadEvent, ReadStep};
-    let mut sim = Simulator::tta(ST);
-    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(3, 2, 5));
-    run(&mut t, &mut sim, 0).result.unwrap();
-    let cfg = ReadBackConfig {
-        confirm: false,
-        ..ReadBackConfig::tta(ST, 1, 3)
-    };
-    let mut rb: ReadBack = ReadBack::new(cfg);
-    let ReadStep::Transmit(q) = rb.poll(0) else {
-        panic!("a query first")
-    };
-    let q = q.to_vec();
-    rb.sent(1);
-    sim.receive(&q, 1);
-    let mut bytes = sim.take_output(10_000);
-    let reply_len = bytes.len();
-    // A stray copy right behind it.
-    bytes.extend_from_within(..reply_len);
-    let r = rb.received(&bytes, 20);
-    assert_eq!(r.event, ReadEvent::Answered { records: 3 });
-    assert_eq!(r.consumed, reply_len);
-    let r = rb.received(&bytes[reply_len..], 21);
-    assert_eq!((r.consumed, r.event), (0, ReadEvent::NeedMore));
-    match rb.poll(22) {
-        ReadStep::Records(recs) => {
-            assert_eq!(recs.collect::<Vec<_>>(), table(3, 2, 5).collect::<Vec<_>>())
-        }
-        other => panic!("{other:?}"),
-    }
-}
-
-/// Polls until the engine transmits, returning the query and the tick it
-/// went out at (`now` advances to each deadline).
-fn next_query(rb: &mut ReadBack, now: &mut u32) -> Vec<u8> {
-    use iai_protocol_b::readback::ReadStep;
-    loop {
-        match rb.poll(*now) {
-            ReadStep::Transmit(q) => return q.to_vec(),
-            ReadStep::WaitUntil(t) => *now = t,
-            other => panic!("a query expected, got {other:?}"),
-        }
-    }
-}
-
-/// The records of the window the next poll delivers.
-fn delivered(rb: &mut ReadBack, now: u32) -> (u16, u16, bool, Vec<u16>) {
-    use iai_protocol_b::readback::ReadStep;
-    match rb.poll(now) {
-        ReadStep::Records(r) => (
-            r.head(),
-            r.asked(),
-            r.reread(),
-            r.map(|p| p.number).collect(),
-        ),
-        other => panic!("records expected, got {other:?}"),
-    }
-}
-
-/// A late reply to a window given up after a timeout holds records of the
-/// next window, which overlaps it (the window shrank). A copy of it may
-/// follow: the next query waits out the duplicate window after the late
-/// reply, so that no copy can pass for its answer (fuzz finding F8).
-#[test]
-fn a_late_reply_holds_back_the_next_query_until_its_copy_cannot_come() {
-    use iai_protocol_b::readback::ReadEvent;
-    let mut sim = Simulator::tta(ST);
-    for n in [3u16, 5] {
-        let mut r = host_tests::table::record(u32::from(n), 8, 4);
-        r.number = n;
-        sim.table.insert(n, r);
-    }
-    let cfg = ReadBackConfig {
-        confirm: false,
-        max_response: 360,
-        ..ReadBackConfig::tta(ST, 1, 8)
-    };
-    assert_eq!(cfg.window(), 4);
-    let mut rb: ReadBack = ReadBack::new(cfg);
-    let mut now = 0;
-    // 1+4 goes out; its reply (holding 3) will come late.
-    let q = next_query(&mut rb, &mut now);
-    rb.sent(now + 1);
-    sim.receive(&q, now + 1);
-    let late = sim.take_output(u32::MAX);
-    // Timeout: 1+2 is asked and answered empty.
-    now += 3_001;
-    let q = next_query(&mut rb, &mut now);
-    rb.sent(now + 1);
-    sim.receive(&q, now + 1);
-    let reply = sim.take_output(u32::MAX);
-    assert_eq!(
-        rb.received(&reply, now + 100).event,
-        ReadEvent::Answered { records: 0 }
-    );
-    assert_eq!(delivered(&mut rb, now + 101), (1, 2, false, vec![]));
-    // The late reply to 1+4 comes just before the hold for it ends.
-    let hold = now + 1 + 6_000;
-    assert_eq!(rb.received(&late, hold - 100).event, ReadEvent::Stale);
-    // The next window (3+3) waits until a copy of it cannot come.
-    let mut at = hold;
-    assert!(matches!(
-        rb.poll(at),
-        iai_protocol_b::readback::ReadStep::WaitUntil(t) if t == hold - 100 + 3_000
-    ));
-    let q = next_query(&mut rb, &mut at);
-    assert_eq!(at, hold - 100 + 3_000);
-    rb.sent(at + 1);
-    sim.receive(&q, at + 1);
-    let reply = sim.take_output(u32::MAX);
-    assert_eq!(
-        rb.received(&reply, at + 100).event,
-        ReadEvent::Answered { records: 2 }
-    );
-    assert_eq!(delivered(&mut rb, at + 101), (3, 3, false, vec![3, 5]));
-    assert_eq!(rb.stats().records, 2);
-}
-
-/// Confirmed reads: a reply to the window shrunk after a timeout confirms
-/// nothing of the larger window asked before (fuzz finding F10), and an
-/// empty window is delivered once, not as a re-read.
-#[test]
-fn a_shrunk_window_is_confirmed_by_its_own_replies() {
-    use iai_protocol_b::readback::ReadEvent;
-    let mut sim = Simulator::tta(ST);
-    let cfg = ReadBackConfig {
-        max_response: 360,
-        ..ReadBackConfig::tta(ST, 1, 4)
-    };
-    let mut rb: ReadBack = ReadBack::new(cfg);
-    let mut now = 0;
-    let empty = |rb: &mut ReadBack, sim: &mut Simulator, now: &mut u32| {
-        let q = next_query(rb, now);
-        rb.sent(*now + 1);
-        sim.receive(&q, *now + 1);
-        let reply = sim.take_output(u32::MAX);
-        *now += 100;
-        assert_eq!(
-            rb.received(&reply, *now).event,
-            ReadEvent::Answered { records: 0 }
-        );
-        *now += 1;
-    };
-    // 1+4 answered empty; its confirmation query is lost.
-    empty(&mut rb, &mut sim, &mut now);
-    let _lost = next_query(&mut rb, &mut now);
-    rb.sent(now + 1);
-    now += 3_001;
-    // Resent as 1+2 and answered empty: not yet confirmed.
-    empty(&mut rb, &mut sim, &mut now);
-    // A second reply to 1+2 confirms it.
-    empty(&mut rb, &mut sim, &mut now);
-    assert_eq!(delivered(&mut rb, now), (1, 2, false, vec![]));
-    assert_eq!(rb.stats().windows_confirmed, 1);
 }

@@ -6,9 +6,8 @@ use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::frame::{Frame, Station};
 use iai_protocol_b::message::{ChangePositionData2, Message, Repeated};
 use iai_protocol_b::position::PositionRecord;
-use iai_protocol_b::stream::{
-    PositionStream, PositionStreamDecoder, PositionStreamEncoder, StreamEvent,
-};
+use iai_protocol_b::position::PositionStream;
+use iai_protocol_b::stream::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
 use iai_protocol_b::Error;
 
 fn encode_all(kind: PositionStream, recs: &[PositionRecord], chunk: usize) -> Vec<u8> {
@@ -37,7 +36,8 @@ fn decode_all(bytes: &[u8]) -> (Vec<PositionRecord>, Option<StreamEvent>) {
     let mut recs = Vec::new();
     let mut rest = bytes;
     while !rest.is_empty() {
-        let (used, ev) = dec.decode(rest);
+        let r = dec.decode(rest);
+        let (used, ev) = (r.consumed, r.event);
         rest = &rest[used..];
         match ev {
             StreamEvent::Record(r) => recs.push(r),

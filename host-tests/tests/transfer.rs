@@ -1,17 +1,31 @@
 //! End to end: full-size position tables written through the transfer
 //! engine into the simulated controller, with and without faults.
 
-use host_tests::link::{run, run_fed, run_line};
+use host_tests::link::{line_to, run_fed, run_transfer, LinkRun};
 use host_tests::sim::{Faults, Simulator};
 use host_tests::table::table;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
-use iai_protocol_b::stream::PositionStream;
+use iai_protocol_b::position::PositionStream;
 use iai_protocol_b::transfer::{
-    Guarantee, RecordQueue, Transfer, TransferConfig, TransferError, Verify,
+    Guarantee, RecordQueue, RecordSource, Transfer, TransferConfig, Verify,
 };
+use iai_protocol_b::{Failure, Profile};
 
 const ST: Station = Station(0x99);
+
+/// A TTA's table writes.
+const TTA: TransferConfig = TransferConfig::new(Profile::TTA);
+
+/// Runs `t` against `sim` on a line of its own (at `baud`, 0: no wire time).
+fn run_line<I: RecordSource, const N: usize>(
+    t: &mut Transfer<I, N>,
+    sim: &mut Simulator,
+    resumes: u32,
+    baud: u32,
+) -> LinkRun {
+    run_transfer(t, &mut line_to(sim), sim, resumes, baud, 0)
+}
 
 fn assert_table_equal(sim: &Simulator, source: impl Iterator<Item = PositionRecord>) {
     let mut expected = std::collections::BTreeMap::new();
@@ -31,11 +45,10 @@ const BAUD: u32 = 115_200;
 #[test]
 fn full_table_20000_records_8_axes_no_faults() {
     let mut sim = Simulator::tta(ST);
-    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(20_000, 8, 11));
+    let mut t: Transfer<_> = Transfer::new(TTA, table(20_000, 8, 11));
     let run = run_line(&mut t, &mut sim, 0, BAUD);
-    let report = run.result.unwrap();
-    let stats = report.stats;
-    assert_eq!(report.guarantee, Guarantee::Verified);
+    let stats = t.stats();
+    assert_eq!(run.result, Ok(Guarantee::Verified));
     assert_eq!(stats.records_confirmed, 20_000);
     assert_eq!(stats.records_verified, 20_000);
     assert_eq!(stats.retries, 0);
@@ -58,10 +71,13 @@ fn full_table_20000_records_8_axes_no_faults() {
 #[test]
 fn full_table_20000_records_1_axis_no_faults() {
     let mut sim = Simulator::tta(ST);
-    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(20_000, 1, 12));
-    let report = run_line(&mut t, &mut sim, 0, BAUD).result.unwrap();
-    assert_eq!(report.stats.records_confirmed, 20_000);
-    assert_eq!(report.stats.records_verified, 20_000);
+    let mut t: Transfer<_> = Transfer::new(TTA, table(20_000, 1, 12));
+    assert_eq!(
+        run_line(&mut t, &mut sim, 0, BAUD).result,
+        Ok(Guarantee::Verified)
+    );
+    assert_eq!(t.stats().records_confirmed, 20_000);
+    assert_eq!(t.stats().records_verified, 20_000);
     assert_table_equal(&sim, table(20_000, 1, 12));
 }
 
@@ -73,12 +89,11 @@ fn each_policy_says_what_it_proves_and_after_fault_costs_nothing_on_a_clean_line
         (Verify::Full, Guarantee::Verified),
     ] {
         let mut sim = Simulator::tta(ST);
-        let cfg = TransferConfig::tta(ST).with_verify(verify);
+        let cfg = TTA.with_verify(verify);
         let mut t: Transfer<_> = Transfer::new(cfg, table(500, 8, 19));
         let run = run_line(&mut t, &mut sim, 0, BAUD);
-        let report = run.result.unwrap();
-        assert_eq!(report.guarantee, guarantee);
-        let queries = report.stats.verify_queries;
+        assert_eq!(run.result, Ok(guarantee));
+        let queries = t.stats().verify_queries;
         match verify {
             Verify::Full => assert!(queries >= 500 / 24),
             _ => assert_eq!(queries, 0, "{verify:?} reads nothing back on a clean line"),
@@ -105,18 +120,17 @@ fn faulty() -> Faults {
 #[test]
 fn full_table_8_axes_with_faults() {
     let mut sim = Simulator::tta(ST).with_faults(faulty(), 0xFA17);
-    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(20_000, 8, 13));
+    let mut t: Transfer<_> = Transfer::new(TTA, table(20_000, 8, 13));
     // Error replies stop the transfer (they are not resent blindly): the
     // caller decides to go on, here always.
     let run = run_line(&mut t, &mut sim, 200, BAUD);
-    let report = run.result.unwrap();
-    let stats = report.stats;
+    let stats = t.stats();
     let s = sim.stats();
     println!(
         "20000x8 faults: {stats:?}\nsimulator: {s:?}\nvirtual time {} s",
         run.virtual_ms / 1000
     );
-    assert_eq!(report.guarantee, Guarantee::Verified);
+    assert_eq!(run.result, Ok(Guarantee::Verified));
     assert_eq!(stats.records_confirmed, 20_000);
     assert!(stats.retries > 0 && stats.timeouts > 0 && stats.error_replies > 0);
     assert!(s.broken_frames > 0, "bit flips must have hit some commands");
@@ -126,8 +140,12 @@ fn full_table_8_axes_with_faults() {
 #[test]
 fn full_table_1_axis_with_faults() {
     let mut sim = Simulator::tta(ST).with_faults(faulty(), 0xBEEF);
-    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(20_000, 1, 14));
-    let stats = run_line(&mut t, &mut sim, 200, BAUD).result.unwrap().stats;
+    let mut t: Transfer<_> = Transfer::new(TTA, table(20_000, 1, 14));
+    assert_eq!(
+        run_line(&mut t, &mut sim, 200, BAUD).result,
+        Ok(Guarantee::Verified)
+    );
+    let stats = t.stats();
     assert_eq!(stats.records_confirmed, 20_000);
     assert!(stats.retries > 0);
     assert_table_equal(&sim, table(20_000, 1, 14));
@@ -136,11 +154,8 @@ fn full_table_1_axis_with_faults() {
 #[test]
 fn xsel_2003_limit_splits_at_1023_bytes_with_245h() {
     let mut sim = Simulator::xsel_2003(ST);
-    let cfg = TransferConfig {
-        stream: PositionStream::CHANGE,
-        max_frame: 1023,
-        ..TransferConfig::tta(ST)
-    };
+    let cfg = TransferConfig::new(Profile::XSEL_2003);
+    assert_eq!((cfg.stream, cfg.max_frame), (PositionStream::CHANGE, 1023));
     let mut t: Transfer<_, 1023> = Transfer::new(
         cfg,
         table(2_000, 8, 15).map(|mut r| {
@@ -148,7 +163,8 @@ fn xsel_2003_limit_splits_at_1023_bytes_with_245h() {
             r
         }),
     );
-    let stats = run(&mut t, &mut sim, 0).result.unwrap().stats;
+    assert!(run_line(&mut t, &mut sim, 0, 0).result.is_ok());
+    let stats = t.stats();
     assert_eq!(stats.records_confirmed, 2_000);
     assert_eq!(sim.stats().oversize_frames, 0);
     assert!(stats.frames_confirmed >= 2_000 / 12);
@@ -163,16 +179,23 @@ fn a_dead_controller_fails_after_three_tries_and_resume_continues_exactly() {
         },
         3,
     );
-    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(100, 4, 16));
-    let first = run(&mut t, &mut sim, 0);
-    assert_eq!(first.result, Err(TransferError::Timeout));
+    let mut t: Transfer<_> = Transfer::new(TTA, table(100, 4, 16));
+    let mut line = line_to(&sim);
+    let first = run_transfer(&mut t, &mut line, &mut sim, 0, 0, 0);
+    assert_eq!(first.result, Err(Failure::Timeout { sends: 3 }));
     assert_eq!(t.stats().frames_sent, 3);
-    assert_eq!(first.virtual_ms, 9_000, "three sends, 3 s each");
+    // The line just opened fences first; no echo by 3,000: it waits out
+    // the past (until 6,001), then three sends, 3 s each.
+    assert_eq!(line.stats().fences_failed, 1);
+    assert_eq!(first.virtual_ms, 6_001 + 9_000);
     assert_eq!(t.progress(), (0, Some(100)));
-    // The controller comes back: resuming sends the same frame again.
+    // The controller comes back: resuming sends the same frame again, on
+    // the same line (after a fence: the three sends' replies were owed).
     sim.faults = Faults::default();
-    let second = run(&mut t, &mut sim, 1);
-    assert_eq!(second.result.unwrap().stats.records_confirmed, 100);
+    let second = run_transfer(&mut t, &mut line, &mut sim, 1, 0, first.virtual_ms);
+    assert!(second.result.is_ok());
+    assert_eq!(t.stats().records_confirmed, 100);
+    assert_eq!(line.stats().fences, 2);
     assert_table_equal(&sim, table(100, 4, 16));
 }
 
@@ -185,12 +208,13 @@ fn persistent_error_replies_fail_with_the_code() {
         },
         4,
     );
-    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), table(10, 2, 17));
-    let r = run(&mut t, &mut sim, 0);
+    let mut t: Transfer<_> = Transfer::new(TTA, table(10, 2, 17));
+    let r = run_line(&mut t, &mut sim, 0, 0);
     assert_eq!(
         r.result,
-        Err(TransferError::Controller {
-            code: host_tests::sim::INJECTED_ERROR_CODE
+        Err(Failure::Controller {
+            code: host_tests::sim::INJECTED_ERROR_CODE,
+            detail: None,
         })
     );
     // Not resent: the spec asks for appropriate action, not repetition.
@@ -204,10 +228,10 @@ fn an_invalid_record_stops_before_anything_is_sent_for_it() {
     let mut bad: Vec<_> = table(100, 2, 18).collect();
     bad[70].positions.pop(); // 2 axes in the pattern, 1 coordinate
     let mut sim = Simulator::tta(ST);
-    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(ST), bad.clone().into_iter());
-    let r = run(&mut t, &mut sim, 0);
+    let mut t: Transfer<_> = Transfer::new(TTA, bad.clone().into_iter());
+    let r = run_line(&mut t, &mut sim, 0, 0);
     match r.result {
-        Err(TransferError::InvalidRecord {
+        Err(Failure::InvalidRecord {
             index: 70,
             error:
                 iai_protocol_b::Error::CountMismatch {
@@ -229,10 +253,10 @@ fn records_arriving_a_few_at_a_time_through_a_queue_lose_nothing() {
     // As in the bridge: records come from the upstream UART in bursts; the
     // engine waits (NeedRecords) rather than sending short frames.
     let mut sim = Simulator::tta(ST).with_faults(faulty(), 77);
-    let mut t: Transfer<RecordQueue<32>> =
-        Transfer::new(TransferConfig::tta(ST), RecordQueue::new()).with_total(3_000);
+    let mut t: Transfer<RecordQueue<32>> = Transfer::new(TTA, RecordQueue::new()).with_total(3_000);
     let mut src = table(3_000, 3, 21);
-    let r = run_fed(&mut t, &mut sim, 50, |q| {
+    let mut line = line_to(&sim);
+    let r = run_fed(&mut t, &mut line, &mut sim, 50, 0, 0, |q| {
         for _ in 0..5 {
             if q.is_full() || q.is_finished() {
                 break;
@@ -243,7 +267,8 @@ fn records_arriving_a_few_at_a_time_through_a_queue_lose_nothing() {
             }
         }
     });
-    assert_eq!(r.result.unwrap().stats.records_confirmed, 3_000);
+    assert!(r.result.is_ok());
+    assert_eq!(t.stats().records_confirmed, 3_000);
     assert_table_equal(&sim, table(3_000, 3, 21));
 }
 
@@ -281,18 +306,12 @@ fn a_range_write_ending_at_the_top_of_its_start_field_completes() {
     let cfg = TransferConfig {
         stream: PositionStream::RANGE,
         start: 0xFFE,
-        ..TransferConfig::tta(ST)
+        ..TTA
     };
     let recs: Vec<_> = table(2, 1, 40).collect();
     let mut t: Transfer<_> = Transfer::new(cfg, recs.clone().into_iter());
-    assert_eq!(
-        run(&mut t, &mut sim, 0)
-            .result
-            .unwrap()
-            .stats
-            .records_confirmed,
-        2
-    );
+    assert!(run_line(&mut t, &mut sim, 0, 0).result.is_ok());
+    assert_eq!(t.stats().records_confirmed, 2);
     assert_eq!(
         sim.table.keys().copied().collect::<Vec<_>>(),
         vec![0xFFE, 0xFFF]
@@ -300,11 +319,11 @@ fn a_range_write_ending_at_the_top_of_its_start_field_completes() {
     // One record more cannot be numbered: refused, after the two that fit.
     let mut sim = Simulator::tta(ST);
     let mut t: Transfer<_> = Transfer::new(cfg, table(3, 1, 41));
-    let r = run(&mut t, &mut sim, 0);
+    let r = run_line(&mut t, &mut sim, 0, 0);
     assert!(
         matches!(
             r.result,
-            Err(TransferError::Config(_)) | Err(TransferError::InvalidRecord { .. })
+            Err(Failure::Protocol(_)) | Err(Failure::InvalidRecord { .. })
         ),
         "{:?}",
         r.result

@@ -14,6 +14,7 @@ use host_tests::table::table;
 use iai_protocol_b::clock::AsyncClock;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::transfer::{Guarantee, Transfer, TransferConfig};
+use iai_protocol_b::{Line, LineConfig, Profile};
 
 struct SimUart {
     sim: Simulator,
@@ -84,25 +85,26 @@ fn async_transfer_with_faults_writes_the_whole_table() {
         inbox: VecDeque::new(),
     };
     let mut clock = VirtualClock(now);
-    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(Station(0x99)), table(5_000, 8, 8));
+    let mut t: Transfer<_> = Transfer::new(TransferConfig::new(Profile::TTA), table(5_000, 8, 8));
+    let mut line = Line::new(LineConfig::new(Station(0x99)), 3);
     // A chunk can fail three times in a row under this fault mix, and an
     // error reply stops the transfer: the documented answer is to resume,
     // which sends the same chunk again.
     let mut resumes = 0;
-    let report = loop {
-        match block_on(t.run_async(&mut uart, &mut clock, 10)) {
-            Ok(report) => break report,
+    let guarantee = loop {
+        match block_on(t.run_async(&mut line, &mut uart, &mut clock, 10)) {
+            Ok(g) => break g,
             Err(e) if resumes < 200 => {
                 println!("resuming after {e:?}");
                 resumes += 1;
-                t.resume(clock.now_ms());
+                t.resume(&mut line, clock.now_ms());
             }
             Err(e) => panic!("{e:?}"),
         }
     };
-    assert_eq!(report.guarantee, Guarantee::Verified);
-    assert_eq!(report.stats.records_confirmed, 5_000);
-    assert!(report.stats.retries > 0);
+    assert_eq!(guarantee, Guarantee::Verified);
+    assert_eq!(t.stats().records_confirmed, 5_000);
+    assert!(t.stats().retries > 0);
     let expected: std::collections::BTreeMap<_, _> =
         table(5_000, 8, 8).map(|r| (r.number, r)).collect();
     assert!(uart.sim.table == expected);
@@ -110,8 +112,8 @@ fn async_transfer_with_faults_writes_the_whole_table() {
 
 #[test]
 fn async_client_gets_its_typed_reply_through_a_lossy_line() {
-    use iai_protocol_b::client::{Client, ClientConfig};
     use iai_protocol_b::message::AxisStatusQuery;
+    use iai_protocol_b::Client;
     let now = Rc::new(Cell::new(0));
     let faults = Faults {
         drop_every_nth_reply: Some(2),
@@ -123,14 +125,20 @@ fn async_client_gets_its_typed_reply_through_a_lossy_line() {
         inbox: VecDeque::new(),
     };
     let mut clock = VirtualClock(now);
-    let mut client: Client = Client::new(ClientConfig::new(Station(0x99)));
+    let mut client: Client = Client::new();
+    let mut line = Line::new(LineConfig::new(Station(0x99)), 4);
     let q = AxisStatusQuery::of(&[1, 2]).unwrap();
     for _ in 0..4 {
-        let reply = block_on(client.call_async(&mut uart, &mut clock, 10, &q)).unwrap();
+        let reply = block_on(client.call_async(&mut line, &mut uart, &mut clock, 10, &q)).unwrap();
         assert_eq!(reply.axes.len(), 2);
     }
-    // Every second reply is dropped (replies 2, 4, 6): requests 2 to 4 were
-    // each sent again after 3 s.
-    assert_eq!(client.stats().resends, 3);
-    assert!(clock.now_ms() >= 9_000);
+    // Every second reply is dropped. The opening fence's echo comes (reply
+    // 1); request 1's reply is dropped (2), its resend answered (3); the
+    // dropped reply is owed, so request 2 is fenced: that echo is dropped
+    // (4), the fence times out and the line waits out the owed reply, then
+    // request 2 is answered at once (5); request 3 is as request 1, request
+    // 4 as request 2.
+    let s = line.stats();
+    assert_eq!((s.resends, s.fences, s.fences_failed), (2, 3, 2));
+    assert!(clock.now_ms() >= 4 * 3_000);
 }

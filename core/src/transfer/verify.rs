@@ -1,73 +1,88 @@
-//! The read-back of a confirmed frame: windows of the frame's positions
-//! queried (21FH, 22DH or 209H), the reply compared record by record with
-//! the frame as it streams in, and the verdict (see the module docs of
-//! [`crate::transfer`]).
+//! The read-back of a confirmed frame: windows of its positions queried
+//! (21FH, 22DH or 209H, planned by [`crate::window`]), each reply compared
+//! record by record with the frame as it streams in, and the verdict.
+//!
+//! A comparison counts only when the reply's SC, station and ID check out
+//! and the line takes it as the answer: a read-back reply carries nothing
+//! that ties it to its query, so the line sends the query only when no
+//! copy of an earlier reply that could pass for it may still arrive (the
+//! same window read again after a rewrite, or positions written twice).
+//! What is compared: every field the write sends. A record sent twice in
+//! one frame is compared against its last copy.
 
 use super::source::RecordSource;
-use super::{grow, Resume, State, Transfer, TransferError, TransferEvent};
-use crate::catalogue;
+use super::{Resume, State, Transfer, TransferConfig};
 use crate::checksum::BypassPolicy;
-use crate::clock::{later, passed};
-use crate::error::Error;
-use crate::exchange::Offer;
-use crate::field::{FieldSpec, Reader, Writer};
-use crate::frame::{emit_envelope, emit_trailer, Header, Station, ENVELOPE_LEN};
+use crate::error::Failure;
+use crate::field::{FieldSpec, Reader};
+use crate::frame::{Header, Station, ENVELOPE_LEN};
+use crate::line::{Claim, Command, Heard, Line, Span};
 use crate::position::{PositionRecord, PositionStream};
 use crate::stream::{PositionStreamDecoder, StreamEvent};
+use crate::window::{write_query, Windows, QUERY_LEN};
 
 /// The read-back of the frame in flight.
 #[derive(Debug, Clone)]
 pub(super) struct Verifier {
     pub(super) stream: PositionStream,
-    pub(super) decoder: PositionStreamDecoder,
+    decoder: PositionStreamDecoder,
     /// After a frame ended or broke: waiting for the next header byte.
     pub(super) hunting: bool,
-    pub(super) query: [u8; 24],
-    pub(super) query_len: usize,
-    pub(super) head: u16,
-    pub(super) asked: u16,
+    query: [u8; QUERY_LEN],
+    query_len: usize,
+    head: u16,
+    asked: u16,
+    windows: Windows,
     /// Records of the frame compared (or superseded by a later copy).
-    pub(super) checked: u128,
+    checked: u128,
     /// Records of the frame found different or missing.
     pub(super) differ: u128,
-    /// For the reply being decoded: records found equal so far.
-    pub(super) seen: u128,
+    /// For the reply being decoded: records found equal so far, and the
+    /// lowest and highest position it carried.
+    seen: u128,
+    carried: Span,
     /// Whether the reply being decoded can still be the awaited one.
-    pub(super) candidate: bool,
+    candidate: bool,
     /// Whether the frame being decoded is a read-back reply from the
     /// station (so that breaking means the reply was lost).
-    pub(super) started: bool,
-    pub(super) station: Station,
+    started: bool,
+    station: Station,
     pub(super) rewrites: u8,
-    /// The chunk was written again after some of it was read back: its
-    /// read-back queries wait until this tick, when no reply to the
-    /// earlier ones can arrive any more (a read-back reply carries nothing
-    /// that ties it to one query, so an old reply would pass for the new
-    /// state).
-    pub(super) hold: Option<u32>,
-    /// A read-back query of the chunk in flight was sent.
-    pub(super) queried: bool,
 }
 
 impl Verifier {
-    pub(super) const fn new(stream: PositionStream) -> Self {
+    pub(super) const fn new(cfg: &TransferConfig) -> Self {
+        let stream = cfg.stream.read_back();
         Verifier {
             stream,
             decoder: PositionStreamDecoder::new(BypassPolicy::Reject),
             hunting: true,
-            query: [0; 24],
+            query: [0; QUERY_LEN],
             query_len: 0,
             head: 0,
             asked: 0,
+            windows: Windows::new(stream.window(cfg.max_response)),
             checked: 0,
             differ: 0,
             seen: 0,
+            carried: Span::UNKNOWN,
             candidate: false,
             started: false,
             station: Station(0),
             rewrites: 0,
-            hold: None,
-            queried: false,
+        }
+    }
+
+    /// The query in flight.
+    pub(super) fn query(&self) -> &[u8] {
+        self.query.get(..self.query_len).unwrap_or(&[])
+    }
+
+    /// The positions the query in flight asks for.
+    fn window(&self) -> Span {
+        Span {
+            lo: self.head,
+            hi: self.head.saturating_add(self.asked.saturating_sub(1)),
         }
     }
 }
@@ -90,34 +105,23 @@ impl<'a> Iterator for Walk<'a> {
     }
 }
 
-pub(super) fn bit(i: usize) -> u128 {
+fn bit(i: usize) -> u128 {
     1u128.checked_shl(i as u32).unwrap_or(0)
 }
 
 impl<I: RecordSource, const N: usize> Transfer<I, N> {
-    /// Records of the chunk that a later copy in the same chunk replaces.
-    pub(super) fn superseded(&self) -> u128 {
-        let mut mask = 0u128;
-        for (i, n) in self.chunk_numbers().enumerate() {
-            if self.chunk_numbers().skip(i + 1).any(|m| m == n) {
-                mask |= bit(i);
-            }
-        }
-        mask
-    }
-
-    pub(super) fn walk(&self) -> Walk<'_> {
+    fn walk(&self) -> Walk<'_> {
         let records_start = ENVELOPE_LEN + self.cfg.stream.prefix_len();
         let cut = self.chunk.map_or(records_start, |c| c.cut);
         Walk {
-            bytes: self.frame.get(..cut).unwrap_or(&[]),
+            bytes: self.frame.buffer_ref().get(..cut).unwrap_or(&[]),
             at: records_start,
             stream: self.cfg.stream,
         }
     }
 
     /// The position numbers of the chunk's records, in order.
-    pub(super) fn chunk_numbers(&self) -> impl Iterator<Item = u16> + '_ {
+    fn chunk_numbers(&self) -> impl Iterator<Item = u16> + '_ {
         let start = self.chunk.map_or(0, |c| c.start);
         let layout = self.cfg.stream.layout;
         self.walk().enumerate().map(move |(i, rec)| {
@@ -131,9 +135,31 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         })
     }
 
+    /// Positions of the chunk found different or missing.
+    pub(super) fn differing(&self) -> impl Iterator<Item = u16> + '_ {
+        let differ = self.verifier.differ;
+        self.chunk_numbers()
+            .enumerate()
+            .filter(move |(i, _)| differ & bit(*i) != 0)
+            .map(|(_, n)| n)
+    }
+
+    /// A read-back of the chunk begins: records a later copy in the same
+    /// chunk replaces need no comparison.
+    pub(super) fn begin_verify(&mut self) {
+        let mut superseded = 0u128;
+        for (i, n) in self.chunk_numbers().enumerate() {
+            if self.chunk_numbers().skip(i + 1).any(|m| m == n) {
+                superseded |= bit(i);
+            }
+        }
+        self.verifier.checked = superseded;
+        self.verifier.differ = 0;
+    }
+
     /// Starts the query for the next window of unchecked records, or gives
     /// the chunk's verdict.
-    pub(super) fn start_verify(&mut self, now: u32) {
+    pub(super) fn start_verify(&mut self, line: &mut Line, now: u32) {
         let all = self.chunk.map_or(0, |c| c.records);
         let all_mask = if all >= 128 {
             u128::MAX
@@ -148,83 +174,64 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 .map(|(_, n)| n)
         };
         let (Some(head), Some(highest)) = (unchecked().min(), unchecked().max()) else {
-            self.verdict(now, all_mask);
+            self.verdict(line, now, all_mask);
             return;
         };
         let v = &mut self.verifier;
         let field_max = v.stream.count_field().max_unsigned();
         let room = field_max.saturating_add(1).saturating_sub(u64::from(head));
-        let full = v
-            .stream
-            .window(self.cfg.max_response)
-            .min(self.window_limit);
         // No further than the chunk's highest unchecked position: what lies
         // beyond it was not written by this frame.
-        let span = u64::from(highest - head) + 1;
-        let window = u64::from(full).min(room).min(span).max(1);
+        let left = (u64::from(highest - head) + 1).min(room);
         v.head = head;
-        v.asked = window as u16;
-        let built = self.write_query();
-        let h = self.exchange.horizon();
-        let at = match self.verifier.hold {
-            Some(t) if !passed(now, t, h) => {
-                self.stats.held_queries += 1;
-                t
+        v.asked = v.windows.span(left as u32);
+        if self.write_query(line).is_err() {
+            return;
+        }
+        let cmd = Command::of(
+            self.verifier.stream.id,
+            self.verifier.window(),
+            Claim::Proof,
+            line.config().max_sends,
+        );
+        line.begin(cmd, now);
+        self.state = State::Verify;
+    }
+
+    /// Writes the read-back query for the verifier's window.
+    fn write_query(&mut self, line: &Line) -> Result<(), ()> {
+        let (station, checksum) = (line.config().station, line.config().checksum);
+        let v = &mut self.verifier;
+        match write_query(v.stream, station, checksum, v.head, v.asked, &mut v.query) {
+            Ok(n) => {
+                v.query_len = n;
+                Ok(())
             }
-            _ => now,
-        };
-        // As in `start_write`: the rules, not the entry.
-        let id = self.verifier.stream.id;
-        match (built, catalogue::request_rules(id)) {
-            (Ok(()), Some((resend, reply))) => {
-                self.exchange.start_raw(id, resend, reply, at);
-                self.verifier.queried = true;
-                self.state = State::Verify;
-            }
-            (Err(e), _) => self.state = State::Failed(TransferError::Config(e), Resume::Nothing),
-            (_, None) => {
-                self.state = State::Failed(
-                    TransferError::Config(Error::UnknownMessageId { id }),
-                    Resume::Nothing,
-                )
+            Err(e) => {
+                self.state = State::Failed(Failure::Protocol(e), Resume::Nothing);
+                Err(())
             }
         }
     }
 
-    /// Writes the read-back query for the verifier's window.
-    pub(super) fn write_query(&mut self) -> Result<(), Error> {
-        let v = &mut self.verifier;
-        let mut w = Writer::new(&mut v.query);
-        emit_envelope(
-            &mut w,
-            Header::Command,
-            self.cfg.exchange.station,
-            v.stream.id,
-        )?;
-        v.stream.write_query(&mut w, v.head, v.asked)?;
-        emit_trailer(&mut w, self.cfg.checksum)?;
-        v.query_len = w.len();
-        Ok(())
-    }
-
-    pub(super) fn verdict(&mut self, now: u32, all: u128) {
+    fn verdict(&mut self, line: &mut Line, now: u32, all: u128) {
         let differ = self.verifier.differ & all;
         if differ == 0 {
             self.stats.frames_verified += 1;
             self.stats.records_verified += u32::from(self.chunk.map_or(0, |c| c.records));
             self.verifier.rewrites = 0;
-            self.finish_chunk(now);
+            self.finish_chunk();
             return;
         }
         if self.verifier.rewrites < self.cfg.rewrites {
             self.verifier.rewrites += 1;
             self.stats.rewrites += 1;
-            self.start_write(now);
+            self.start_write(line, now);
             return;
         }
-        let first_position = self.mismatched_positions().next().unwrap_or(0);
+        let first_position = self.differing().next().unwrap_or(0);
         self.state = State::Failed(
-            TransferError::Mismatch {
+            Failure::Mismatch {
                 first_position,
                 records: differ.count_ones() as u16,
             },
@@ -232,28 +239,41 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         );
     }
 
-    /// A read-back window was answered (and compared): let the window
+    /// A read-back window was answered (and compared): let the windows
     /// grow back, ask the next.
-    pub(super) fn window_answered(&mut self, now: u32) {
-        let full = self.verifier.stream.window(self.cfg.max_response);
-        self.window_limit = grow(self.window_limit, full);
-        self.start_verify(now);
+    pub(super) fn window_answered(&mut self, line: &mut Line, now: u32) {
+        self.verifier.windows.grow();
+        self.start_verify(line, now);
+    }
+
+    /// A read-back query timed out: ask the same head for half the window.
+    /// A late reply to the larger window still answers the smaller one
+    /// exactly: it lists every record in it.
+    pub(super) fn shrink_window(&mut self, line: &mut Line) {
+        let v = &mut self.verifier;
+        if v.asked > 1 {
+            v.asked = v.windows.shrink(v.asked);
+            if self.write_query(line).is_ok() {
+                line.accept(self.verifier.window());
+            }
+        }
     }
 
     /// One byte in the read-back: the stream decoder compares the reply's
-    /// records as they arrive; the comparison counts when its SC checks.
-    pub(super) fn verify_byte(&mut self, b: u8, now: u32) -> TransferEvent {
+    /// records as they arrive; the comparison counts when the line takes
+    /// the reply.
+    pub(super) fn verify_byte(&mut self, line: &mut Line, b: u8, now: u32) -> Heard {
         let v = &mut self.verifier;
         if v.hunting {
             if Header::from_byte(b).is_none() {
-                return TransferEvent::NeedMore;
+                return Heard::NeedMore;
             }
             v.decoder.reset();
             v.hunting = false;
             v.candidate = false;
         }
         match v.decoder.push(b) {
-            StreamEvent::NeedMore => TransferEvent::NeedMore,
+            StreamEvent::NeedMore => Heard::NeedMore,
             StreamEvent::Start {
                 kind,
                 station,
@@ -262,92 +282,65 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             } => {
                 v.station = station;
                 v.seen = 0;
+                v.carried = Span::UNKNOWN;
                 v.candidate = kind == v.stream && count <= v.asked;
-                v.started = kind == v.stream && station == self.cfg.exchange.station;
-                TransferEvent::NeedMore
+                v.started = kind == v.stream && station == line.config().station;
+                Heard::NeedMore
             }
             StreamEvent::Record(rec) => {
-                let (head, asked) = (self.verifier.head, self.verifier.asked);
-                let inside = u32::from(rec.number) >= u32::from(head)
-                    && u32::from(rec.number) < u32::from(head) + u32::from(asked);
-                if !inside {
-                    self.verifier.candidate = false;
-                } else if self.verifier.candidate {
+                let v = &mut self.verifier;
+                let n = rec.number;
+                v.carried = if v.carried == Span::UNKNOWN {
+                    Span::one(n)
+                } else {
+                    Span {
+                        lo: v.carried.lo.min(n),
+                        hi: v.carried.hi.max(n),
+                    }
+                };
+                let window = v.window();
+                if n < window.lo || n > window.hi {
+                    v.candidate = false;
+                } else if v.candidate {
                     if let Some(i) = self.matching_record(&rec) {
                         self.verifier.seen |= bit(i);
                     }
                 }
-                TransferEvent::NeedMore
+                Heard::NeedMore
             }
             StreamEvent::End { .. } => {
-                let v = &mut self.verifier;
                 v.hunting = true;
                 v.started = false;
-                let (station, id, ok) = (v.station, v.stream.id, v.candidate);
-                match self
-                    .exchange
-                    .offer_head(Header::Response, station, id, ok, now)
-                {
-                    Offer::Accepted => self.commit_window(),
+                let (station, id, ok, carried) = (v.station, v.stream.id, v.candidate, v.carried);
+                let heard = line.hear(Header::Response, station, id, None, carried, ok, now);
+                match heard {
+                    Heard::Answer => self.commit_window(),
                     // A reply to another window, or one that came early.
-                    // A copy of it may follow: the chunk's next read-back
-                    // waits until none can come.
-                    Offer::Mismatch | Offer::Stale => {
-                        self.stats.stale_replies += 1;
-                        self.stale_read_back(now);
-                        TransferEvent::Stale
-                    }
-                    other => self.judged(other, 0),
+                    Heard::Mismatch | Heard::Stale => self.stats.stale_replies += 1,
+                    _ => self.judged(heard),
                 }
+                heard
             }
             StreamEvent::Error { .. } => {
                 v.hunting = true;
                 if core::mem::take(&mut v.started) {
-                    if !self.exchange.awaiting() {
-                        // A read-back reply, broken, while none is awaited:
-                        // a copy of it may follow intact.
-                        self.stale_read_back(now);
-                    }
-                    // The awaited read-back reply arrived broken.
-                    self.exchange.reply_lost(now);
-                    let v = &mut self.verifier;
-                    if Header::from_byte(b).is_some() {
-                        v.decoder.reset();
-                        v.hunting = false;
-                        let _ = v.decoder.push(b);
-                    }
-                    return TransferEvent::NeedMore;
+                    // A read-back reply from the station, broken.
+                    let station = v.station;
+                    line.broken(Some((Header::Response, station, v.stream.id)), now);
                 }
+                let v = &mut self.verifier;
                 if Header::from_byte(b).is_some() {
                     v.decoder.reset();
                     v.hunting = false;
                     let _ = v.decoder.push(b);
                 }
-                TransferEvent::NeedMore
+                Heard::NeedMore
             }
         }
     }
 
-    /// A read-back reply (whole or broken) came that answers no query in
-    /// flight: a copy of it may follow within the duplicate window, and a
-    /// read-back reply names nothing that ties it to one query. The chunk's
-    /// next read-back waits until no copy can come, also one already
-    /// started but not yet sent.
-    pub(super) fn stale_read_back(&mut self, now: u32) {
-        let dup = now.wrapping_add(self.cfg.exchange.duplicate_window_ms);
-        let h = self.exchange.horizon();
-        let hold = match self.verifier.hold {
-            Some(t) if !passed(now, t, h) => later(t, dup),
-            _ => dup,
-        };
-        self.verifier.hold = Some(hold);
-        if self.state == State::Verify {
-            self.exchange.defer(hold);
-        }
-    }
-
     /// The index of the chunk record `rec` should equal, if it does.
-    pub(super) fn matching_record(&self, rec: &PositionRecord) -> Option<usize> {
+    fn matching_record(&self, rec: &PositionRecord) -> Option<usize> {
         let last = self
             .chunk_numbers()
             .enumerate()
@@ -368,49 +361,24 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         same.then_some(last)
     }
 
-    pub(super) fn commit_window(&mut self) -> TransferEvent {
-        let (head, asked) = (self.verifier.head, self.verifier.asked);
-        let end = u32::from(head) + u32::from(asked);
+    /// The window's reply was taken: its records are checked, those of the
+    /// window it did not hold (or held different) differ.
+    fn commit_window(&mut self) {
+        let window = self.verifier.window();
         let seen = self.verifier.seen;
         let mut checked = self.verifier.checked;
         let mut differ = self.verifier.differ;
-        let (mut equal, mut missing) = (0u16, 0u16);
         for (i, n) in self.chunk_numbers().enumerate() {
             let m = bit(i);
-            if checked & m != 0 || u32::from(n) < u32::from(head) || u32::from(n) >= end {
+            if checked & m != 0 || n < window.lo || n > window.hi {
                 continue;
             }
             checked |= m;
-            if seen & m != 0 {
-                equal += 1;
-            } else {
+            if seen & m == 0 {
                 differ |= m;
-                missing += 1;
             }
         }
         self.verifier.checked = checked;
         self.verifier.differ = differ;
-        TransferEvent::Compared {
-            head,
-            equal,
-            differ: missing,
-        }
-    }
-
-    /// A read-back query timed out: ask the same head for half the window.
-    /// A late reply to the larger window still answers the smaller one
-    /// exactly: it lists every record in it.
-    pub(super) fn shrink_window(&mut self) {
-        let v = &mut self.verifier;
-        if v.asked > 1 {
-            v.asked /= 2;
-            self.window_limit = v.asked;
-            if self.write_query().is_err() {
-                self.state = State::Failed(
-                    TransferError::Config(Error::BufferTooSmall),
-                    Resume::Nothing,
-                );
-            }
-        }
     }
 }

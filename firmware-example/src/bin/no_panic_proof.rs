@@ -269,7 +269,7 @@ fn main() -> ! {
 
     // The bridge, both ports fed arbitrary bytes, under any configuration.
     let (cfg, source) = Config::from_block(input);
-    let mut bridge = Bridge::new(black_box(cfg), black_box(source));
+    let mut bridge = Bridge::new(black_box(cfg), black_box(source), black_box(0));
     let half = input.len() / 2;
     let mut up = Wire(input.get(..half).unwrap_or(&[]));
     let mut down = Wire(input.get(half..).unwrap_or(&[]));

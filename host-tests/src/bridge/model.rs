@@ -353,5 +353,5 @@ pub fn run(
 
 /// A fresh bridge with `cfg` (boxed: it is a few kilobytes).
 pub fn bridge(cfg: &Config) -> Box<Bridge> {
-    Box::new(Bridge::new(*cfg, Source::Default))
+    Box::new(Bridge::new(*cfg, Source::Default, 0x5EED))
 }

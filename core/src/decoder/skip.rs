@@ -1,0 +1,149 @@
+//! A frame passed over without a buffer: its bytes are summed as they go
+//! by, and its end says whether its checksum (or an `@@` the policy
+//! allows) was right. For a frame that is not kept anyway: a bridge reads
+//! a refused command (a 26DH may be 1.6 MB) to its end before it answers,
+//! and skips commands for other stations.
+
+use crate::catalogue::text_span;
+use crate::checksum::BypassPolicy;
+use crate::frame::{Header, ENVELOPE_LEN};
+use crate::hex;
+
+/// What one byte did to a skipped frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Skipped {
+    /// The frame goes on.
+    NeedMore,
+    /// The frame ended with CR LF: whether its checksum was right.
+    End {
+        /// The SC matched the bytes it covers, or was an `@@` the policy
+        /// allows.
+        checksum_ok: bool,
+    },
+    /// The frame broke at this byte (a header byte outside a text field,
+    /// or CR without LF): the byte may start the next frame.
+    Broken,
+}
+
+/// Skips one frame, summing its checksum (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FrameSkipper {
+    header: Header,
+    policy: BypassPolicy,
+    /// Sum of every byte so far, the last two included.
+    sum: u8,
+    /// The last two bytes (the SC once CR comes).
+    tail: [u8; 2],
+    len: usize,
+    /// The text field's span, when the envelope says it has one.
+    text: Option<(usize, usize)>,
+    cr: bool,
+}
+
+impl FrameSkipper {
+    /// Begins skipping the frame whose envelope (its first
+    /// [`ENVELOPE_LEN`] bytes, already read) is `envelope`. A text field
+    /// is recognised when the envelope locates it (200H); a 216H reply's
+    /// counted text is not.
+    pub fn new(header: Header, envelope: &[u8; ENVELOPE_LEN], policy: BypassPolicy) -> Self {
+        FrameSkipper {
+            header,
+            policy,
+            sum: envelope.iter().fold(0u8, |s, &b| s.wrapping_add(b)),
+            tail: [envelope[4], envelope[5]],
+            len: ENVELOPE_LEN,
+            text: text_span(header, envelope),
+            cr: false,
+        }
+    }
+
+    /// One more byte of the frame.
+    pub fn push(&mut self, b: u8) -> Skipped {
+        let in_text = self
+            .text
+            .is_some_and(|(start, end)| self.len >= start && self.len < end);
+        if self.cr {
+            let [h, l] = self.tail;
+            let covered = self.sum.wrapping_sub(h).wrapping_sub(l);
+            let bypass = h == b'@' && l == b'@' && self.policy.allows(self.header);
+            let sc_ok = bypass || hex::decode2(&[h, l]) == Some(covered);
+            return if b == b'\n' {
+                Skipped::End { checksum_ok: sc_ok }
+            } else {
+                Skipped::Broken
+            };
+        }
+        if !in_text && (Header::from_byte(b).is_some() || b == b'\n') {
+            return Skipped::Broken;
+        }
+        if !in_text && b == b'\r' {
+            self.cr = true;
+            return Skipped::NeedMore;
+        }
+        self.sum = self.sum.wrapping_add(b);
+        self.tail = [self.tail[1], b];
+        self.len = self.len.saturating_add(1);
+        Skipped::NeedMore
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use std::vec::Vec;
+
+    fn skip(frame: &[u8], policy: BypassPolicy) -> Vec<Skipped> {
+        let mut env = [0u8; ENVELOPE_LEN];
+        env.copy_from_slice(&frame[..ENVELOPE_LEN]);
+        let header = Header::from_byte(frame[0]).unwrap();
+        let mut s = FrameSkipper::new(header, &env, policy);
+        frame[ENVELOPE_LEN..].iter().map(|&b| s.push(b)).collect()
+    }
+
+    fn end(frame: &[u8], policy: BypassPolicy) -> Skipped {
+        *skip(frame, policy).last().unwrap()
+    }
+
+    #[test]
+    fn a_skipped_frame_ends_with_its_checksum_checked() {
+        // 25BH Software Reset, as sent: SC 3C.
+        let ok = b"!9925B3C\r\n";
+        assert_eq!(
+            end(ok, BypassPolicy::Reject),
+            Skipped::End { checksum_ok: true }
+        );
+        let bad = b"!9925B3D\r\n";
+        assert_eq!(
+            end(bad, BypassPolicy::Reject),
+            Skipped::End { checksum_ok: false }
+        );
+        // `@@` where the policy allows it.
+        let bypass = b"!9925B@@\r\n";
+        assert_eq!(
+            end(bypass, BypassPolicy::CommandsOnly),
+            Skipped::End { checksum_ok: true }
+        );
+        assert_eq!(
+            end(bypass, BypassPolicy::Reject),
+            Skipped::End { checksum_ok: false }
+        );
+    }
+
+    #[test]
+    fn a_header_byte_breaks_it_except_in_a_200h_text() {
+        assert_eq!(end(b"!99212!", BypassPolicy::Reject), Skipped::Broken);
+        assert_eq!(end(b"!99212\rX", BypassPolicy::Reject), Skipped::Broken);
+        // 200H with `!99212` inside its ten characters: text, not a frame.
+        let t = b"!99200!9921201391A\r\n";
+        assert!(skip(t, BypassPolicy::Reject)
+            .iter()
+            .all(|&e| e == Skipped::NeedMore || e == Skipped::End { checksum_ok: true }));
+        assert_eq!(
+            end(t, BypassPolicy::Reject),
+            Skipped::End { checksum_ok: true }
+        );
+    }
+}

@@ -1,0 +1,228 @@
+//! The ledger: the replies that may still arrive on a line, and until when.
+//!
+//! Two kinds of entry, because two kinds of fault put them there:
+//! - **owed** replies: a send whose reply was not taken (a timeout, a
+//!   resend, an abandoned command, or the past before the line was
+//!   opened). Their content is unknown, so each could answer any command.
+//!   A controller answers in order, so a fence clears them ([`super`]).
+//! - **copies**: every reply seen from the station may be repeated within
+//!   the line's duplicate window (an echoing converter), and a copy may
+//!   come after later replies, so only time clears them. Each is kept with
+//!   the values its content commits to ([`Span`]): a copy can pass only
+//!   for a command that accepts those values.
+
+use crate::clock::{later, passed};
+
+/// A message ID that matches every command: the entry of an `&` reply
+/// (which names no ID) or of a reply whose envelope could not be read.
+/// IDs are three hex digits, so it never clashes with one.
+pub(crate) const ANY_ID: u16 = 0xFFFF;
+
+/// A range of values (a record count, the position numbers of a reply's
+/// records, a fence's sequence number): what a reply carries, or what a
+/// command accepts in its reply. Empty when `lo > hi`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub(crate) struct Span {
+    pub(crate) lo: u16,
+    pub(crate) hi: u16,
+}
+
+impl Span {
+    /// Every value: a command that accepts any reply of its ID.
+    pub(crate) const ANY: Span = Span {
+        lo: 0,
+        hi: u16::MAX,
+    };
+    /// No value: a reply whose content is unknown, or that carries nothing
+    /// that tells it apart (an empty read-back reply). It passes for every
+    /// command of its ID.
+    pub(crate) const UNKNOWN: Span = Span { lo: 1, hi: 0 };
+
+    /// The one value `v`.
+    pub(crate) const fn one(v: u16) -> Span {
+        Span { lo: v, hi: v }
+    }
+
+    /// Whether a reply carrying these values could be accepted by a command
+    /// that accepts `accepts`.
+    pub(crate) const fn within(self, accepts: Span) -> bool {
+        self.lo > self.hi || (accepts.lo <= self.lo && self.hi <= accepts.hi)
+    }
+}
+
+/// Copies remembered at once; a further one is merged into the last slot
+/// as a copy of anything (never forgotten early, maybe kept too broadly).
+const COPIES: usize = 16;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+struct Copy {
+    id: u16,
+    values: Span,
+    /// The first tick at which it can no longer arrive.
+    until: u32,
+}
+
+/// What the ledger holds.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub(crate) struct Ledger {
+    copies: heapless::Vec<Copy, COPIES>,
+    /// The first tick at which no owed reply can arrive any more.
+    owed: Option<u32>,
+    /// How far ahead of the tick it was set any hold lies (see [`passed`]).
+    horizon: u32,
+}
+
+impl Ledger {
+    pub(crate) const fn new(horizon: u32) -> Self {
+        Ledger {
+            copies: heapless::Vec::new(),
+            owed: None,
+            horizon,
+        }
+    }
+
+    pub(crate) fn set_horizon(&mut self, horizon: u32) {
+        self.horizon = self.horizon.max(horizon);
+    }
+
+    fn over(&self, now: u32, until: u32) -> bool {
+        passed(now, until, self.horizon)
+    }
+
+    /// Drops what can no longer arrive.
+    pub(crate) fn prune(&mut self, now: u32) {
+        let h = self.horizon;
+        self.copies.retain(|c| !passed(now, c.until, h));
+        if self.owed.is_some_and(|u| self.over(now, u)) {
+            self.owed = None;
+        }
+    }
+
+    /// Replies owed until `until` (exclusive).
+    pub(crate) fn owe(&mut self, until: u32, now: u32) {
+        self.prune(now);
+        self.owed = Some(match self.owed {
+            Some(u) => later(u, until),
+            None => until,
+        });
+    }
+
+    /// When owed replies stop being possible, if any still are.
+    pub(crate) fn owed(&self, now: u32) -> Option<u32> {
+        self.owed.filter(|&u| !self.over(now, u))
+    }
+
+    /// A fence was answered: every reply owed before it has come or never
+    /// will.
+    pub(crate) fn settle_owed(&mut self) {
+        self.owed = None;
+    }
+
+    /// A reply of `id` carrying `values` arrived: a copy of it may come
+    /// until `until` (exclusive).
+    pub(crate) fn copy(&mut self, id: u16, values: Span, until: u32, now: u32) {
+        self.prune(now);
+        let new = Copy { id, values, until };
+        if let Some(c) = self
+            .copies
+            .iter_mut()
+            .find(|c| c.id == id && c.values == values)
+        {
+            c.until = later(c.until, until);
+        } else if self.copies.push(new).is_err() {
+            if let Some(last) = self.copies.last_mut() {
+                *last = Copy {
+                    id: ANY_ID,
+                    values: Span::UNKNOWN,
+                    until: later(last.until, until),
+                };
+            }
+        }
+    }
+
+    /// The first tick, from `now`, at which no copy could pass for the
+    /// reply to a command `id` accepting `accepts`. With `errors_only`,
+    /// only copies that could pass as an error reply count (see
+    /// [`super::Claim::Tentative`]).
+    pub(crate) fn clear_at(&self, id: u16, accepts: Span, errors_only: bool, now: u32) -> u32 {
+        let mut at = now;
+        for c in &self.copies {
+            let id_ok = c.id == ANY_ID || (!errors_only && c.id == id);
+            if id_ok && c.values.within(accepts) && !self.over(now, c.until) {
+                at = later(at, c.until);
+            }
+        }
+        at
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_copy_passes_only_for_commands_that_accept_its_values() {
+        let mut l = Ledger::new(10_000);
+        // A 26DH reply reporting 24 records, seen at 100, copies until 3,101.
+        l.copy(0x26D, Span::one(24), 3_101, 100);
+        assert_eq!(l.clear_at(0x26D, Span::one(24), false, 200), 3_101);
+        assert_eq!(l.clear_at(0x26D, Span::one(23), false, 200), 200);
+        assert_eq!(l.clear_at(0x21F, Span::ANY, false, 200), 200);
+        // A read-back reply with positions 1..=24: a window 1..=30 could
+        // take it, a window 25..=48 could not.
+        l.copy(0x21F, Span { lo: 1, hi: 24 }, 3_200, 200);
+        assert_eq!(l.clear_at(0x21F, Span { lo: 1, hi: 30 }, false, 300), 3_200);
+        assert_eq!(l.clear_at(0x21F, Span { lo: 25, hi: 48 }, false, 300), 300);
+        // An empty one passes for any window.
+        l.copy(0x21F, Span::UNKNOWN, 3_300, 300);
+        assert_eq!(
+            l.clear_at(0x21F, Span { lo: 25, hi: 48 }, false, 300),
+            3_300
+        );
+        assert_eq!(
+            l.clear_at(0x21F, Span { lo: 25, hi: 48 }, false, 3_300),
+            3_300
+        );
+        assert_eq!(
+            l.clear_at(0x21F, Span { lo: 25, hi: 48 }, false, 3_301),
+            3_301
+        );
+    }
+
+    #[test]
+    fn an_error_copy_passes_for_every_command_even_tentative_ones() {
+        let mut l = Ledger::new(10_000);
+        l.copy(0x21F, Span::UNKNOWN, 500, 0);
+        assert_eq!(l.clear_at(0x21F, Span::ANY, true, 10), 10);
+        l.copy(ANY_ID, Span::UNKNOWN, 600, 0);
+        assert_eq!(l.clear_at(0x212, Span::ANY, true, 10), 600);
+        assert_eq!(l.clear_at(0x26D, Span::one(3), false, 10), 600);
+    }
+
+    #[test]
+    fn a_full_ledger_forgets_nothing_early() {
+        let mut l = Ledger::new(100_000);
+        for i in 0..40u16 {
+            l.copy(0x26D, Span::one(i), 1_000 + u32::from(i), 0);
+        }
+        // Every count is still guarded until its own time, or later.
+        for i in 0..40u16 {
+            assert!(l.clear_at(0x26D, Span::one(i), false, 1) >= 1_000 + u32::from(i));
+        }
+    }
+
+    #[test]
+    fn owed_replies_end_at_their_horizon_or_a_fence() {
+        let mut l = Ledger::new(10_000);
+        l.owe(6_000, 0);
+        l.owe(5_000, 10);
+        assert_eq!(l.owed(5_999), Some(6_000));
+        assert_eq!(l.owed(6_000), None);
+        l.owe(9_000, 6_100);
+        l.settle_owed();
+        assert_eq!(l.owed(6_200), None);
+    }
+}

@@ -1,0 +1,764 @@
+//! One line to a controller: the command on it, its reply, and every reply
+//! that may still arrive.
+//!
+//! A line carries one conversation at a time (half duplex, 2003 p. 8), so
+//! one [`Line`] is shared by every engine that talks over it
+//! ([`crate::client::Client`], [`crate::transfer::Transfer`],
+//! [`crate::readback::ReadBack`], a bridge's pass-through), each borrowing
+//! it for its calls. What the line remembers outlives them: a new call,
+//! a restarted or resumed engine, another engine, all see the same
+//! memory.
+//!
+//! - **Matching**: a frame is the reply only if its station, header and
+//!   ID fit the command, its SC checked (the decoders' job), it came after
+//!   the command was completely sent, and the owner's content check
+//!   passed ([`Line::offer`]). Within a command's resends, the first reply
+//!   counts (a late reply to an earlier send answers the same command).
+//! - **Timing** (chapter 5, 2003 p. 62): the reply is awaited `timeout_ms`
+//!   after the end of transmission; up to `max_sends` sends of a command
+//!   that is safe to repeat ([`Resend`]); an `&` is never resent; 25BH
+//!   waits for an error reply only, then holds the line while the
+//!   controller restarts; after a reply the next command waits
+//!   `turnaround_ms` plus one tick.
+//! - **What may still arrive** (the ledger): replies owed to sends that
+//!   were not answered, until `timeout_ms + late_window_ms` after them,
+//!   and copies of every reply seen, until `duplicate_window_ms` after it.
+//!   A command goes out only when nothing in the ledger could pass for its
+//!   reply.
+//! - **Fences**: owed replies are settled by order, not time. Before the
+//!   next command the line sends a 200H whose text is its own; once the
+//!   echo is back, a controller that answers in order has nothing left
+//!   to say about earlier commands ([`fence`]). A line just opened knows
+//!   nothing of its past, so its first command is fenced too. Copies are
+//!   not settled by a fence: an echoing converter may repeat a reply after
+//!   later ones, so they keep their time. What breaks the order
+//!   assumption: a controller that buffers commands and answers out of
+//!   order (none is documented), and copies (handled by time).
+
+mod fence;
+mod ledger;
+
+pub(crate) use ledger::{Span, ANY_ID};
+
+use fence::Fence;
+use ledger::Ledger;
+
+use crate::catalogue::{self, MessageInfo, Reply, Resend};
+use crate::checksum::ChecksumMode;
+use crate::clock::{later, passed};
+use crate::error::{Error, Failure};
+use crate::frame::{Frame, Header, Station};
+
+/// The longest a hold may lie ahead (a quarter of the wrapping clock's
+/// range, about 12 days): settings beyond it are cut to it.
+const MAX_HORIZON_MS: u32 = 0x4000_0000;
+
+/// The settings of a line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LineConfig {
+    /// The controller's station.
+    pub station: Station,
+    /// Time a reply may take after the command was completely sent, ms
+    /// (3,000, 2003 p. 62).
+    pub timeout_ms: u32,
+    /// Sends of one command before giving up: 3 or 4 per the spec (2 or 3
+    /// re-sends); 0 is read as 1.
+    pub max_sends: u8,
+    /// Pause after a reply before the next command, ms (at least 1, 2003
+    /// p. 8); one tick is added so that it holds on a millisecond tick.
+    pub turnaround_ms: u32,
+    /// How much later than its timeout a reply may still arrive, ms. The
+    /// spec allows none; links with converters and slow controllers do.
+    pub late_window_ms: u32,
+    /// How long after a reply a copy of it may arrive (an echoing
+    /// converter), ms; 0 for a line that never repeats a frame.
+    pub duplicate_window_ms: u32,
+    /// Resend commands the catalogue marks [`Resend::Unsafe`] after a
+    /// timeout (a relative move may then run twice).
+    pub resend_unsafe: bool,
+    /// Checksum or `@@` on the commands (the controller's setting).
+    pub checksum: ChecksumMode,
+    /// Settle owed replies with 200H fences (see the module docs); off
+    /// for a controller that does not answer 200H: the line then waits
+    /// out `timeout_ms + late_window_ms` instead.
+    pub fences: bool,
+}
+
+impl LineConfig {
+    /// The spec's settings for `station`: 3 s timeout, 3 sends, 1 ms
+    /// turnaround, late replies allowed 3 s after their timeout, no copies,
+    /// unsafe commands sent once, computed checksums, fences on.
+    pub const fn new(station: Station) -> Self {
+        LineConfig {
+            station,
+            timeout_ms: 3_000,
+            max_sends: 3,
+            turnaround_ms: 1,
+            late_window_ms: 3_000,
+            duplicate_window_ms: 0,
+            resend_unsafe: false,
+            checksum: ChecksumMode::Compute,
+            fences: true,
+        }
+    }
+
+    /// These settings with copies expected up to `ms` after a reply.
+    pub const fn with_duplicate_window(mut self, ms: u32) -> Self {
+        self.duplicate_window_ms = ms;
+        self
+    }
+
+    /// The furthest ahead of the current tick that these settings ever
+    /// place a hold.
+    const fn horizon(&self) -> u32 {
+        let sum = self
+            .timeout_ms
+            .saturating_add(self.late_window_ms)
+            .saturating_add(self.duplicate_window_ms)
+            .saturating_add(self.turnaround_ms)
+            .saturating_add(2);
+        let restart = catalogue::LONGEST_RESTART_MS;
+        let h = if sum > restart { sum } else { restart };
+        if h > MAX_HORIZON_MS {
+            MAX_HORIZON_MS
+        } else {
+            h
+        }
+    }
+}
+
+/// Counters of a line.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LineStats {
+    /// Commands started.
+    pub commands: u32,
+    /// Commands sent, resends included (fences not).
+    pub sends: u32,
+    /// Commands sent again after a timeout.
+    pub resends: u32,
+    /// Timeouts of commands and fences.
+    pub timeouts: u32,
+    /// Error responses taken as a command's reply.
+    pub error_replies: u32,
+    /// Replies with the command's ID whose content did not fit it.
+    pub mismatches: u32,
+    /// Replies that came when none was awaited (late or copied).
+    pub stale: u32,
+    /// Frames for another station or command.
+    pub foreign: u32,
+    /// Broken frames, and bytes that may have held a reply dropped unread.
+    pub line_errors: u32,
+    /// Fences sent.
+    pub fences: u32,
+    /// Fences whose echo did not come (the line then waited instead).
+    pub fences_failed: u32,
+}
+
+/// What the line needs now.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Due {
+    /// No command.
+    Idle,
+    /// Transmit [`Line::fence_bytes`], then report [`Line::sent`].
+    Fence,
+    /// Transmit the command, then report [`Line::sent`]; `fresh` on the
+    /// first poll of each send (count it, reset the reply decoder).
+    Send {
+        /// First poll of this send.
+        fresh: bool,
+    },
+    /// Nothing to do before this tick (feed received bytes meanwhile).
+    WaitUntil(u32),
+    /// The command is over: `Ok` when its reply was taken (or, for a
+    /// command without normal response, when no error came).
+    Done(Result<(), Failure>),
+}
+
+/// What a received frame meant on the line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Heard {
+    /// All bytes were used; nothing is complete.
+    NeedMore,
+    /// The command's reply: taken.
+    Answer,
+    /// An error response to the command, with its code: taken.
+    Rejected(u16),
+    /// The command's station and ID, but not its content (a 26DH count
+    /// other than the records sent, a record outside the window asked).
+    Mismatch,
+    /// The echo of the line's fence.
+    Fence,
+    /// A reply from the station while none was awaited: late or copied.
+    Stale,
+    /// Another station's frame, a command, or a reply to another ID.
+    Foreign,
+    /// A broken frame or noise was dropped.
+    Broken(Error),
+}
+
+/// How much a command's reply has to prove.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub(crate) enum Claim {
+    /// The reply is what the caller acts on: nothing that could pass for it
+    /// may still arrive.
+    Proof,
+    /// A later command will check the reply (the first read of a confirmed
+    /// read-back): only a copy that could pass as an error reply must be
+    /// excluded, since it would stop the engine.
+    Tentative,
+}
+
+/// A command as the line runs it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub(crate) struct Command {
+    pub(crate) id: u16,
+    pub(crate) resend: Resend,
+    pub(crate) reply: Reply,
+    /// What a reply must carry to be taken (see [`Span`]).
+    pub(crate) accepts: Span,
+    pub(crate) claim: Claim,
+    pub(crate) max_sends: u8,
+}
+
+impl Command {
+    /// The command `id` under the catalogue's rules (an ID outside the
+    /// catalogue is sent once and any normal response with it taken).
+    pub(crate) fn of(id: u16, accepts: Span, claim: Claim, max_sends: u8) -> Self {
+        let (resend, reply) =
+            catalogue::request_rules(id).unwrap_or((Resend::Unsafe, Reply::Normal));
+        Command {
+            id,
+            resend,
+            reply,
+            accepts,
+            claim,
+            max_sends,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+enum Phase {
+    Idle,
+    /// Started, waiting for its (next) send.
+    Ready,
+    FenceSending,
+    FenceAwait {
+        deadline: u32,
+    },
+    Sending,
+    Await {
+        deadline: u32,
+    },
+    Finished(Result<(), Failure>),
+}
+
+/// One line to a controller (see the module docs). About 400 bytes.
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Line {
+    cfg: LineConfig,
+    cmd: Command,
+    phase: Phase,
+    sends: u8,
+    last_sent: u32,
+    /// Earliest tick of the next send (turnaround, restart).
+    not_before: Option<u32>,
+    faulted: bool,
+    /// Nothing was started yet: the line's past is unknown.
+    opened: bool,
+    fence: Fence,
+    fence_sent: u32,
+    /// A fence failed: wait for owed replies instead until this tick.
+    no_fence_until: Option<u32>,
+    ledger: Ledger,
+    stats: LineStats,
+    horizon: u32,
+}
+
+impl Line {
+    /// A line with these settings. `seed` makes its fence texts its own:
+    /// give each start of a program a different one (a hardware timer, the
+    /// time of day), so that a fence echo of an earlier run cannot pass
+    /// for this run's.
+    pub const fn new(cfg: LineConfig, seed: u32) -> Self {
+        Line {
+            cfg,
+            cmd: Command {
+                id: 0,
+                resend: Resend::Safe,
+                reply: Reply::Normal,
+                accepts: Span::ANY,
+                claim: Claim::Proof,
+                max_sends: 1,
+            },
+            phase: Phase::Idle,
+            sends: 0,
+            last_sent: 0,
+            not_before: None,
+            faulted: false,
+            opened: true,
+            fence: Fence::new(seed),
+            fence_sent: 0,
+            no_fence_until: None,
+            ledger: Ledger::new(cfg.horizon()),
+            stats: LineStats {
+                commands: 0,
+                sends: 0,
+                resends: 0,
+                timeouts: 0,
+                error_replies: 0,
+                mismatches: 0,
+                stale: 0,
+                foreign: 0,
+                line_errors: 0,
+                fences: 0,
+                fences_failed: 0,
+            },
+            horizon: cfg.horizon(),
+        }
+    }
+
+    /// The settings.
+    pub const fn config(&self) -> &LineConfig {
+        &self.cfg
+    }
+
+    /// Changes the settings (between commands); the ledger is kept.
+    pub fn set_config(&mut self, cfg: LineConfig) {
+        self.cfg = cfg;
+        self.horizon = self.horizon.max(cfg.horizon());
+        self.ledger.set_horizon(self.horizon);
+    }
+
+    /// Counters so far.
+    pub const fn stats(&self) -> LineStats {
+        self.stats
+    }
+
+    /// Begins command `info` (its first send is due from `now`, when
+    /// nothing that may still arrive could pass for its reply). A command
+    /// still running is abandoned: its replies are owed.
+    pub fn start(&mut self, info: &MessageInfo, now: u32) {
+        let cmd = Command {
+            id: info.id,
+            resend: info.resend,
+            reply: info.reply,
+            accepts: Span::ANY,
+            claim: Claim::Proof,
+            max_sends: self.cfg.max_sends,
+        };
+        self.begin(cmd, now);
+    }
+
+    /// [`Line::start`] for a command known by its ID only (a bridge passing
+    /// on what a host sent), sent at most `max_sends` times; an ID outside
+    /// the catalogue is sent once.
+    pub fn start_raw(&mut self, id: u16, max_sends: u8, now: u32) {
+        self.begin(Command::of(id, Span::ANY, Claim::Proof, max_sends), now);
+    }
+
+    pub(crate) fn begin(&mut self, cmd: Command, now: u32) {
+        self.abandon(now);
+        if core::mem::take(&mut self.opened) {
+            // The past is unknown: a reply to anything sent before may
+            // still come, and a copy of anything received before.
+            let owed = now
+                .wrapping_add(self.cfg.timeout_ms)
+                .wrapping_add(self.cfg.late_window_ms)
+                .wrapping_add(1);
+            self.ledger.owe(owed, now);
+            self.copy_possible(ANY_ID, Span::UNKNOWN, now);
+        }
+        self.cmd = cmd;
+        self.sends = 0;
+        self.faulted = false;
+        self.stats.commands += 1;
+        self.phase = Phase::Ready;
+    }
+
+    /// The current command's reply must now carry `accepts` (a frame or
+    /// window cut shorter before its resend).
+    pub(crate) fn accept(&mut self, accepts: Span) {
+        self.cmd.accepts = accepts;
+    }
+
+    /// The ID of the current (or last) command.
+    pub const fn id(&self) -> u16 {
+        self.cmd.id
+    }
+
+    /// Sends of the current command so far.
+    pub const fn sends(&self) -> u8 {
+        self.sends
+    }
+
+    /// Whether something abnormal happened since the current command
+    /// started: a timeout, a resend, a reply with the wrong content, a
+    /// stale reply, or a reply to another send still owed at its end.
+    pub const fn faulted(&self) -> bool {
+        self.faulted
+    }
+
+    /// Whether the command's reply is awaited now (it was completely sent).
+    pub const fn awaiting(&self) -> bool {
+        matches!(self.phase, Phase::Await { .. })
+    }
+
+    /// Whether a command is in progress (not idle, not finished).
+    pub const fn busy(&self) -> bool {
+        !matches!(self.phase, Phase::Idle | Phase::Finished(_))
+    }
+
+    /// Whether the line has an answer for its current command (and
+    /// received bytes should wait until the owner took it).
+    pub const fn answered(&self) -> bool {
+        matches!(self.phase, Phase::Finished(Ok(())))
+    }
+
+    /// The fence to transmit after [`Due::Fence`].
+    pub fn fence_bytes(&self) -> &[u8] {
+        self.fence.bytes()
+    }
+
+    fn over(&self, now: u32, t: u32) -> bool {
+        passed(now, t, self.horizon)
+    }
+
+    /// The hold on the next send, seen from `now` (`now` if none).
+    fn next_send(&self, now: u32) -> u32 {
+        match self.not_before {
+            Some(t) if !self.over(now, t) => t,
+            _ => now,
+        }
+    }
+
+    /// Sends this command may take.
+    fn send_limit(&self) -> u8 {
+        let max = self.cmd.max_sends.max(1);
+        match (self.cmd.resend, self.cmd.reply) {
+            (_, Reply::None { .. }) => 1,
+            (Resend::Unsafe, _) if !self.cfg.resend_unsafe => 1,
+            _ => max,
+        }
+    }
+
+    /// The first tick, from `now`, at which no copy in the ledger could
+    /// pass for the reply of a command `id` accepting `accepts` (owed
+    /// replies are the fence's business).
+    pub(crate) fn clear_at(&mut self, id: u16, accepts: Span, claim: Claim, now: u32) -> u32 {
+        self.ledger.prune(now);
+        self.ledger
+            .clear_at(id, accepts, claim == Claim::Tentative, now)
+    }
+
+    /// Decides what is due at tick `now`.
+    pub fn poll(&mut self, now: u32) -> Due {
+        loop {
+            return match self.phase {
+                Phase::Idle => Due::Idle,
+                Phase::Finished(r) => Due::Done(r),
+                Phase::Ready => {
+                    let hold = self.next_send(now);
+                    if hold != now {
+                        return Due::WaitUntil(hold);
+                    }
+                    self.ledger.prune(now);
+                    if let Some(owed) = self.ledger.owed(now) {
+                        let fence_ok = self.cfg.fences
+                            && self.no_fence_until.is_none_or(|t| self.over(now, t));
+                        if !fence_ok {
+                            return Due::WaitUntil(owed);
+                        }
+                        self.fence.next(self.cfg.station, self.cfg.checksum);
+                        self.stats.fences += 1;
+                        self.phase = Phase::FenceSending;
+                        return Due::Fence;
+                    }
+                    let clear = self.clear_at(self.cmd.id, self.cmd.accepts, self.cmd.claim, now);
+                    if clear != now {
+                        return Due::WaitUntil(clear);
+                    }
+                    self.sends = self.sends.saturating_add(1);
+                    self.stats.sends += 1;
+                    if self.sends > 1 {
+                        self.stats.resends += 1;
+                    }
+                    self.phase = Phase::Sending;
+                    Due::Send { fresh: true }
+                }
+                Phase::FenceSending => Due::Fence,
+                Phase::FenceAwait { deadline } if !self.over(now, deadline) => {
+                    Due::WaitUntil(deadline)
+                }
+                Phase::FenceAwait { .. } => {
+                    // No echo: the controller may not answer 200H. What it
+                    // owes (and the fence's own reply) is waited out.
+                    self.stats.timeouts += 1;
+                    self.stats.fences_failed += 1;
+                    self.faulted = true;
+                    let until = self.late_horizon(self.fence_sent);
+                    self.ledger.owe(until, now);
+                    self.no_fence_until = self.ledger.owed(now);
+                    self.phase = Phase::Ready;
+                    continue;
+                }
+                Phase::Sending => Due::Send { fresh: false },
+                Phase::Await { deadline } if !self.over(now, deadline) => Due::WaitUntil(deadline),
+                Phase::Await { .. } => {
+                    if let Reply::None { .. } = self.cmd.reply {
+                        // Its error response may still come late.
+                        self.finish(Ok(()), now, 1);
+                        continue;
+                    }
+                    self.faulted = true;
+                    self.stats.timeouts += 1;
+                    if self.sends < self.send_limit() {
+                        self.phase = Phase::Ready;
+                        self.not_before = Some(now);
+                        continue;
+                    }
+                    let sends = self.sends;
+                    let f = match self.cmd.resend {
+                        Resend::Safe => Failure::Timeout { sends },
+                        Resend::Unsafe => Failure::OutcomeUnknown { sends },
+                    };
+                    self.finish(Err(f), now, sends);
+                    continue;
+                }
+            };
+        }
+    }
+
+    /// The first tick after which no reply to a send at `sent` can arrive.
+    fn late_horizon(&self, sent: u32) -> u32 {
+        sent.wrapping_add(self.cfg.timeout_ms)
+            .wrapping_add(self.cfg.late_window_ms)
+            .wrapping_add(1)
+    }
+
+    /// The command (or fence) was completely transmitted at tick `now`:
+    /// its timeout starts.
+    pub fn sent(&mut self, now: u32) {
+        match self.phase {
+            Phase::FenceSending => {
+                self.fence_sent = now;
+                self.phase = Phase::FenceAwait {
+                    deadline: now.wrapping_add(self.cfg.timeout_ms),
+                };
+            }
+            Phase::Sending => {
+                self.last_sent = now;
+                self.phase = Phase::Await {
+                    deadline: now.wrapping_add(self.cfg.timeout_ms),
+                };
+                if let Reply::None { ready_after_ms } = self.cmd.reply {
+                    // The controller restarts: nothing before it is ready.
+                    self.not_before = Some(now.wrapping_add(ready_after_ms));
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// A checked frame arrived at `now`. `content_ok` is the owner's check
+    /// of a normal response's body against the command (always `true` for
+    /// an owner that only relays the reply: its host judges the body).
+    pub fn offer(&mut self, frame: &Frame<'_>, content_ok: bool, now: u32) -> Heard {
+        let (h, s, c) = (frame.header(), frame.station(), frame.code());
+        self.hear(h, s, c, Some(frame.body()), Span::UNKNOWN, content_ok, now)
+    }
+
+    /// [`Line::offer`] for a frame known by its envelope, with the values
+    /// its content commits to (for the ledger).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn hear(
+        &mut self,
+        header: Header,
+        station: Station,
+        code: u16,
+        body: Option<&[u8]>,
+        values: Span,
+        content_ok: bool,
+        now: u32,
+    ) -> Heard {
+        if station != self.cfg.station || header == Header::Command {
+            self.stats.foreign += 1;
+            return Heard::Foreign;
+        }
+        let id = if header == Header::Error {
+            ANY_ID
+        } else {
+            code
+        };
+        if header == Header::Response && code == catalogue::TEST_CALL.id {
+            let seq = Span::one(self.fence.seq);
+            let echo = body.is_some_and(|b| self.fence.is_echo(b));
+            self.copy_possible(id, if echo { seq } else { values }, now);
+            if echo && matches!(self.phase, Phase::FenceAwait { .. }) {
+                self.ledger.settle_owed();
+                self.no_fence_until = None;
+                self.not_before = Some(self.turnaround_after(now));
+                self.phase = Phase::Ready;
+                return Heard::Fence;
+            }
+        } else {
+            self.copy_possible(id, values, now);
+        }
+        let for_command = match header {
+            Header::Error => true,
+            _ => header == Header::Response && code == self.cmd.id,
+        };
+        if !for_command {
+            self.stats.foreign += 1;
+            return Heard::Foreign;
+        }
+        if !self.awaiting() {
+            if self.busy() {
+                self.faulted = true;
+            }
+            self.stats.stale += 1;
+            return Heard::Stale;
+        }
+        let pending = self.sends.saturating_sub(1);
+        if header == Header::Error {
+            self.stats.error_replies += 1;
+            self.finish(
+                Err(Failure::Controller { code, detail: None }),
+                now,
+                pending,
+            );
+            return Heard::Rejected(code);
+        }
+        if !content_ok {
+            self.faulted = true;
+            self.stats.mismatches += 1;
+            return Heard::Mismatch;
+        }
+        self.finish(Ok(()), now, pending);
+        Heard::Answer
+    }
+
+    /// A reply of `id` carrying `values` arrived at `now`: its copy may
+    /// follow within the duplicate window.
+    fn copy_possible(&mut self, id: u16, values: Span, now: u32) {
+        let dup = self.cfg.duplicate_window_ms;
+        if dup > 0 {
+            let until = now.wrapping_add(dup).wrapping_add(1);
+            self.ledger.copy(id, values, until, now);
+        }
+    }
+
+    fn turnaround_after(&self, now: u32) -> u32 {
+        now.wrapping_add(self.cfg.turnaround_ms).wrapping_add(1)
+    }
+
+    /// A frame ended broken at `now`; `envelope` is what could be read of
+    /// it ([`crate::decoder::FrameDecoder::failed_envelope`]). A copy of
+    /// it may come whole. If it was the awaited reply, the controller will
+    /// not answer again: the command is resent as soon as the turnaround
+    /// has passed (an **inference** from the half-duplex rules, 2003 p. 8),
+    /// unless it may be an earlier send's late reply on the last send.
+    pub fn broken(&mut self, envelope: Option<(Header, Station, u16)>, now: u32) {
+        self.stats.line_errors += 1;
+        let ours = match envelope {
+            Some((h, s, code)) if s == self.cfg.station && h != Header::Command => {
+                let id = if h == Header::Error { ANY_ID } else { code };
+                self.copy_possible(id, Span::UNKNOWN, now);
+                h == Header::Error || code == self.cmd.id
+            }
+            Some(_) => false,
+            None => {
+                self.copy_possible(ANY_ID, Span::UNKNOWN, now);
+                false
+            }
+        };
+        if !ours {
+            return;
+        }
+        let Phase::Await { deadline } = self.phase else {
+            return;
+        };
+        self.faulted = true;
+        if let Reply::None { .. } = self.cmd.reply {
+            // Answered with an error whose code cannot be read.
+            let sends = self.sends;
+            self.finish(Err(Failure::OutcomeUnknown { sends }), now, 0);
+            return;
+        }
+        let ambiguous = self.sends > 1 || self.ledger.owed(now).is_some();
+        if ambiguous && self.sends >= self.send_limit() {
+            return;
+        }
+        let soon = self.turnaround_after(now);
+        if crate::clock::reached(deadline, soon) {
+            self.phase = Phase::Await { deadline: soon };
+        }
+    }
+
+    /// Bytes that may have held a reply were dropped unread at `now` (an
+    /// engine clearing its decoder before a send): a copy of whatever they
+    /// held may still come.
+    pub fn unread(&mut self, now: u32) {
+        self.stats.line_errors += 1;
+        self.copy_possible(ANY_ID, Span::UNKNOWN, now);
+    }
+
+    /// Forgets the current command: the replies to its sends are owed.
+    pub fn abandon(&mut self, now: u32) {
+        match self.phase {
+            Phase::FenceSending | Phase::FenceAwait { .. } => {
+                // The fence may have gone out; what it was to settle is
+                // still owed.
+                let until = self.late_horizon(now);
+                self.ledger.owe(until, now);
+            }
+            Phase::Sending => {
+                // It may have gone out by now.
+                self.last_sent = now;
+                let sends = self.sends;
+                self.finish(Err(Failure::Timeout { sends }), now, sends);
+            }
+            Phase::Ready | Phase::Await { .. } => {
+                let sends = self.sends;
+                self.finish(Err(Failure::Timeout { sends }), now, sends);
+            }
+            Phase::Idle | Phase::Finished(_) => {}
+        }
+        self.phase = Phase::Idle;
+    }
+
+    /// Ends the command; `pending` replies to its sends may still come.
+    fn finish(&mut self, r: Result<(), Failure>, now: u32, pending: u8) {
+        self.phase = Phase::Finished(r);
+        let no_reply = matches!(self.cmd.reply, Reply::None { .. });
+        if pending > 0 {
+            let until = self.late_horizon(self.last_sent);
+            self.ledger.owe(until, now);
+            self.faulted |= !no_reply;
+        }
+        if !no_reply && matches!(r, Ok(()) | Err(Failure::Controller { .. })) {
+            self.not_before = Some(later(self.next_send(now), self.turnaround_after(now)));
+        }
+    }
+}
+
+#[cfg(test)]
+impl Line {
+    /// A line whose past is known: for tests that start mid-conversation.
+    pub(crate) fn known(cfg: LineConfig) -> Self {
+        let mut l = Line::new(cfg, 0x12_3456);
+        l.opened = false;
+        l
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,491 @@
+//! The bridge: protocol B between a host (upstream) and one controller
+//! (downstream), board-independent and never blocking.
+//!
+//! [`Bridge::poll`] makes what progress the ports allow and answers
+//! [`Poll::Busy`] (call again), [`Poll::Wait`] (nothing can move before one
+//! of the listed events or the deadline) or [`Poll::Quit`]. Time is a
+//! wrapping millisecond tick passed in by the caller, so the same code runs
+//! on a board ([`run`]) and in the host model of `host-tests`, in virtual
+//! time. Its jobs, one file each:
+//!
+//! - [`upstream`]: frames from the host, by their envelope: commands to the
+//!   bridge's own station are answered by the bridge ([`crate::status`]),
+//!   other stations' commands are skipped, refused ones ([`crate::config`])
+//!   are read to their end and answered `&` [`crate::codes::REFUSED`];
+//! - [`passthrough`]: any other command is checked, forwarded, and the
+//!   controller's checked reply relayed; without one within 3 s the bridge
+//!   answers nothing and the host resends (2003 p. 62);
+//! - [`stream`]: a 26DH of any size is decoded record by record and written
+//!   in controller-sized chunks, each confirmed and read back equal before
+//!   more is taken from the host; one `#` with the count at the end;
+//! - [`pipeline`]: chunk and queue sizes for the downstream rate, so that
+//!   the final reply fits the host's timeout.
+//!
+//! The downstream line is one [`Line`] for both paths: what the 26DH path
+//! left in flight (a read-back's late reply) the pass-through knows, and the
+//! reverse; a line just booted fences its first command. The bridge is
+//! wired to the controller, so its line expects no copied replies.
+//!
+//! Buffers: one 2,051-byte area serves both paths. It is the frame buffer
+//! of the 26DH transfer, built once and restarted in place for each 26DH;
+//! between 26DHs it is lent out as the pass-through's frame decoder
+//! ([`Transfer::idle_decoder`]), which holds the command, then the reply.
+
+mod passthrough;
+pub mod pipeline;
+mod stream;
+mod upstream;
+
+use embedded_io::{Write, WriteReady};
+use iai_protocol_b::checksum::BypassPolicy;
+use iai_protocol_b::decoder::FrameDecoder;
+use iai_protocol_b::frame::Station;
+use iai_protocol_b::line::Line as ControllerLine;
+use iai_protocol_b::position::PositionStream;
+use iai_protocol_b::transfer::{RecordQueue, Transfer};
+use iai_protocol_b::{LineConfig, Profile, TransferConfig};
+
+use crate::config::{Config, Source};
+pub use crate::serial::Port;
+use crate::status::{self, LastError, Stats};
+pub use pipeline::Pipeline;
+
+use stream::StreamWork;
+use upstream::Upstream;
+
+/// Upstream silence required before the quit sequence.
+pub const QUIT_GUARD_MS: u32 = 20;
+
+/// Records buffered between the upstream decoder and the transfer. The
+/// transfer packs records into its chunk as they come, so a few suffice;
+/// more only lets the host run further ahead while a chunk is confirmed.
+pub const QUEUE_LEN: usize = 8;
+
+/// How long a 26DH may pause upstream in its middle (while the bridge is
+/// ready to read) before it is abandoned with
+/// [`crate::codes::UPSTREAM_STALLED`].
+pub const UPSTREAM_STALL_MS: u32 = 5_000;
+
+/// Largest frame handled in pass-through (a TTA receives at most 2,051
+/// bytes and sends at most 2,048, TTA p. 15).
+pub const FRAME_CAP: usize = Profile::TTA.max_command_frame();
+
+/// Bytes of the bridge's own replies (the status reply is the longest).
+pub const RESPONSE_CAP: usize = status::REPLY_LEN;
+
+/// The 26DH stream the bridge splits: the TTA's table write.
+const STREAM: PositionStream = Profile::TTA.table_write();
+
+/// Why [`Bridge::poll`] failed: a port reported an error.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Error<U, D> {
+    /// The upstream port failed.
+    Upstream(U),
+    /// The downstream port failed.
+    Downstream(D),
+}
+
+/// What [`Bridge::poll`] achieved.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Poll {
+    /// Something moved: call again.
+    Busy,
+    /// Nothing can move until one of the events in the [`Wait`] happens.
+    Wait(Wait),
+    /// The quit sequence arrived (only with [`Config::quit_sequence`]).
+    Quit,
+}
+
+/// What the bridge waits for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Wait {
+    /// Call [`Bridge::poll`] again at this tick at the latest (a reply
+    /// timeout, a turnaround, a stall limit), if any.
+    pub deadline: Option<u32>,
+    /// Why it is waiting.
+    pub reason: Reason,
+    /// Which port events would let it move.
+    pub interest: Interest,
+}
+
+/// Why the bridge is waiting.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reason {
+    /// Bytes from the host (idle, or inside a command).
+    Host,
+    /// The controller's reply (or a timer of the line).
+    Controller,
+    /// Room in the upstream transmit ring.
+    HostRoom,
+    /// Room in the downstream transmit ring.
+    ControllerRoom,
+}
+
+/// Port events that would let the bridge move.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Interest {
+    /// Upstream bytes to read.
+    pub up_read: bool,
+    /// Room to write upstream.
+    pub up_write: bool,
+    /// Downstream bytes to read.
+    pub down_read: bool,
+    /// Room to write downstream.
+    pub down_write: bool,
+}
+
+/// The 26DH transfer: records from the upstream decoder through a bounded
+/// queue to controller-sized commands.
+type Job = Transfer<RecordQueue<QUEUE_LEN>>;
+
+/// Where the bridge is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Mode {
+    /// Hunting for a header byte upstream.
+    Idle,
+    /// Collecting the envelope (header, station, ID) of an upstream frame.
+    Head,
+    /// Feeding an upstream command (not 26DH) to the frame decoder.
+    Command,
+    /// Skipping a command to its end; at a valid end answer `answer`.
+    Skip { answer: Option<u16> },
+    /// Sending the decoded command downstream (after a fence, if the line
+    /// asks for one).
+    SendCommand,
+    /// Waiting for the controller's reply (the line says until when).
+    AwaitReply,
+    /// Writing the reply upstream.
+    RelayReply,
+    /// A 26DH stream is being decoded and transferred.
+    Stream {
+        station: Station,
+        /// The upstream frame ended well (`End`).
+        upstream_done: bool,
+        /// Stop as soon as the downstream line is clean, answering this code.
+        abort: Option<u16>,
+        /// Since when the bridge has been ready for upstream bytes.
+        waiting_since: u32,
+    },
+    /// Writing the bridge's own response upstream.
+    Respond,
+}
+
+/// The bridge's state: about 5 KiB; keep it in a static. It holds no port
+/// and no clock.
+pub struct Bridge {
+    cfg: Config,
+    source: Source,
+    mode: Mode,
+    up: Upstream,
+    /// The downstream line: the command on it and what may still arrive.
+    line: ControllerLine,
+    /// The 26DH transfer, built once and restarted in place for each 26DH.
+    /// Between 26DHs its frame buffer is the pass-through's decoder.
+    job: Job,
+    /// Downstream frames while a pass-through command waits for its fence:
+    /// the fence's echo and stale replies (never kept).
+    fence_replies: FrameDecoder<24>,
+    /// A 26DH's upstream side.
+    stream: StreamWork,
+    /// Bytes of the current outgoing frame already written.
+    out_off: usize,
+    /// The 26DH transfer's next deadline and whether a frame waits for
+    /// room downstream.
+    stream_deadline: Option<u32>,
+    tx_blocked: bool,
+    resp: [u8; RESPONSE_CAP],
+    resp_len: usize,
+    stats: Stats,
+    last_error: Option<LastError>,
+}
+
+/// The line to the controller for `cfg`.
+const fn line_config(cfg: &Config) -> LineConfig {
+    LineConfig::new(cfg.controller_station)
+}
+
+impl Bridge {
+    /// An idle bridge with this configuration (`source` says where it came
+    /// from, for the status query). `seed` makes the downstream line's
+    /// fence texts its own: give a different one at each boot.
+    pub fn new(cfg: Config, source: Source, seed: u32) -> Self {
+        Self {
+            cfg,
+            source,
+            mode: Mode::Idle,
+            up: Upstream::new(),
+            line: ControllerLine::new(line_config(&cfg), seed),
+            job: Transfer::new(TransferConfig::new(Profile::TTA), RecordQueue::new()),
+            fence_replies: FrameDecoder::with_policy(BypassPolicy::Reject),
+            stream: StreamWork::new(cfg.downstream_baud),
+            out_off: 0,
+            stream_deadline: None,
+            tx_blocked: false,
+            resp: [0; RESPONSE_CAP],
+            resp_len: 0,
+            stats: Stats::default(),
+            last_error: None,
+        }
+    }
+
+    /// Sets the configuration (at start, before the first [`Bridge::poll`]):
+    /// lets a board build the bridge before its configuration is read.
+    pub fn configure(&mut self, cfg: Config, source: Source) {
+        self.cfg = cfg;
+        self.source = source;
+        self.line.set_config(line_config(&cfg));
+    }
+
+    /// The configuration in force.
+    pub fn config(&self) -> &Config {
+        &self.cfg
+    }
+
+    /// Where the configuration came from.
+    pub fn config_source(&self) -> Source {
+        self.source
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> Stats {
+        self.stats
+    }
+
+    /// The downstream line's counters (fences, timeouts, stale replies).
+    pub fn line_stats(&self) -> iai_protocol_b::line::LineStats {
+        self.line.stats()
+    }
+
+    /// The last `&` code the bridge sent of its own.
+    pub fn last_error(&self) -> Option<LastError> {
+        self.last_error
+    }
+
+    /// Whether the bridge is between commands (nothing half done).
+    pub fn is_idle(&self) -> bool {
+        self.mode == Mode::Idle
+    }
+
+    /// Makes what progress is possible at tick `now` without waiting.
+    pub fn poll<U: Port, D: Port>(
+        &mut self,
+        up: &mut U,
+        down: &mut D,
+        now: u32,
+    ) -> Result<Poll, Error<U::Error, D::Error>> {
+        let lost = down.take_overruns();
+        if lost > 0 {
+            self.stats.downstream_overruns = self.stats.downstream_overruns.wrapping_add(lost);
+            if self.mode == Mode::AwaitReply {
+                // The reply being decoded lost bytes: start again.
+                self.job.idle_decoder().reset();
+            }
+        }
+        let moved = match self.mode {
+            Mode::Idle | Mode::Head | Mode::Command | Mode::Skip { .. } => {
+                match self.poll_upstream(up, down, now)? {
+                    upstream::Read::Quit => return Ok(Poll::Quit),
+                    upstream::Read::Moved(moved) => moved,
+                }
+            }
+            Mode::SendCommand | Mode::AwaitReply | Mode::RelayReply => {
+                self.poll_passthrough(up, down, now)?
+            }
+            Mode::Stream { .. } => self.poll_stream(up, down, now)?,
+            Mode::Respond => self.poll_respond(up).map_err(Error::Upstream)?,
+        };
+        Ok(if moved {
+            Poll::Busy
+        } else {
+            Poll::Wait(self.wait(now))
+        })
+    }
+
+    /// What the bridge waits for in its current mode.
+    fn wait(&mut self, now: u32) -> Wait {
+        let only = |i: Interest| i;
+        let (deadline, reason, interest) = match self.mode {
+            Mode::Idle | Mode::Head | Mode::Command | Mode::Skip { .. } => (
+                None,
+                Reason::Host,
+                Interest {
+                    up_read: true,
+                    down_read: true,
+                    ..Interest::default()
+                },
+            ),
+            Mode::SendCommand | Mode::AwaitReply => {
+                let due = self.line.poll(now);
+                let sending = matches!(
+                    due,
+                    iai_protocol_b::line::Due::Fence | iai_protocol_b::line::Due::Send { .. }
+                );
+                let deadline = match due {
+                    iai_protocol_b::line::Due::WaitUntil(t) => Some(t),
+                    _ => Some(now),
+                };
+                if sending {
+                    (
+                        None,
+                        Reason::ControllerRoom,
+                        only(Interest {
+                            down_write: true,
+                            ..Interest::default()
+                        }),
+                    )
+                } else {
+                    (
+                        deadline,
+                        Reason::Controller,
+                        only(Interest {
+                            down_read: true,
+                            ..Interest::default()
+                        }),
+                    )
+                }
+            }
+            Mode::RelayReply | Mode::Respond => (
+                None,
+                Reason::HostRoom,
+                only(Interest {
+                    up_write: true,
+                    ..Interest::default()
+                }),
+            ),
+            Mode::Stream {
+                upstream_done,
+                abort,
+                waiting_since,
+                ..
+            } => {
+                let reading = !upstream_done && abort.is_none() && !self.queue_full();
+                let stall = reading.then(|| waiting_since.wrapping_add(UPSTREAM_STALL_MS));
+                let deadline = earliest(now, stall, self.stream_deadline);
+                let reason = if self.tx_blocked {
+                    Reason::ControllerRoom
+                } else if reading {
+                    Reason::Host
+                } else {
+                    Reason::Controller
+                };
+                (
+                    deadline,
+                    reason,
+                    Interest {
+                        up_read: reading,
+                        down_read: true,
+                        down_write: self.tx_blocked,
+                        up_write: false,
+                    },
+                )
+            }
+        };
+        Wait {
+            deadline,
+            reason,
+            interest,
+        }
+    }
+
+    /// Back to hunting for a frame upstream.
+    fn go_idle(&mut self) {
+        self.mode = Mode::Idle;
+        self.out_off = 0;
+        self.up.head_len = 0;
+        self.stream_deadline = None;
+        self.tx_blocked = false;
+        // The job's frame buffer is the decoder's again (a 26DH restarts
+        // the job before it polls it).
+        self.stream.started = false;
+        let frames = self.job.idle_decoder();
+        frames.reset();
+        frames.set_policy(BypassPolicy::CommandsOnly);
+    }
+
+    /// Reads and drops whatever the controller sends unasked (late replies,
+    /// noise) while no command is on the line: the line already counts
+    /// them as owed until its next fence.
+    fn drain_downstream<D: Port>(&mut self, down: &mut D) -> Result<bool, D::Error> {
+        let mut buf = [0u8; 16];
+        let mut moved = false;
+        while down.read_ready()? {
+            let n = down.read(&mut buf)?;
+            if n == 0 {
+                break;
+            }
+            self.stats.downstream_in += n as u64;
+            moved = true;
+        }
+        Ok(moved)
+    }
+}
+
+/// The earlier of two optional deadlines, seen from `now`.
+fn earliest(now: u32, a: Option<u32>, b: Option<u32>) -> Option<u32> {
+    match (a, b) {
+        (Some(a), Some(b)) => Some(if a.wrapping_sub(now) <= b.wrapping_sub(now) {
+            a
+        } else {
+            b
+        }),
+        (a, b) => a.or(b),
+    }
+}
+
+/// Writes what `port` takes right now of `bytes[*off..]`, never waiting;
+/// advances `*off` and `*counter` by the bytes written and returns them.
+fn write_some<W: Write + WriteReady>(
+    port: &mut W,
+    bytes: &[u8],
+    off: &mut usize,
+    counter: &mut u64,
+) -> Result<usize, W::Error> {
+    let rest = bytes.get(*off..).unwrap_or(&[]);
+    if rest.is_empty() || !port.write_ready()? {
+        return Ok(0);
+    }
+    let n = port.write(rest)?;
+    *off += n;
+    *counter += n as u64;
+    Ok(n)
+}
+
+/// Bridges until the quit sequence (`Ok` with the counters) or a port
+/// error.
+///
+/// Never waits inside a port call. When nothing can move it calls `sleep`
+/// with a readiness check, which should sleep (e.g. WFI) unless the check
+/// says there is work; `feed` runs once per loop (a watchdog: if the loop
+/// stalls, the watchdog resets the MCU). `now_ms` is a wrapping millisecond
+/// clock; timers count in ms, so the board must wake at least once a
+/// millisecond or by the deadline.
+pub fn run<U: Port, D: Port>(
+    bridge: &mut Bridge,
+    upstream: &mut U,
+    downstream: &mut D,
+    now_ms: impl Fn() -> u32,
+    mut sleep: impl FnMut(&mut dyn FnMut() -> bool),
+    mut feed: impl FnMut(),
+) -> Result<Stats, Error<U::Error, D::Error>> {
+    loop {
+        feed();
+        match bridge.poll(upstream, downstream, now_ms())? {
+            Poll::Quit => return Ok(bridge.stats()),
+            Poll::Busy => {}
+            Poll::Wait(w) => {
+                let i = w.interest;
+                let start = now_ms();
+                sleep(&mut || {
+                    now_ms() != start
+                        || (i.up_read && upstream.read_ready().unwrap_or(true))
+                        || (i.down_read && downstream.read_ready().unwrap_or(true))
+                        || (i.up_write && upstream.write_ready().unwrap_or(true))
+                        || (i.down_write && downstream.write_ready().unwrap_or(true))
+                });
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,239 @@
+//! The bridge's jobs, frame by frame.
+
+extern crate std;
+use std::vec::Vec;
+
+use super::*;
+use crate::codes;
+use crate::config::{AllowList, Policy};
+use crate::serial::FlowControl;
+use embedded_io::{Read, ReadReady};
+use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
+use iai_protocol_b::frame::{emit_frame, Frame, Header};
+
+/// The seed of the bridges under test: their fences' texts begin `000000`.
+const SEED: u32 = 0;
+
+/// A port over byte vectors: reads `input`, collects what is written. As
+/// the controller side it answers the bridge's fences (200H whose text
+/// begins with the seed's six digits) with their echo, and keeps them out
+/// of `output`.
+#[derive(Default)]
+struct Fake {
+    input: Vec<u8>,
+    output: Vec<u8>,
+    echo_fences: bool,
+    fences: u32,
+}
+
+impl Fake {
+    fn controller() -> Self {
+        Fake {
+            echo_fences: true,
+            ..Fake::default()
+        }
+    }
+}
+
+impl embedded_io::ErrorType for Fake {
+    type Error = core::convert::Infallible;
+}
+impl ReadReady for Fake {
+    fn read_ready(&mut self) -> Result<bool, Self::Error> {
+        Ok(!self.input.is_empty())
+    }
+}
+impl Read for Fake {
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
+        let n = buf.len().min(self.input.len());
+        buf[..n].copy_from_slice(&self.input[..n]);
+        self.input.drain(..n);
+        Ok(n)
+    }
+}
+impl WriteReady for Fake {
+    fn write_ready(&mut self) -> Result<bool, Self::Error> {
+        Ok(true)
+    }
+}
+impl Write for Fake {
+    fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+        if self.echo_fences && buf.starts_with(b"!99200000000") && buf.len() == 20 {
+            self.fences += 1;
+            let f = Frame::new_checked(buf, BypassPolicy::Reject).unwrap();
+            let echo = frame(Header::Response, 0x99, 0x200, f.body());
+            self.input.extend_from_slice(&echo);
+            return Ok(buf.len());
+        }
+        self.output.extend_from_slice(buf);
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}
+impl Port for Fake {}
+
+fn frame(header: Header, station: u8, code: u16, body: &[u8]) -> Vec<u8> {
+    let mut buf = [0u8; 64];
+    let n = emit_frame(
+        &mut buf,
+        header,
+        Station(station),
+        code,
+        ChecksumMode::Compute,
+        |w| w.put(body),
+    )
+    .unwrap();
+    buf[..n].to_vec()
+}
+
+/// Polls until the bridge waits, at tick `now`.
+fn settle(b: &mut Bridge, up: &mut Fake, down: &mut Fake, now: u32) {
+    for _ in 0..10_000 {
+        if let Poll::Wait(_) = b.poll(up, down, now).unwrap() {
+            return;
+        }
+    }
+    panic!("the bridge never waits");
+}
+
+fn bridge(policy: Policy) -> Bridge {
+    Bridge::new(
+        Config {
+            policy,
+            ..Config::DEFAULT
+        },
+        Source::Default,
+        SEED,
+    )
+}
+
+#[test]
+fn own_station_answers_status_and_b09() {
+    let mut b = bridge(Policy::ForwardAll);
+    let (mut up, mut down) = (Fake::default(), Fake::controller());
+    up.input = frame(Header::Command, 0xBB, codes::STATUS_QUERY, b"");
+    up.input.extend(frame(Header::Command, 0xBB, 0x212, b"01"));
+    settle(&mut b, &mut up, &mut down, 7);
+    settle(&mut b, &mut up, &mut down, 8);
+    assert!(down.output.is_empty());
+    let status = Frame::new_checked(&up.output[..status::REPLY_LEN], BypassPolicy::Reject).unwrap();
+    let fields = status::parse(status.body()).unwrap();
+    assert_eq!(fields[1], ("uptime_ms", 7));
+    assert_eq!(fields[16], ("own_queries", 1));
+    assert_eq!(
+        &up.output[status::REPLY_LEN..],
+        &frame(Header::Error, 0xBB, codes::UNKNOWN_QUERY, b"")[..]
+    );
+    assert_eq!(b.last_error().map(|e| e.code), Some(codes::UNKNOWN_QUERY));
+}
+
+#[test]
+fn other_stations_are_ignored_and_refusals_answered_after_the_end() {
+    let mut b = bridge(Policy::Allow(AllowList::of(&[0x212])));
+    let (mut up, mut down) = (Fake::default(), Fake::controller());
+    up.input = frame(Header::Command, 0x42, 0x212, b"01");
+    up.input.extend(frame(Header::Command, 0x99, 0x25B, b""));
+    settle(&mut b, &mut up, &mut down, 0);
+    settle(&mut b, &mut up, &mut down, 1);
+    assert!(down.output.is_empty());
+    assert_eq!(up.output, frame(Header::Error, 0x99, codes::REFUSED, b""));
+    assert_eq!(b.stats().other_station, 1);
+    assert_eq!(b.stats().refused, 1);
+    // A refused command with a wrong checksum gets no answer.
+    let mut bad = frame(Header::Command, 0x99, 0x25B, b"");
+    bad[6] ^= 1;
+    up.input = bad;
+    up.output.clear();
+    settle(&mut b, &mut up, &mut down, 2);
+    assert!(up.output.is_empty());
+    assert_eq!(b.stats().rejected, 1);
+    // The allowed one goes through.
+    // The allowed one goes through (after the fence of a line just booted
+    // and its turnaround).
+    up.input = frame(Header::Command, 0x99, 0x212, b"01");
+    settle(&mut b, &mut up, &mut down, 3);
+    settle(&mut b, &mut up, &mut down, 5);
+    assert_eq!(down.fences, 1);
+    assert_eq!(down.output, frame(Header::Command, 0x99, 0x212, b"01"));
+}
+
+/// Under a restricting policy a 200H whose ten characters hold a frame is
+/// refused: a controller that decodes again inside a broken 200H could run
+/// the frame although the policy refuses it. Under forward-all it goes.
+#[test]
+fn no_command_rides_in_a_200h_text_under_a_restricting_policy() {
+    // `!9925B` inside the text: a software reset the read-only policy
+    // refuses.
+    let text = b"!9925B3C\r\n";
+    for (policy, refused) in [(Policy::ReadOnly, true), (Policy::ForwardAll, false)] {
+        let mut b = bridge(policy);
+        let (mut up, mut down) = (Fake::default(), Fake::controller());
+        let cmd = frame(Header::Command, 0x99, 0x200, text);
+        up.input = cmd.clone();
+        settle(&mut b, &mut up, &mut down, 0);
+        settle(&mut b, &mut up, &mut down, 2);
+        if refused {
+            assert!(down.output.is_empty(), "{policy:?}");
+            assert_eq!(up.output, frame(Header::Error, 0x99, codes::REFUSED, b""));
+            assert_eq!(b.stats().refused, 1);
+        } else {
+            assert_eq!(down.output, cmd, "{policy:?}");
+        }
+    }
+}
+
+#[test]
+fn a_reply_with_xoff_in_its_text_is_not_relayed_under_xon_xoff() {
+    for flow in [FlowControl::XonXoff, FlowControl::None] {
+        let mut b = Bridge::new(
+            Config {
+                flow,
+                ..Config::DEFAULT
+            },
+            Source::Default,
+            SEED,
+        );
+        let (mut up, mut down) = (Fake::default(), Fake::controller());
+        let cmd = frame(Header::Command, 0x99, 0x200, b"0123456789");
+        up.input = cmd.clone();
+        settle(&mut b, &mut up, &mut down, 0);
+        settle(&mut b, &mut up, &mut down, 2);
+        assert_eq!(down.output, cmd);
+        let reply = frame(Header::Response, 0x99, 0x200, b"01234\x1356789");
+        down.input = reply.clone();
+        settle(&mut b, &mut up, &mut down, 5);
+        settle(&mut b, &mut up, &mut down, 6);
+        let want = match flow {
+            FlowControl::XonXoff => frame(Header::Error, 0x99, codes::XON_XOFF_IN_TEXT, b""),
+            _ => reply,
+        };
+        assert_eq!(up.output, want, "{flow:?}");
+    }
+}
+
+#[test]
+fn no_reply_within_3_s_gives_no_answer_and_the_deadline_says_when() {
+    let mut b = bridge(Policy::ForwardAll);
+    let (mut up, mut down) = (Fake::default(), Fake::controller());
+    up.input = frame(Header::Command, 0x99, 0x212, b"01");
+    // Just booted: the line's fence goes first, answered at once; the
+    // command follows after the turnaround (two ticks).
+    settle(&mut b, &mut up, &mut down, 100);
+    assert_eq!(down.fences, 1);
+    assert!(down.output.is_empty());
+    settle(&mut b, &mut up, &mut down, 102);
+    assert_eq!(down.output, frame(Header::Command, 0x99, 0x212, b"01"));
+    let Poll::Wait(w) = b.poll(&mut up, &mut down, 102).unwrap() else {
+        panic!("waits for the reply");
+    };
+    assert_eq!(w.reason, Reason::Controller);
+    assert_eq!(w.deadline, Some(102 + 3_000));
+    settle(&mut b, &mut up, &mut down, 3_101);
+    assert!(!b.is_idle());
+    settle(&mut b, &mut up, &mut down, 3_102);
+    assert!(b.is_idle());
+    assert!(up.output.is_empty());
+    assert_eq!(b.stats().reply_timeouts, 1);
+}

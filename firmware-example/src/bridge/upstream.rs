@@ -1,0 +1,413 @@
+//! Frames from the host, sorted by their envelope (header, station, ID):
+//! the bridge's own station, other stations, refused commands, 26DH, and
+//! the pass-through; and the bridge's own answers going up.
+
+use iai_protocol_b::checksum::BypassPolicy;
+use iai_protocol_b::decoder::{Event, FrameSkipper, Skipped};
+use iai_protocol_b::frame::{emit_frame, read_envelope, Frame, Header, Station, ENVELOPE_LEN};
+use iai_protocol_b::line::Line as ControllerLine;
+
+use super::{write_some, Bridge, Error, Mode, Port, STREAM};
+use crate::codes;
+use crate::config::Policy;
+use crate::log;
+use crate::status::{self, LastError};
+
+/// Upstream bytes read per call (a staging chunk, not a message buffer).
+const IN_CHUNK: usize = 16;
+
+/// One step of reading the upstream.
+pub(super) enum Up {
+    Byte(u8),
+    /// Bytes were lost before the next one.
+    Lost,
+    Empty,
+}
+
+/// What reading the host did.
+pub(super) enum Read {
+    /// Whether bytes moved.
+    Moved(bool),
+    /// The quit sequence arrived.
+    Quit,
+}
+
+/// The upstream side: the envelope being read, a staging chunk, the
+/// skipper of a refused command, the quit detector.
+pub(super) struct Upstream {
+    pub(super) head: [u8; ENVELOPE_LEN],
+    pub(super) head_len: usize,
+    inbuf: [u8; IN_CHUNK],
+    in_pos: usize,
+    in_len: usize,
+    skipper: Option<FrameSkipper>,
+    quit: QuitDetector,
+}
+
+impl Upstream {
+    pub(super) const fn new() -> Self {
+        Upstream {
+            head: [0; ENVELOPE_LEN],
+            head_len: 0,
+            inbuf: [0; IN_CHUNK],
+            in_pos: 0,
+            in_len: 0,
+            skipper: None,
+            quit: QuitDetector::new(),
+        }
+    }
+}
+
+impl Bridge {
+    /// The modes that read the host (idle, envelope, command, skip): read
+    /// and sort bytes until the mode changes or none is left.
+    pub(super) fn poll_upstream<U: Port, D: Port>(
+        &mut self,
+        up: &mut U,
+        down: &mut D,
+        now: u32,
+    ) -> Result<Read, Error<U::Error, D::Error>> {
+        let mut moved = self.drain_downstream(down).map_err(Error::Downstream)?;
+        while matches!(
+            self.mode,
+            Mode::Idle | Mode::Head | Mode::Command | Mode::Skip { .. }
+        ) {
+            let b = match self.next_up(up).map_err(Error::Upstream)? {
+                Up::Empty => break,
+                Up::Lost => {
+                    moved = true;
+                    if self.mode != Mode::Idle {
+                        self.stats.rejected += 1;
+                    }
+                    self.go_idle();
+                    continue;
+                }
+                Up::Byte(b) => b,
+            };
+            moved = true;
+            if self.cfg.quit_sequence && self.up.quit.feed(b, now) && self.mode == Mode::Idle {
+                return Ok(Read::Quit);
+            }
+            self.on_upstream_byte(b, now);
+        }
+        Ok(Read::Moved(moved))
+    }
+
+    /// The next upstream byte. Checks the overrun count each time it reads
+    /// a new chunk from the port, so every byte handed out before
+    /// [`Up::Lost`] was received before the loss.
+    pub(super) fn next_up<U: Port>(&mut self, up: &mut U) -> Result<Up, U::Error> {
+        let u = &mut self.up;
+        if u.in_pos >= u.in_len {
+            let lost = up.take_overruns();
+            if lost > 0 {
+                self.stats.upstream_overruns = self.stats.upstream_overruns.wrapping_add(lost);
+                return Ok(Up::Lost);
+            }
+            if !up.read_ready()? {
+                return Ok(Up::Empty);
+            }
+            let n = up.read(&mut u.inbuf)?;
+            self.stats.upstream_in += n as u64;
+            u.in_pos = 0;
+            u.in_len = n.min(IN_CHUNK);
+        }
+        match u.inbuf.get(u.in_pos).copied() {
+            Some(b) if u.in_pos < u.in_len => {
+                u.in_pos += 1;
+                Ok(Up::Byte(b))
+            }
+            _ => Ok(Up::Empty),
+        }
+    }
+
+    /// One upstream byte in the Idle, Head, Command or Skip mode.
+    fn on_upstream_byte(&mut self, b: u8, now: u32) {
+        let is_header = Header::from_byte(b).is_some();
+        match self.mode {
+            Mode::Idle | Mode::Head if is_header => {
+                self.up.head[0] = b;
+                self.up.head_len = 1;
+                self.mode = Mode::Head;
+            }
+            Mode::Idle => {}
+            Mode::Head => {
+                if let Some(slot) = self.up.head.get_mut(self.up.head_len) {
+                    *slot = b;
+                    self.up.head_len += 1;
+                }
+                if self.up.head_len == ENVELOPE_LEN {
+                    self.classify(now);
+                }
+            }
+            Mode::Command => self.command_byte(b, now),
+            Mode::Skip { answer } => self.skip_byte(b, answer, now),
+            _ => {}
+        }
+    }
+
+    /// The envelope is complete: decide what to do with the frame.
+    fn classify(&mut self, now: u32) {
+        let head = self.up.head;
+        if let Some((Header::Command, station, id)) = read_envelope(&head) {
+            if station == self.cfg.bridge_station {
+                self.start_command(now);
+                return;
+            }
+            if station != self.cfg.controller_station {
+                self.stats.other_station += 1;
+                self.start_skip(None);
+                return;
+            }
+            if !self.cfg.policy.allows(id) {
+                log::warning!("command {=u16:X}H refused by the policy", id);
+                self.start_skip(Some(codes::REFUSED));
+                return;
+            }
+            if id == STREAM.id {
+                self.start_stream(station, now);
+                return;
+            }
+        }
+        self.start_command(now);
+    }
+
+    /// Pass-through (or own query): the envelope goes to the frame decoder.
+    fn start_command(&mut self, now: u32) {
+        let frames = self.job.idle_decoder();
+        frames.reset();
+        frames.set_policy(BypassPolicy::CommandsOnly);
+        self.mode = Mode::Command;
+        let head = self.up.head;
+        for &b in &head {
+            self.command_byte(b, now);
+            if self.mode != Mode::Command {
+                break;
+            }
+        }
+    }
+
+    /// Skip the rest of the frame, summing its checksum.
+    fn start_skip(&mut self, answer: Option<u16>) {
+        self.up.skipper = Some(FrameSkipper::new(
+            Header::Command,
+            &self.up.head,
+            BypassPolicy::CommandsOnly,
+        ));
+        self.mode = Mode::Skip { answer };
+    }
+
+    /// One byte of a skipped command.
+    fn skip_byte(&mut self, b: u8, answer: Option<u16>, now: u32) {
+        let Some(skipper) = self.up.skipper.as_mut() else {
+            self.go_idle();
+            return;
+        };
+        match (skipper.push(b), answer) {
+            (Skipped::NeedMore, _) => {}
+            (Skipped::End { checksum_ok: true }, Some(code)) => {
+                self.stats.refused += 1;
+                let station = self.cfg.controller_station;
+                self.respond_error(station, code, now);
+            }
+            (Skipped::End { checksum_ok: true }, None) => self.go_idle(),
+            (Skipped::End { checksum_ok: false }, _) => {
+                self.stats.rejected += 1;
+                self.go_idle();
+            }
+            (Skipped::Broken, _) => {
+                // The frame was cut: this byte may start the next one.
+                self.stats.rejected += 1;
+                self.go_idle();
+                self.on_upstream_byte(b, now);
+            }
+        }
+    }
+
+    /// One byte of a pass-through command (or an own query).
+    fn command_byte(&mut self, b: u8, now: u32) {
+        let bridge_station = self.cfg.bridge_station;
+        let policy = self.cfg.policy;
+        // What a checked frame asks for: decided while it is borrowed.
+        let decided = match self.job.idle_decoder().push(b) {
+            Event::NeedMore => return,
+            Event::Frame(f) if f.header() == Header::Command => {
+                let (station, id) = (f.station(), f.code());
+                if station == bridge_station {
+                    Next::Own {
+                        station,
+                        id,
+                        body_empty: f.body().is_empty(),
+                    }
+                } else if carries_a_frame_in_its_text(&f, policy) {
+                    Next::Refuse(station)
+                } else {
+                    Next::Forward(id)
+                }
+            }
+            // Only commands go downstream.
+            Event::Frame(_) => Next::Drop(false),
+            Event::Error(_e) => {
+                log::warning!("malformed upstream command dropped: {}", _e);
+                Next::Drop(Header::from_byte(b).is_some())
+            }
+        };
+        match decided {
+            Next::Own {
+                station,
+                id,
+                body_empty,
+            } => {
+                self.stats.own_queries += 1;
+                self.own_query(station, id, body_empty, now);
+            }
+            Next::Refuse(station) => {
+                log::warning!("200H with a frame in its text refused");
+                self.stats.refused += 1;
+                self.respond_error(station, codes::REFUSED, now);
+            }
+            Next::Forward(id) => {
+                // Sent once: the host resends after its own timeout.
+                start_forward(&mut self.line, id, now);
+                self.mode = Mode::SendCommand;
+                self.out_off = 0;
+            }
+            Next::Drop(restart) => {
+                self.stats.rejected += 1;
+                self.go_idle();
+                if restart {
+                    // The header byte that cut the frame starts the next one.
+                    self.on_upstream_byte(b, now);
+                }
+            }
+        }
+    }
+
+    /// A command to the bridge's own station.
+    fn own_query(&mut self, station: Station, id: u16, body_empty: bool, now: u32) {
+        if id == codes::STATUS_QUERY && body_empty {
+            let report = status::Report {
+                now_ms: now,
+                config: &self.cfg,
+                source: self.source,
+                stats: &self.stats,
+                last_error: self.last_error,
+            };
+            self.resp_len = report.emit(station, &mut self.resp).unwrap_or(0);
+            self.out_off = 0;
+            self.mode = Mode::Respond;
+        } else {
+            self.respond_error(station, codes::UNKNOWN_QUERY, now);
+        }
+    }
+
+    /// The Respond mode: the bridge's own reply goes up.
+    pub(super) fn poll_respond<U: Port>(&mut self, up: &mut U) -> Result<bool, U::Error> {
+        let resp = self.resp.get(..self.resp_len).unwrap_or(&[]);
+        let out = &mut self.stats.upstream_out;
+        let n = write_some(up, resp, &mut self.out_off, out)?;
+        if self.out_off >= self.resp_len {
+            self.go_idle();
+        }
+        Ok(n > 0)
+    }
+
+    /// Queue the 26DH's `#` reply with the count.
+    pub(super) fn respond_count(&mut self, station: Station, count: u16) {
+        self.go_idle();
+        self.resp_len = emit_frame(
+            &mut self.resp,
+            Header::Response,
+            station,
+            STREAM.id,
+            Default::default(),
+            |w| STREAM.write_prefix(w, 0, count),
+        )
+        .unwrap_or(0);
+        self.mode = Mode::Respond;
+    }
+
+    /// Queue an `&` reply with one of the bridge's codes.
+    pub(super) fn respond_error(&mut self, station: Station, code: u16, now: u32) {
+        self.go_idle();
+        self.last_error = Some(LastError { code, at_ms: now });
+        self.resp_len = emit_frame(
+            &mut self.resp,
+            Header::Error,
+            station,
+            code,
+            Default::default(),
+            |_| Ok(()),
+        )
+        .unwrap_or(0);
+        self.mode = Mode::Respond;
+    }
+}
+
+/// What a complete upstream command asks of the bridge.
+enum Next {
+    Own {
+        station: Station,
+        id: u16,
+        body_empty: bool,
+    },
+    Refuse(Station),
+    Forward(u16),
+    /// Dropped; `true` if the byte that broke it starts the next frame.
+    Drop(bool),
+}
+
+/// Starts forwarding command `id` on the line: one send (the host resends
+/// after its own timeout).
+fn start_forward(line: &mut ControllerLine, id: u16, now: u32) {
+    line.start_raw(id, 1, now);
+}
+
+/// Whether a command may carry a frame in its free text under `policy`: a
+/// 200H whose ten characters hold a header byte, CR or LF. A controller
+/// that decodes again inside a broken 200H (as the project's own decoder
+/// does) could run that frame, after one line error, although the policy
+/// refuses it; so under a restricting policy such a 200H is refused.
+fn carries_a_frame_in_its_text(f: &Frame<'_>, policy: Policy) -> bool {
+    if policy == Policy::ForwardAll || f.code() != iai_protocol_b::catalogue::TEST_CALL.id {
+        return false;
+    }
+    f.body()
+        .iter()
+        .any(|&b| Header::from_byte(b).is_some() || b == b'\r' || b == b'\n')
+}
+
+/// Recognises [`codes::QUIT`] after [`super::QUIT_GUARD_MS`] of silence.
+pub(super) struct QuitDetector {
+    matched: usize,
+    last_byte_ms: Option<u32>,
+}
+
+impl QuitDetector {
+    const fn new() -> Self {
+        Self {
+            matched: 0,
+            last_byte_ms: None,
+        }
+    }
+
+    /// Feed one byte read at `now_ms`; `true` once the sequence is complete.
+    fn feed(&mut self, byte: u8, now_ms: u32) -> bool {
+        let quiet_before = self
+            .last_byte_ms
+            .is_none_or(|last| now_ms.wrapping_sub(last) >= super::QUIT_GUARD_MS);
+        self.last_byte_ms = Some(now_ms);
+        if self.matched > 0 && codes::QUIT.get(self.matched) == Some(&byte) {
+            self.matched += 1;
+            if self.matched == codes::QUIT.len() {
+                self.matched = 0;
+                return true;
+            }
+        } else if byte == codes::QUIT[0] && quiet_before {
+            self.matched = 1;
+        } else {
+            self.matched = 0;
+        }
+        false
+    }
+}
