@@ -1,6 +1,8 @@
 //! The controller's memory and its answers: [`Controller`] and
 //! [`Controller::execute`], which parses each command once into the core's
-//! typed [`Command`] and dispatches on it.
+//! typed [`Command`] and answers the messages listed in the
+//! [module docs](super); every other one is refused with
+//! [`NOT_MODELLED_CODE`].
 
 use std::collections::BTreeMap;
 
@@ -8,10 +10,11 @@ use iai_protocol_b::axis::{AxisPattern, PerAxis, MAX_AXES};
 use iai_protocol_b::field::{FieldSpec, Writer};
 use iai_protocol_b::frame::{emit_envelope, emit_trailer, Frame, Header, Station};
 use iai_protocol_b::message::{
-    AbsoluteMoveResponse, AxisStatus, AxisStatusResponse, Command, ErrorDetailResponse,
-    ErrorResponse, HomeReturnResponse, JogInchResponse, Message, OperationStopResponse,
-    PositionNumberMove2Response, PositionNumberMoveResponse, PositionRecords, RelativeMoveResponse,
-    Response, ServoOnOffResponse, SystemStatusResponse,
+    AbsoluteMoveResponse, AxisStatus, AxisStatusResponse, ClearPositionDataResponse, Command,
+    EffectivePositionCountResponse, ErrorDetailResponse, ErrorResponse, HomeReturnResponse,
+    JogInchResponse, Message, OperationStopResponse, PositionNumberMove2Response,
+    PositionNumberMoveResponse, PositionRecords, RelativeMoveResponse, ServoOnOffResponse,
+    SystemStatusResponse, TestCallResponse,
 };
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::profile::Profile;
@@ -19,9 +22,12 @@ use iai_protocol_b::stream::PositionStream;
 
 use super::axis::{Axis, Home, Kind};
 use super::{
-    Rng, AXIS_BUSY_CODE, DEFAULT_ACC, DEFAULT_SPEED, NOT_HOMED_CODE, NO_POSITION_CODE,
-    SERVO_OFF_CODE, SOFT_LIMIT, UNSUPPORTED_ERROR_CODE,
+    Rng, AXIS_BUSY_CODE, DEFAULT_ACC, DEFAULT_SPEED, NOT_HOMED_CODE, NOT_MODELLED_CODE,
+    NO_POSITION_CODE, SERVO_OFF_CODE, SOFT_LIMIT, UNSUPPORTED_ERROR_CODE,
 };
+
+/// The largest count 208H can carry (3 hex digits).
+const MAX_208H_COUNT: usize = 0xFFF;
 
 /// The controller's memory: position table, axes, limits.
 #[derive(Debug, Clone)]
@@ -44,8 +50,8 @@ pub struct Controller {
     pub records_written: u64,
     /// Refuse moves as described in the module docs (servo off, not
     /// homed, busy, undefined position). Off in the constructors, so that
-    /// protocol tests get a normal response to every well-formed command;
-    /// `iai simulate` turns it on.
+    /// protocol tests get a normal response to every well-formed command
+    /// the simulator models; `iai simulate` turns it on.
     pub refuse: bool,
 }
 
@@ -109,15 +115,6 @@ impl Controller {
         }
     }
 
-    /// The normal response of `id` with default (zero) fields.
-    fn ack(&self, id: u16) -> Reply {
-        let r = Response::default_for(id)?;
-        let mut buf = vec![0u8; self.max_transmit];
-        let n = r.emit(self.station, &mut buf).ok()?;
-        buf.truncate(n);
-        Some(buf)
-    }
-
     /// `msg` when the command was carried out, else the `&` frame of the
     /// refusal.
     fn answer<'a, M: Message<'a>>(&self, outcome: Result<(), u16>, msg: &M) -> Vec<u8> {
@@ -132,7 +129,9 @@ impl Controller {
     ///
     /// The frame is parsed once into its typed [`Command`]. A body that
     /// does not fit its layout, or an ID outside the catalogue (or one the
-    /// profile does not know), is answered [`UNSUPPORTED_ERROR_CODE`].
+    /// profile does not know), is answered [`UNSUPPORTED_ERROR_CODE`]; a
+    /// catalogue message the simulator does not model,
+    /// [`NOT_MODELLED_CODE`].
     pub fn execute(&mut self, f: &Frame<'_>, now: u32, swap: Option<&mut Rng>) -> Reply {
         self.settle(now);
         if self.profile != Profile::TTA && !self.profile.supports(f.code()) {
@@ -144,6 +143,11 @@ impl Controller {
             return Some(self.error_frame(UNSUPPORTED_ERROR_CODE));
         };
         let reply = match cmd {
+            // 2003 p. 15: the same 10 characters back.
+            Command::TestCall(c) => self.emit(&TestCallResponse {
+                test_string: c.test_string,
+            }),
+            Command::EffectivePositionCountQuery(_) => self.count_positions(),
             Command::AxisStatusQuery(q) => self.axis_status(q.query_axis_pattern, now),
             // AUTO mode, no system error; byte 3: operating in AUTO, system
             // ready. 215H has no motion field: moves show in 212H only.
@@ -264,6 +268,10 @@ impl Controller {
             Command::ChangePositionData3(c) => {
                 self.write_positions(PositionStream::CHANGE_3, 0, &c.records, swap)
             }
+            Command::ClearPositionData(c) => {
+                self.clear_positions(c.clear_start_position_number, c.number_of_clear_positions);
+                self.emit(&ClearPositionDataResponse {})
+            }
             Command::EffectivePositionQuery(q) => self.query_positions(
                 PositionStream::QUERY_RESPONSE,
                 q.query_head_position_number,
@@ -279,9 +287,9 @@ impl Controller {
                 q.query_head_position_number,
                 q.number_of_query_records,
             ),
-            // Every other message of the catalogue: its response with
-            // default (zero) fields; 25BH gets none.
-            other => return self.ack(other.id()),
+            // Every other message: refused rather than answered with made-up
+            // fields (see "Refusals" in the module docs).
+            _ => self.error_frame(NOT_MODELLED_CODE),
         };
         Some(reply)
     }
@@ -399,6 +407,29 @@ impl Controller {
         Ok(())
     }
 
+    /// 208H: how many records the table holds. Its 3-digit field cannot
+    /// carry more than FFFH: a larger table is refused with
+    /// [`NOT_MODELLED_CODE`] (what a TTA answers then is not known).
+    fn count_positions(&self) -> Vec<u8> {
+        match u16::try_from(self.table.len()) {
+            Ok(n) if self.table.len() <= MAX_208H_COUNT => {
+                self.emit(&EffectivePositionCountResponse {
+                    number_of_effective_positions: n,
+                })
+            }
+            _ => self.error_frame(NOT_MODELLED_CODE),
+        }
+    }
+
+    /// 246H: clears positions `start..start + count`.
+    fn clear_positions(&mut self, start: u16, count: u16) {
+        let end = start.saturating_add(count);
+        let gone: Vec<u16> = self.table.range(start..end).map(|(k, _)| *k).collect();
+        for k in gone {
+            self.table.remove(&k);
+        }
+    }
+
     /// 244H / 245H / 26DH / 290H / 291H: stores the records (numbered from
     /// `start` for the range writes, whose records carry no number) and
     /// confirms how many.
@@ -512,6 +543,168 @@ fn swap_digits(recs: &mut [PositionRecord], rng: &mut Rng) {
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+    use iai_protocol_b::catalogue;
+    use iai_protocol_b::checksum::BypassPolicy;
+
+    const ST: Station = Station(0x99);
+
+    /// The reply of `ctl` to the frame `cmd` at tick `now`, as text.
+    fn exec(ctl: &mut Controller, cmd: &str, now: u32) -> String {
+        let f = Frame::new_checked(cmd.as_bytes(), BypassPolicy::Reject).unwrap();
+        let reply = ctl.execute(&f, now, None).unwrap();
+        String::from_utf8(reply).unwrap()
+    }
+
+    /// Four one-axis records, positions 1, 2, 3 and 5 (26DH, 4-digit numbers).
+    const WRITE_1_2_3_5: &str = "!9926D0004\
+        000101001E001E0064000003E8\
+        000201001E001E0064000007D0\
+        000301001E001E006400000BB8\
+        000501001E001E006400001388E5\r\n";
+
+    #[test]
+    fn a_test_call_comes_back_with_the_same_ten_characters() {
+        let mut ctl = Controller::tta(ST);
+        assert_eq!(
+            exec(&mut ctl, "!99200ABCDEFGHIJDC\r\n", 0),
+            "#99200ABCDEFGHIJDE\r\n"
+        );
+        // Any text, as a host's ordering fence would carry it.
+        assert_eq!(
+            exec(&mut ctl, "!99200fence-004219\r\n", 0),
+            "#99200fence-00421B\r\n"
+        );
+    }
+
+    #[test]
+    fn the_count_of_positions_follows_the_table() {
+        let mut ctl = Controller::tta(ST);
+        assert_eq!(exec(&mut ctl, "!992082D\r\n", 0), "#99208000BF\r\n");
+        assert_eq!(exec(&mut ctl, WRITE_1_2_3_5, 0), "#9926D000405\r\n");
+        assert_eq!(exec(&mut ctl, "!992082D\r\n", 0), "#99208004C3\r\n");
+        // FFFH records still fit the 3-digit count; one more does not and
+        // is refused rather than saturated.
+        let rec = PositionRecord::new(0, 1, 1, 1, &[(1, 5)]).unwrap();
+        ctl.table = (0..0xFFF)
+            .map(|n| {
+                (
+                    n,
+                    PositionRecord {
+                        number: n,
+                        ..rec.clone()
+                    },
+                )
+            })
+            .collect();
+        assert_eq!(exec(&mut ctl, "!992082D\r\n", 0), "#99208FFF01\r\n");
+        ctl.table.insert(0xFFF, rec);
+        assert_eq!(exec(&mut ctl, "!992082D\r\n", 0), "&990E340\r\n");
+    }
+
+    #[test]
+    fn a_clear_removes_its_positions_and_the_query_no_longer_shows_them() {
+        let mut ctl = Controller::tta(ST);
+        exec(&mut ctl, WRITE_1_2_3_5, 0);
+        assert_eq!(
+            exec(&mut ctl, "!9921F00000010BD\r\n", 0),
+            "#9921F0004\
+             000101001E001E0064000003E8\
+             000201001E001E0064000007D0\
+             000301001E001E006400000BB8\
+             000501001E001E006400001388E4\r\n"
+        );
+        // Clear 2 positions from 002: 2 and 3 go, 1 and 5 stay.
+        assert_eq!(exec(&mut ctl, "!9924600200253\r\n", 0), "#9924631\r\n");
+        assert_eq!(
+            exec(&mut ctl, "!9921F00000010BD\r\n", 0),
+            "#9921F0002\
+             000101001E001E0064000003E8\
+             000501001E001E00640000138868\r\n"
+        );
+        assert_eq!(exec(&mut ctl, "!992082D\r\n", 0), "#99208002C1\r\n");
+        // Clearing nothing, or positions that are not defined, is no error.
+        let f = |s: &str| {
+            let sc = s.bytes().map(u32::from).sum::<u32>() & 0xFF;
+            format!("{s}{sc:02X}\r\n")
+        };
+        assert_eq!(exec(&mut ctl, &f("!99246FFF000"), 0), "#9924631\r\n");
+        assert_eq!(exec(&mut ctl, &f("!99246FFFFFF"), 0), "#9924631\r\n");
+        assert_eq!(ctl.table.len(), 2);
+    }
+
+    #[test]
+    fn a_message_the_simulator_does_not_model_is_refused() {
+        let mut ctl = Controller::tta(ST);
+        ctl.table
+            .insert(1, PositionRecord::new(1, 1, 1, 1, &[(1, 5)]).unwrap());
+        // 201H version, 252H alarm reset, 25BH software reset.
+        for cmd in ["!99201000B6\r\n", "!992522C\r\n", "!9925B3C\r\n"] {
+            assert_eq!(exec(&mut ctl, cmd, 0), "&990E340\r\n", "{cmd}");
+        }
+        // An ID outside the catalogue, a body that does not fit (212H without
+        // its axis pattern): 0E2.
+        assert_eq!(exec(&mut ctl, "!992FF51\r\n", 0), "&990E23F\r\n");
+        assert_eq!(exec(&mut ctl, "!9921228\r\n", 0), "&990E23F\r\n");
+        assert_eq!(ctl.table.len(), 1, "nothing executed");
+    }
+
+    #[test]
+    fn every_catalogue_command_is_answered_or_refused_as_documented() {
+        // The messages the module docs list as modelled.
+        let modelled = [
+            &catalogue::TEST_CALL,
+            &catalogue::EFFECTIVE_POSITION_COUNT_QUERY,
+            &catalogue::EFFECTIVE_POSITION_QUERY,
+            &catalogue::EFFECTIVE_POSITION_QUERY_2,
+            &catalogue::EFFECTIVE_POSITION_QUERY_3,
+            &catalogue::RANGE_WRITE_POSITION_DATA,
+            &catalogue::CHANGE_POSITION_DATA,
+            &catalogue::CHANGE_POSITION_DATA_2,
+            &catalogue::RANGE_WRITE_POSITION_DATA_3,
+            &catalogue::CHANGE_POSITION_DATA_3,
+            &catalogue::CLEAR_POSITION_DATA,
+            &catalogue::AXIS_STATUS_QUERY,
+            &catalogue::SERVO_ON_OFF,
+            &catalogue::HOME_RETURN,
+            &catalogue::ABSOLUTE_MOVE,
+            &catalogue::RELATIVE_MOVE,
+            &catalogue::JOG_INCH,
+            &catalogue::POSITION_NUMBER_MOVE,
+            &catalogue::OPERATION_STOP,
+            &catalogue::POSITION_NUMBER_MOVE_2,
+            &catalogue::SYSTEM_STATUS_QUERY,
+            &catalogue::ERROR_DETAIL_QUERY,
+        ]
+        .map(|m| m.id);
+        let mut ctl = Controller::tta(ST);
+        for id in catalogue::ALL.iter().map(|m| m.id) {
+            let mut buf = [0u8; 64];
+            let n = Command::default_for(id)
+                .unwrap()
+                .emit(ST, &mut buf)
+                .unwrap();
+            let f = Frame::new_checked(&buf[..n], BypassPolicy::Reject).unwrap();
+            let reply = ctl.execute(&f, 0, None).unwrap();
+            let r = Frame::new_checked(&reply, BypassPolicy::Reject).unwrap();
+            if modelled.contains(&id) {
+                assert_eq!((r.header(), r.code()), (Header::Response, id), "{id:03X}H");
+            } else {
+                assert_eq!(
+                    (r.header(), r.code()),
+                    (Header::Error, NOT_MODELLED_CODE),
+                    "{id:03X}H"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_2003_x_sel_does_not_know_the_tta_messages() {
+        let mut ctl = Controller::xsel_2003(ST);
+        assert_eq!(exec(&mut ctl, WRITE_1_2_3_5, 0), "&990E23F\r\n");
+        assert_eq!(exec(&mut ctl, "!992082D\r\n", 0), "#99208000BF\r\n");
+    }
+
     #[test]
     fn a_swapped_record_keeps_the_checksum() {
         let mut rng = Rng::new(3);

@@ -1,13 +1,12 @@
 //! A controller simulator: the controller's side of protocol B, built on
 //! the core, with a position table, a model of each axis and faults
-//! injected on demand.
+//! injected on demand. It answers only what it models; every other
+//! message is refused (see "What it answers").
 //!
 //! Two parts:
 //! - [`Controller`]: what a controller remembers (position table, axes,
-//!   counters) and how it answers a command ([`Controller::execute`],
-//!   dispatching on the core's typed
-//!   [`Command`](iai_protocol_b::message::Command)). It persists across
-//!   connections, as a real controller's memory does.
+//!   counters) and how it answers a command ([`Controller::execute`]). It
+//!   persists across connections, as a real controller's memory does.
 //! - [`Session`]: what belongs to one connection (the frame decoder, replies
 //!   not yet sent, the fault generator).
 //!
@@ -23,6 +22,26 @@
 //! Like the controller (manual p. 9), it does not answer a command it could
 //! not receive: bad checksum, broken frame, or one longer than the
 //! profile's receive buffer.
+//!
+//! # What it answers
+//! Each command is parsed once into the core's typed
+//! [`Command`](iai_protocol_b::message::Command). The simulator models:
+//!
+//! | message | answer |
+//! |---|---|
+//! | 200H Test Call | the 10 characters it was sent, exactly (2003 p. 15; the TTA page is not recovered, its layout is inferred identical) |
+//! | 208H | the number of records in the table (3 hex digits); more than FFFH records cannot be counted in that field and are refused with [`NOT_MODELLED_CODE`] rather than saturated |
+//! | 209H, 21FH, 22DH | the defined records in the window asked for, as many as fit the transmit buffer |
+//! | 244H, 245H, 26DH, 290H, 291H | the records stored, their count confirmed |
+//! | 246H | `number_of_clear_positions` positions from `clear_start_position_number` (3-digit numbering) removed from the table, then acknowledged |
+//! | 212H, 232H to 238H, 26BH | the axis model below |
+//! | 215H | AUTO mode, no system error, "operating in AUTO", "system ready" |
+//! | 216H | illustrative details (error C74H, step 5, axis 2, point -3) |
+//!
+//! Every other catalogue message (201H version, ports, flags, variables,
+//! programs, 252H alarm reset, 25BH software reset, speed change, the
+//! SCARA messages, …) is refused with [`NOT_MODELLED_CODE`] rather than
+//! answered with made-up fields.
 //!
 //! # Axis model
 //! Eight axes, all connected, servo off and not homed at start, at 0.
@@ -43,19 +62,21 @@
 //!   field for motion.
 //!
 //! # Refusals
-//! Only when [`Controller::refuse`] is on (`iai simulate` turns it on;
-//! `--accept-all` turns it off); otherwise every well-formed command gets
-//! its normal response and a move runs whatever the servo and homing
-//! state. The manuals state when a real controller refuses a command only in
+//! The manuals state when a real controller refuses a command only in
 //! general terms (an `&` reply when a received command cannot be executed,
 //! TTA p. 15, 2003 p. 13) and publish no code list. The simulator refuses
 //! the cases below with codes of its own, chosen for it and documented
-//! here; a real controller's codes will differ:
+//! here; a real controller's codes will differ. `0E2` and `0E3` are always
+//! on; the refusals of moves (`0E4` to `0E7`) only when
+//! [`Controller::refuse`] is on (`iai simulate` turns it on,
+//! `--accept-all` turns it off), otherwise a move runs whatever the servo
+//! and homing state.
 //!
 //! | code | refusal |
 //! |---|---|
 //! | [`INJECTED_ERROR_CODE`] `0E1` | fault injection (`error=P`) |
-//! | [`UNSUPPORTED_ERROR_CODE`] `0E2` | body does not fit the layout, an ID a 2003 X-SEL does not know (the TTA simulator answers every catalogue message), position number past FFFFH |
+//! | [`UNSUPPORTED_ERROR_CODE`] `0E2` | body does not fit the layout, an ID outside the catalogue, an ID a 2003 X-SEL does not know (the TTA simulator knows every catalogue message), position number past FFFFH |
+//! | [`NOT_MODELLED_CODE`] `0E3` | a catalogue message the simulator does not model (see "What it answers"); 208H with more than FFFH records |
 //! | [`SERVO_OFF_CODE`] `0E4` | move, jog or home on an axis whose servo is off |
 //! | [`NOT_HOMED_CODE`] `0E5` | 234H/235H/237H/26BH before the axis was homed (jog and inching are allowed) |
 //! | [`AXIS_BUSY_CODE`] `0E6` | a new operation on an axis that is still moving or homing |
@@ -74,9 +95,12 @@ use iai_protocol_b::stream::PositionStream;
 
 /// Error code the simulator sends when it injects an error response.
 pub const INJECTED_ERROR_CODE: u16 = 0x0E1;
-/// Error code for a command whose body does not fit its layout (or whose ID
-/// is not in the catalogue).
+/// Error code for a command whose body does not fit its layout, whose ID
+/// is not in the catalogue, or that the profile does not know.
 pub const UNSUPPORTED_ERROR_CODE: u16 = 0x0E2;
+/// Refusal: a catalogue message the simulator does not model (simulator's
+/// own code; see the module docs).
+pub const NOT_MODELLED_CODE: u16 = 0x0E3;
 /// Refusal: the servo of an axis concerned is off (simulator's own code).
 pub const SERVO_OFF_CODE: u16 = 0x0E4;
 /// Refusal: a coordinate move before homing (simulator's own code).
