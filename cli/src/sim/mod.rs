@@ -61,6 +61,16 @@
 //!   no system error, "operating in AUTO" and "system ready"; it has no
 //!   field for motion.
 //!
+//! # Reply timing and order
+//! A reply is due [`Controller::response_delay_ms`] after its command. A
+//! real controller answers its commands one at a time, in the order it
+//! received them, so late replies keep their order: a reply made late by
+//! [`Faults::late_reply`] or [`Faults::late_every_nth_reply`] delays every
+//! reply scheduled after it (no reply is due before one scheduled
+//! earlier). Copies may come after later replies: a [`Faults::dup_reply`]
+//! copy stands for an echoing converter on the line repeating a frame, and
+//! arrives its delay after the original whatever was answered meanwhile.
+//!
 //! # Refusals
 //! The manuals state when a real controller refuses a command only in
 //! general terms (an `&` reply when a received command cannot be executed,
@@ -130,7 +140,8 @@ pub struct Faults {
     pub flip_bit_out: f64,
     /// Every n-th reply is not sent at all.
     pub drop_every_nth_reply: Option<u32>,
-    /// Every n-th reply is sent late, after this many ms.
+    /// Every n-th reply is sent late, after this many ms; the replies after
+    /// it wait for it.
     pub late_every_nth_reply: Option<(u32, u32)>,
     /// Chance that a command gets an `&` error response instead of its reply.
     pub error_reply: f64,
@@ -139,10 +150,12 @@ pub struct Faults {
     /// Chance that a reply is not sent at all.
     pub drop_reply: f64,
     /// Chance that a reply is sent this many ms after its command (past
-    /// the host's timeout, so that it meets the resend).
+    /// the host's timeout, so that it meets the resend); the replies after
+    /// it wait for it.
     pub late_reply: Option<(f64, u32)>,
     /// Chance that a reply is sent a second time, this many ms after the
-    /// first (an echoing converter, a late copy).
+    /// first (an echoing converter, a late copy); replies to later commands
+    /// may come before the copy.
     pub dup_reply: Option<(f64, u32)>,
     /// The controller stops answering anything once this many position
     /// records were written (it hangs in the middle of a table).
@@ -216,9 +229,13 @@ impl Rng {
 /// One connection's state: decoder, replies waiting to go out, faults.
 pub struct Session {
     decoder: Box<FrameDecoder<4096>>,
+    /// Replies (and copies) with the tick each is due at.
     outbox: Vec<(u32, Vec<u8>)>,
     rng: Rng,
     reply_no: u32,
+    /// Tick the last reply (not copy) was scheduled for: no later reply is
+    /// due before it.
+    last_due: u32,
     stats: SimStats,
 }
 
@@ -230,6 +247,7 @@ impl Session {
             outbox: Vec::new(),
             rng: Rng::new(seed),
             reply_no: 0,
+            last_due: 0,
             stats: SimStats::default(),
         }
     }
@@ -244,8 +262,10 @@ impl Session {
         self.outbox.iter().map(|(t, _)| *t).min()
     }
 
-    /// Reply bytes due by `now`, in order.
+    /// Reply bytes due by `now`, in order (replies due at the same tick
+    /// in the order they were scheduled).
     pub fn take_output(&mut self, now: u32) -> Vec<u8> {
+        // A stable sort: equal ticks keep their scheduling order.
         self.outbox.sort_by_key(|(t, _)| *t);
         let due = self.outbox.iter().take_while(|(t, _)| *t <= now).count();
         let out: Vec<u8> = self.outbox.drain(..due).flat_map(|(_, b)| b).collect();
@@ -317,6 +337,9 @@ impl Session {
         }
     }
 
+    /// Queues `reply` to the command received at `now`, with the faults
+    /// drawn for it. Replies keep their order; copies need not (see "Reply
+    /// timing and order" in the module docs).
     fn schedule(&mut self, ctl: &Controller, faults: &Faults, reply: Option<Vec<u8>>, now: u32) {
         let Some(mut reply) = reply else { return };
         self.reply_no += 1;
@@ -357,15 +380,20 @@ impl Session {
                 at = now.wrapping_add(late);
             }
         }
-        if let Some((p, later)) = faults.dup_reply {
-            if self.rng.chance(p) {
+        // In order: not before a reply scheduled earlier, late or not.
+        at = at.max(self.last_due);
+        self.last_due = at;
+        let copy = match faults.dup_reply {
+            Some((p, later)) if self.rng.chance(p) => {
                 self.stats.duplicated_replies += 1;
-                self.outbox.push((at.wrapping_add(later), reply.clone()));
+                Some((at.wrapping_add(later), reply.clone()))
             }
-        }
-
+            _ => None,
+        };
         self.stats.replies += 1;
         self.outbox.push((at, reply));
+        // A copy keeps its own time: later replies may come before it.
+        self.outbox.extend(copy);
     }
 }
 
@@ -649,5 +677,49 @@ mod tests {
         let reply = send(&mut sim, &q, 10);
         assert!(reply.starts_with(b"#99212"), "{reply:?}");
         assert_eq!(sim.table.len(), 1);
+    }
+
+    const FIRST: &[u8] = b"!99200first-late20\r\n";
+    const FIRST_REPLY: &[u8] = b"#99200first-late22\r\n";
+    const NEXT: &[u8] = b"!99200then-next!E1\r\n";
+    const NEXT_REPLY: &[u8] = b"#99200then-next!E3\r\n";
+
+    #[test]
+    fn a_late_reply_holds_back_the_replies_after_it() {
+        let mut sim = Simulator::tta(ST);
+        sim.faults.late_reply = Some((1.0, 500));
+        sim.receive(FIRST, 0);
+        sim.faults = Faults::default();
+        sim.receive(NEXT, 10);
+        // The second reply would be due at 12; it waits for the first.
+        assert_eq!(sim.next_output_at(), Some(500));
+        assert!(sim.take_output(499).is_empty());
+        assert_eq!(sim.take_output(500), [FIRST_REPLY, NEXT_REPLY].concat());
+        assert_eq!(sim.stats().late_replies, 1);
+    }
+
+    #[test]
+    fn a_copy_may_come_after_later_replies() {
+        let mut sim = Simulator::tta(ST);
+        // The first reply late and copied 300 ms after it.
+        sim.faults.late_reply = Some((1.0, 500));
+        sim.faults.dup_reply = Some((1.0, 300));
+        sim.receive(FIRST, 0);
+        sim.faults = Faults::default();
+        sim.receive(NEXT, 10);
+        assert_eq!(sim.take_output(500), [FIRST_REPLY, NEXT_REPLY].concat());
+        assert_eq!(sim.next_output_at(), Some(800));
+        assert_eq!(sim.take_output(800), FIRST_REPLY);
+        // Without lateness the copy still comes after the next reply.
+        let mut sim = Simulator::tta(ST);
+        sim.faults.dup_reply = Some((1.0, 300));
+        sim.receive(FIRST, 0);
+        sim.faults = Faults::default();
+        sim.receive(NEXT, 10);
+        assert_eq!(
+            sim.take_output(1_000),
+            [FIRST_REPLY, NEXT_REPLY, FIRST_REPLY].concat()
+        );
+        assert_eq!(sim.stats().duplicated_replies, 1);
     }
 }
