@@ -70,6 +70,10 @@
 //! earlier). Copies may come after later replies: a [`Faults::dup_reply`]
 //! copy stands for an echoing converter on the line repeating a frame, and
 //! arrives its delay after the original whatever was answered meanwhile.
+//! The order holds on one time base: a caller that restarts its clock (a
+//! command at a tick before the previous command's, as a harness running
+//! separate virtual-time runs against one simulator does) starts a new
+//! one, and replies still pending from before hold no new reply back.
 //!
 //! # Refusals
 //! The manuals state when a real controller refuses a command only in
@@ -236,6 +240,9 @@ pub struct Session {
     /// Tick the last reply (not copy) was scheduled for: no later reply is
     /// due before it.
     last_due: u32,
+    /// Tick of the last command answered (to see the caller's clock
+    /// restart).
+    last_command_at: u32,
     stats: SimStats,
 }
 
@@ -248,6 +255,7 @@ impl Session {
             rng: Rng::new(seed),
             reply_no: 0,
             last_due: 0,
+            last_command_at: 0,
             stats: SimStats::default(),
         }
     }
@@ -380,7 +388,13 @@ impl Session {
                 at = now.wrapping_add(late);
             }
         }
-        // In order: not before a reply scheduled earlier, late or not.
+        // In order: not before a reply scheduled earlier, late or not. A
+        // caller whose clock went back started a new time base: what was
+        // scheduled on the old one holds nothing back.
+        if now < self.last_command_at {
+            self.last_due = 0;
+        }
+        self.last_command_at = now;
         at = at.max(self.last_due);
         self.last_due = at;
         let copy = match faults.dup_reply {
@@ -721,5 +735,20 @@ mod tests {
             [FIRST_REPLY, NEXT_REPLY, FIRST_REPLY].concat()
         );
         assert_eq!(sim.stats().duplicated_replies, 1);
+    }
+
+    #[test]
+    fn a_clock_that_restarts_starts_a_new_order() {
+        // One run ends at 20 s with a late reply still pending; the next
+        // run's clock starts again at 0.
+        let mut sim = Simulator::tta(ST);
+        sim.receive(NEXT, 19_000);
+        sim.faults.late_reply = Some((1.0, 5_000));
+        sim.receive(FIRST, 20_000);
+        assert_eq!(sim.take_output(20_000), NEXT_REPLY);
+        sim.faults = Faults::default();
+        sim.receive(NEXT, 10);
+        assert_eq!(sim.take_output(12), NEXT_REPLY);
+        assert_eq!(sim.take_output(25_000), FIRST_REPLY);
     }
 }
