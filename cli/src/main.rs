@@ -242,9 +242,9 @@ struct SimArgs {
     /// Print only connection summaries, not every frame.
     #[arg(long)]
     quiet: bool,
-    /// Answer every well-formed command normally: no refusal of moves with
-    /// the servo off, before homing, on a busy axis or to an undefined
-    /// position.
+    /// Do not refuse moves with the servo off, before homing, on a busy
+    /// axis or to an undefined position (messages the simulator does not
+    /// model are still refused).
     #[arg(long)]
     accept_all: bool,
 }

@@ -32,6 +32,9 @@ pub(crate) struct Fault {
     /// Answered, and the same reply again this long after (an echoing
     /// converter: the copy may come after later replies).
     pub(crate) copy_after_ms: Option<u32>,
+    /// A 21FH reply that shows this position with coordinate 1 at this
+    /// value (two digits swapped: the SC does not see it).
+    pub(crate) shows: Option<(u16, i32)>,
 }
 
 pub(crate) struct Controller {
@@ -91,8 +94,8 @@ impl Controller {
             };
             let n = self.received.len();
             self.received.push((now, cmd.clone()));
-            let reply = self.answer(&cmd);
             let fault = self.faults.get(&n).copied().unwrap_or_default();
+            let reply = self.answer(&cmd, fault.shows);
             if fault.silent {
                 continue;
             }
@@ -106,7 +109,7 @@ impl Controller {
         }
     }
 
-    fn answer(&mut self, cmd: &[u8]) -> Vec<u8> {
+    fn answer(&mut self, cmd: &[u8], shows: Option<(u16, i32)>) -> Vec<u8> {
         let mut out = std::vec![0u8; 2048];
         let mut dec: FrameDecoder = FrameDecoder::with_policy(BypassPolicy::Accept);
         let Event::Frame(f) = dec.decode(cmd).event else {
@@ -120,15 +123,26 @@ impl Controller {
         } else if let Ok(q) = EffectivePositionQuery2::parse(&f) {
             let head = q.query_head_position_number;
             let end = head.saturating_add(q.number_of_query_records);
-            let found: Vec<_> = self
+            let mut found: Vec<_> = self
                 .table
                 .range(head..end)
                 .map(|(_, r)| r.clone())
                 .collect();
+            for r in found.iter_mut() {
+                if let Some((_, v)) = shows.filter(|(n, _)| *n == r.number) {
+                    r.positions[0] = v;
+                }
+            }
             EffectivePositionResponse2 {
                 records: Repeated::from_slice(&found),
             }
             .emit(ST, &mut out)
+        } else if !cmd.starts_with(b"!9926D") {
+            // Anything else: its normal response with default fields.
+            match crate::message::Response::default_for(f.code()) {
+                Some(r) => r.emit(ST, &mut out),
+                None => return Vec::new(),
+            }
         } else {
             let mut dec = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
             let mut input = cmd;

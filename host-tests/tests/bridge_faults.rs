@@ -106,8 +106,10 @@ fn stream_under_faults(seed: u64) {
     sim.response_delay_ms = (seed % 50) as u32;
     let mut bridge = model::bridge(&cfg.bridge);
     let want = reply_26dh(station, n as u16);
+    let mut clock = 0;
     for send in 1..=SENDS {
-        let r = model::run(&cfg, &mut bridge, &mut sim, &[&cmd]);
+        let r = model::run(&cfg, &mut bridge, &mut sim, &[&cmd], clock);
+        clock = r.end_ns;
         assert_eq!(r.overruns, 0, "seed {seed}");
         assert_eq!(r.stale_waits, 0, "seed {seed}");
         let reply = r.replies[0]
@@ -156,7 +158,7 @@ fn corrupted_upstream(seed: u64) -> usize {
     cmd[at] ^= 1 << rng.below(7);
     let mut sim = Simulator::tta(station);
     let mut bridge = model::bridge(&cfg.bridge);
-    let r = model::run(&cfg, &mut bridge, &mut sim, &[&cmd]);
+    let r = model::run(&cfg, &mut bridge, &mut sim, &[&cmd], 0);
     let reply = r.replies[0].clone();
     // A flip that turned a byte into a header or CR/LF cuts the frame:
     // then the bridge answers B01 at once, or nothing if the envelope
@@ -182,7 +184,7 @@ fn corrupted_upstream(seed: u64) -> usize {
     // Records before the flip may already be in the controller (the
     // bridge streams them before the checksum at the end can be checked);
     // the host's resend rewrites the whole table.
-    let r = model::run(&cfg, &mut bridge, &mut sim, &[&intact]);
+    let r = model::run(&cfg, &mut bridge, &mut sim, &[&intact], r.end_ns);
     assert_eq!(
         r.replies[0].as_deref(),
         Some(&reply_26dh(station, 30)[..]),
@@ -215,7 +217,7 @@ fn passthrough_under_faults(seed: u64) {
     let cmd = buf[..n].to_vec();
     let mut bridge = model::bridge(&cfg.bridge);
     let cmds: Vec<&[u8]> = vec![&cmd; 5];
-    let r = model::run(&cfg, &mut bridge, &mut sim, &cmds);
+    let r = model::run(&cfg, &mut bridge, &mut sim, &cmds, 0);
     assert_eq!(r.stale_waits, 0, "seed {seed}");
     for reply in r.replies.iter().flatten() {
         let f = Frame::new_checked(reply, Default::default())

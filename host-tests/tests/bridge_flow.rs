@@ -32,7 +32,7 @@ fn send_table(
     let mut sim = Simulator::tta(station);
     sim.response_delay_ms = PROCESSING_MS;
     let mut bridge = model::bridge(&cfg.bridge);
-    let r = model::run(cfg, &mut bridge, &mut sim, &[&cmd]);
+    let r = model::run(cfg, &mut bridge, &mut sim, &[&cmd], 0);
     assert_eq!(r.host_bytes, cmd.len() as u64);
     (r, sim, records)
 }

@@ -1,1 +1,149 @@
-//! Tests.
+//! The request engine, frame by frame.
+
+extern crate std;
+use std::vec::Vec;
+
+use super::*;
+use crate::line::LineConfig;
+use crate::message::{AxisStatusQuery, SystemStatusQuery};
+use crate::testing::{run, Controller, Fault, ST};
+
+/// `#99212` for axis 1: status 1C, at 2.300 mm (2300 = 0x8FC).
+const REPLY_212: &[u8] = b"#9921201 1C 00 00 00 000008FC";
+
+fn reply_212() -> Vec<u8> {
+    // The recorded reply without blanks, SC computed.
+    let body: Vec<u8> = REPLY_212.iter().copied().filter(|&b| b != b' ').collect();
+    let sum = body.iter().fold(0u8, |s, &b| s.wrapping_add(b));
+    let mut f = body;
+    f.extend_from_slice(std::format!("{sum:02X}\r\n").as_bytes());
+    f
+}
+
+fn line() -> Line {
+    Line::known(LineConfig::new(ST))
+}
+
+#[test]
+fn a_212h_and_its_typed_reply() {
+    let mut c: Client = Client::new();
+    let mut l = line();
+    let q = AxisStatusQuery::of(&[1]).unwrap();
+    c.start(&mut l, &q, 0).unwrap();
+    match c.poll(&mut l, 0) {
+        Step::Transmit(b) => assert_eq!(b, b"!992120189\r\n"),
+        other => panic!("{other:?}"),
+    }
+    c.sent(&mut l, 1);
+    let reply = reply_212();
+    let r = c.received(&mut l, &reply, 5);
+    assert_eq!((r.consumed, r.event), (reply.len(), Heard::Answer));
+    assert_eq!(c.poll(&mut l, 5), Step::Done(Ok(())));
+    let status = c.response::<AxisStatusQuery>().unwrap();
+    assert_eq!(status.axes[0].axis_status, 0x1C);
+    assert_eq!(status.axes[0].current_position, 2_300);
+}
+
+/// Issue "one memory of the line", case 7: more bytes of the same burst
+/// after the reply (a copy from an echoing converter) must not cost the
+/// reply: the client takes no bytes once it holds it.
+#[test]
+fn a_copy_in_the_same_burst_never_costs_the_reply_taken() {
+    let mut c: Client = Client::new();
+    let mut l = line();
+    let q = AxisStatusQuery::of(&[1]).unwrap();
+    c.start(&mut l, &q, 0).unwrap();
+    let _ = c.poll(&mut l, 0);
+    c.sent(&mut l, 1);
+    let reply = reply_212();
+    let mut burst = reply.clone();
+    burst.extend_from_slice(&reply);
+    let used = crate::engine::feed(&mut c, &mut l, &burst, 5);
+    assert_eq!(used, reply.len(), "the copy is not taken");
+    assert_eq!(c.poll(&mut l, 5), Step::Done(Ok(())));
+    assert_eq!(
+        c.response::<AxisStatusQuery>().unwrap().axes[0].current_position,
+        2_300
+    );
+    // The same through the blocking loop, over a UART that hands out the
+    // reply and its copy in one read.
+    struct Burst(Vec<u8>, Vec<u8>);
+    impl embedded_io::ErrorType for Burst {
+        type Error = core::convert::Infallible;
+    }
+    impl embedded_io::ReadReady for Burst {
+        fn read_ready(&mut self) -> Result<bool, Self::Error> {
+            Ok(!self.0.is_empty())
+        }
+    }
+    impl embedded_io::Read for Burst {
+        fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
+            let n = buf.len().min(self.0.len());
+            buf[..n].copy_from_slice(&self.0[..n]);
+            self.0.drain(..n);
+            Ok(n)
+        }
+    }
+    impl embedded_io::Write for Burst {
+        fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+            if buf.starts_with(b"!99212") {
+                let r = core::mem::take(&mut self.1);
+                self.0.extend_from_slice(&r);
+            }
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> Result<(), Self::Error> {
+            Ok(())
+        }
+    }
+    let short: Vec<u8> = {
+        // 24 bytes of reply + its copy: one 32-byte read takes the reply
+        // and the start of the copy.
+        let mut b = reply.clone();
+        b.extend_from_slice(&reply);
+        b
+    };
+    let mut uart = Burst(Vec::new(), short);
+    let mut t = 10u32;
+    let mut clock = move || {
+        t += 1;
+        t
+    };
+    let mut l = line();
+    let got = c.call(&mut l, &mut uart, &mut clock, &q).unwrap();
+    assert_eq!(got.axes[0].current_position, 2_300);
+}
+
+/// A new call on a line where an earlier one gave up: the reply the
+/// earlier command still owes is settled by a fence, so the new call gets
+/// its own reply, not the old one (issue case 6, through the client).
+#[test]
+fn a_new_call_never_takes_the_reply_an_earlier_one_still_owes() {
+    let mut ctl = Controller::new();
+    // The first 215H's reply comes 9.1 s late, after all three sends gave
+    // up; the replies to the resends follow it (in order).
+    ctl.faults.insert(
+        0,
+        Fault {
+            late_ms: 9_100,
+            ..Fault::default()
+        },
+    );
+    let mut c: Client<64, 128> = Client::new();
+    let mut l = line();
+    c.start(&mut l, &SystemStatusQuery {}, 0).unwrap();
+    let first = run(&mut c, &mut l, &mut ctl, 0);
+    assert_eq!(first.result, Err(Failure::Timeout { sends: 3 }));
+    // 216H next: fenced; the 215H replies come before the echo, stale.
+    c.start(&mut l, &ErrorDetailQuery::latest_system_error(), first.now)
+        .unwrap();
+    let second = run(&mut c, &mut l, &mut ctl, first.now);
+    let kinds: Vec<&[u8]> = ctl.received.iter().map(|(_, c)| &c[..6]).collect();
+    assert_eq!(
+        kinds,
+        [b"!99215", b"!99215", b"!99215", b"!99200", b"!99216"]
+    );
+    assert_eq!(second.result, Ok(()));
+    assert_eq!(c.reply_frame().map(|f| f.code()), Some(0x216));
+    assert!(c.response::<ErrorDetailQuery>().is_ok());
+}

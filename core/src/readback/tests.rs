@@ -1,1 +1,170 @@
-//! Tests.
+//! The read-back engine, frame by frame, against the scripted controller
+//! of [`crate::testing`].
+
+extern crate std;
+use std::vec::Vec;
+
+use super::*;
+use crate::line::LineConfig;
+use crate::testing::{record, Controller, Fault, ST};
+
+fn line() -> Line {
+    Line::known(LineConfig::new(ST))
+}
+
+/// A table of `n` one-axis records, position i at i x 1000.
+fn controller(n: u16) -> Controller {
+    let mut ctl = Controller::new();
+    for i in 1..=n {
+        ctl.table.insert(i, record(i, i32::from(i) * 1_000));
+    }
+    ctl
+}
+
+/// Runs `rb` on `line` against `ctl` to its end; the records delivered.
+fn read(rb: &mut ReadBack, l: &mut Line, ctl: &mut Controller) -> Vec<PositionRecord> {
+    let mut got = Vec::new();
+    let r = {
+        let mut engine = rb.delivering(|recs| got.extend(recs));
+        crate::testing::run(&mut engine, l, ctl, 0)
+    };
+    assert!(r.result.is_ok(), "{:?}", r.result);
+    got
+}
+
+#[test]
+fn every_window_is_read_twice_and_delivered_in_order() {
+    let mut ctl = controller(60);
+    let mut rb: ReadBack = ReadBack::new(ReadBackConfig::new(Profile::TTA, 1, 60));
+    let got = read(&mut rb, &mut line(), &mut ctl);
+    assert_eq!(got, ctl.table.values().cloned().collect::<Vec<_>>());
+    // 21FH from position 1, 24 positions (a 2,048-byte reply holds 24
+    // 8-axis records): `!9921F` 0001 0018 SC.
+    assert_eq!(ctl.received[0].1, b"!9921F00010018C6\r\n");
+    let s = rb.stats();
+    assert_eq!((s.windows_confirmed, s.queries), (3, 6));
+    assert_eq!(s.records, 60);
+}
+
+/// Issue "one memory of the line", case 5: a 21FH reply with two digits
+/// swapped (the SC still matches) and its copy 5 ms later from an echoing
+/// converter agree with each other. The confirmation goes out only when
+/// no copy of the first reply can come, so it is answered by the
+/// controller, disagrees, and the window is delivered as it is held.
+#[test]
+fn a_copy_of_a_reply_never_confirms_it() {
+    let mut ctl = controller(2);
+    ctl.faults.insert(
+        0,
+        Fault {
+            copy_after_ms: Some(5),
+            shows: Some((1, 1_094_151)),
+            ..Fault::default()
+        },
+    );
+    let mut l = Line::known(LineConfig::new(ST).with_duplicate_window(3_000));
+    let mut rb: ReadBack = ReadBack::new(ReadBackConfig::new(Profile::TTA, 1, 2));
+    let got = read(&mut rb, &mut l, &mut ctl);
+    assert_eq!(
+        got[0].positions[0], 1_000,
+        "position 1 as the controller holds it"
+    );
+    assert_eq!(got, ctl.table.values().cloned().collect::<Vec<_>>());
+    assert_eq!(rb.stats().disagreements, 1);
+    // The confirming query went out after the copy's window.
+    let first_reply_at = ctl.received[0].0 + 5;
+    assert!(ctl.received[1].0 > first_reply_at + 5 + 3_000);
+}
+
+/// A window's reply comes after its timeout and resend (the resend is
+/// answered too, in order). What the window still owes is settled by a
+/// fence before the next query, so the late reply never answers it.
+#[test]
+fn a_late_reply_never_answers_the_next_window() {
+    let mut ctl = controller(48);
+    // Positions 25..=48 are not defined: window 2 is empty.
+    for n in 25..=48 {
+        ctl.table.remove(&n);
+    }
+    ctl.faults.insert(
+        0,
+        Fault {
+            late_ms: 3_500,
+            ..Fault::default()
+        },
+    );
+    let cfg = ReadBackConfig {
+        confirm: false,
+        ..ReadBackConfig::new(Profile::TTA, 1, 48)
+    };
+    let mut l = line();
+    let mut rb: ReadBack = ReadBack::new(cfg);
+    let got = read(&mut rb, &mut l, &mut ctl);
+    assert_eq!(got, ctl.table.values().cloned().collect::<Vec<_>>());
+    assert_eq!(l.stats().fences, 1);
+    assert_eq!(rb.stats().retries, 1);
+}
+
+/// Confirmed reads: a confirmation that times out is asked again for half
+/// the window, which then needs two replies of its own (fuzz finding F10).
+#[test]
+fn a_shrunk_window_is_confirmed_by_its_own_replies() {
+    let mut ctl = controller(4);
+    let cfg = ReadBackConfig {
+        max_response: 360,
+        ..ReadBackConfig::new(Profile::TTA, 1, 4)
+    };
+    assert_eq!(cfg.window(), 4);
+    // 1+4 is read once; its confirmation is lost.
+    ctl.faults.insert(
+        1,
+        Fault {
+            silent: true,
+            ..Fault::default()
+        },
+    );
+    let mut l = line();
+    let mut rb: ReadBack = ReadBack::new(cfg);
+    let got = read(&mut rb, &mut l, &mut ctl);
+    assert_eq!(got, ctl.table.values().cloned().collect::<Vec<_>>());
+    let queries: Vec<&[u8]> = ctl.received.iter().map(|(_, c)| &c[6..14]).collect();
+    // 1+4, its confirmation (lost), 1+2 resent in its place (a first read
+    // of the smaller window), then 1+2 confirmed, and 3+2 twice.
+    assert_eq!(queries[..3], [b"00010004", b"00010004", b"00010002"]);
+    assert_eq!(rb.stats().windows_confirmed, 2);
+}
+
+/// After a window's reply is answered, the engine takes no more bytes until
+/// the next poll has delivered it: a frame fed right behind it would
+/// otherwise overwrite the reply in the decoder and its records be lost.
+#[test]
+fn an_answered_reply_is_held_until_it_is_polled() {
+    let mut ctl = controller(3);
+    let cfg = ReadBackConfig {
+        confirm: false,
+        ..ReadBackConfig::new(Profile::TTA, 1, 3)
+    };
+    let mut l = line();
+    let mut rb: ReadBack = ReadBack::new(cfg);
+    let Step::Transmit(q) = rb.poll(&mut l, 0) else {
+        panic!("a query first")
+    };
+    let q = q.to_vec();
+    rb.sent(&mut l, 1);
+    ctl.receive(&q, 1);
+    let mut bytes = ctl.take(10_000);
+    let reply_len = bytes.len();
+    // A stray copy right behind it.
+    bytes.extend_from_within(..reply_len);
+    let r = rb.received(&mut l, &bytes, 20);
+    assert_eq!((r.consumed, r.event), (reply_len, Heard::Answer));
+    let r = rb.received(&mut l, &bytes[reply_len..], 21);
+    assert_eq!((r.consumed, r.event), (0, Heard::NeedMore));
+    match rb.poll(&mut l, 22) {
+        Step::Done(Ok(Some(recs))) => assert_eq!(
+            recs.collect::<Vec<_>>(),
+            ctl.table.values().cloned().collect::<Vec<_>>()
+        ),
+        other => panic!("{other:?}"),
+    }
+}

@@ -79,6 +79,9 @@ pub struct ModelReport {
     pub host_bytes: u64,
     /// Virtual time from the first byte to the last reply, ns.
     pub elapsed_ns: u64,
+    /// The virtual clock when the run ended, ns: where the next run on the
+    /// same bridge and simulator starts (their lines remember times).
+    pub end_ns: u64,
     /// For each command that got a reply: from the host's last byte to the
     /// reply's last byte, ns (what the host's 3 s reply timeout measures).
     pub reply_after_ns: Vec<Option<u64>>,
@@ -162,12 +165,15 @@ impl Host {
 
 /// Runs `commands` through `bridge` one after the other (each waits for its
 /// reply or [`ModelConfig::reply_limit_ms`]) against `sim`, in virtual
-/// time. The bridge keeps its state across calls.
+/// time from `start_ns` (a run on a bridge and simulator used before
+/// starts where the last one ended: [`ModelReport::end_ns`]). The bridge
+/// keeps its state across calls.
 pub fn run(
     cfg: &ModelConfig,
     bridge: &mut Bridge,
     sim: &mut Simulator,
     commands: &[&[u8]],
+    start_ns: u64,
 ) -> ModelReport {
     let mut up_line: Box<UpstreamLine> = Box::default();
     let mut down_line: Box<DownstreamLine> = Box::default();
@@ -186,13 +192,13 @@ pub fn run(
         replies: FrameDecoder::with_policy(BypassPolicy::Reject),
     };
     let mut report = ModelReport::default();
-    let mut t: u64 = 0;
+    let mut t: u64 = start_ns;
     let ms = |t: u64| (t / 1_000_000) as u32;
     // When each line direction is free for its next byte.
-    let mut host_tx_free = 0u64;
-    let mut bridge_up_tx_free = 0u64;
-    let mut bridge_down_tx_free = 0u64;
-    let mut ctrl_tx_free = 0u64;
+    let mut host_tx_free = t;
+    let mut bridge_up_tx_free = t;
+    let mut bridge_down_tx_free = t;
+    let mut ctrl_tx_free = t;
     let mut ctrl_out: VecDeque<u8> = VecDeque::new();
     let mut deadline: Option<u64> = None;
     let mut run_bridge = true;
@@ -307,7 +313,7 @@ pub fn run(
                             _ => {
                                 if let Event::Frame(f) = host.replies.push(b) {
                                     reply = Some(f.as_bytes().to_vec());
-                                    report.elapsed_ns = t + up_byte;
+                                    report.elapsed_ns = t + up_byte - start_ns;
                                     reply_after =
                                         Some((t + up_byte).saturating_sub(last_host_byte));
                                 }
@@ -344,6 +350,7 @@ pub fn run(
         report.replies.push(reply);
         report.reply_after_ns.push(reply_after);
     }
+    report.end_ns = t;
     report.overruns = up.overruns();
     if flow == FlowControl::RtsCts {
         report.pauses = up.pauses();
