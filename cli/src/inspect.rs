@@ -8,6 +8,7 @@
 //! frames, errors and position streams), `listing` (the two output forms)
 //! and `text_log` (reading text logs).
 
+mod held;
 mod inspector;
 mod item;
 mod listing;

@@ -7,12 +7,22 @@
 //! 290H, 291H) are diverted to the [`PositionStreamDecoder`] instead, so a
 //! 1.6 MB 26DH is summarised without ever being held in memory whole; one
 //! that fits the frame decoder's buffer is listed field by field as well.
+//!
+//! After a failed 200H or 216H the frame decoder decodes that frame's
+//! bytes again from its first header byte (its text may hide whole
+//! frames): each byte is given with `decode` and everything it produces is
+//! taken until it answers `NeedMore`, and [`Held`] places each frame and
+//! error at its offset. Where the capture (or a text log's line) ends
+//! inside a frame, that frame is listed as cut short and its bytes are
+//! decoded again the same way, so the frames its text swallowed are
+//! listed too.
 
 use iai_protocol_b::checksum::{BypassPolicy, ChecksumField};
 use iai_protocol_b::decoder::{Event, FrameDecoder, DEFAULT_CAPACITY};
 use iai_protocol_b::frame::{Frame, Header};
 use iai_protocol_b::stream::{PositionStream, PositionStreamDecoder, StreamEvent};
 
+use super::held::Held;
 use super::item::{frame_item, Item, Origin, StreamItem, What};
 use crate::fields::record_tree;
 
@@ -34,8 +44,9 @@ pub struct Inspector {
     dec: Box<FrameDecoder<DEFAULT_CAPACITY>>,
     offset: u64,
     origin: Origin,
-    frame_start: (u64, Origin),
-    cur: Vec<u8>,
+    /// The bytes given to the frame decoder and not listed yet (it holds
+    /// the last `pending()` of them).
+    held: Held,
     noise: Option<(u64, Origin, Vec<u8>, u64)>,
     env: Vec<u8>,
     env_start: (u64, Origin),
@@ -66,8 +77,7 @@ impl Inspector {
             dec: Box::new(FrameDecoder::with_policy(BypassPolicy::Accept)),
             offset: 0,
             origin: Origin::default(),
-            frame_start: (0, Origin::default()),
-            cur: Vec::new(),
+            held: Held::default(),
             noise: None,
             env: Vec::new(),
             env_start: (0, Origin::default()),
@@ -90,7 +100,7 @@ impl Inspector {
     /// Feeds bytes.
     pub fn feed(&mut self, bytes: &[u8]) {
         for &b in bytes {
-            self.byte(b);
+            self.byte(b, self.offset);
             self.offset += 1;
         }
     }
@@ -110,52 +120,80 @@ impl Inspector {
     }
 
     fn close(&mut self, by: &str) {
-        if let Some(st) = self.stream.take() {
-            let records = st.item.as_ref().map_or(0, |i| i.records);
-            self.items.push(Item {
-                offset: st.start,
-                len: st.len,
-                origin: st.origin,
-                what: What::Error {
-                    kind: "Truncated".into(),
-                    message: format!(
-                        "position stream cut short by {by} after {} bytes ({records} records read)",
-                        st.len
-                    ),
-                    bytes: sample(&st.copy),
-                },
-            });
-        }
-        if let Some(item) = self.skip.take() {
-            self.items.push(item);
-        }
-        let env = std::mem::take(&mut self.env);
-        let at = self.env_start.0;
-        for (i, b) in env.into_iter().enumerate() {
-            self.feed_dec(b, at + i as u64);
-        }
-        let pending = self.dec.pending();
-        if pending > 0 {
-            self.items.push(Item {
-                offset: self.frame_start.0,
-                len: pending as u64,
-                origin: self.frame_start.1,
-                what: What::Error {
-                    kind: "Truncated".into(),
-                    message: format!("frame cut short by {by} after {pending} bytes"),
-                    bytes: sample(&self.cur),
-                },
-            });
-            self.dec.reset();
+        loop {
+            if let Some(st) = self.stream.take() {
+                let records = st.item.as_ref().map_or(0, |i| i.records);
+                self.push_item(Item {
+                    offset: st.start,
+                    len: st.len,
+                    origin: st.origin,
+                    what: What::Error {
+                        kind: "Truncated".into(),
+                        message: format!(
+                            "position stream cut short by {by} after {} bytes ({records} records read)",
+                            st.len
+                        ),
+                        bytes: sample(&st.copy),
+                    },
+                });
+            }
+            if let Some(item) = self.skip.take() {
+                self.push_item(item);
+            }
+            self.flush_env();
+            if !self.cut_held_frame(by) {
+                break;
+            }
         }
         self.flush_noise();
     }
 
-    fn byte(&mut self, b: u8) {
-        let off = self.offset;
+    /// The frame decoder holds the start of a frame that `by` cut short:
+    /// lists it as cut short, up to its first header byte after its start,
+    /// and decodes the bytes from there again, as the decoder does itself
+    /// with a 200H or 216H that fails (text can hide whole frames; a frame
+    /// without text holds no header byte after its start). `false` if the
+    /// decoder held nothing.
+    fn cut_held_frame(&mut self, by: &str) -> bool {
+        let pending = self.dec.pending() as u64;
+        if pending == 0 {
+            return false;
+        }
+        let start = self.held.end().saturating_sub(pending);
+        self.noise_to(start);
+        let again = self.held.first_header(start + 1);
+        let end = again.unwrap_or(self.held.end());
+        let mut message = format!("frame cut short by {by} after {pending} bytes");
+        if let Some(at) = again {
+            message.push_str(&format!(", decoded again from offset {at}"));
+        }
+        let item = Item {
+            offset: start,
+            len: end - start,
+            origin: self.held.origin_at(start),
+            what: What::Error {
+                kind: "Truncated".into(),
+                message,
+                bytes: self.held.sample(start, end, SAMPLE),
+            },
+        };
+        self.push_item(item);
+        self.dec.reset();
+        self.held.drop_to(end);
+        let origin = self.origin;
+        let mut rest = std::mem::take(&mut self.held);
+        while let Some((b, off, from)) = rest.pop() {
+            self.origin = from;
+            self.byte(b, off);
+        }
+        self.origin = origin;
+        true
+    }
+
+    fn byte(&mut self, b: u8, off: u64) {
         let is_header = Header::from_byte(b).is_some();
         if self.stream.is_some() {
-            self.stream_byte(b, is_header);
+            self.stream_byte(b, off, is_header);
             return;
         }
         if let Some(item) = self.skip.as_mut() {
@@ -163,13 +201,15 @@ impl Inspector {
                 // The rest of the broken frame, through its LF.
                 item.len += 1;
                 if b == b'\n' {
-                    let item = self.skip.take();
-                    self.items.extend(item);
+                    if let Some(item) = self.skip.take() {
+                        self.push_item(item);
+                    }
                 }
                 return;
             }
-            let item = self.skip.take();
-            self.items.extend(item);
+            if let Some(item) = self.skip.take() {
+                self.push_item(item);
+            }
         }
         if !self.env.is_empty() {
             if is_header {
@@ -239,7 +279,7 @@ impl Inspector {
         self.stream = Some(st);
     }
 
-    fn stream_byte(&mut self, b: u8, is_header: bool) {
+    fn stream_byte(&mut self, b: u8, off: u64, is_header: bool) {
         let Some(mut st) = self.stream.take() else {
             return;
         };
@@ -299,8 +339,8 @@ impl Inspector {
                 };
                 if used == 0 || consumed_header {
                     // The byte belongs to what follows.
-                    self.items.push(item);
-                    self.byte(b);
+                    self.push_item(item);
+                    self.byte(b, off);
                 } else {
                     self.skip = Some(item);
                 }
@@ -321,7 +361,7 @@ impl Inspector {
         // Small enough for the frame decoder: list it field by field.
         if st.copy.len() as u64 == st.len && st.copy.len() <= DEFAULT_CAPACITY {
             if let Ok(frame) = Frame::new_checked(&st.copy, BypassPolicy::Accept) {
-                self.items.push(Item {
+                self.push_item(Item {
                     offset: st.start,
                     len: st.len,
                     origin: st.origin,
@@ -332,7 +372,7 @@ impl Inspector {
         }
         let Some(mut item) = st.item else { return };
         item.checksum = checksum;
-        self.items.push(Item {
+        self.push_item(Item {
             offset: st.start,
             len: st.len,
             origin: st.origin,
@@ -340,7 +380,18 @@ impl Inspector {
         });
     }
 
-    fn noise_byte(&mut self, b: u8, off: u64) {
+    /// Lists `item`, after the noise before it.
+    fn push_item(&mut self, item: Item) {
+        self.flush_noise();
+        self.items.push(item);
+    }
+
+    fn noise_byte(&mut self, b: u8, off: u64, origin: Origin) {
+        if let Some((start, _, _, len)) = &self.noise {
+            if start + len != off {
+                self.flush_noise();
+            }
+        }
         match self.noise.as_mut() {
             Some((_, _, bytes, len)) => {
                 if bytes.len() < SAMPLE {
@@ -348,7 +399,14 @@ impl Inspector {
                 }
                 *len += 1;
             }
-            None => self.noise = Some((off, self.origin, vec![b], 1)),
+            None => self.noise = Some((off, origin, vec![b], 1)),
+        }
+    }
+
+    /// The held bytes before `off` are noise the frame decoder dropped.
+    fn noise_to(&mut self, off: u64) {
+        while let Some((b, at, origin)) = self.held.pop_before(off) {
+            self.noise_byte(b, at, origin);
         }
     }
 
@@ -367,72 +425,77 @@ impl Inspector {
         }
     }
 
+    /// Gives one byte to the frame decoder and lists everything it
+    /// produces until it needs more: after a failed 200H or 216H one byte
+    /// can bring several frames, decoded again from that frame's bytes.
     fn feed_dec(&mut self, b: u8, off: u64) {
-        let before = self.dec.pending();
-        let origin = self.origin;
-        let (item, started) = match self.dec.push(b) {
-            Event::NeedMore => {
-                if before == 0 && self.dec.pending() == 0 {
-                    self.noise_byte(b, off);
+        self.held.push(b, off, self.origin);
+        let byte = [b];
+        let mut input: &[u8] = &byte;
+        loop {
+            let d = self.dec.decode(input);
+            input = input.get(d.consumed..).unwrap_or(&[]);
+            let event = match d.event {
+                Event::NeedMore => None,
+                Event::Frame(f) => Some(Ok((f.len() as u64, frame_item(&f)))),
+                Event::Error(e) => Some(Err(e)),
+            };
+            // What the decoder still holds starts here; what it reported
+            // ends here.
+            let unused = input.len() as u64 + self.dec.pending() as u64;
+            let holds = self.held.end().saturating_sub(unused);
+            match event {
+                None => {
+                    self.noise_to(holds);
                     return;
                 }
-                (None, before == 0)
-            }
-            Event::Frame(f) => {
-                let item = Item {
-                    offset: self.frame_start.0,
-                    len: f.len() as u64,
-                    origin: self.frame_start.1,
-                    what: What::Frame(frame_item(&f)),
-                };
-                (Some(item), false)
-            }
-            Event::Error(e) => {
-                let start = if before > 0 { self.frame_start.0 } else { off };
-                let new_frame = self.dec.pending() == 1;
-                let end = if new_frame { off } else { off + 1 };
-                let mut bytes = self.cur.clone();
-                if !new_frame {
-                    bytes.push(b);
+                Some(Ok((len, frame))) => {
+                    let start = holds.saturating_sub(len);
+                    self.noise_to(start);
+                    let item = Item {
+                        offset: start,
+                        len,
+                        origin: self.held.origin_at(start),
+                        what: What::Frame(frame),
+                    };
+                    self.push_item(item);
+                    self.held.drop_to(holds);
                 }
-                let item = Item {
-                    offset: start,
-                    len: end - start,
-                    origin: self.frame_start.1,
-                    what: What::Error {
-                        kind: error_kind(&e),
-                        message: e.to_string(),
-                        bytes: sample(&bytes),
-                    },
-                };
-                if matches!(e, iai_protocol_b::Error::FrameTooLong { .. }) && b != b'\n' {
-                    // The frame goes on past the decoder's buffer: the
-                    // bytes up to its LF (or the next header) belong to
-                    // this one error, not to noise.
-                    self.flush_noise();
-                    self.skip = Some(item);
-                    self.cur.clear();
-                    return;
+                Some(Err(e)) => {
+                    let start = self.held.first_header(0).filter(|&h| h < holds);
+                    let start = start.unwrap_or(holds);
+                    self.noise_to(start);
+                    let item = Item {
+                        offset: start,
+                        len: holds - start,
+                        origin: self.held.origin_at(start),
+                        what: What::Error {
+                            kind: error_kind(&e),
+                            message: e.to_string(),
+                            bytes: self.held.sample(start, holds, SAMPLE),
+                        },
+                    };
+                    self.held.drop_to(holds);
+                    let idle = input.is_empty() && self.dec.pending() == 0;
+                    if idle && matches!(e, iai_protocol_b::Error::FrameTooLong { .. }) && b != b'\n'
+                    {
+                        // The frame goes on past the decoder's buffer: the
+                        // bytes up to its LF (or the next header) belong to
+                        // this one error, not to noise.
+                        self.flush_noise();
+                        self.skip = Some(item);
+                        return;
+                    }
+                    self.push_item(item);
+                    if input.is_empty() && b == b'!' && holds == off && self.dec.pending() == 1 {
+                        // Cut off by a new command: it may be a position stream.
+                        self.dec.reset();
+                        self.held.drop_to(off + 1);
+                        self.start_or_feed(b, off);
+                        return;
+                    }
                 }
-                (Some(item), new_frame)
             }
-        };
-        if item.is_some() || started {
-            self.flush_noise();
-        }
-        self.items.extend(item);
-        if started {
-            self.frame_start = (off, origin);
-            self.cur.clear();
-            if b == b'!' && before > 0 {
-                // Cut off by a new command: it may be a position stream.
-                self.dec.reset();
-                self.start_or_feed(b, off);
-                return;
-            }
-        }
-        if self.dec.pending() > 0 && self.cur.len() < SAMPLE {
-            self.cur.push(b);
         }
     }
 }
