@@ -1,6 +1,6 @@
 //! Codecs of single fields: numbers in fixed-width digits ([`FieldSpec`]),
 //! raw text of a fixed length, a number that must stay 0 unless another
-//! field allows it ([`ZeroUnless`]), reserved literals ([`Fixed`]) and
+//! field allows it ([`ZeroUnless`], 216H), reserved literals ([`Fixed`]) and
 //! nested structs ([`Nested`]). Each codec shows its values to a
 //! [`Visitor`] too.
 

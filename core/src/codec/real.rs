@@ -1,5 +1,7 @@
 //! Real variables (20FH, 24DH): a double's bit pattern as 16 hex digits,
-//! in one of two word orders the frames do not reveal.
+//! in one of two word orders the frames do not reveal (a controller
+//! setting). The manuals show only the plain order for 24DH; that writes
+//! follow the same setting as reads is **inferred**.
 
 use super::Scalar;
 

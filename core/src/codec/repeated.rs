@@ -1,6 +1,6 @@
 //! Counted repeat groups: a count field, then that many items
 //! ([`Counted`], [`CountedText`]) or the items that carry that many units
-//! ([`CountedPer`], 8 ports or flags per byte).
+//! ([`CountedPer`], 8 ports or flags per byte, 2003 p. 19).
 //!
 //! A parsed group is lazy: parsing validates every item once and keeps a
 //! slice of the frame ([`Repeated`]); iterating decodes items on demand.
