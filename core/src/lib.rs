@@ -18,7 +18,7 @@
 //! - [`message`], [`position`]: typed messages declared field by field,
 //!   and the position-table records they share;
 //! - [`stream`]: position tables of any size, record by record;
-//! - [`line`]: one line to a controller, what is on it and what may still
+//! - [`line`](mod@line): one line to a controller, what is on it and what may still
 //!   arrive; [`engine`]: the shape of the engines and their driver loops;
 //! - [`client`], [`transfer`], [`readback`]: any command and its reply; a
 //!   table written in confirmed, verified commands; a table read back;

@@ -6,7 +6,7 @@
 //! fits the controller's transmit buffer (24 records of 8 axes in a
 //! 2,048-byte 21FH reply), so a short reply means "fewer defined records",
 //! never "cut off"; they halve after a timeout and grow back after answers
-//! ([`crate::window`]). A reply counts only if the line takes it
+//! (one planner with the transfer's read-back). A reply counts only if the line takes it
 //! ([`crate::line`]): its SC, station and ID check out, it holds no more
 //! records than asked, every record lies in the window, and nothing that
 //! may still arrive could have passed for it.

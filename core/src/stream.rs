@@ -188,7 +188,7 @@ where
         }
     }
 
-    /// [`Self::records`] for one shape (see `position::put_as`).
+    /// [`Self::records`] for one shape (see `position::whole_field::put_as`).
     #[inline(always)]
     fn records_as<const NW: usize, const HEAD: usize, const EXT: bool>(
         &mut self,

@@ -28,7 +28,7 @@
 //! - **Fences**: owed replies are settled by order, not time. Before the
 //!   next command the line sends a 200H whose text is its own; once the
 //!   echo is back, a controller that answers in order has nothing left
-//!   to say about earlier commands ([`fence`]). A line just opened knows
+//!   to say about earlier commands. A line just opened knows
 //!   nothing of its past, so its first command is fenced too. Copies are
 //!   not settled by a fence: an echoing converter may repeat a reply after
 //!   later ones, so they keep their time. What breaks the order

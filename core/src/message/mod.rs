@@ -1,7 +1,6 @@
 //! Typed messages: each is a short declaration of its fields.
 //!
-//! The generic machinery (field codecs, repeat groups) lives in [`crate::codec`];
-//! a message is a struct declared with the crate's `wire!` macro, which lists
+//! The field codecs and repeat groups are re-exported here; a message is a struct declared with the crate's `wire!` macro, which lists
 //! its fields in wire order, each with its Rust type and its codec. The
 //! macro derives [`Wire`] (read, write and length of the body). A field may
 //! end in `=> "unit"`; the macro also derives [`Fields`], which walks the

@@ -19,7 +19,7 @@
 //!   to (2003 p. 66 asks for "appropriate action", not a blind resend).
 //!   Nothing is lost, skipped or reordered.
 //!
-//! Verification ([`verify`]): a confirmed frame means the controller
+//! Verification: a confirmed frame means the controller
 //! *said* it wrote that many records. The 8-bit SC lets some corruptions
 //! through, and a count cannot say which records. With [`Verify::Full`]
 //! every frame is read back (21FH for 26DH, 22DH for 290H/291H, 209H for

@@ -1,5 +1,5 @@
 //! The read-back of a confirmed frame: windows of its positions queried
-//! (21FH, 22DH or 209H, planned by [`crate::window`]), each reply compared
+//! (21FH, 22DH or 209H, planned as the read-back engine's are), each reply compared
 //! record by record with the frame as it streams in, and the verdict.
 //!
 //! A comparison counts only when the reply's SC, station and ID check out

@@ -8,20 +8,20 @@
 //! on a board ([`run`]) and in the host model of `host-tests`, in virtual
 //! time. Its jobs, one file each:
 //!
-//! - [`upstream`]: frames from the host, by their envelope: commands to the
+//! - `upstream`: frames from the host, by their envelope: commands to the
 //!   bridge's own station are answered by the bridge ([`crate::status`]),
 //!   other stations' commands are skipped, refused ones ([`crate::config`])
 //!   are read to their end and answered `&` [`crate::codes::REFUSED`];
-//! - [`passthrough`]: any other command is checked, forwarded, and the
+//! - `passthrough`: any other command is checked, forwarded, and the
 //!   controller's checked reply relayed; without one within 3 s the bridge
 //!   answers nothing and the host resends (2003 p. 62);
-//! - [`stream`]: a 26DH of any size is decoded record by record and written
+//! - `stream`: a 26DH of any size is decoded record by record and written
 //!   in controller-sized chunks, each confirmed and read back equal before
 //!   more is taken from the host; one `#` with the count at the end;
 //! - [`pipeline`]: chunk and queue sizes for the downstream rate, so that
 //!   the final reply fits the host's timeout.
 //!
-//! The downstream line is one [`Line`] for both paths: what the 26DH path
+//! The downstream line is one [`Line`](iai_protocol_b::Line) for both paths: what the 26DH path
 //! left in flight (a read-back's late reply) the pass-through knows, and the
 //! reverse; a line just booted fences its first command. The bridge is
 //! wired to the controller, so its line expects no copied replies.
