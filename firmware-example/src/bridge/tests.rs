@@ -237,3 +237,181 @@ fn no_reply_within_3_s_gives_no_answer_and_the_deadline_says_when() {
     assert!(up.output.is_empty());
     assert_eq!(b.stats().reply_timeouts, 1);
 }
+
+// ---------------------------------------------------------------------
+// What may still arrive belongs to the line, not to one 26DH.
+// ---------------------------------------------------------------------
+
+use iai_protocol_b::message::{
+    ChangePositionData2, ChangePositionData2Response, EffectivePositionQuery2,
+    EffectivePositionResponse2, Message, Repeated,
+};
+use iai_protocol_b::position::PositionRecord;
+
+/// Position 1, coordinate 1 at `x`.
+fn rec(x: i32) -> PositionRecord {
+    PositionRecord::new(1, 30, 30, 100, &[(1, x)]).unwrap()
+}
+
+fn emitted<'a>(m: &impl Message<'a>) -> Vec<u8> {
+    let mut buf = [0u8; 256];
+    let n = m.emit(Station(0x99), &mut buf).unwrap();
+    buf[..n].to_vec()
+}
+
+/// The host's 26DH of position 1 at `x`.
+fn host_26dh(x: i32) -> Vec<u8> {
+    emitted(&ChangePositionData2 {
+        records: Repeated::from_slice(&[rec(x)]),
+    })
+}
+
+fn chunk_reply() -> Vec<u8> {
+    emitted(&ChangePositionData2Response {
+        number_of_changed_positions: 1,
+    })
+}
+
+/// A 21FH reply showing position 1 at `x`.
+fn read_back(x: i32) -> Vec<u8> {
+    emitted(&EffectivePositionResponse2 {
+        records: Repeated::from_slice(&[rec(x)]),
+    })
+}
+
+/// The commands the bridge wrote downstream since the last call, by ID.
+fn commands(down: &mut Fake) -> Vec<u16> {
+    let mut dec: iai_protocol_b::FrameDecoder<4096> = Default::default();
+    let mut ids = Vec::new();
+    for &b in &down.output {
+        if let iai_protocol_b::decoder::Event::Frame(f) = dec.push(b) {
+            ids.push(f.code());
+        }
+    }
+    down.output.clear();
+    ids
+}
+
+/// Issue "one memory of the line", case 2: a 26DH's read-back reply comes
+/// late, the bridge answers after the host gave up, the host sends the
+/// 26DH again. The reply still owed to the first message's read-back
+/// arrives while the second message starts: it must not verify the
+/// second message's chunk, which the controller stored with two digits
+/// swapped. The second message's first command is fenced, the owed reply
+/// comes before the echo, and the swap is found and rewritten.
+#[test]
+fn a_reply_owed_to_the_first_26dh_never_verifies_the_resent_one() {
+    let mut b = bridge(Policy::ForwardAll);
+    let (mut up, mut down) = (Fake::default(), Fake::controller());
+    // Message 1: fence (echoed by the fake), chunk, read-back.
+    up.input = host_26dh(111_111);
+    settle(&mut b, &mut up, &mut down, 0);
+    settle(&mut b, &mut up, &mut down, 2);
+    assert_eq!(commands(&mut down), [0x26D]);
+    down.input = chunk_reply();
+    settle(&mut b, &mut up, &mut down, 10);
+    settle(&mut b, &mut up, &mut down, 12);
+    assert_eq!(commands(&mut down), [0x21F]);
+    // No read-back reply within 3 s: the query is sent again; then the
+    // late reply to the first query comes and verifies message 1.
+    settle(&mut b, &mut up, &mut down, 3_012);
+    assert_eq!(commands(&mut down), [0x21F]);
+    down.input = read_back(111_111);
+    settle(&mut b, &mut up, &mut down, 3_050);
+    assert_eq!(up.output, reply_26dh_of(1));
+    up.output.clear();
+    // The host had given up after its 3 s and sends message 1 again; the
+    // reply owed to the second read-back query comes meanwhile.
+    up.input = host_26dh(111_111);
+    down.echo_fences = false;
+    settle(&mut b, &mut up, &mut down, 3_100);
+    let fence = down.output.clone();
+    assert!(fence.starts_with(b"!99200"), "the resent message is fenced");
+    down.output.clear();
+    // In order: the owed reply (the first message's content), the echo.
+    let f = Frame::new_checked(&fence, BypassPolicy::Reject).unwrap();
+    down.input = read_back(111_111);
+    down.input.extend(frame(Header::Response, 0x99, 0x200, f.body()));
+    down.echo_fences = true;
+    settle(&mut b, &mut up, &mut down, 3_110);
+    settle(&mut b, &mut up, &mut down, 3_112);
+    assert_eq!(commands(&mut down), [0x26D]);
+    // The controller stores position 1 swapped (1,094,151): the chunk's
+    // read-back shows it, and the chunk is rewritten before any `#`.
+    down.input = chunk_reply();
+    settle(&mut b, &mut up, &mut down, 3_120);
+    settle(&mut b, &mut up, &mut down, 3_122);
+    assert_eq!(commands(&mut down), [0x21F]);
+    down.input = read_back(1_094_151);
+    settle(&mut b, &mut up, &mut down, 3_130);
+    settle(&mut b, &mut up, &mut down, 3_132);
+    assert!(up.output.is_empty(), "no answer before the rewrite is read back");
+    assert_eq!(commands(&mut down), [0x26D]);
+    down.input = chunk_reply();
+    settle(&mut b, &mut up, &mut down, 3_140);
+    settle(&mut b, &mut up, &mut down, 3_142);
+    assert_eq!(commands(&mut down), [0x21F]);
+    down.input = read_back(111_111);
+    settle(&mut b, &mut up, &mut down, 3_150);
+    settle(&mut b, &mut up, &mut down, 3_152);
+    assert_eq!(up.output, reply_26dh_of(1));
+}
+
+/// Issue "one memory of the line", case 4: the 26DH path gives up on a
+/// read-back (its three queries unanswered: `&` B02 to the host), and the
+/// reply to one of them comes late, while the host's next command, a
+/// 21FH of its own, waits to go down. The pass-through is fenced: the late
+/// reply comes before the echo and is not relayed; the host gets the reply
+/// to its own query.
+#[test]
+fn the_pass_through_never_relays_a_reply_to_the_bridges_own_query() {
+    let mut b = bridge(Policy::ForwardAll);
+    let (mut up, mut down) = (Fake::default(), Fake::controller());
+    up.input = host_26dh(111_111);
+    settle(&mut b, &mut up, &mut down, 0);
+    settle(&mut b, &mut up, &mut down, 2);
+    down.input = chunk_reply();
+    settle(&mut b, &mut up, &mut down, 10);
+    settle(&mut b, &mut up, &mut down, 12);
+    for t in [3_012, 6_012, 9_012] {
+        settle(&mut b, &mut up, &mut down, t);
+    }
+    assert_eq!(commands(&mut down), [0x26D, 0x21F, 0x21F, 0x21F]);
+    assert_eq!(
+        up.output,
+        frame(Header::Error, 0x99, codes::CONTROLLER_TIMEOUT, b"")
+    );
+    up.output.clear();
+    // The host asks 21FH for positions 1..2 itself.
+    let mine = emitted(&EffectivePositionQuery2 {
+        query_head_position_number: 1,
+        number_of_query_records: 2,
+    });
+    up.input = mine.clone();
+    down.echo_fences = false;
+    settle(&mut b, &mut up, &mut down, 9_020);
+    // Fenced: the bridge's queries are owed. The controller answers in
+    // order: the late reply to the bridge's last query first (3,008 ms
+    // after it), then the fence's echo.
+    let fence = down.output.clone();
+    assert!(fence.starts_with(b"!99200"), "a fence, not the host's 21FH");
+    down.output.clear();
+    let f = Frame::new_checked(&fence, BypassPolicy::Reject).unwrap();
+    down.input = read_back(999);
+    down.input.extend(frame(Header::Response, 0x99, 0x200, f.body()));
+    settle(&mut b, &mut up, &mut down, 12_020);
+    settle(&mut b, &mut up, &mut down, 12_022);
+    assert_eq!(commands(&mut down), [0x21F]);
+    assert!(up.output.is_empty(), "the late reply was not relayed");
+    down.input = read_back(111_111);
+    settle(&mut b, &mut up, &mut down, 12_030);
+    settle(&mut b, &mut up, &mut down, 12_031);
+    assert_eq!(up.output, read_back(111_111), "the reply to the host's query");
+}
+
+/// `#99` 26DH with the count: the bridge's answer to a whole 26DH.
+fn reply_26dh_of(count: u16) -> Vec<u8> {
+    emitted(&ChangePositionData2Response {
+        number_of_changed_positions: count,
+    })
+}
