@@ -295,7 +295,9 @@ fn a_resume_on_a_swapped_controller_reads_back_or_says_unverified() {
     drop(sim.stop());
     let fresh = Sim::start(&["--tcp", &at, "--quiet"]);
     assert_eq!(fresh.at, at);
-    let out = iai(&["table", "write", &p, "--tcp", &at, "--resume", "--verify", "off"]);
+    let out = iai(&[
+        "table", "write", &p, "--tcp", &at, "--resume", "--verify", "off",
+    ]);
     assert_eq!(out.status.code(), Some(3), "{}\n{}", stderr(&out), state);
     assert!(
         stdout(&out).contains("NOT read back on this controller"),
@@ -316,7 +318,9 @@ fn a_resume_on_a_swapped_controller_reads_back_or_says_unverified() {
         "{}",
         stdout(&out)
     );
-    let out = iai(&["table", "read", "--first", "1", "--count", "1000", "--tcp", &at]);
+    let out = iai(&[
+        "table", "read", "--first", "1", "--count", "1000", "--tcp", &at,
+    ]);
     assert_eq!(stdout(&out), csv);
     fresh.stop();
 }
@@ -336,7 +340,9 @@ fn a_new_process_after_a_killed_one_fences_first_and_completes() {
     let out = iai(&["table", "write", &p, "--tcp", &at, "--resume"]);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(stdout(&out).contains("verified"), "{}", stdout(&out));
-    let out = iai(&["table", "read", "--first", "1", "--count", "1000", "--tcp", &at]);
+    let out = iai(&[
+        "table", "read", "--first", "1", "--count", "1000", "--tcp", &at,
+    ]);
     assert_eq!(stdout(&out), csv);
     let log = sim.stop();
     // The new connection's first command is a 200H (the fence).

@@ -344,3 +344,70 @@ fn read_back_under_every_fault_class() {
         println!("{r}");
     }
 }
+
+/// Issue "one memory of the line": a table that writes the same positions
+/// twice (positions 1..=2,000, then all of them again with other values),
+/// on a line that repeats read-back replies (declared: its duplicate
+/// window covers the copies' delay), with late replies and SC-preserving
+/// swaps in the controller's memory. A copy or a late reply from the first
+/// pass must never verify the second: the run ends verified with the
+/// second pass's values everywhere, or in a typed failure.
+#[test]
+fn the_same_positions_written_twice_under_copies_late_replies_and_swaps() {
+    let first: Vec<_> = table(2_000, 8, 41).collect();
+    let second: Vec<_> = table(2_000, 8, 43).collect();
+    let expected: BTreeMap<u16, PositionRecord> =
+        second.iter().map(|r| (r.number, r.clone())).collect();
+    let mut rows = Vec::new();
+    for (i, (dup, late)) in [(0.10, 0.0), (0.0, 0.05), (0.10, 0.05)].iter().enumerate() {
+        let faults = Faults {
+            dup_reply: (*dup > 0.0).then_some((*dup, 3_000)),
+            late_reply: (*late > 0.0).then_some((*late, 3_500)),
+            swap_record: 0.05,
+            ..Faults::default()
+        };
+        let mut sim = Simulator::tta(ST).with_faults(faults, 4_000 + i as u64);
+        let mut line = Line::new(LineConfig::new(ST).with_duplicate_window(3_000), 9);
+        let records = first.iter().chain(second.iter()).cloned();
+        let mut t: Transfer<_> = Transfer::new(TransferConfig::new(Profile::TTA), records);
+        let run = run_transfer(&mut t, &mut line, &mut sim, RESUMES, BAUD, 0);
+        match &run.result {
+            Ok(g) => {
+                assert_eq!(*g, Guarantee::Verified);
+                assert_eq!(
+                    differences(&sim.table, &expected),
+                    0,
+                    "a verified success with a wrong table (dup {dup}, late {late})"
+                );
+            }
+            Err(e) => assert!(
+                matches!(e, Failure::Timeout { .. } | Failure::Mismatch { .. }),
+                "{e:?}"
+            ),
+        }
+        let s = t.stats();
+        let l = line.stats();
+        rows.push(format!(
+            "| {:.0} % copies, {:.0} % late | {} | {} | {} | {} | {} | {:.1} |",
+            dup * 100.0,
+            late * 100.0,
+            match &run.result {
+                Ok(g) => format!("{g:?}"),
+                Err(e) => format!("failed: {e:?}"),
+            },
+            s.rewrites,
+            l.fences,
+            l.stale,
+            sim.stats().swapped_records,
+            f64::from(run.virtual_ms) / 1000.0
+        ));
+    }
+    println!(
+        "\n2 x 2,000 x 8 over the same positions at {BAUD} baud, 5 % swaps\n\
+         | faults | outcome | rewrites | fences | stale replies | swaps | wire time (s) |\n\
+         |---|---|---|---|---|---|---|"
+    );
+    for r in &rows {
+        println!("{r}");
+    }
+}

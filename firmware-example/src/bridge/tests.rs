@@ -331,7 +331,8 @@ fn a_reply_owed_to_the_first_26dh_never_verifies_the_resent_one() {
     // In order: the owed reply (the first message's content), the echo.
     let f = Frame::new_checked(&fence, BypassPolicy::Reject).unwrap();
     down.input = read_back(111_111);
-    down.input.extend(frame(Header::Response, 0x99, 0x200, f.body()));
+    down.input
+        .extend(frame(Header::Response, 0x99, 0x200, f.body()));
     down.echo_fences = true;
     settle(&mut b, &mut up, &mut down, 3_110);
     settle(&mut b, &mut up, &mut down, 3_112);
@@ -345,7 +346,10 @@ fn a_reply_owed_to_the_first_26dh_never_verifies_the_resent_one() {
     down.input = read_back(1_094_151);
     settle(&mut b, &mut up, &mut down, 3_130);
     settle(&mut b, &mut up, &mut down, 3_132);
-    assert!(up.output.is_empty(), "no answer before the rewrite is read back");
+    assert!(
+        up.output.is_empty(),
+        "no answer before the rewrite is read back"
+    );
     assert_eq!(commands(&mut down), [0x26D]);
     down.input = chunk_reply();
     settle(&mut b, &mut up, &mut down, 3_140);
@@ -398,7 +402,8 @@ fn the_pass_through_never_relays_a_reply_to_the_bridges_own_query() {
     down.output.clear();
     let f = Frame::new_checked(&fence, BypassPolicy::Reject).unwrap();
     down.input = read_back(999);
-    down.input.extend(frame(Header::Response, 0x99, 0x200, f.body()));
+    down.input
+        .extend(frame(Header::Response, 0x99, 0x200, f.body()));
     settle(&mut b, &mut up, &mut down, 12_020);
     settle(&mut b, &mut up, &mut down, 12_022);
     assert_eq!(commands(&mut down), [0x21F]);
@@ -406,7 +411,11 @@ fn the_pass_through_never_relays_a_reply_to_the_bridges_own_query() {
     down.input = read_back(111_111);
     settle(&mut b, &mut up, &mut down, 12_030);
     settle(&mut b, &mut up, &mut down, 12_031);
-    assert_eq!(up.output, read_back(111_111), "the reply to the host's query");
+    assert_eq!(
+        up.output,
+        read_back(111_111),
+        "the reply to the host's query"
+    );
 }
 
 /// `#99` 26DH with the count: the bridge's answer to a whole 26DH.

@@ -47,6 +47,12 @@ pub struct ModelConfig {
     /// Give up on a command after this much virtual time without its
     /// reply, ms.
     pub reply_limit_ms: u64,
+    /// A host that gives up on a command this long after its last byte
+    /// (protocol B's 3 s, 2003 p. 62) and goes on with the next, whatever
+    /// the bridge is still doing; after the last command the run goes on
+    /// until the bridge is idle and the lines are quiet. `None`: the host
+    /// waits as long as something moves.
+    pub host_timeout_ms: Option<u64>,
 }
 
 impl ModelConfig {
@@ -62,6 +68,7 @@ impl ModelConfig {
             },
             host_latency: HOST_LATENCY,
             reply_limit_ms: 30_000,
+            host_timeout_ms: None,
         }
     }
 }
@@ -69,8 +76,12 @@ impl ModelConfig {
 /// What a model run measured.
 #[derive(Debug, Clone, Default)]
 pub struct ModelReport {
-    /// The reply to each command (`None`: none within the limit), in order.
+    /// The reply to each command (`None`: none within the limit), in order:
+    /// the first frame the host got while that command was its current one.
     pub replies: Vec<Option<Vec<u8>>>,
+    /// Every frame the host got, in order (with a host that gives up, a
+    /// late answer to one command comes while the next is current).
+    pub answers: Vec<Vec<u8>>,
     /// Upstream bytes that found the receive ring full (overruns).
     pub overruns: u32,
     /// Times the bridge stopped the host (XOFF sent, or RTS dropped).
@@ -203,8 +214,11 @@ pub fn run(
     let mut deadline: Option<u64> = None;
     let mut run_bridge = true;
 
-    for cmd in commands {
-        host.out.extend(cmd.iter().copied());
+    let drain = cfg.host_timeout_ms.is_some();
+    for cmd in commands.iter().map(Some).chain(drain.then_some(None)) {
+        let draining = cmd.is_none();
+        host.out
+            .extend(cmd.into_iter().flat_map(|c| c.iter().copied()));
         let mut reply = None;
         let mut last_host_byte = t;
         let mut reply_after = None;
@@ -247,7 +261,15 @@ pub fn run(
                     host.sample_cts(up_isr.rts(), cfg.host_latency);
                 }
             }
-            if reply.is_some() && host.out.is_empty() {
+            if reply.is_some() && host.out.is_empty() && !draining {
+                break;
+            }
+            let quiet = bridge.is_idle()
+                && ctrl_out.is_empty()
+                && sim.next_output_at().is_none()
+                && !down_isr.wants_tx()
+                && !up_isr.wants_tx();
+            if draining && quiet {
                 break;
             }
 
@@ -285,6 +307,16 @@ pub fn run(
             if ms(next).saturating_sub(ms(last_progress)) as u64 > cfg.reply_limit_ms {
                 break;
             }
+            let gave_up = !draining
+                && cfg.host_timeout_ms.is_some_and(|limit| {
+                    reply.is_none()
+                        && host.out.is_empty()
+                        && next.saturating_sub(last_host_byte) > limit * 1_000_000
+                });
+            if gave_up {
+                t = last_host_byte + cfg.host_timeout_ms.unwrap_or(0) * 1_000_000;
+                break;
+            }
             t = next;
             match what {
                 1 => {
@@ -312,6 +344,7 @@ pub fn run(
                             XON if flow == FlowControl::XonXoff => host.go_on(),
                             _ => {
                                 if let Event::Frame(f) = host.replies.push(b) {
+                                    report.answers.push(f.as_bytes().to_vec());
                                     reply = Some(f.as_bytes().to_vec());
                                     report.elapsed_ns = t + up_byte - start_ns;
                                     reply_after =
@@ -347,8 +380,10 @@ pub fn run(
             }
             run_bridge = true;
         }
-        report.replies.push(reply);
-        report.reply_after_ns.push(reply_after);
+        if !draining {
+            report.replies.push(reply);
+            report.reply_after_ns.push(reply_after);
+        }
     }
     report.end_ns = t;
     report.overruns = up.overruns();
