@@ -13,7 +13,8 @@ use iai_cli::csvtable;
 use iai_cli::encode::{encode, field_help, find_message, EncodeOptions};
 use iai_cli::inspect::{self, Format, InspectError};
 use iai_cli::link::{Link, Target};
-use iai_cli::send::{request, Outcome};
+use iai_cli::resume::ResumeState;
+use iai_cli::send::{describe, request, Outcome};
 use iai_cli::sim::Controller;
 use iai_cli::simulate::{self, ServeOptions, Shared};
 use iai_cli::table::{self, Plan, TableError};
@@ -23,7 +24,6 @@ use iai_protocol_b::frame::{Header, Station};
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::profile::Profile;
 use iai_protocol_b::transfer::{Guarantee, Verify as CoreVerify};
-use iai_protocol_b::Failure as EngineFailure;
 
 /// IAI protocol B tools: captures, messages, position tables, a simulator.
 #[derive(Parser)]
@@ -523,81 +523,7 @@ fn send_cmd(msg: &MessageArgs, line: &LineArgs, output: OutputArg, detail: bool)
         }
         Outcome::Failed(e) => e,
     };
-    Err(match e {
-        EngineFailure::Controller {
-            code,
-            detail: fetched,
-        } => {
-            let mut m = iai_cli::codes::answered_with(code);
-            if let Some(d) = fetched {
-                m.push_str(&format!(
-                    "; 216H latest system error {:03X}{}: details {} {} {} {} {:?}",
-                    d.error_number,
-                    if d.matches_code {
-                        ""
-                    } else {
-                        " (not the same number: it may be another error)"
-                    },
-                    d.detail_1,
-                    d.detail_2,
-                    d.detail_3,
-                    d.detail_4,
-                    d.detail_5_to_8
-                ));
-            } else if detail {
-                m.push_str("; the 216H detail did not come");
-            }
-            m
-        }
-        EngineFailure::Timeout { sends } => {
-            format!("no valid reply from {target} after {sends} send(s), 3 s each")
-        }
-        EngineFailure::OutcomeUnknown { sends } => format!(
-            "no valid reply from {target} after {sends} send(s); not sent again, since a second send could repeat the operation: check the controller's state (212H)"
-        ),
-        EngineFailure::Protocol(e) => format!("the reply does not decode: {e}"),
-        e => format!("{e}"),
-    }
-    .into())
-}
-
-/// The resume state kept beside the CSV.
-#[derive(serde::Serialize, serde::Deserialize, PartialEq, Eq, Debug)]
-struct ResumeState {
-    /// FNV-1a hash of the CSV file.
-    csv_hash: String,
-    /// Records in the file.
-    records: u32,
-    /// Records confirmed by the controller, in file order.
-    confirmed: u32,
-    /// The line they were written over: port or address, station,
-    /// profile.
-    #[serde(default)]
-    line: String,
-}
-
-fn fnv(bytes: &[u8]) -> String {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for &b in bytes {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(0x100_0000_01b3);
-    }
-    format!("{h:016x}")
-}
-
-fn state_path(csv: &Path) -> PathBuf {
-    let mut s = csv.as_os_str().to_owned();
-    s.push(".iai-state");
-    PathBuf::from(s)
-}
-
-fn save_state(path: &Path, st: &ResumeState) {
-    if let Ok(text) = serde_json::to_string(st) {
-        let tmp = path.with_extension("iai-state.tmp");
-        if std::fs::write(&tmp, text).is_ok() {
-            let _ = std::fs::rename(&tmp, path);
-        }
-    }
+    Err(describe(&e, &target, detail).into())
 }
 
 fn progress_bar(total: u64, what: &str) -> indicatif::ProgressBar {
@@ -634,34 +560,14 @@ fn table_write(file: &Path, line: &LineArgs, verify: Verify, resume: bool) -> Ru
         m
     })?;
     let total = u32::try_from(records.len()).map_err(|_| "too many records".to_string())?;
-    let state_file = state_path(file);
-    let hash = fnv(&bytes);
     let identity = line.identity();
-    let mut skip = 0u32;
+    let state = if resume {
+        ResumeState::resume(file, &bytes, total, &identity)?
+    } else {
+        ResumeState::new(&bytes, total, &identity)
+    };
+    let skip = state.confirmed;
     if resume {
-        let text = std::fs::read_to_string(&state_file).map_err(|e| {
-            format!(
-                "--resume: no state file {} ({e}); run without --resume",
-                state_file.display()
-            )
-        })?;
-        let st: ResumeState = serde_json::from_str(&text)
-            .map_err(|e| format!("--resume: {} is damaged ({e})", state_file.display()))?;
-        if st.csv_hash != hash || st.records != total {
-            return Err(format!(
-                "--resume: {} changed since the interrupted write; run without --resume",
-                file.display()
-            )
-            .into());
-        }
-        if st.line != identity {
-            return Err(format!(
-                "--resume: the interrupted write went to {}, not to {identity}; its records are not on this line's controller: run without --resume",
-                if st.line.is_empty() { "an unrecorded line" } else { &st.line }
-            )
-            .into());
-        }
-        skip = st.confirmed.min(total);
         eprintln!("resuming after record {skip} of {total}");
     }
     let target = line.target();
@@ -701,15 +607,11 @@ fn table_write(file: &Path, line: &LineArgs, verify: Verify, resume: bool) -> Ru
     let t0 = std::time::Instant::now();
     let mut last_save = std::time::Instant::now();
     let save = |n: u32| {
-        save_state(
-            &state_file,
-            &ResumeState {
-                csv_hash: hash.clone(),
-                records: total,
-                confirmed: skip + n.saturating_sub(redo_len),
-                line: identity.clone(),
-            },
-        )
+        ResumeState {
+            confirmed: skip + n.saturating_sub(redo_len),
+            ..state.clone()
+        }
+        .save(file)
     };
     let (result, s) = table::write(
         &mut link,
@@ -740,13 +642,13 @@ fn table_write(file: &Path, line: &LineArgs, verify: Verify, resume: bool) -> Ru
             return Err(format!(
                 "{target}: {e}; {confirmed} of {total} records confirmed{}; run again with --resume to continue (state in {})",
                 if verify == Verify::Off { "" } else { " and verified" },
-                state_file.display()
+                iai_cli::resume::path(file).display()
             )
             .into());
         }
     };
     bar.finish_and_clear();
-    let _ = std::fs::remove_file(&state_file);
+    ResumeState::remove(file);
     let l = link.line().stats();
     eprintln!(
         "{total} records in {} frames, {:.1} s: {} bytes written, {} read-back queries ({} bytes), {} resends, {} timeouts, {} error replies, {} line errors, {} stale replies, {} fences, {} rewrites",

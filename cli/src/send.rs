@@ -45,3 +45,43 @@ pub fn request(link: &mut Link, frame: &[u8], detail: bool) -> std::io::Result<O
         }
     }
 }
+
+/// What a failed request means, for the user: `target` is the line,
+/// `asked_detail` whether 216H was asked for.
+pub fn describe(e: &Failure, target: &impl std::fmt::Display, asked_detail: bool) -> String {
+    match *e {
+        Failure::Controller {
+            code,
+            detail: fetched,
+        } => {
+            let mut m = crate::codes::answered_with(code);
+            if let Some(d) = fetched {
+                m.push_str(&format!(
+                    "; 216H latest system error {:03X}{}: details {} {} {} {} {:?}",
+                    d.error_number,
+                    if d.matches_code {
+                        ""
+                    } else {
+                        " (not the same number: it may be another error)"
+                    },
+                    d.detail_1,
+                    d.detail_2,
+                    d.detail_3,
+                    d.detail_4,
+                    d.detail_5_to_8
+                ));
+            } else if asked_detail {
+                m.push_str("; the 216H detail did not come");
+            }
+            m
+        }
+        Failure::Timeout { sends } => {
+            format!("no valid reply from {target} after {sends} send(s), 3 s each")
+        }
+        Failure::OutcomeUnknown { sends } => format!(
+            "no valid reply from {target} after {sends} send(s); not sent again, since a second send could repeat the operation: check the controller's state (212H)"
+        ),
+        Failure::Protocol(e) => format!("the reply does not decode: {e}"),
+        e => format!("{e}"),
+    }
+}

@@ -485,6 +485,54 @@ const UNSAFE: u64 = {
     bits
 };
 
+/// Bit `i` set: entry `i` of [`ALL`] only reads ([`Kind::Query`]).
+// Indexing in a const initialiser is checked at compile time.
+#[allow(clippy::indexing_slicing)]
+const QUERY_BITS: u64 = {
+    let mut bits = 0;
+    let mut i = 0;
+    while i < ALL.len() {
+        if let Kind::Query = ALL[i].kind {
+            bits |= 1 << i;
+        }
+        i += 1;
+    }
+    bits
+};
+
+/// How many messages only read.
+const QUERY_COUNT: usize = QUERY_BITS.count_ones() as usize;
+
+/// The IDs of every message that only reads the controller's state
+/// ([`Kind::Query`]), ascending.
+// Indexing in a const initialiser is checked at compile time.
+#[allow(clippy::indexing_slicing)]
+pub const QUERIES: [u16; QUERY_COUNT] = {
+    let mut out = [0; QUERY_COUNT];
+    let (mut i, mut k) = (0, 0);
+    while i < ALL.len() {
+        if let Kind::Query = ALL[i].kind {
+            out[k] = ALL[i].id;
+            k += 1;
+        }
+        i += 1;
+    }
+    out
+};
+
+/// The lowest message ID of the catalogue (200H).
+// Indexing in a const initialiser is checked at compile time.
+#[allow(clippy::indexing_slicing)]
+pub const LOWEST_ID: u16 = IDS[0];
+
+/// Whether message `id` only reads the controller's state (as
+/// [`lookup`]`(id)`'s kind says), without linking the entries: an ID table
+/// and a bit set.
+pub fn is_query(id: u16) -> bool {
+    IDS.binary_search(&id)
+        .is_ok_and(|i| QUERY_BITS.checked_shr(i as u32).unwrap_or(0) & 1 != 0)
+}
+
 /// Entries whose reply is not [`Reply::Normal`].
 // Indexing in a const initialiser is checked at compile time.
 #[allow(clippy::indexing_slicing)]

@@ -18,7 +18,7 @@
 //! | 16 | 1 | policy: 0 forward all, 1 read-only preset, 2 allow-list |
 //! | 17 | 1 | flags: bit 0 = honour the quit sequence (QEMU test runs only) |
 //! | 18 | 2 | 0 |
-//! | 20 | 32 | allow-list: bit `id - 0x200` (byte `(id - 0x200) / 8`, bit `id % 8`) for IDs 200H..2FFH |
+//! | 20 | 32 | allow-list: bit `id - 200H` (byte `(id - 200H) / 8`, bit `id % 8`) for IDs 200H..2FFH |
 //! | 52 | 8 | 0 |
 //! | 60 | 4 | CRC-32 (IEEE 802.3, as zlib's `crc32`) of bytes 0..60 |
 //!
@@ -26,6 +26,7 @@
 //! 115,200; TTA p. 7). A board that cannot set a rate (QEMU ignores them)
 //! still reports the configured one.
 
+use iai_protocol_b::catalogue;
 use iai_protocol_b::frame::Station;
 
 use crate::serial::FlowControl;
@@ -51,12 +52,9 @@ pub enum Policy {
     Allow(AllowList),
 }
 
-/// The read-only preset: every message that only reads (the queries of
-/// TTA 4-3 and the 2003 spec), plus 200H (test call, an echo).
-pub const READ_ONLY: [u16; 21] = [
-    0x200, 0x201, 0x208, 0x209, 0x20B, 0x20C, 0x20D, 0x20E, 0x20F, 0x210, 0x212, 0x213, 0x215,
-    0x216, 0x21F, 0x22D, 0x2A0, 0x2A1, 0x2A2, 0x2A3, 0x2A4,
-];
+/// The read-only preset: every message the catalogue says only reads (the
+/// queries of TTA 4-3 and the 2003 spec, 200H the test call among them).
+pub const READ_ONLY: &[u16] = &catalogue::QUERIES;
 
 impl Policy {
     /// Code in the configuration block and the status reply.
@@ -72,7 +70,7 @@ impl Policy {
     pub fn allows(&self, id: u16) -> bool {
         match self {
             Policy::ForwardAll => true,
-            Policy::ReadOnly => READ_ONLY.contains(&id),
+            Policy::ReadOnly => catalogue::is_query(id),
             Policy::Allow(list) => list.contains(id),
         }
     }
@@ -132,7 +130,9 @@ impl AllowList {
     }
 
     fn slot(id: u16) -> Option<(usize, u8)> {
-        let i = id.checked_sub(0x200).filter(|i| *i < 0x100)?;
+        let i = id
+            .checked_sub(catalogue::LOWEST_ID)
+            .filter(|i| *i < 0x100)?;
         Some((usize::from(i / 8), 1 << (i % 8)))
     }
 }
