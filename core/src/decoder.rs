@@ -1,18 +1,15 @@
 //! The streaming frame decoder: push bytes in, get whole frames out.
 //!
-//! Like `httparse`, it never blocks and never allocates: it takes whatever
-//! bytes the UART produced (one at a time or any slice) and answers
-//! [`Event::NeedMore`] until a frame is complete. Its buffer is a const
-//! generic `N` (default [`DEFAULT_CAPACITY`] = 2,051 bytes, the largest
-//! frame a TTA accepts; it sends at most 2,048).
+//! It never blocks and never allocates: it takes whatever bytes the UART
+//! produced (one at a time or any slice) and answers [`Event::NeedMore`]
+//! until a frame is complete. Its buffer is a const generic `N` (default
+//! [`DEFAULT_CAPACITY`], the TTA's 2,051 bytes); every access is checked.
 //!
 //! Resynchronisation: bytes before a header byte (`!`, `#`, `&`, `%`) are
-//! discarded and counted. A header byte inside a frame (outside the text
-//! fields of 200H and 216H) means the frame lost its end: the cut frame is
-//! reported as [`Error::Truncated`] and decoding restarts at the new header.
-//! A bad checksum, a non-hex digit, CR without LF, LF without CR and an
-//! over-long frame are each reported once, with a typed [`Error`]; the
-//! bytes are dropped and the next valid frame decodes.
+//! discarded and counted; a header byte inside a frame (outside a text
+//! field) cuts it ([`Error::Truncated`]). A bad checksum, a non-hex digit,
+//! a stray CR or LF and an over-long frame are reported once each, with a
+//! typed [`Error`], and the next valid frame decodes.
 //!
 //! Inside a text field every byte is text, header bytes and CR LF
 //! included, and a cut 216H reply can announce up to 255 characters: its
@@ -41,9 +38,6 @@
 //! assert_eq!(frames, 1);
 //! assert_eq!(dec.stats().discarded_bytes, 5);
 //! ```
-//!
-//! # Panic freedom
-//! Every buffer access is bounds-checked with `get`; counters saturate.
 
 use crate::checksum::BypassPolicy;
 use crate::error::Error;

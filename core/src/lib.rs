@@ -24,8 +24,7 @@
 //!   table written in confirmed, verified commands; a table read back;
 //! - [`profile`], [`io`]: what each controller accepts; UART glue.
 //!
-//! Start with the [`guide`]: three runnable walkthroughs (receive a frame,
-//! send a command and read the reply, stream a position table).
+//! Start with the [`guide`]: three runnable walkthroughs.
 //!
 //! # Cargo features
 //! - `async`: the engines over an `embedded-io-async` UART

@@ -14,9 +14,8 @@
 //! depends on the core clock the board model gives SysTick, so the bench
 //! does not assume it: it times a two-instruction loop (`subs`, `bne`) at
 //! two lengths and takes instructions per tick from the difference.
-//! SysTick runs free over its 24 bits with its interrupt off, so no
-//! handler is counted; every timed piece is far shorter than a wrap.
-//! Instructions, not cycles: no pipeline, wait states or flash latency.
+//! SysTick runs free with its interrupt off; every timed piece is far
+//! shorter than a wrap. Instructions, not cycles.
 //!
 //! # What is counted, per wire byte of the same frames
 //! - `encode`: `PositionStreamEncoder::read` pulled in 64-byte chunks into

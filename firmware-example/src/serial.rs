@@ -9,10 +9,6 @@
 //! * a [`ThreadEnd`], owned by the bridge: it implements the `embedded-io`
 //!   traits and [`Port`].
 //!
-//! The board code only moves bytes between registers and these ends, so
-//! everything below is the same on every board and in the host model
-//! (`host-tests`), which drives an [`IsrEnd`] at line rate.
-//!
 //! # Overruns
 //! A byte that arrives while the receive ring is full is dropped and
 //! counted, and so is a byte the UART itself lost (its overrun flag, passed
@@ -32,9 +28,8 @@
 //!   input to [`IsrEnd::next_tx`].
 //!
 //! The decision is taken in the interrupt handler, on the byte that crosses
-//! the mark, so it does not wait for the bridge's loop. The sender keeps
-//! sending for its own latency: [`Watermarks::pause_at`] must leave that
-//! many bytes free (see [`Watermarks::for_latency`]).
+//! the mark; [`Watermarks::pause_at`] leaves room for the sender's latency
+//! ([`Watermarks::for_latency`]).
 //!
 //! XON/XOFF and protocol B: every frame byte is printable ASCII or CR/LF,
 //! except the free text of 200H (test string) and 216H (message string).

@@ -1,5 +1,21 @@
-//! The axis model: servo, homing and trapezoidal moves in virtual time (see
-//! "Axis model" in the [module docs](super)).
+//! The axis model: servo, homing and trapezoidal moves in virtual time.
+//!
+//! Eight axes, all connected, servo off and not homed at start, at 0.
+//! - 232H switches the servo; switching it off stops a move.
+//! - 233H homes: the axis travels to 0 at the end-search speed, then creeps
+//!   for [`HOME_CREEP_MS`]; bits 1-2 of the 212H status read 1 meanwhile,
+//!   2 after.
+//! - 234H / 235H / 237H / 26BH move to a coordinate, 236H jogs (to the soft
+//!   limit [`SOFT_LIMIT`]) or inches. A move follows a trapezoidal speed
+//!   profile from its acceleration, speed and deceleration (0 G = 9,806.65
+//!   mm/s² × the value / 100); zero values take the record's values (237H),
+//!   then the simulator's parameters [`DEFAULT_SPEED`], [`DEFAULT_ACC`].
+//! - 238H stops the axes at their current position.
+//! - 212H reports bit 0 (in use) while an axis moves or homes, bits 1-2
+//!   (homing), bit 3 (servo), bit 4 (last operation completed normally),
+//!   and the position at the time of the query. 215H reports AUTO mode,
+//!   no system error, "operating in AUTO" and "system ready"; it has no
+//!   field for motion.
 
 use super::HOME_CREEP_MS;
 

@@ -1,8 +1,34 @@
 //! The controller's memory and its answers: [`Controller`] and
 //! [`Controller::execute`], which parses each command once into the core's
-//! typed [`Command`] and answers the messages listed in the
-//! [module docs](super); every other one is refused with
-//! [`NOT_MODELLED_CODE`].
+//! typed [`Command`] and answers the messages below; every other one is
+//! refused with [`NOT_MODELLED_CODE`].
+//!
+//! | message | answer |
+//! |---|---|
+//! | 200H Test Call | the 10 characters it was sent, exactly (2003 p. 15; the TTA page is not recovered, its layout is inferred identical) |
+//! | 208H | the number of records in the table (3 hex digits); more than FFFH records cannot be counted in that field and are refused with [`NOT_MODELLED_CODE`] rather than saturated |
+//! | 209H, 21FH, 22DH | the defined records in the window asked for, as many as fit the transmit buffer |
+//! | 244H, 245H, 26DH, 290H, 291H | the records stored, their count confirmed |
+//! | 246H | `number_of_clear_positions` positions from `clear_start_position_number` (3-digit numbering) removed from the table, then acknowledged |
+//! | 212H, 232H to 238H, 26BH | the axis model (`axis`) |
+//! | 215H | AUTO mode, no system error, "operating in AUTO", "system ready" |
+//! | 216H | illustrative details (error C74H, step 5, axis 2, point -3) |
+//!
+//! # Refusals
+//! The manuals publish no code list (TTA p. 15, 2003 p. 13): these codes
+//! are the simulator's own. `0E4` to `0E7` only with
+//! [`Controller::refuse`] on (`iai simulate` turns it on, `--accept-all`
+//! off).
+//!
+//! | code | refusal |
+//! |---|---|
+//! | [`INJECTED_ERROR_CODE`] `0E1` | fault injection (`error=P`) |
+//! | [`UNSUPPORTED_ERROR_CODE`] `0E2` | body does not fit the layout, an ID outside the catalogue, an ID a 2003 X-SEL does not know (the TTA simulator knows every catalogue message), position number past FFFFH |
+//! | [`NOT_MODELLED_CODE`] `0E3` | a catalogue message the simulator does not model; 208H with more than FFFH records |
+//! | [`SERVO_OFF_CODE`] `0E4` | move, jog or home on an axis whose servo is off |
+//! | [`NOT_HOMED_CODE`] `0E5` | 234H/235H/237H/26BH before the axis was homed (jog and inching are allowed) |
+//! | [`AXIS_BUSY_CODE`] `0E6` | a new operation on an axis that is still moving or homing |
+//! | [`NO_POSITION_CODE`] `0E7` | 237H/26BH to a position that is not defined or shares no axis with the pattern |
 
 use std::collections::BTreeMap;
 

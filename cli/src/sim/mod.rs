@@ -1,7 +1,7 @@
 //! A controller simulator: the controller's side of protocol B, built on
 //! the core, with a position table, a model of each axis and faults
-//! injected on demand. It answers only what it models; every other
-//! message is refused (see "What it answers").
+//! injected on demand. It answers only what it models (200H, positions,
+//! axes, status: see [`Controller::execute`]); every other message is refused.
 //!
 //! Two parts:
 //! - [`Controller`]: what a controller remembers (position table, axes,
@@ -20,46 +20,7 @@
 //! many connections on one shared controller.
 //!
 //! Like the controller (manual p. 9), it does not answer a command it could
-//! not receive: bad checksum, broken frame, or one longer than the
-//! profile's receive buffer.
-//!
-//! # What it answers
-//! Each command is parsed once into the core's typed
-//! [`Command`](iai_protocol_b::message::Command). The simulator models:
-//!
-//! | message | answer |
-//! |---|---|
-//! | 200H Test Call | the 10 characters it was sent, exactly (2003 p. 15; the TTA page is not recovered, its layout is inferred identical) |
-//! | 208H | the number of records in the table (3 hex digits); more than FFFH records cannot be counted in that field and are refused with [`NOT_MODELLED_CODE`] rather than saturated |
-//! | 209H, 21FH, 22DH | the defined records in the window asked for, as many as fit the transmit buffer |
-//! | 244H, 245H, 26DH, 290H, 291H | the records stored, their count confirmed |
-//! | 246H | `number_of_clear_positions` positions from `clear_start_position_number` (3-digit numbering) removed from the table, then acknowledged |
-//! | 212H, 232H to 238H, 26BH | the axis model below |
-//! | 215H | AUTO mode, no system error, "operating in AUTO", "system ready" |
-//! | 216H | illustrative details (error C74H, step 5, axis 2, point -3) |
-//!
-//! Every other catalogue message (201H version, ports, flags, variables,
-//! programs, 252H alarm reset, 25BH software reset, speed change, the
-//! SCARA messages, …) is refused with [`NOT_MODELLED_CODE`] rather than
-//! answered with made-up fields.
-//!
-//! # Axis model
-//! Eight axes, all connected, servo off and not homed at start, at 0.
-//! - 232H switches the servo; switching it off stops a move.
-//! - 233H homes: the axis travels to 0 at the end-search speed, then creeps
-//!   for [`HOME_CREEP_MS`]; bits 1-2 of the 212H status read 1 meanwhile,
-//!   2 after.
-//! - 234H / 235H / 237H / 26BH move to a coordinate, 236H jogs (to the soft
-//!   limit [`SOFT_LIMIT`]) or inches. A move follows a trapezoidal speed
-//!   profile from its acceleration, speed and deceleration (0 G = 9,806.65
-//!   mm/s² × the value / 100); zero values take the record's values (237H),
-//!   then the simulator's parameters [`DEFAULT_SPEED`], [`DEFAULT_ACC`].
-//! - 238H stops the axes at their current position.
-//! - 212H reports bit 0 (in use) while an axis moves or homes, bits 1-2
-//!   (homing), bit 3 (servo), bit 4 (last operation completed normally),
-//!   and the position at the time of the query. 215H reports AUTO mode,
-//!   no system error, "operating in AUTO" and "system ready"; it has no
-//!   field for motion.
+//! not receive: bad checksum, broken frame, or longer than its buffer.
 //!
 //! # Reply timing and order
 //! A reply is due [`Controller::response_delay_ms`] after its command. A
@@ -70,31 +31,9 @@
 //! earlier). Copies may come after later replies: a [`Faults::dup_reply`]
 //! copy stands for an echoing converter on the line repeating a frame, and
 //! arrives its delay after the original whatever was answered meanwhile.
-//! The order holds on one time base: a caller that restarts its clock (a
-//! command at a tick before the previous command's, as a harness running
-//! separate virtual-time runs against one simulator does) starts a new
-//! one, and replies still pending from before hold no new reply back.
-//!
-//! # Refusals
-//! The manuals state when a real controller refuses a command only in
-//! general terms (an `&` reply when a received command cannot be executed,
-//! TTA p. 15, 2003 p. 13) and publish no code list. The simulator refuses
-//! the cases below with codes of its own, chosen for it and documented
-//! here; a real controller's codes will differ. `0E2` and `0E3` are always
-//! on; the refusals of moves (`0E4` to `0E7`) only when
-//! [`Controller::refuse`] is on (`iai simulate` turns it on,
-//! `--accept-all` turns it off), otherwise a move runs whatever the servo
-//! and homing state.
-//!
-//! | code | refusal |
-//! |---|---|
-//! | [`INJECTED_ERROR_CODE`] `0E1` | fault injection (`error=P`) |
-//! | [`UNSUPPORTED_ERROR_CODE`] `0E2` | body does not fit the layout, an ID outside the catalogue, an ID a 2003 X-SEL does not know (the TTA simulator knows every catalogue message), position number past FFFFH |
-//! | [`NOT_MODELLED_CODE`] `0E3` | a catalogue message the simulator does not model (see "What it answers"); 208H with more than FFFH records |
-//! | [`SERVO_OFF_CODE`] `0E4` | move, jog or home on an axis whose servo is off |
-//! | [`NOT_HOMED_CODE`] `0E5` | 234H/235H/237H/26BH before the axis was homed (jog and inching are allowed) |
-//! | [`AXIS_BUSY_CODE`] `0E6` | a new operation on an axis that is still moving or homing |
-//! | [`NO_POSITION_CODE`] `0E7` | 237H/26BH to a position that is not defined or shares no axis with the pattern |
+//! A caller whose clock goes back (a command at a tick before the last
+//! one's) starts a new time base: replies pending from before hold no new
+//! one back.
 
 mod axis;
 mod controller;
