@@ -1,11 +1,9 @@
 //! Instructions per wire byte of the core's hex paths, for two 26DH
 //! workloads, on whatever Cortex-M core runs it (M0, M3, M4).
 //!
-//! Self-contained: it needs the core peripherals (SysTick, CPUID) and a
-//! print function, nothing of a board, so the same code runs on every QEMU
-//! machine. `src/bin/icount_bench.rs` is the program around it;
-//! `host-tests/src/bin/icount.rs` builds that for each board, runs it under
-//! QEMU with `-icount` and prints the figures.
+//! It needs SysTick, CPUID and a print function, nothing of a board;
+//! `src/bin/icount_bench.rs` is the program around it, and
+//! `host-tests/src/bin/icount.rs` runs it under QEMU with `-icount`.
 //!
 //! # Counting
 //! Under `-icount shift=S,sleep=off` every instruction advances QEMU's
