@@ -27,6 +27,8 @@ pub(crate) const ST: Station = Station(0x99);
 pub(crate) struct Fault {
     /// Not answered at all.
     pub(crate) silent: bool,
+    /// Lost on the way: neither executed nor answered.
+    pub(crate) lost: bool,
     /// Answered this much later than usual.
     pub(crate) late_ms: u32,
     /// Answered, and the same reply again this long after (an echoing
@@ -52,6 +54,8 @@ pub(crate) struct Controller {
     /// Every command received, with its tick.
     pub(crate) received: Vec<(u32, Vec<u8>)>,
     writes: usize,
+    /// When the last reply (not a copy) is due: none goes before it.
+    last_due: u32,
 }
 
 impl Controller {
@@ -65,6 +69,7 @@ impl Controller {
             alter: BTreeMap::new(),
             received: Vec::new(),
             writes: 0,
+            last_due: 0,
         }
     }
 
@@ -95,13 +100,16 @@ impl Controller {
             let n = self.received.len();
             self.received.push((now, cmd.clone()));
             let fault = self.faults.get(&n).copied().unwrap_or_default();
+            if fault.lost {
+                continue;
+            }
             let reply = self.answer(&cmd, fault.shows);
             if fault.silent {
                 continue;
             }
-            // In order: not before any reply already waiting.
-            let last = self.outbox.iter().map(|(t, _)| *t).max().unwrap_or(0);
-            let at = (now + self.delay_ms + fault.late_ms).max(last);
+            // In order: not before a reply due earlier (copies aside).
+            let at = (now + self.delay_ms + fault.late_ms).max(self.last_due);
+            self.last_due = at;
             if let Some(after) = fault.copy_after_ms {
                 self.outbox.push((at + after, reply.clone()));
             }

@@ -8,7 +8,7 @@ use super::{Chunk, Resume, State, Transfer};
 use crate::error::{Error, Failure};
 use crate::field::{move_within, Writer};
 use crate::frame::{emit_envelope, emit_trailer, Header, ENVELOPE_LEN, TRAILER_LEN};
-use crate::line::{Claim, Line, Span};
+use crate::line::{Line, Span};
 
 /// What [`Transfer::build`] achieved.
 pub(super) enum Built {
@@ -128,7 +128,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         let id = self.cfg.stream.id;
         let mut wake: Option<u32> = None;
         for n in (1..=most).rev() {
-            let at = line.clear_at(id, Span::one(n), Claim::Proof, now);
+            let at = line.clear_at(id, Span::one(n), self.cfg.write_claim(), now);
             if at == now {
                 return Ok(n);
             }

@@ -8,9 +8,11 @@
 //! confirms a frame only if it reports exactly the records sent (and, for
 //! a range write, its start).
 //!
-//! - A reply carries only a count, so a frame never gets a count that a
-//!   copy of an earlier reply could carry: the line's ledger says which
-//!   counts are still possible, and the frame takes fewer records instead.
+//! - A reply carries only a count, so where the count is the proof
+//!   ([`Verify::Off`], [`Verify::AfterFault`]) a frame never gets a count
+//!   that a copy of an earlier reply could carry: the line's ledger says
+//!   which counts are still possible, and the frame takes fewer records
+//!   instead. Under [`Verify::Full`] the read-back is the proof.
 //! - A frame whose reply times out is sent again with half its records
 //!   (a long frame is more likely hit by noise); frames grow back by a
 //!   quarter per confirmation.
@@ -127,6 +129,18 @@ impl TransferConfig {
     pub const fn with_verify(mut self, verify: Verify) -> Self {
         self.verify = verify;
         self
+    }
+
+    /// How much a write's reply has to prove. Under [`Verify::Full`] the
+    /// read-back that follows is the proof (a write a copy seemed to
+    /// confirm reads back different and is rewritten), so the reply need
+    /// only not be an error's copy; otherwise the count it carries is the
+    /// proof, and no reply that may still arrive may carry it.
+    const fn write_claim(&self) -> Claim {
+        match self.verify {
+            Verify::Full => Claim::Tentative,
+            _ => Claim::Proof,
+        }
     }
 
     /// What a success proves under this policy.
@@ -501,7 +515,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         let cmd = Command::of(
             self.cfg.stream.id,
             Span::one(records),
-            Claim::Proof,
+            self.cfg.write_claim(),
             max_sends,
         );
         line.begin(cmd, now);
