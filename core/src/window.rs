@@ -31,7 +31,8 @@ impl Windows {
 
     /// Positions to ask for when `left` remain to be read (at least one).
     pub(crate) fn span(&self, left: u32) -> u16 {
-        left.clamp(1, u32::from(self.limit)) as u16
+        // Not `clamp`: its check of the bounds' order would stay linked.
+        left.min(u32::from(self.limit)).max(1) as u16
     }
 
     /// A query of `asked` positions timed out: half as many (at least

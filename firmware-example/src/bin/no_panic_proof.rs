@@ -9,9 +9,11 @@
 //!
 //! Covered: the frame decoder, `Frame::new_checked`, `decode_any` and the
 //! field visitor of every message, the position-stream decoder, every
-//! record layout, the request client, the transfer engine (its write and
-//! streamed read-back paths) and the read-back engine fed arbitrary reply
-//! bytes (including a raw command frame passed through the client), the
+//! record layout, the frame skipper, the line (its ledger of replies that
+//! may still arrive, and its fences, on a line that repeats frames), the
+//! request client, the transfer engine (its write and streamed read-back
+//! paths) and the read-back engine fed arbitrary reply bytes (including a
+//! raw command frame passed through the client), the
 //! encoders (`RecordLayout::put_record`, the whole-field record paths, and
 //! `PositionStreamEncoder` for every position stream) on a record made of
 //! those bytes, and the bridge library (`Bridge::poll`, the configuration
@@ -28,21 +30,20 @@ use core::hint::black_box;
 use cortex_m_rt::entry;
 use iai_protocol_b::axis::{AxisPattern, PerAxis};
 use iai_protocol_b::checksum::BypassPolicy;
-use iai_protocol_b::client::{Client, ClientConfig, ClientStep};
-use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::decoder::{Event, FrameDecoder, FrameSkipper};
+use iai_protocol_b::engine::{feed, Step};
 use iai_protocol_b::field::{FieldSpec, Reader};
-use iai_protocol_b::frame::{Frame, Station};
+use iai_protocol_b::frame::{read_envelope, Frame, Header, Station};
 use iai_protocol_b::message::{decode_any, AxisStatusQuery, Fields, GroupInfo, Value, Visitor};
-use iai_protocol_b::position::{PositionRecord, RecordLayout};
-use iai_protocol_b::readback::{ReadBack, ReadBackConfig, ReadStep};
-use iai_protocol_b::stream::{
-    PositionStream, PositionStreamDecoder, PositionStreamEncoder, StreamEvent,
+use iai_protocol_b::position::{PositionRecord, PositionStream, RecordLayout};
+use iai_protocol_b::stream::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
+use iai_protocol_b::{
+    Client, Line, LineConfig, Profile, ReadBack, ReadBackConfig, Transfer, TransferConfig,
 };
-use iai_protocol_b::transfer::{Step, Transfer, TransferConfig};
 
 use firmware_example::bridge::{Bridge, Port};
 use firmware_example::config::Config;
-use firmware_example::serial::{FlowControl, Line, Watermarks};
+use firmware_example::serial::{self, FlowControl, Watermarks};
 
 extern "C" {
     /// Deliberately undefined (see the module docs).
@@ -179,9 +180,9 @@ fn main() -> ! {
     let mut sd = PositionStreamDecoder::new(black_box(BypassPolicy::Reject));
     let mut rest = input;
     while !rest.is_empty() {
-        let (used, ev) = sd.decode(rest);
-        rest = rest.get(used..).unwrap_or(&[]);
-        match ev {
+        let r = sd.decode(rest);
+        rest = rest.get(r.consumed..).unwrap_or(&[]);
+        match r.event {
             StreamEvent::NeedMore => {}
             StreamEvent::End { .. } | StreamEvent::Error { .. } => sd.reset(),
             other => {
@@ -232,40 +233,58 @@ fn main() -> ! {
         }
     }
 
-    // The engines, answered with arbitrary bytes.
+    // A frame passed over, summed as it goes.
+    if let Some(env) = input.first_chunk::<6>() {
+        if let Some((header, _, _)) = read_envelope(env) {
+            let mut skip = FrameSkipper::new(header, env, black_box(BypassPolicy::Accept));
+            for &b in input.get(6..).unwrap_or(&[]) {
+                black_box(skip.push(b));
+            }
+        }
+    }
+
+    // The engines on a line that repeats frames (its ledger holds copies),
+    // answered with arbitrary bytes; a fence first.
     let now = black_box(0u32);
-    let mut t: Transfer<_> = Transfer::new(TransferConfig::tta(Station(0x99)), core::iter::empty());
-    black_box(t.received(input, now));
-    if let Step::Transmit(b) = t.poll(now) {
+    let cfg = LineConfig::new(Station(0x99)).with_duplicate_window(black_box(3_000));
+    let mut line = Line::new(cfg, black_box(7));
+    let mut t: Transfer<_> =
+        Transfer::new(TransferConfig::new(Profile::TTA), core::iter::once(rec.clone()));
+    black_box(t.received(&mut line, input, now));
+    if let Step::Transmit(b) = t.poll(&mut line, now) {
         black_box(b);
     }
-    t.sent(now);
-    t.received_all(input, now);
-    black_box(t.poll(now.wrapping_add(black_box(5_000))));
+    t.sent(&mut line, now);
+    feed(&mut t, &mut line, input, now);
+    black_box(t.poll(&mut line, now.wrapping_add(black_box(5_000))));
     black_box(t.mismatched_positions().count());
-    let mut c: Client = Client::new(ClientConfig::new(Station(0x99)).with_error_detail());
-    let _ = black_box(c.start_frame(input, now));
+    line.broken(read_envelope(input), now);
+    line.broken(black_box(Some((Header::Error, Station(0x99), 0x0E1))), now);
+    line.unread(now);
+    let mut c: Client = Client::new().with_error_detail();
+    let _ = black_box(c.start_frame(&mut line, input, now));
     if let Ok(q) = AxisStatusQuery::of(black_box(&[1, 2])) {
-        let _ = black_box(c.start(&q, now));
+        let _ = black_box(c.start(&mut line, &q, now));
     }
-    if let ClientStep::Transmit(b) = c.poll(now) {
+    if let Step::Transmit(b) = c.poll(&mut line, now) {
         black_box(b);
     }
-    c.sent(now);
-    c.received_all(input, now);
-    black_box(c.poll(now.wrapping_add(black_box(3_000))));
+    c.sent(&mut line, now);
+    feed(&mut c, &mut line, input, now);
+    black_box(c.poll(&mut line, now.wrapping_add(black_box(3_000))));
     let _ = black_box(c.response::<AxisStatusQuery>().map(|r| r.axes.len()));
-    let mut rb: ReadBack = ReadBack::new(ReadBackConfig::tta(Station(0x99), 1, 100));
-    if let ReadStep::Transmit(b) = rb.poll(now) {
+    let mut rb: ReadBack = ReadBack::new(ReadBackConfig::new(Profile::TTA, 1, 100));
+    if let Step::Transmit(b) = rb.poll(&mut line, now) {
         black_box(b);
     }
-    rb.sent(now);
-    black_box(rb.received_all(input, now));
-    if let ReadStep::Records(recs) = rb.poll(now) {
+    rb.sent(&mut line, now);
+    black_box(rb.received(&mut line, input, now));
+    if let Step::Done(Ok(Some(recs))) = rb.poll(&mut line, now) {
         for r in recs {
             black_box(r);
         }
     }
+    black_box(line.stats());
 
     // The bridge, both ports fed arbitrary bytes, under any configuration.
     let (cfg, source) = Config::from_block(input);
@@ -279,7 +298,7 @@ fn main() -> ! {
     black_box(bridge.stats());
 
     // The serial line's interrupt end, fed the same bytes.
-    let mut line: Line<256, 64> = Line::new();
+    let mut line: serial::Line<256, 64> = serial::Line::new();
     let marks = Watermarks::for_latency(black_box(255), black_box(17));
     let (mut isr, mut thr) = line.split(black_box(FlowControl::XonXoff), marks, &|| {});
     for &b in input {
