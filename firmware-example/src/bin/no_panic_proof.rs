@@ -248,8 +248,10 @@ fn main() -> ! {
     let now = black_box(0u32);
     let cfg = LineConfig::new(Station(0x99)).with_duplicate_window(black_box(3_000));
     let mut line = Line::new(cfg, black_box(7));
-    let mut t: Transfer<_> =
-        Transfer::new(TransferConfig::new(Profile::TTA), core::iter::once(rec.clone()));
+    let mut t: Transfer<_> = Transfer::new(
+        TransferConfig::new(Profile::TTA),
+        core::iter::once(rec.clone()),
+    );
     black_box(t.received(&mut line, input, now));
     if let Step::Transmit(b) = t.poll(&mut line, now) {
         black_box(b);
