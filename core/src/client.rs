@@ -156,11 +156,19 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
                 Phase::Done(r) => return Step::Done(r.map(|_| ())),
                 Phase::Running { detail_for } => detail_for,
             };
-            if line.busy() && !line.awaiting() && line.sends() == 0 && self.replies.pending() > 0 {
+            if line.busy()
+                && !line.awaiting()
+                && !line.fence_awaited()
+                && line.sends() == 0
+                && self.replies.pending() > 0
+            {
                 // Bytes held from before the first send (a frame in
                 // progress, or a 200H's text that took in other frames)
                 // cannot answer it, but a late reply may hide in them: a
-                // copy of it may follow.
+                // copy of it may follow. Not while the fence's echo is
+                // awaited: what is held then is the start of the echo (or
+                // of a reply owed before it), arriving in pieces as bytes
+                // off a serial line do.
                 line.unread(now);
                 self.replies.reset();
             }

@@ -147,3 +147,53 @@ fn a_new_call_never_takes_the_reply_an_earlier_one_still_owes() {
     assert_eq!(c.reply_frame().map(|f| f.code()), Some(0x216));
     assert!(c.response::<ErrorDetailQuery>().is_ok());
 }
+
+/// The echo of a fence arriving in pieces (as bytes come off a serial
+/// line), with polls in between, is still the echo: the command goes out
+/// at once rather than after the fallback wait.
+#[test]
+fn a_fence_echo_in_pieces_is_still_its_echo() {
+    for split in 1..20 {
+        let mut c: Client = Client::new();
+        // A line just opened: it fences before its first command.
+        let mut l = Line::new(LineConfig::new(ST), 0x1234_5678);
+        let q = AxisStatusQuery::of(&[1]).unwrap();
+        c.start(&mut l, &q, 0).unwrap();
+        let fence = match c.poll(&mut l, 0) {
+            Step::Transmit(b) => b.to_vec(),
+            other => panic!("{other:?}"),
+        };
+        assert!(fence.starts_with(b"!99200"), "{fence:?}");
+        c.sent(&mut l, 1);
+        // The echo: '#' for '!', SC two more.
+        let body = &fence[1..fence.len() - 4];
+        let mut echo = std::vec![b'#'];
+        echo.extend_from_slice(body);
+        let sum = echo.iter().fold(0u8, |s, &b| s.wrapping_add(b));
+        echo.extend_from_slice(std::format!("{sum:02X}\r\n").as_bytes());
+        let (first, rest) = echo.split_at(split);
+        let r = c.received(&mut l, first, 3);
+        assert_eq!((r.consumed, r.event), (first.len(), Heard::NeedMore));
+        assert!(matches!(c.poll(&mut l, 4), Step::WaitUntil(_)));
+        let r = c.received(&mut l, rest, 5);
+        assert_eq!(
+            (r.consumed, r.event),
+            (rest.len(), Heard::Fence),
+            "split {split}"
+        );
+        // The command follows after the turnaround, long before the
+        // 3 s the line would wait for owed replies without the echo.
+        let mut now = 6;
+        loop {
+            match c.poll(&mut l, now) {
+                Step::Transmit(b) => {
+                    assert_eq!(b, b"!992120189\r\n", "split {split}");
+                    break;
+                }
+                Step::WaitUntil(t) if t > now && t < 100 => now = t,
+                other => panic!("split {split} at {now}: {other:?}"),
+            }
+        }
+        assert_eq!(l.stats().fences_failed, 0);
+    }
+}

@@ -412,6 +412,13 @@ impl Line {
         matches!(self.phase, Phase::Await { .. })
     }
 
+    /// Whether the echo of the line's fence is awaited now (the fence was
+    /// completely sent): bytes received meanwhile are the echo or what the
+    /// controller owed before it, and must be decoded, not dropped.
+    pub(crate) const fn fence_awaited(&self) -> bool {
+        matches!(self.phase, Phase::FenceAwait { .. })
+    }
+
     /// Whether a command is in progress (not idle, not finished).
     pub const fn busy(&self) -> bool {
         !matches!(self.phase, Phase::Idle | Phase::Finished(_))
