@@ -508,6 +508,12 @@ impl QemuSession {
         self.child.id()
     }
 
+    /// QEMU's exit status once it has exited (and is reaped), `None`
+    /// while it runs.
+    pub fn try_wait(&mut self) -> io::Result<Option<ExitStatus>> {
+        self.child.try_wait()
+    }
+
     /// Ask the firmware to end the run: keep the upstream silent for
     /// [`QUIT_GUARD`], then send [`QUIT_SEQUENCE`].
     pub fn quit(&mut self) -> io::Result<()> {
