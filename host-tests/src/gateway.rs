@@ -22,7 +22,9 @@
 //! yet, which a Unix socket to QEMU tells (`SIOCOUTQ`) and a TCP socket
 //! does not (loopback TCP counts bytes as delivered once the kernel holds
 //! them); and one process is one thing to stop: QEMU is this process's
-//! child, killed through its own handle, and the simulator is a thread.
+//! child, killed through its own handle (and by the kernel should this
+//! process die without stopping it, [`QemuSession::start_tied`]), and the
+//! simulator is a thread.
 //!
 //! One client at a time: a connection made while a client is connected
 //! is closed at once, unanswered. What a client wrote before it closed its
@@ -146,7 +148,8 @@ pub fn run(
             .map_err(|e| format!("building the firmware for {}: {e}", opts.board))?,
     };
     let cfg = config(opts.baud);
-    let mut qemu = QemuSession::start_configured(
+    // Tied: QEMU goes with this thread even if the process is killed.
+    let mut qemu = QemuSession::start_tied(
         opts.board,
         &elf,
         BOOT_TIMEOUT,
