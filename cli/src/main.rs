@@ -214,13 +214,22 @@ impl LineArgs {
 }
 
 #[derive(Args)]
+#[command(group(clap::ArgGroup::new("place").required(true).args(["tcp", "pty", "connect"])))]
 struct SimArgs {
     /// Listen on 127.0.0.1:PORT (port 0 picks a free one).
-    #[arg(long, conflicts_with = "pty", required_unless_present = "pty")]
+    #[arg(long)]
     tcp: Option<String>,
     /// Serve on a new pseudo-terminal (/dev/pts/N).
     #[arg(long)]
     pty: bool,
+    /// Connect to a listening HOST:PORT (such as the bridge's controller
+    /// port under QEMU), serve that one connection and exit when it closes.
+    #[arg(long)]
+    connect: Option<String>,
+    /// How long --connect keeps trying while nothing listens yet, ms
+    /// (default 10000).
+    #[arg(long, conflicts_with_all = ["tcp", "pty"])]
+    connect_wait_ms: Option<u64>,
     /// Controller kind.
     #[arg(long, value_enum, default_value = "tta")]
     profile: ProfileArg,
@@ -236,7 +245,8 @@ struct SimArgs {
     /// Seed of the fault draws.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// On SIGTERM or SIGINT, write the position table to this CSV file.
+    /// On SIGTERM or SIGINT (or the end of the --connect connection),
+    /// write the position table to this CSV file.
     #[arg(long)]
     dump: Option<PathBuf>,
     /// Print only connection summaries, not every frame.
@@ -768,12 +778,26 @@ fn simulate_cmd(args: &SimArgs) -> Run {
     };
     // Signals: write the table if asked, then exit.
     let (tx, rx) = std::sync::mpsc::channel::<()>();
+    let done = tx.clone();
     ctrlc::set_handler(move || {
         let _ = tx.send(());
     })
     .map_err(|e| format!("cannot handle signals: {e}"))?;
+    let mut connected = None;
     let listening = if args.pty {
         start_pty(&shared, &opts)?
+    } else if let Some(addr) = &args.connect {
+        let wait = args
+            .connect_wait_ms
+            .map_or(simulate::CONNECT_PATIENCE, |ms| {
+                std::time::Duration::from_millis(ms)
+            });
+        let conn = simulate::connect(addr, wait)?;
+        let peer = conn
+            .peer_addr()
+            .map_or_else(|_| addr.clone(), |a| a.to_string());
+        connected = Some(conn);
+        format!("connected tcp {peer}")
     } else {
         let addr = args.tcp.clone().unwrap_or_default();
         let listener = std::net::TcpListener::bind(addr.as_str()).map_err(|e| {
@@ -799,6 +823,14 @@ fn simulate_cmd(args: &SimArgs) -> Run {
             ctl.max_transmit
         );
         let _ = out.flush();
+    }
+    // The one connection of --connect: its end ends the run, as a signal does.
+    if let Some(conn) = connected {
+        let (s, o) = (shared.clone(), opts.clone());
+        std::thread::spawn(move || {
+            simulate::serve_connected(conn, &s, &o);
+            let _ = done.send(());
+        });
     }
     let _ = rx.recv();
     if let Some(path) = &args.dump {

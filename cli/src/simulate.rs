@@ -1,5 +1,7 @@
-//! `iai simulate`: the controller simulator on a TCP port of this machine
-//! or on a pseudo-terminal (which serial tools open like a port).
+//! `iai simulate`: the controller simulator on a TCP port of this machine,
+//! on a pseudo-terminal (which serial tools open like a port), or on one
+//! TCP connection it makes itself to a listening port ([`connect`]: the
+//! controller side of the bridge under QEMU, for instance).
 //!
 //! One [`Controller`] is shared by every connection: its position table
 //! and axes persist, as a real controller's memory does. Each connection
@@ -7,7 +9,7 @@
 //! and its own thread, so an idle client blocks nobody.
 
 use std::io::{self, Write};
-use std::net::{TcpListener, TcpStream};
+use std::net::{SocketAddr, TcpListener, TcpStream, ToSocketAddrs};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -244,6 +246,54 @@ pub fn serve_tcp(listener: TcpListener, shared: Shared, opts: ServeOptions) -> i
         });
     }
     Ok(())
+}
+
+/// How long [`connect`] keeps trying by default: long enough for QEMU to
+/// boot and open its port.
+pub const CONNECT_PATIENCE: Duration = Duration::from_secs(10);
+
+/// Connects to the listening `addr` (`HOST:PORT`), trying again every
+/// 100 ms for up to `patience` while nothing listens there yet (a port
+/// that is still starting up). An address that does not resolve fails at
+/// once.
+pub fn connect(addr: &str, patience: Duration) -> Result<TcpStream, String> {
+    let targets: Vec<SocketAddr> = addr
+        .to_socket_addrs()
+        .map_err(|e| format!("--connect {addr:?}: not an address ({e}); give HOST:PORT"))?
+        .collect();
+    let deadline = Instant::now() + patience;
+    let mut last = format!("{addr:?} resolves to no address");
+    loop {
+        for target in &targets {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match TcpStream::connect_timeout(target, left.max(Duration::from_millis(100))) {
+                Ok(conn) => {
+                    let _ = conn.set_nodelay(true);
+                    return Ok(conn);
+                }
+                Err(e) => last = format!("{target}: {e}"),
+            }
+        }
+        let now = Instant::now();
+        if now >= deadline || targets.is_empty() {
+            return Err(format!(
+                "--connect {addr}: nothing accepted a connection within {:.1} s (last attempt: {last})",
+                patience.as_secs_f64()
+            ));
+        }
+        std::thread::sleep((deadline - now).min(Duration::from_millis(100)));
+    }
+}
+
+/// Serves the one connection [`connect`] made until the peer closes it,
+/// logging like [`serve_tcp`]; returns when it is gone.
+pub fn serve_connected(mut conn: TcpStream, shared: &Shared, opts: &ServeOptions) {
+    let name = conn
+        .peer_addr()
+        .map_or_else(|_| "#0".to_string(), |a| a.to_string());
+    log_lines(&[format!("connection {name} opened")]);
+    let line = serve(shared, &mut conn, &name, opts, opts.seed);
+    log_lines(&[line]);
 }
 
 /// A pseudo-terminal: the simulator holds the master side, serial tools

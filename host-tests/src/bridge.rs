@@ -21,7 +21,7 @@ use std::time::{Duration, Instant};
 
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameDecoder};
-use iai_protocol_b::frame::Station;
+use iai_protocol_b::frame::{Frame, Header, Station};
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::position::PositionStream;
 use iai_protocol_b::stream::PositionStreamEncoder;
@@ -454,6 +454,44 @@ impl HostLink {
         }
     }
 
+    /// Waits up to `timeout` for received bytes and takes all there are
+    /// (without XON/XOFF when they are honoured); empty when none came.
+    /// `UnexpectedEof` once the upstream closed and all was taken.
+    pub fn read_some(&self, timeout: Duration) -> io::Result<Vec<u8>> {
+        let deadline = Instant::now() + timeout;
+        let (state, changed) = &*self.rx;
+        let mut st = state.lock().unwrap_or_else(PoisonError::into_inner);
+        loop {
+            if !st.data.is_empty() {
+                return Ok(st.data.drain(..).collect());
+            }
+            if st.closed {
+                return Err(io::Error::new(
+                    io::ErrorKind::UnexpectedEof,
+                    "upstream closed",
+                ));
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Ok(Vec::new());
+            }
+            st = changed
+                .wait_timeout(st, deadline - now)
+                .unwrap_or_else(PoisonError::into_inner)
+                .0;
+        }
+    }
+
+    /// Drops the bytes received and not taken yet.
+    pub fn discard_received(&self) {
+        let (state, _) = &*self.rx;
+        state
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .data
+            .clear();
+    }
+
     /// Send `command` and wait up to `timeout` (after the last byte) for
     /// the bridge's reply.
     pub fn exchange(&self, command: &[u8], timeout: Duration) -> io::Result<Option<Vec<u8>>> {
@@ -465,6 +503,54 @@ impl HostLink {
     pub fn write_raw(&self, bytes: &[u8]) -> io::Result<()> {
         (&self.writer).write_all(bytes)?;
         (&self.writer).flush()
+    }
+}
+
+/// The bridge's status query: `!`, the bridge's station, `B00`, SC, CR LF.
+pub fn status_query_frame(bridge_station: Station) -> Vec<u8> {
+    let mut buf = [0u8; 16];
+    let n = iai_protocol_b::frame::emit_frame(
+        &mut buf,
+        iai_protocol_b::frame::Header::Command,
+        bridge_station,
+        codes::STATUS_QUERY,
+        Default::default(),
+        |_| Ok(()),
+    )
+    .expect("fits");
+    buf[..n].to_vec()
+}
+
+/// Asks the bridge at `bridge_station` for its status and waits up to
+/// `timeout` for the reply, skipping the frames that come before it (the
+/// bridge answers in order: what it still owed comes first); returns the
+/// named fields.
+pub fn status_query(
+    link: &HostLink,
+    bridge_station: Station,
+    timeout: Duration,
+) -> Result<Vec<(&'static str, u64)>, String> {
+    link.send(&status_query_frame(bridge_station), |_| {})
+        .map_err(|e| format!("status query: {e}"))?;
+    let deadline = Instant::now() + timeout;
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let reply = link
+            .read_frame(left)
+            .map_err(|e| format!("status query: {e}"))?
+            .ok_or_else(|| format!("no reply to the status query within {timeout:?}"))?;
+        let Ok(frame) = Frame::new_checked(&reply, Default::default()) else {
+            continue;
+        };
+        if frame.header() != Header::Response
+            || frame.station() != bridge_station
+            || frame.code() != codes::STATUS_QUERY
+        {
+            continue;
+        }
+        return firmware_example::status::parse(frame.body())
+            .map(|f| f.to_vec())
+            .ok_or_else(|| format!("bad status reply {:?}", String::from_utf8_lossy(&reply)));
     }
 }
 

@@ -1,7 +1,9 @@
 //! Host-side tools and test support for `iai-protocol-b`: generated
-//! position tables, the QEMU runner, the bridge test harness. The
+//! position tables, the QEMU runner, the bridge test harness, the gateway
+//! (the bridge under QEMU on a TCP port). The
 //! controller simulator lives in `iai-cli` and is re-exported here.
 pub mod bridge;
+pub mod gateway;
 pub mod link;
 pub mod naive;
 pub mod qemu;

@@ -389,6 +389,34 @@ impl QemuSession {
         extra_args: &[&str],
         config: Option<&Config>,
     ) -> io::Result<Self> {
+        Self::start_inner(board, elf, timeout, ready_marker, extra_args, config, false)
+    }
+
+    /// Like [`QemuSession::start_configured`], and QEMU is also killed
+    /// when the thread that calls this ends, even if this process is
+    /// killed with SIGKILL (Linux `PR_SET_PDEATHSIG`): for a long-running
+    /// program whose main thread starts QEMU, such as the gateway. Not for
+    /// tests, whose sessions may outlive the thread that started them.
+    pub fn start_tied(
+        board: Board,
+        elf: &Path,
+        timeout: Duration,
+        ready_marker: Option<&str>,
+        extra_args: &[&str],
+        config: Option<&Config>,
+    ) -> io::Result<Self> {
+        Self::start_inner(board, elf, timeout, ready_marker, extra_args, config, true)
+    }
+
+    fn start_inner(
+        board: Board,
+        elf: &Path,
+        timeout: Duration,
+        ready_marker: Option<&str>,
+        extra_args: &[&str],
+        config: Option<&Config>,
+        tied: bool,
+    ) -> io::Result<Self> {
         let loader = match config {
             Some(cfg) => Some(config_loader_arg(elf, cfg)?),
             None => None,
@@ -427,6 +455,21 @@ impl QemuSession {
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped());
+        if tied {
+            use std::os::unix::process::CommandExt;
+            let die_with_parent = || {
+                // SAFETY: PR_SET_PDEATHSIG takes one int argument; prctl is
+                // async-signal-safe and touches no memory.
+                if unsafe { prctl(PR_SET_PDEATHSIG, SIGKILL) } != 0 {
+                    return Err(io::Error::last_os_error());
+                }
+                Ok(())
+            };
+            // SAFETY: between fork and exec the closure only calls prctl.
+            unsafe {
+                command.pre_exec(die_with_parent);
+            }
+        }
         let mut child = command.spawn().map_err(|e| {
             io::Error::new(
                 e.kind(),
@@ -508,6 +551,12 @@ impl QemuSession {
         self.child.id()
     }
 
+    /// QEMU's exit status once it has exited (and is reaped), `None`
+    /// while it runs.
+    pub fn try_wait(&mut self) -> io::Result<Option<ExitStatus>> {
+        self.child.try_wait()
+    }
+
     /// Ask the firmware to end the run: keep the upstream silent for
     /// [`QUIT_GUARD`], then send [`QUIT_SEQUENCE`].
     pub fn quit(&mut self) -> io::Result<()> {
@@ -569,6 +618,15 @@ impl Drop for QemuSession {
         // process.
         self.kill_child();
     }
+}
+
+/// `prctl` option: the signal the process gets when its parent thread ends.
+const PR_SET_PDEATHSIG: i32 = 1;
+/// Signal number of SIGKILL.
+const SIGKILL: i32 = 9;
+
+extern "C" {
+    fn prctl(option: i32, ...) -> i32;
 }
 
 /// Boot `elf` on `board` with no serial port connected (all to `null`) and

@@ -26,18 +26,16 @@ use std::sync::Arc;
 use std::thread;
 use std::time::{Duration, Instant};
 
-use firmware_example::codes;
 use firmware_example::config::Config;
-use firmware_example::status;
-use host_tests::bridge::{check_table, command_26dh, reply_26dh, HostLink, SimThread};
+use host_tests::bridge::{
+    check_table, command_26dh, reply_26dh, status_query, HostLink, SimThread,
+};
 
 /// Sends of the 26DH before the demo gives up (a host's own retries).
 const MAX_SENDS: u32 = 8;
 use host_tests::qemu::{build_firmware, test_config, Board, QemuSession, READY_MARKER};
 use host_tests::sim::{Faults, Simulator};
 use host_tests::table::table;
-use iai_protocol_b::checksum::ChecksumMode;
-use iai_protocol_b::frame::{emit_frame, Frame, Header};
 
 struct Options {
     records: u16,
@@ -132,28 +130,6 @@ fn progress_bar(done: usize, total: usize, started: Instant) {
         secs
     );
     let _ = io::stderr().flush();
-}
-
-/// Ask the bridge's status query; the named counters.
-fn status_query(link: &HostLink, cfg: &Config) -> Result<Vec<(&'static str, u64)>, String> {
-    let mut buf = [0u8; 16];
-    let n = emit_frame(
-        &mut buf,
-        Header::Command,
-        cfg.bridge_station,
-        codes::STATUS_QUERY,
-        ChecksumMode::Compute,
-        |_| Ok(()),
-    )
-    .map_err(|e| e.to_string())?;
-    let reply = link
-        .exchange(&buf[..n], Duration::from_secs(5))
-        .map_err(|e| format!("status query: {e}"))?
-        .ok_or("no reply to the status query")?;
-    let frame = Frame::new_checked(&reply, Default::default()).map_err(|e| e.to_string())?;
-    status::parse(frame.body())
-        .map(|f| f.to_vec())
-        .ok_or_else(|| format!("bad status reply {:?}", String::from_utf8_lossy(&reply)))
 }
 
 fn field(fields: &[(&'static str, u64)], name: &str) -> u64 {
@@ -283,7 +259,7 @@ fn run() -> Result<(), String> {
             String::from_utf8_lossy(&want)
         ));
     }
-    let fields = status_query(&link, &cfg)?;
+    let fields = status_query(&link, cfg.bridge_station, Duration::from_secs(5))?;
     let link_stats = link.stats();
 
     let mut qemu = qemu;

@@ -1,0 +1,99 @@
+//! The bridge firmware under QEMU with the controller simulator behind it
+//! and its host side on a TCP port of 127.0.0.1, relayed like a serial
+//! cable at the line rate with XON/XOFF (see [`host_tests::gateway`]).
+//!
+//! Prints exactly one line on stdout, `protocol-b 127.0.0.1:PORT`, once
+//! the bridge answers through the relay; everything else goes to stderr.
+//! Runs until SIGINT, SIGTERM or SIGHUP (Ctrl-C), then stops QEMU and the
+//! simulator. Exit code 0 after such a stop, 1 if anything failed (QEMU
+//! exiting on its own included), 2 for bad arguments.
+//!
+//! Run through `./tools/gateway.sh`. Options: `--port P` (default: a free
+//! port), `--baud B` (9600, 19200, 38400, 57600 or 115200, default
+//! 115200), `--board lm3s6965|mps2-an386`, `--reply-delay-ms MS` (the
+//! simulated controller's time per command, default 2), `--faults SPEC`
+//! (as `iai simulate --faults`), `--seed S`, `--elf PATH`.
+
+use std::io::{self, Write};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use host_tests::gateway::{self, Options};
+use host_tests::qemu::Board;
+
+const USAGE: &str = "usage: gateway [--port P] [--baud B] [--board lm3s6965|mps2-an386] \
+                     [--reply-delay-ms MS] [--faults SPEC] [--seed S] [--elf PATH]";
+
+fn parse_args() -> Result<Options, String> {
+    let mut o = Options::default();
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        let mut value = || args.next().ok_or(format!("{a} needs a value"));
+        match a.as_str() {
+            "--port" => {
+                o.port = value()?
+                    .parse()
+                    .map_err(|_| "--port takes 0..=65535 (0: a free port)".to_owned())?;
+            }
+            "--baud" => {
+                o.baud = value()?
+                    .parse()
+                    .ok()
+                    .filter(|b| firmware_example::config::BAUD_RATES.contains(b))
+                    .ok_or("--baud takes 9600, 19200, 38400, 57600 or 115200")?;
+            }
+            "--board" => {
+                let v = value()?;
+                o.board = Board::ALL
+                    .into_iter()
+                    .find(|b| b.bin() == v || b.machine() == v)
+                    .ok_or(format!("--board takes lm3s6965 or mps2-an386, not {v:?}"))?;
+            }
+            "--reply-delay-ms" => {
+                o.reply_delay_ms = value()?
+                    .parse()
+                    .map_err(|_| "--reply-delay-ms takes milliseconds".to_owned())?;
+            }
+            "--faults" => o.faults = iai_cli::simulate::parse_faults(&value()?)?,
+            "--seed" => {
+                o.seed = value()?
+                    .parse()
+                    .map_err(|_| "--seed takes a number".to_owned())?;
+            }
+            "--elf" => o.elf = Some(PathBuf::from(value()?)),
+            "-h" | "--help" => return Err(USAGE.to_owned()),
+            other => return Err(format!("unknown argument {other:?}\n{USAGE}")),
+        }
+    }
+    Ok(o)
+}
+
+fn main() -> ExitCode {
+    let opts = match parse_args() {
+        Ok(o) => o,
+        Err(e) => {
+            eprintln!("gateway: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = Arc::clone(&stop);
+    if let Err(e) = ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)) {
+        eprintln!("gateway: cannot handle signals: {e}");
+        return ExitCode::FAILURE;
+    }
+    let ready = |addr| {
+        let mut out = io::stdout().lock();
+        let _ = writeln!(out, "protocol-b {addr}");
+        let _ = out.flush();
+    };
+    match gateway::run(&opts, &stop, ready) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("gateway: FAILED: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

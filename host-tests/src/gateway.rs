@@ -1,0 +1,535 @@
+//! The gateway: the bridge firmware under QEMU with the controller
+//! simulator behind it and its host side on a TCP port, so that any
+//! protocol-B client (`iai --tcp 127.0.0.1:PORT`) talks to the bridge as
+//! through a serial cable. Run by `tools/gateway.sh` (binary `gateway`).
+//!
+//! QEMU models neither baud rates nor flow control, and a UART fed in
+//! bursts overruns the bridge's receive rings (see the README, "Flow
+//! control"). So neither side is wired straight to a socket:
+//!
+//! - **Host side**: the TCP client's bytes go to the bridge's first UART
+//!   through a [`HostLink`]: at the line rate, only once QEMU has read the
+//!   previous ones, stopped by the bridge's XOFF and restarted by its XON,
+//!   as a PC's serial port with IXON does. XON and XOFF from the bridge are
+//!   flow control, not data: they never reach the client; the bridge's
+//!   other bytes go to the client as they come.
+//! - **Controller side**: the simulator (`iai_cli::sim`, the controller
+//!   `iai simulate` runs) serves the second UART in this process
+//!   ([`SimThread`]), its replies paced to the line rate the same way.
+//!
+//! Why the simulator runs in-process rather than as an `iai simulate
+//! --connect` process: pacing needs to know how much QEMU has not read
+//! yet, which a Unix socket to QEMU tells (`SIOCOUTQ`) and a TCP socket
+//! does not (loopback TCP counts bytes as delivered once the kernel holds
+//! them); and one process is one thing to stop: QEMU is this process's
+//! child, killed through its own handle (and by the kernel should this
+//! process die without stopping it, [`QemuSession::start_tied`]), and the
+//! simulator is a thread.
+//!
+//! One client at a time: a connection made while a client is connected
+//! is closed at once, unanswered. What a client wrote before it closed its
+//! connection is still sent (a serial driver drains its output on close),
+//! and one connection made meanwhile waits for that instead of being
+//! refused. Between clients the line is made clean: an XON (in case the
+//! client sent an XOFF, which stops the bridge's transmitter), CR LF if
+//! the client stopped in the middle of a frame (the bridge drops a partial
+//! frame, and ends a partial 26DH with `&` B01), then the bridge's own
+//! status query, whose reply comes after anything the bridge still owed;
+//! what came before it is dropped. Only then is the next client served
+//! (its bytes wait meanwhile).
+//!
+//! The bridge runs the default configuration (controller station 99,
+//! bridge station BB, XON/XOFF, forward all) at the chosen baud rate on
+//! both sides; the quit sequence stays off, since a client's bytes could
+//! hold it. The gateway stops when asked (`stop`), or fails when QEMU
+//! exits on its own.
+
+use std::collections::VecDeque;
+use std::io::{self, Read, Write};
+use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+use std::thread::{self, JoinHandle};
+use std::time::{Duration, Instant};
+
+use firmware_example::config::Config;
+use firmware_example::serial::XON;
+use iai_protocol_b::frame::Station;
+
+use crate::bridge::{status_query, HostLink, SimThread};
+use crate::qemu::{build_firmware, Board, QemuSession, READY_MARKER};
+use crate::sim::{Faults, Simulator};
+
+/// What the gateway runs.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// The QEMU board.
+    pub board: Board,
+    /// Line rate of both sides (one of `firmware_example::config::BAUD_RATES`).
+    pub baud: u32,
+    /// TCP port on 127.0.0.1 for the host side (0: a free one).
+    pub port: u16,
+    /// The simulated controller's time per command, ms.
+    pub reply_delay_ms: u32,
+    /// Faults the simulated controller injects.
+    pub faults: Faults,
+    /// Seed of the fault draws.
+    pub seed: u64,
+    /// The firmware ELF (default: built with the `firmware` profile).
+    pub elf: Option<PathBuf>,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            board: Board::Lm3s6965,
+            baud: 115_200,
+            port: 0,
+            reply_delay_ms: 2,
+            faults: Faults::default(),
+            seed: 1,
+            elf: None,
+        }
+    }
+}
+
+/// How long QEMU may take to boot the firmware.
+const BOOT_TIMEOUT: Duration = Duration::from_secs(30);
+/// How long the bridge may take to answer its status query (it first
+/// finishes what it was doing: a command it forwarded waits up to 3 s for
+/// the controller, three times over).
+const FENCE_TIMEOUT: Duration = Duration::from_secs(15);
+/// A client that takes nothing for this long is dropped.
+const CLIENT_WRITE_TIMEOUT: Duration = Duration::from_secs(10);
+/// How often the loops look at their stop flags.
+const POLL: Duration = Duration::from_millis(20);
+
+/// The configuration block the gateway boots the bridge with.
+pub fn config(baud: u32) -> Config {
+    Config {
+        upstream_baud: baud,
+        downstream_baud: baud,
+        ..Config::DEFAULT
+    }
+}
+
+fn log(line: &str) {
+    let mut err = io::stderr().lock();
+    let _ = writeln!(err, "gateway: {line}");
+}
+
+/// Boots the bridge, puts the simulator behind it, listens on
+/// 127.0.0.1:`port`, calls `on_ready` with that address once the bridge
+/// has answered through the relay, and relays clients until `stop` is set.
+/// An error if anything fails to start or QEMU exits on its own; QEMU is
+/// stopped in every case.
+pub fn run(
+    opts: &Options,
+    stop: &AtomicBool,
+    on_ready: impl FnOnce(SocketAddr),
+) -> Result<(), String> {
+    if !firmware_example::config::BAUD_RATES.contains(&opts.baud) {
+        return Err(format!(
+            "baud rate {} is not one the bridge runs at ({:?})",
+            opts.baud,
+            firmware_example::config::BAUD_RATES
+        ));
+    }
+    let listener = TcpListener::bind(("127.0.0.1", opts.port))
+        .map_err(|e| format!("cannot listen on 127.0.0.1:{}: {e}", opts.port))?;
+    let addr = listener.local_addr().map_err(|e| e.to_string())?;
+    listener
+        .set_nonblocking(true)
+        .map_err(|e| format!("listener: {e}"))?;
+    let elf = match &opts.elf {
+        Some(p) => p.clone(),
+        None => build_firmware(opts.board)
+            .map_err(|e| format!("building the firmware for {}: {e}", opts.board))?,
+    };
+    let cfg = config(opts.baud);
+    // Tied: QEMU goes with this thread even if the process is killed.
+    let mut qemu = QemuSession::start_tied(
+        opts.board,
+        &elf,
+        BOOT_TIMEOUT,
+        Some(READY_MARKER),
+        &[],
+        Some(&cfg),
+    )
+    .map_err(|e| format!("starting QEMU: {e}"))?;
+
+    let mut sim = Simulator::tta(cfg.controller_station);
+    sim.response_delay_ms = opts.reply_delay_ms;
+    sim.refuse = true;
+    let sim = sim.with_faults(opts.faults.clone(), opts.seed);
+    let downstream = qemu
+        .downstream
+        .try_clone()
+        .map_err(|e| format!("controller side: {e}"))?;
+    let sim = SimThread::spawn(sim, downstream, Some(opts.baud));
+    let link = HostLink::new(&qemu.upstream, Some(opts.baud), true)
+        .map_err(|e| format!("host side: {e}"))?;
+    let link = Arc::new(link);
+
+    let (client, result): Served = match status_query(&link, cfg.bridge_station, FENCE_TIMEOUT) {
+        Err(e) => (
+            None,
+            Err(format!("the bridge did not answer through the relay: {e}")),
+        ),
+        Ok(_) => {
+            link.discard_received();
+            log(&format!(
+                "{} (QEMU pid {}) up; host side relayed at {} baud with XON/XOFF, \
+                 simulated controller (station {:02X}) behind it; Ctrl-C stops",
+                opts.board,
+                qemu.pid(),
+                opts.baud,
+                cfg.controller_station.0
+            ));
+            on_ready(addr);
+            serve(&listener, &link, &mut qemu, stop, cfg.bridge_station)
+        }
+    };
+
+    // QEMU first: its end closes both lines, which ends the threads.
+    drop(qemu);
+    if let Some(client) = client {
+        client.join_within(Duration::from_secs(5));
+    }
+    match sim.join() {
+        Ok(sim) => {
+            let s = sim.stats();
+            log(&format!(
+                "stopped; the simulator answered {} command(s) and holds {} position(s)",
+                s.commands,
+                sim.table.len()
+            ));
+        }
+        Err(e) => log(&format!("stopped; {e}")),
+    }
+    result
+}
+
+/// The client served when the relay ended, and how it ended.
+type Served = (Option<Client>, Result<(), String>);
+
+/// Relays one client at a time until `stop`; returns the client being
+/// served at that moment.
+fn serve(
+    listener: &TcpListener,
+    link: &Arc<HostLink>,
+    qemu: &mut QemuSession,
+    stop: &AtomicBool,
+    bridge: Station,
+) -> Served {
+    let mut client: Option<Client> = None;
+    // A connection made while the client before it was leaving.
+    let mut next: Option<(TcpStream, SocketAddr)> = None;
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            return (client, Ok(()));
+        }
+        match qemu.try_wait() {
+            Ok(None) => {}
+            Ok(Some(status)) => {
+                // A Ctrl-C on the terminal reaches QEMU as well as us.
+                let end = Instant::now() + Duration::from_millis(500);
+                while !stop.load(Ordering::Relaxed) && Instant::now() < end {
+                    thread::sleep(POLL);
+                }
+                if stop.load(Ordering::Relaxed) {
+                    return (client, Ok(()));
+                }
+                let why = format!(
+                    "QEMU exited on its own ({status})\n{}",
+                    qemu.stderr_so_far()
+                );
+                return (client, Err(why));
+            }
+            Err(e) => return (client, Err(format!("QEMU: {e}"))),
+        }
+        retire_finished(&mut client, link, bridge);
+        if client.is_none() {
+            if let Some((conn, peer)) = next.take() {
+                client = admit(conn, peer, link);
+            }
+        }
+        match listener.accept() {
+            Ok((conn, peer)) => match &client {
+                None if next.is_none() => client = admit(conn, peer, link),
+                // The client before closed its connection and its last
+                // bytes are still going out: this one waits for them.
+                Some(c) if c.leaving() && next.is_none() => next = Some((conn, peer)),
+                _ => {
+                    log(&format!(
+                        "refused {peer}: one client at a time, and one is connected"
+                    ));
+                    let _ = conn.shutdown(Shutdown::Both);
+                }
+            },
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => thread::sleep(POLL),
+            Err(e) => {
+                log(&format!("accept: {e}"));
+                thread::sleep(POLL);
+            }
+        }
+    }
+}
+
+/// Starts serving `conn`.
+fn admit(conn: TcpStream, peer: SocketAddr, link: &Arc<HostLink>) -> Option<Client> {
+    // What the bridge sent while nobody listened is not this client's.
+    link.discard_received();
+    match Client::start(conn, peer, Arc::clone(link)) {
+        Ok(c) => {
+            log(&format!("{peer} connected"));
+            Some(c)
+        }
+        Err(e) => {
+            log(&format!("{peer}: {e}"));
+            None
+        }
+    }
+}
+
+/// Takes the client out once its threads ended, and cleans the line.
+fn retire_finished(client: &mut Option<Client>, link: &HostLink, bridge: Station) {
+    if !client.as_ref().is_some_and(Client::finished) {
+        return;
+    }
+    if let Some(c) = client.take() {
+        let end = c.join();
+        log(&format!(
+            "{} left ({} byte(s) in, {} out{})",
+            end.peer,
+            end.bytes_in,
+            end.bytes_out,
+            end.why.map(|w| format!("; {w}")).unwrap_or_default()
+        ));
+        settle(link, bridge, end.mid_frame);
+    }
+}
+
+/// Makes the line clean after a client: XON, the end of a frame it left
+/// unfinished, then the bridge's status query, dropping what came before
+/// its reply.
+fn settle(link: &HostLink, bridge: Station, mid_frame: bool) {
+    let _ = link.write_raw(&[XON]);
+    if mid_frame {
+        if let Err(e) = link.send(b"\r\n", |_| {}) {
+            log(&format!("ending the client's partial frame: {e}"));
+        }
+    }
+    if let Err(e) = status_query(link, bridge, FENCE_TIMEOUT) {
+        log(&format!(
+            "the bridge did not answer its status query after the client left ({e}); going on"
+        ));
+    }
+    link.discard_received();
+}
+
+/// Bytes read from a client and not yet sent to the bridge.
+#[derive(Default)]
+struct Inbox {
+    data: VecDeque<u8>,
+    /// The client closed its side (or its connection failed).
+    closed: bool,
+}
+
+type Shared<T> = Arc<(Mutex<T>, Condvar)>;
+
+fn lock<T>(shared: &Shared<T>) -> MutexGuard<'_, T> {
+    shared.0.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// One client: a thread reads it, one sends what it wrote to the bridge,
+/// one sends the bridge's bytes to it.
+struct Client {
+    peer: SocketAddr,
+    done: Arc<AtomicBool>,
+    inbox: Shared<Inbox>,
+    threads: [JoinHandle<()>; 3],
+    upward: Arc<Mutex<Upward>>,
+    bytes_out: Arc<AtomicU64>,
+}
+
+/// What went up from a client.
+#[derive(Default)]
+struct Upward {
+    bytes: u64,
+    last: Option<u8>,
+    why: Option<String>,
+}
+
+/// How a client's connection ended.
+struct End {
+    peer: SocketAddr,
+    bytes_in: u64,
+    bytes_out: u64,
+    mid_frame: bool,
+    why: Option<String>,
+}
+
+impl Client {
+    fn start(conn: TcpStream, peer: SocketAddr, link: Arc<HostLink>) -> io::Result<Client> {
+        conn.set_nonblocking(false)?;
+        conn.set_nodelay(true)?;
+        conn.set_read_timeout(Some(POLL))?;
+        conn.set_write_timeout(Some(CLIENT_WRITE_TIMEOUT))?;
+        let reader = conn.try_clone()?;
+        let done = Arc::new(AtomicBool::new(false));
+        let inbox: Shared<Inbox> = Arc::default();
+        let upward = Arc::new(Mutex::new(Upward::default()));
+        let bytes_out = Arc::new(AtomicU64::new(0));
+        let threads = [
+            {
+                let (done, inbox) = (Arc::clone(&done), Arc::clone(&inbox));
+                thread::spawn(move || read_client(reader, &inbox, &done))
+            },
+            {
+                let (done, inbox, link) =
+                    (Arc::clone(&done), Arc::clone(&inbox), Arc::clone(&link));
+                let up = Arc::clone(&upward);
+                thread::spawn(move || forward_up(&inbox, &link, &done, &up))
+            },
+            {
+                let (done, sent) = (Arc::clone(&done), Arc::clone(&bytes_out));
+                thread::spawn(move || forward_down(conn, &link, &done, &sent))
+            },
+        ];
+        Ok(Client {
+            peer,
+            done,
+            inbox,
+            threads,
+            upward,
+            bytes_out,
+        })
+    }
+
+    /// Whether the client closed its side (or the connection failed): it
+    /// is leaving, though what it wrote may still be going out.
+    fn leaving(&self) -> bool {
+        self.done.load(Ordering::Relaxed) || lock(&self.inbox).closed
+    }
+
+    fn finished(&self) -> bool {
+        self.threads.iter().all(JoinHandle::is_finished)
+    }
+
+    fn join(self) -> End {
+        let mut why = None;
+        for t in self.threads {
+            if t.join().is_err() {
+                why = Some("a relay thread failed".to_owned());
+            }
+        }
+        let up = std::mem::take(&mut *self.upward.lock().unwrap_or_else(PoisonError::into_inner));
+        End {
+            peer: self.peer,
+            bytes_in: up.bytes,
+            bytes_out: self.bytes_out.load(Ordering::Relaxed),
+            mid_frame: up.last.is_some_and(|b| b != b'\n'),
+            why: up.why.or(why),
+        }
+    }
+
+    /// Ends the client's threads (they end within [`POLL`] or so, or once
+    /// QEMU is gone) and waits up to `limit` for them.
+    fn join_within(self, limit: Duration) {
+        self.done.store(true, Ordering::Relaxed);
+        self.inbox.1.notify_all();
+        let end = Instant::now() + limit;
+        while !self.finished() && Instant::now() < end {
+            thread::sleep(POLL);
+        }
+        if self.finished() {
+            self.join();
+        }
+    }
+}
+
+/// Reads everything the client writes into `inbox` until it closes.
+fn read_client(mut conn: TcpStream, inbox: &Shared<Inbox>, done: &AtomicBool) {
+    let mut buf = [0u8; 4096];
+    while !done.load(Ordering::Relaxed) {
+        match conn.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => {
+                lock(inbox)
+                    .data
+                    .extend(buf.get(..n).unwrap_or_default().iter().copied());
+                inbox.1.notify_all();
+            }
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::WouldBlock
+                        | io::ErrorKind::TimedOut
+                        | io::ErrorKind::Interrupted
+                ) => {}
+            Err(_) => break,
+        }
+    }
+    lock(inbox).closed = true;
+    inbox.1.notify_all();
+}
+
+/// Client → bridge: what the client wrote, at the line rate, until it
+/// closed and all is sent (or the other direction failed).
+fn forward_up(inbox: &Shared<Inbox>, link: &HostLink, done: &AtomicBool, up: &Mutex<Upward>) {
+    // Small pieces: the bridge's XOFF stops the link between them.
+    const PIECE: usize = 256;
+    loop {
+        let piece: Vec<u8> = {
+            let mut st = lock(inbox);
+            loop {
+                if done.load(Ordering::Relaxed) {
+                    return;
+                }
+                if !st.data.is_empty() {
+                    let n = st.data.len().min(PIECE);
+                    break st.data.drain(..n).collect();
+                }
+                if st.closed {
+                    done.store(true, Ordering::Relaxed);
+                    return;
+                }
+                st = inbox
+                    .1
+                    .wait_timeout(st, POLL)
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .0;
+            }
+        };
+        let sent = link.send(&piece, |_| {});
+        let mut u = up.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Err(e) = sent {
+            u.why = Some(format!("the bridge took no more: {e}"));
+            done.store(true, Ordering::Relaxed);
+            return;
+        }
+        u.bytes += piece.len() as u64;
+        u.last = piece.last().copied().or(u.last);
+    }
+}
+
+/// Bridge → client: the bridge's bytes (XON/XOFF taken out by the link)
+/// as they come, until the client is gone.
+fn forward_down(mut conn: TcpStream, link: &HostLink, done: &AtomicBool, sent: &AtomicU64) {
+    while !done.load(Ordering::Relaxed) {
+        match link.read_some(POLL) {
+            Ok(bytes) if bytes.is_empty() => {}
+            Ok(bytes) => {
+                if conn.write_all(&bytes).is_err() {
+                    break;
+                }
+                sent.fetch_add(bytes.len() as u64, Ordering::Relaxed);
+            }
+            Err(_) => break,
+        }
+    }
+    done.store(true, Ordering::Relaxed);
+    let _ = conn.shutdown(Shutdown::Both);
+}

@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# The bridge firmware under QEMU (lm3s6965evb by default) with the
+# controller simulator behind it and its host side on a TCP port: prints
+# `protocol-b 127.0.0.1:PORT` once it is ready, then point any client at
+# it, for instance `iai send 212 query_axis_pattern=1 --tcp 127.0.0.1:PORT`.
+# The port behaves like a serial cable to the bridge: bytes go at the line
+# rate and the bridge's XON/XOFF are honoured (QEMU models neither). One
+# client at a time. Ctrl-C stops QEMU and the simulator.
+# Arguments go to the gateway binary: --port P (default: a free port),
+# --baud B (default 115200), --board lm3s6965|mps2-an386,
+# --reply-delay-ms MS, --faults SPEC (as iai simulate), --seed S.
+# Also builds the iai tool (target/release/iai).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+./tools/setup.sh >&2
+board=lm3s6965
+args=("$@")
+for ((i = 0; i < ${#args[@]}; i++)); do
+  case "${args[i]}" in
+    --board) board=${args[i + 1]:-} ;;
+    --board=*) echo "gateway.sh: write --board NAME (two words)" >&2; exit 2 ;;
+  esac
+done
+case "$board" in
+  lm3s6965 | lm3s6965evb) target=thumbv7m-none-eabi; bin=lm3s6965 ;;
+  mps2-an386) target=thumbv7em-none-eabihf; bin=mps2-an386 ;;
+  *) echo "gateway.sh: --board takes lm3s6965 or mps2-an386, not '$board'" >&2; exit 2 ;;
+esac
+echo "==> building the firmware ($bin)" >&2
+cargo build -q -p firmware-example --profile firmware --target "$target" \
+  --no-default-features --features "board-$bin" --bin "$bin"
+echo "==> building the gateway and iai (release)" >&2
+cargo build -q -p host-tests --release --bin gateway
+cargo build -q -p iai-cli --release --bin iai
+tdir=${CARGO_TARGET_DIR:-target}
+echo "==> starting (iai is $tdir/release/iai)" >&2
+exec "$tdir/release/gateway" --elf "$tdir/$target/firmware/$bin" "$@"
