@@ -398,7 +398,7 @@ mod tests {
     fn a_212h_reply_reads_as_its_status_bits() {
         let r: AxisStatusResponse =
             parse(b"#99212031C000000000008980D400000FFFFF9C460\r\n").unwrap();
-        let (a1, a2) = (r.axes.get(0).unwrap(), r.axes.get(1).unwrap());
+        let (a1, a2) = (r.axes.first().unwrap(), r.axes.get(1).unwrap());
         assert_eq!(
             (a1.in_use(), a1.homing(), a1.servo_on(), a1.completed()),
             (false, Homing::Done, true, true)
