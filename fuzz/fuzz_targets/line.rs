@@ -80,21 +80,20 @@ use iai_protocol_b::line::{Due, Heard, Line, LineConfig, LineStats};
 use libfuzzer_sys::fuzz_target;
 use records::Input;
 
-/// Finding F14 (open, fuzz/README.md): `Line::broken` compares the
+/// Finding F14 (fixed, fuzz/README.md): `Line::broken` compares the
 /// reply's deadline with `clock::reached`, so a deadline that passed more
 /// than 2^31 ms before the broken frame (no poll meanwhile) reads as a
 /// future one and is replaced by the turnaround after the frame: the
-/// timeout comes `turnaround + 1` ms late. The model tolerates exactly that
-/// until it is fixed.
-const F14_FIXED: bool = false;
+/// timeout came `turnaround + 1` ms late. `true`: the model is strict.
+const F14_FIXED: bool = true;
 
-/// Finding F15 (open, fuzz/README.md): a reply taken for a command without
+/// Finding F15 (fixed, fuzz/README.md): a reply taken for a command without
 /// normal response (an `&` to 25BH) sets no turnaround: only the
 /// controller's restart (`ready_after_ms` after the send) holds the next
 /// command, so a reply later than `ready_after_ms - turnaround` after the
-/// send (a timeout over 10 s, or a late poll) lets it out at once. The
-/// model tolerates exactly that until it is fixed.
-const F15_FIXED: bool = false;
+/// send (a timeout over 10 s, or a late poll) let it out at once. `true`:
+/// the model is strict.
+const F15_FIXED: bool = true;
 
 /// The model's stand-in for "any ID" (an `&`, an unreadable envelope).
 const ANY: u16 = 0xFFFF;
