@@ -1,0 +1,62 @@
+//! The commands' handlers: each takes its parsed arguments and returns
+//! the exit status, or a [`Failure`] for `main` to report.
+
+pub(crate) mod encode;
+pub(crate) mod inspect;
+pub(crate) mod monitor;
+pub(crate) mod send;
+pub(crate) mod simulate;
+pub(crate) mod table_read;
+pub(crate) mod table_write;
+
+use std::io;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+/// What went wrong, and the exit status for it.
+pub(crate) enum Failure {
+    /// Exit 1 with this message.
+    Failed(String),
+    /// The reader of stdout went away: stop quietly.
+    ClosedPipe,
+}
+
+impl From<String> for Failure {
+    fn from(s: String) -> Self {
+        Failure::Failed(s)
+    }
+}
+
+/// A write to stdout: a closed pipe ends the program quietly.
+pub(crate) fn out_err(e: io::Error) -> Failure {
+    if e.kind() == io::ErrorKind::BrokenPipe {
+        Failure::ClosedPipe
+    } else {
+        Failure::Failed(format!("cannot write the output: {e}"))
+    }
+}
+
+pub(crate) type Run = Result<ExitCode, Failure>;
+
+pub(crate) fn stop_flag() -> Arc<AtomicBool> {
+    let flag = Arc::new(AtomicBool::new(false));
+    let f = flag.clone();
+    // A second handler cannot be installed; the first one is enough.
+    let _ = ctrlc::set_handler(move || f.store(true, Ordering::SeqCst));
+    flag
+}
+
+pub(crate) fn progress_bar(total: u64, what: &str) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::with_draw_target(
+        Some(total),
+        indicatif::ProgressDrawTarget::stderr(),
+    );
+    if let Ok(style) = indicatif::ProgressStyle::with_template(
+        "{msg} [{bar:30}] {pos}/{len} records ({per_sec}, {eta} left)",
+    ) {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar.set_message(what.to_string());
+    bar
+}

@@ -1,0 +1,65 @@
+//! `iai send`: one command and its reply.
+
+use std::io::{self, Write};
+use std::process::ExitCode;
+
+use iai_cli::inspect;
+use iai_cli::link::Link;
+use iai_cli::send::{describe, request, Outcome};
+
+use super::encode::build;
+use super::monitor::print_item;
+use super::{out_err, Run};
+use crate::{LineArgs, MessageArgs, OutputArg};
+
+pub(crate) fn show_frame(out: &mut impl Write, frame: &[u8], json: bool) -> io::Result<()> {
+    let mut ins = inspect::Inspector::new();
+    ins.feed(frame);
+    ins.finish();
+    for item in ins.take_items() {
+        print_item(out, &item, json)?;
+    }
+    Ok(())
+}
+
+pub(crate) fn send_cmd(msg: &MessageArgs, line: &LineArgs, output: OutputArg, detail: bool) -> Run {
+    let frame = build(msg, line.station, false, false)?;
+    let profile = line.profile.profile();
+    if let Ok(f) = iai_protocol_b::frame::Frame::new_checked(
+        &frame,
+        iai_protocol_b::checksum::BypassPolicy::Reject,
+    ) {
+        if !profile.supports(f.code()) {
+            return Err(format!(
+                "{:03X}H is not a message of the {} profile",
+                f.code(),
+                profile.name()
+            )
+            .into());
+        }
+        profile
+            .check_command_len(frame.len())
+            .map_err(|e| format!("{:03X}H: {e}", f.code()))?;
+    }
+    let target = line.target();
+    let mut link = Link::open(&target, line.plan().line)?;
+    let json = output == OutputArg::Json;
+    let mut out = io::stdout().lock();
+    let outcome = request(&mut link, &frame, detail).map_err(|e| format!("{target}: {e}"))?;
+    let e = match outcome {
+        Outcome::Reply(reply) => {
+            show_frame(&mut out, &reply, json).map_err(out_err)?;
+            return Ok(ExitCode::SUCCESS);
+        }
+        Outcome::NoReplyExpected => {
+            writeln!(
+                out,
+                "sent; this command has no normal response and no error response came"
+            )
+            .map_err(out_err)?;
+            return Ok(ExitCode::SUCCESS);
+        }
+        Outcome::Failed(e) => e,
+    };
+    Err(describe(&e, &target, detail).into())
+}
