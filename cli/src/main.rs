@@ -95,37 +95,80 @@ pub(crate) enum TableCmd {
     /// status 0 only when the controller holds the table (or, with
     /// --verify off, when every frame was confirmed; the output then says
     /// the table is unverified).
-    Write {
-        /// The CSV file.
-        file: PathBuf,
-        #[command(flatten)]
-        line: LineArgs,
-        /// Read the table back and compare: always (full), only after a
-        /// timeout, error reply or line error (after-fault), or never (off).
-        #[arg(long, value_enum, default_value = "full")]
-        verify: Verify,
-        /// Continue after the last confirmed record of an interrupted
-        /// write (state kept in FILE.csv.iai-state).
-        #[arg(long)]
-        resume: bool,
-    },
-    /// Read positions FIRST .. FIRST+COUNT-1 back as CSV.
-    Read {
-        /// First position number.
-        #[arg(long, value_parser = clap::value_parser!(u16))]
-        first: u16,
-        /// Number of positions.
-        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=65536))]
-        count: u32,
-        /// Write to this file instead of stdout.
-        #[arg(short, long)]
-        output: Option<PathBuf>,
-        /// Axis columns (default: up to the highest axis read).
-        #[arg(long, value_parser = clap::value_parser!(u8).range(1..=8))]
-        axes: Option<u8>,
-        #[command(flatten)]
-        line: LineArgs,
-    },
+    Write(WriteArgs),
+    /// Read positions back as CSV: FIRST .. FIRST+COUNT-1, or --all.
+    Read(ReadArgs),
+    /// Clear positions (246H): FIRST .. FIRST+COUNT-1, or --all. No
+    /// confirmation is asked: the range must be given.
+    Clear(ClearArgs),
+}
+
+#[derive(Args)]
+pub(crate) struct WriteArgs {
+    /// The CSV file.
+    pub file: PathBuf,
+    #[command(flatten)]
+    pub line: LineArgs,
+    /// Read the table back and compare: always (full), only after a
+    /// timeout, error reply or line error (after-fault), or never (off).
+    #[arg(long, value_enum, default_value = "full")]
+    pub verify: Verify,
+    /// Continue after the last confirmed record of an interrupted
+    /// write (state kept in FILE.csv.iai-state).
+    #[arg(long, conflicts_with = "restart")]
+    pub resume: bool,
+    /// Start over although an interrupted write left its state file.
+    #[arg(long)]
+    pub restart: bool,
+    /// Make the controller's table the file's: clear every position 246H
+    /// reaches (0..=8189) first, then write; afterwards 208H must count
+    /// exactly the file's records.
+    #[arg(long)]
+    pub replace: bool,
+}
+
+#[derive(Args)]
+pub(crate) struct ReadArgs {
+    /// First position number.
+    #[arg(long, required_unless_present = "all", requires = "count")]
+    pub first: Option<u16>,
+    /// Number of positions.
+    #[arg(long, requires = "first", value_parser = clap::value_parser!(u32).range(1..=65536))]
+    pub count: Option<u32>,
+    /// The whole table: as many defined positions as 208H counts, looked
+    /// for from position 0 up.
+    #[arg(long, conflicts_with_all = ["first", "count"])]
+    pub all: bool,
+    /// Write to this file instead of stdout (needed for --resume).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Axis columns (default: up to the highest axis read).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=8))]
+    pub axes: Option<u8>,
+    /// Continue an interrupted read into the same -o FILE (state kept in
+    /// FILE.iai-read-state).
+    #[arg(long, conflicts_with = "restart", requires = "output")]
+    pub resume: bool,
+    /// Start over although an interrupted read left its state file.
+    #[arg(long)]
+    pub restart: bool,
+    #[command(flatten)]
+    pub line: LineArgs,
+}
+
+#[derive(Args)]
+pub(crate) struct ClearArgs {
+    /// First position to clear.
+    #[arg(long, required_unless_present = "all", requires = "count")]
+    pub first: Option<u16>,
+    /// Number of positions to clear.
+    #[arg(long, requires = "first", value_parser = clap::value_parser!(u32).range(1..=65536))]
+    pub count: Option<u32>,
+    /// Every position 246H reaches (0..=8189; 0..=4095 on a 2003 X-SEL).
+    #[arg(long, conflicts_with_all = ["first", "count"])]
+    pub all: bool,
+    #[command(flatten)]
+    pub line: LineArgs,
 }
 
 #[derive(Args)]
@@ -309,19 +352,9 @@ fn main() -> ExitCode {
             detail,
         } => cmd::send::send_cmd(&msg, &line, output, detail),
         Cmd::Table { op } => match op {
-            TableCmd::Write {
-                file,
-                line,
-                verify,
-                resume,
-            } => cmd::table_write::table_write(&file, &line, verify, resume),
-            TableCmd::Read {
-                first,
-                count,
-                output,
-                axes,
-                line,
-            } => cmd::table_read::table_read(first, count, output.as_deref(), axes, &line),
+            TableCmd::Write(a) => cmd::table_write::table_write(&a),
+            TableCmd::Read(a) => cmd::table_read::table_read(&a),
+            TableCmd::Clear(a) => cmd::table_clear::table_clear(&a),
         },
         Cmd::Simulate(args) => cmd::simulate::simulate_cmd(&args),
     };
@@ -331,6 +364,12 @@ fn main() -> ExitCode {
         Err(Failure::Failed(msg)) => {
             let _ = writeln!(io::stderr(), "iai: {msg}");
             ExitCode::from(1)
+        }
+        Err(Failure::Exit(code, msg)) => {
+            if !msg.is_empty() {
+                let _ = writeln!(io::stderr(), "iai: {msg}");
+            }
+            ExitCode::from(code)
         }
     }
 }

@@ -6,6 +6,7 @@ pub(crate) mod inspect;
 pub(crate) mod monitor;
 pub(crate) mod send;
 pub(crate) mod simulate;
+pub(crate) mod table_clear;
 pub(crate) mod table_read;
 pub(crate) mod table_write;
 
@@ -14,12 +15,30 @@ use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
+/// Exit status of a run stopped by Ctrl-C (128 + SIGINT, as a shell
+/// reports a process the signal killed).
+pub(crate) const EXIT_INTERRUPTED: u8 = 130;
+
 /// What went wrong, and the exit status for it.
 pub(crate) enum Failure {
     /// Exit 1 with this message.
     Failed(String),
+    /// Exit with this status and message (none if empty: the command
+    /// said it already, as a JSON object on stdout).
+    Exit(u8, String),
     /// The reader of stdout went away: stop quietly.
     ClosedPipe,
+}
+
+impl Failure {
+    /// The failure of a table operation: exit 130 when the user stopped
+    /// it, 1 otherwise.
+    pub(crate) fn of_table(e: &iai_cli::table::TableError, msg: String) -> Failure {
+        match e {
+            iai_cli::table::TableError::Interrupted => Failure::Exit(EXIT_INTERRUPTED, msg),
+            _ => Failure::Failed(msg),
+        }
+    }
 }
 
 impl From<String> for Failure {
@@ -47,14 +66,16 @@ pub(crate) fn stop_flag() -> Arc<AtomicBool> {
     flag
 }
 
-pub(crate) fn progress_bar(total: u64, what: &str) -> indicatif::ProgressBar {
+/// A progress bar on stderr (drawn only when stderr is a terminal) of
+/// `total` `unit` (records, positions, bytes).
+pub(crate) fn progress_bar(total: u64, what: &str, unit: &str) -> indicatif::ProgressBar {
     let bar = indicatif::ProgressBar::with_draw_target(
         Some(total),
         indicatif::ProgressDrawTarget::stderr(),
     );
-    if let Ok(style) = indicatif::ProgressStyle::with_template(
-        "{msg} [{bar:30}] {pos}/{len} records ({per_sec}, {eta} left)",
-    ) {
+    if let Ok(style) = indicatif::ProgressStyle::with_template(&format!(
+        "{{msg}} [{{bar:30}}] {{pos}}/{{len}} {unit} ({{per_sec}}, {{eta}} left)"
+    )) {
         bar.set_style(style.progress_chars("=> "));
     }
     bar.set_message(what.to_string());
