@@ -28,7 +28,7 @@ use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
 use iai_protocol_b::frame::{Frame, Header, Station};
 use iai_protocol_b::message::decode_any;
 
-use args::{leaf_names, write_level, Args};
+use args::{leaf_names, write_level, Args, Rules};
 use json::write_json_level;
 use layout::frame_bytes;
 
@@ -73,6 +73,7 @@ pub fn encode(opts: &EncodeOptions) -> Result<Vec<u8>, String> {
             }
         )
     })?;
+    let rules = Rules { id, header };
     let mut body = Vec::new();
     if let Some(json) = &opts.json {
         if !opts.assignments.is_empty() {
@@ -81,38 +82,86 @@ pub fn encode(opts: &EncodeOptions) -> Result<Vec<u8>, String> {
         let obj = json
             .as_object()
             .ok_or_else(|| format!("the JSON must be an object of fields, found {json}"))?;
-        write_json_level(&nodes, obj, "", &mut body)?;
+        let mut missing = Vec::new();
+        write_json_level(&nodes, obj, "", rules, &mut missing, &mut body)?;
+        refuse_missing(id, &missing)?;
         return finish_frame(opts, header, id, &body);
     }
-    let mut args = Args::parse(&opts.assignments)?;
-    write_level(&nodes, &[], &[], &mut args, &mut body)?;
-    let unknown: Vec<&String> = args
+    let mut args = Args::parse(&opts.assignments, rules)?;
+    // A name the message does not have is reported first: a misspelled
+    // field would otherwise show as a missing one.
+    let mut known = Vec::new();
+    leaf_names(&nodes, "", &mut known);
+    let names: Vec<String> = known
+        .iter()
+        .map(|(g, n)| {
+            if g.is_empty() || g == n {
+                n.clone()
+            } else {
+                format!("{g}.{n}")
+            }
+        })
+        .collect();
+    let unknown: Vec<String> = args
         .values
         .keys()
-        .filter(|k| !args.used.contains_key(*k))
+        .filter(|k| {
+            !known
+                .iter()
+                .any(|(g, n)| *k == n || **k == format!("{g}.{n}"))
+        })
+        .map(|k| match closest(k, &names) {
+            Some(c) => format!("{k} (did you mean {c}?)"),
+            None => k.clone(),
+        })
         .collect();
     if !unknown.is_empty() {
-        let mut known = Vec::new();
-        leaf_names(&nodes, "", &mut known);
         return Err(format!(
             "{id:03X}H has no field {}; its fields: {}",
-            unknown
-                .iter()
-                .map(|s| s.as_str())
-                .collect::<Vec<_>>()
-                .join(", "),
-            known
-                .iter()
-                .map(|(g, n)| if g.is_empty() || g == n {
-                    n.clone()
-                } else {
-                    format!("{g}.{n}")
-                })
-                .collect::<Vec<_>>()
-                .join(" ")
+            unknown.join(", "),
+            names.join(" ")
         ));
     }
+    write_level(&nodes, &[], &[], &mut args, &mut body)?;
+    refuse_missing(id, &args.missing)?;
     finish_frame(opts, header, id, &body)
+}
+
+/// The fields that must be given and were not, named.
+fn refuse_missing(id: u16, missing: &[String]) -> Result<(), String> {
+    if missing.is_empty() {
+        return Ok(());
+    }
+    Err(format!(
+        "{id:03X}H needs {}: give {} (`iai encode {id:03X} --fields` lists the fields and which may be left out)",
+        if missing.len() == 1 { "a field that is missing" } else { "fields that are missing" },
+        missing.join(", ")
+    ))
+}
+
+/// The name in `names` closest to `k` by edit distance, if close enough
+/// to be a misspelling.
+fn closest<'n>(k: &str, names: &'n [String]) -> Option<&'n str> {
+    let dist = |a: &str, b: &str| {
+        let b: Vec<char> = b.chars().collect();
+        let mut row: Vec<usize> = (0..=b.len()).collect();
+        for (i, ca) in a.chars().enumerate() {
+            let mut prev = row[0];
+            row[0] = i + 1;
+            for (j, cb) in b.iter().enumerate() {
+                let cur = row[j + 1];
+                row[j + 1] = (prev + usize::from(ca != *cb)).min(row[j] + 1).min(cur + 1);
+                prev = cur;
+            }
+        }
+        row[b.len()]
+    };
+    names
+        .iter()
+        .map(|n| (dist(k, n), n))
+        .filter(|(d, n)| *d <= (n.len() / 3).max(2))
+        .min_by_key(|(d, _)| *d)
+        .map(|(_, n)| n.as_str())
 }
 
 fn finish_frame(
@@ -141,21 +190,32 @@ fn encode_error(opts: &EncodeOptions) -> Result<Vec<u8>, String> {
         .and_then(|f| decode_any(&f).ok())
         .map(|d| tree(&d.message))
         .ok_or("error responses cannot be built")?;
+    let rules = Rules {
+        id: 0,
+        header: Header::Error,
+    };
     let mut digits = Vec::new();
     match &opts.json {
         Some(json) => {
             let obj = json
                 .as_object()
                 .ok_or_else(|| format!("the JSON must be an object of fields, found {json}"))?;
-            write_json_level(&nodes, obj, "", &mut digits)?;
+            let mut missing = Vec::new();
+            write_json_level(&nodes, obj, "", rules, &mut missing, &mut digits)?;
+            if !missing.is_empty() {
+                return Err("an error response needs its error_code".into());
+            }
         }
         None => {
-            let mut args = Args::parse(&opts.assignments)?;
-            write_level(&nodes, &[], &[], &mut args, &mut digits)?;
-            if let Some(k) = args.values.keys().find(|k| !args.used.contains_key(*k)) {
+            let mut args = Args::parse(&opts.assignments, rules)?;
+            if let Some(k) = args.values.keys().find(|k| *k != "error_code") {
                 return Err(format!(
                     "an error response has no field {k}; its field: error_code"
                 ));
+            }
+            write_level(&nodes, &[], &[], &mut args, &mut digits)?;
+            if !args.missing.is_empty() {
+                return Err("an error response needs its error_code (error_code=0x0E4)".into());
             }
         }
     }
@@ -170,12 +230,12 @@ fn encode_error(opts: &EncodeOptions) -> Result<Vec<u8>, String> {
 pub fn field_help(header: Header, id: u16) -> Vec<String> {
     let mut out = Vec::new();
     if let Some(nodes) = layout(header, id) {
-        help_level(&nodes, 0, &mut out);
+        help_level(&nodes, 0, Rules { id, header }, &mut out);
     }
     out
 }
 
-fn help_level(nodes: &[Node], depth: usize, out: &mut Vec<String>) {
+fn help_level(nodes: &[Node], depth: usize, rules: Rules, out: &mut Vec<String>) {
     let pad = "  ".repeat(depth + 1);
     for n in nodes {
         match n {
@@ -187,13 +247,24 @@ fn help_level(nodes: &[Node], depth: usize, out: &mut Vec<String>) {
             } => {
                 let fixed = matches!(value, Val::Text(_)) && spec.radix != Radix::Text;
                 let unit = super::fields::unit_suffix(", ", unit);
-                let note = if fixed { ", fixed" } else { "" };
+                let mut note = if fixed {
+                    ", fixed".to_string()
+                } else {
+                    String::new()
+                };
+                if let Some(d) = crate::meaning::default_meaning(rules.id, name) {
+                    note.push_str(&format!(", optional: {d}"));
+                }
+                let codes = rules.codes(name);
+                if !codes.is_empty() {
+                    note.push_str(&format!(", names: {}", args::code_list(codes)));
+                }
                 out.push(format!("{pad}{name} ({}{unit}{note})", describe(*spec)));
             }
             Node::Group { name, info, items } => {
                 out.push(format!("{pad}{name}: repeated, up to {} item(s)", info.max));
                 if let Some(first) = items.first() {
-                    help_level(first, depth + 1, out);
+                    help_level(first, depth + 1, rules, out);
                 }
             }
         }

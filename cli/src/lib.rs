@@ -11,6 +11,7 @@ pub mod encode;
 pub mod fields;
 pub mod inspect;
 pub mod link;
+pub mod meaning;
 pub mod resume;
 pub mod send;
 pub mod sim;

@@ -3,6 +3,8 @@
 
 mod cmd;
 
+use cmd::help;
+
 use std::io::{self, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -16,8 +18,12 @@ use iai_protocol_b::frame::Station;
 use iai_protocol_b::profile::Profile;
 
 /// IAI protocol B tools: captures, messages, position tables, a simulator.
+///
+/// Flags mean the same in every command: --json prints JSON (one object
+/// per line) on stdout; -o/--output names an output file; --fields-json
+/// and --fields-file give a message's fields as JSON.
 #[derive(Parser)]
-#[command(name = "iai", version, about, long_about = None)]
+#[command(name = "iai", version, about, after_help = help::IAI)]
 pub(crate) struct Cli {
     #[command(subcommand)]
     command: Cmd,
@@ -25,9 +31,11 @@ pub(crate) struct Cli {
 
 #[derive(Subcommand)]
 pub(crate) enum Cmd {
-    /// List every frame of a capture with offsets, fields and checksum
-    /// status, and every error at its byte offset. Exit status 1 if the
-    /// capture had errors (broken frames, noise, bodies that do not decode).
+    /// List every frame of a capture with offsets (hex), fields, what
+    /// their values mean and checksum status, and every error at its byte
+    /// offset. Exit status 1 if the capture had errors (broken frames,
+    /// noise, bodies that do not decode).
+    #[command(after_help = help::INSPECT)]
     Inspect {
         /// Raw bytes, or a text log with one frame per line (optionally
         /// prefixed '> '/'< ' or 'TX '/'RX ', with \r \n \\ \xNN escapes);
@@ -40,7 +48,10 @@ pub(crate) enum Cmd {
         #[arg(long, value_enum)]
         format: Option<FormatArg>,
     },
-    /// Build one frame from field=value arguments or JSON.
+    /// Build one frame from field=value arguments or JSON. Only the frame
+    /// goes to stdout (escaped, one line; --raw: the bytes); its checksum
+    /// and length go to stderr.
+    #[command(after_help = help::ENCODE)]
     Encode {
         #[command(flatten)]
         msg: MessageArgs,
@@ -53,39 +64,61 @@ pub(crate) enum Cmd {
         /// Send '@@' instead of the checksum.
         #[arg(long)]
         bypass: bool,
-        /// List the message's fields instead.
+        /// List the message's fields instead (which may be left out, and
+        /// the names a field takes).
         #[arg(long)]
         fields: bool,
+        /// Write the frame's bytes as they go on the wire (CR LF
+        /// included), not escaped.
+        #[arg(long)]
+        raw: bool,
     },
-    /// List the frames arriving on a line, live.
+    /// List the frames arriving on a line, live, until Ctrl-C (exit 130).
+    #[command(after_help = help::MONITOR)]
     Monitor {
         #[command(flatten)]
         line: LineArgs,
         /// One JSON object per line.
         #[arg(long)]
         json: bool,
+        /// Prefix each entry with the time since the start ("t_ms" in
+        /// JSON).
+        #[arg(long)]
+        timestamps: bool,
+        /// Also save the bytes as received to FILE (raw; `iai inspect`
+        /// reads it).
+        #[arg(long, value_name = "FILE")]
+        save: Option<PathBuf>,
     },
     /// Send one command, wait for its reply (3 s, resent up to 3 times
-    /// when resending cannot repeat an operation) and print it.
+    /// when resending cannot repeat an operation) and print it with what
+    /// its values mean. A field without a documented default must be
+    /// given.
+    #[command(after_help = help::SEND)]
     Send {
         #[command(flatten)]
         msg: MessageArgs,
         #[command(flatten)]
         line: LineArgs,
-        /// Print the reply as JSON (as `inspect --json` does).
-        #[arg(long, value_enum, default_value = "text")]
-        output: OutputArg,
+        /// Print the reply, or the failure, as one JSON object (the reply
+        /// as `inspect --json` prints it).
+        #[arg(long)]
+        json: bool,
+        /// Former spelling of --json (--output json).
+        #[arg(long, value_enum, hide = true)]
+        output: Option<OutputArg>,
         /// On an error response, also query its details (216H, latest
         /// system error).
         #[arg(long)]
         detail: bool,
     },
-    /// Position tables as CSV (see the README for the format).
+    /// Position tables as CSV.
     Table {
         #[command(subcommand)]
         op: TableCmd,
     },
     /// Run the controller simulator.
+    #[command(after_help = help::SIMULATE)]
     Simulate(SimArgs),
 }
 
@@ -95,11 +128,14 @@ pub(crate) enum TableCmd {
     /// status 0 only when the controller holds the table (or, with
     /// --verify off, when every frame was confirmed; the output then says
     /// the table is unverified).
+    #[command(after_help = help::TABLE_WRITE)]
     Write(WriteArgs),
     /// Read positions back as CSV: FIRST .. FIRST+COUNT-1, or --all.
+    #[command(after_help = help::TABLE_READ)]
     Read(ReadArgs),
     /// Clear positions (246H): FIRST .. FIRST+COUNT-1, or --all. No
     /// confirmation is asked: the range must be given.
+    #[command(after_help = help::TABLE_CLEAR)]
     Clear(ClearArgs),
 }
 
@@ -178,12 +214,13 @@ pub(crate) struct MessageArgs {
     /// field=value: decimal or 0x hex, one optional '-' for signed fields;
     /// repeat-group fields take comma lists, '/' between outer items.
     assignments: Vec<String>,
-    /// The fields as JSON, in the form `inspect --json` prints under "fields".
-    #[arg(long, conflicts_with = "json_file")]
-    json: Option<String>,
-    /// The fields as JSON, from a file.
-    #[arg(long)]
-    json_file: Option<PathBuf>,
+    /// The fields as JSON, in the form `inspect --json` prints under
+    /// "fields".
+    #[arg(long, value_name = "JSON", conflicts_with = "fields_file")]
+    fields_json: Option<String>,
+    /// The fields as JSON, from a file (former spelling: --json-file).
+    #[arg(long, value_name = "FILE", alias = "json-file")]
+    fields_file: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -343,14 +380,24 @@ fn main() -> ExitCode {
             response,
             bypass,
             fields,
-        } => cmd::encode::encode_cmd(&msg, station, response, bypass, fields),
-        Cmd::Monitor { line, json } => cmd::monitor::monitor_cmd(&line, json),
+            raw,
+        } => cmd::encode::encode_cmd(&msg, station, response, bypass, fields, raw),
+        Cmd::Monitor {
+            line,
+            json,
+            timestamps,
+            save,
+        } => cmd::monitor::monitor_cmd(&line, json, timestamps, save.as_deref()),
         Cmd::Send {
             msg,
             line,
+            json,
             output,
             detail,
-        } => cmd::send::send_cmd(&msg, &line, output, detail),
+        } => {
+            let json = json || output == Some(OutputArg::Json);
+            cmd::send::send_cmd(&msg, &line, json, detail)
+        }
         Cmd::Table { op } => match op {
             TableCmd::Write(a) => cmd::table_write::table_write(&a),
             TableCmd::Read(a) => cmd::table_read::table_read(&a),

@@ -85,3 +85,52 @@ pub fn describe(e: &Failure, target: &impl std::fmt::Display, asked_detail: bool
         e => format!("{e}"),
     }
 }
+
+/// A failed request as one JSON object (for `iai send --json`, on
+/// stdout): `{"type":"failure","failure":KIND,…,"message":TEXT}`. KIND is
+/// `error_response` (with the `code`, its `meaning` where the tool knows
+/// it, and the 216H `detail` if it came), `timeout`, `outcome_unknown`
+/// (with `sends`), or another failure's kind.
+pub fn failure_json(e: &Failure, message: &str) -> String {
+    use serde_json::json;
+    let mut v = match *e {
+        Failure::Controller { code, detail } => {
+            let mut v = json!({
+                "type": "failure",
+                "failure": "error_response",
+                "code": format!("{code:03X}"),
+            });
+            if let Some(m) = crate::codes::meaning(code) {
+                v["meaning"] = json!(m);
+            }
+            if let Some(d) = detail {
+                v["detail"] = json!({
+                    "error_number": format!("{:03X}", d.error_number),
+                    "matches_code": d.matches_code,
+                    "detail_1": d.detail_1,
+                    "detail_2": d.detail_2,
+                    "detail_3": d.detail_3,
+                    "detail_4": d.detail_4,
+                    "detail_5_to_8": d.detail_5_to_8,
+                });
+            }
+            v
+        }
+        Failure::Timeout { sends } => {
+            json!({"type": "failure", "failure": "timeout", "sends": sends})
+        }
+        Failure::OutcomeUnknown { sends } => {
+            json!({"type": "failure", "failure": "outcome_unknown", "sends": sends})
+        }
+        Failure::Protocol(_) => json!({"type": "failure", "failure": "protocol"}),
+        _ => json!({"type": "failure", "failure": "other"}),
+    };
+    v["message"] = json!(message);
+    v.to_string()
+}
+
+/// A failure before or beside the exchange (bad arguments, a line that
+/// cannot be opened) as one JSON object.
+pub fn plain_failure_json(kind: &str, message: &str) -> String {
+    serde_json::json!({"type": "failure", "failure": kind, "message": message}).to_string()
+}

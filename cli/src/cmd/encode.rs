@@ -12,12 +12,12 @@ use super::{out_err, Run};
 use crate::MessageArgs;
 
 pub(crate) fn message_json(msg: &MessageArgs) -> Result<Option<serde_json::Value>, String> {
-    let (text, from) = match (&msg.json, &msg.json_file) {
-        (Some(t), _) => (t.clone(), "--json".to_string()),
+    let (text, from) = match (&msg.fields_json, &msg.fields_file) {
+        (Some(t), _) => (t.clone(), "--fields-json".to_string()),
         (None, Some(p)) => (
             std::fs::read_to_string(p)
-                .map_err(|e| format!("--json-file {}: cannot read it: {e}", p.display()))?,
-            format!("--json-file {}", p.display()),
+                .map_err(|e| format!("--fields-file {}: cannot read it: {e}", p.display()))?,
+            format!("--fields-file {}", p.display()),
         ),
         (None, None) => return Ok(None),
     };
@@ -49,6 +49,7 @@ pub(crate) fn encode_cmd(
     response: bool,
     bypass: bool,
     fields: bool,
+    raw: bool,
 ) -> Run {
     let mut out = io::stdout().lock();
     let header = if response {
@@ -77,7 +78,15 @@ pub(crate) fn encode_cmd(
         .and_then(|at| frame.get(at..at + 2))
         .map(|s| String::from_utf8_lossy(s).into_owned())
         .unwrap_or_default();
-    writeln!(out, "{}", escape(&frame)).map_err(out_err)?;
-    writeln!(out, "checksum {sc}, {} bytes", frame.len()).map_err(out_err)?;
+    // Only the frame goes to stdout, so that `iai encode … | iai inspect -`
+    // and redirections get the frame alone.
+    if raw {
+        out.write_all(&frame)
+            .and_then(|_| out.flush())
+            .map_err(out_err)?;
+    } else {
+        writeln!(out, "{}", escape(&frame)).map_err(out_err)?;
+    }
+    eprintln!("checksum {sc}, {} bytes", frame.len());
     Ok(ExitCode::SUCCESS)
 }

@@ -2,6 +2,7 @@
 //! the exit status, or a [`Failure`] for `main` to report.
 
 pub(crate) mod encode;
+pub(crate) mod help;
 pub(crate) mod inspect;
 pub(crate) mod monitor;
 pub(crate) mod send;

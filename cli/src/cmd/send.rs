@@ -5,12 +5,12 @@ use std::process::ExitCode;
 
 use iai_cli::inspect;
 use iai_cli::link::Link;
-use iai_cli::send::{describe, request, Outcome};
+use iai_cli::send::{describe, failure_json, plain_failure_json, request, Outcome};
 
 use super::encode::build;
 use super::monitor::print_item;
-use super::{out_err, Run};
-use crate::{LineArgs, MessageArgs, OutputArg};
+use super::{out_err, Failure, Run};
+use crate::{LineArgs, MessageArgs};
 
 pub(crate) fn show_frame(out: &mut impl Write, frame: &[u8], json: bool) -> io::Result<()> {
     let mut ins = inspect::Inspector::new();
@@ -22,7 +22,19 @@ pub(crate) fn show_frame(out: &mut impl Write, frame: &[u8], json: bool) -> io::
     Ok(())
 }
 
-pub(crate) fn send_cmd(msg: &MessageArgs, line: &LineArgs, output: OutputArg, detail: bool) -> Run {
+pub(crate) fn send_cmd(msg: &MessageArgs, line: &LineArgs, json: bool, detail: bool) -> Run {
+    match exchange(msg, line, json, detail) {
+        Err(Failure::Failed(m)) if json => {
+            // Whatever stopped it before an answer: one object on stdout too.
+            let mut out = io::stdout().lock();
+            writeln!(out, "{}", plain_failure_json("command", &m)).map_err(out_err)?;
+            Err(Failure::Failed(m))
+        }
+        r => r,
+    }
+}
+
+fn exchange(msg: &MessageArgs, line: &LineArgs, json: bool, detail: bool) -> Run {
     let frame = build(msg, line.station, false, false)?;
     let profile = line.profile.profile();
     if let Ok(f) = iai_protocol_b::frame::Frame::new_checked(
@@ -43,7 +55,6 @@ pub(crate) fn send_cmd(msg: &MessageArgs, line: &LineArgs, output: OutputArg, de
     }
     let target = line.target();
     let mut link = Link::open(&target, line.plan().line)?;
-    let json = output == OutputArg::Json;
     let mut out = io::stdout().lock();
     let outcome = request(&mut link, &frame, detail).map_err(|e| format!("{target}: {e}"))?;
     let e = match outcome {
@@ -52,14 +63,28 @@ pub(crate) fn send_cmd(msg: &MessageArgs, line: &LineArgs, output: OutputArg, de
             return Ok(ExitCode::SUCCESS);
         }
         Outcome::NoReplyExpected => {
-            writeln!(
-                out,
-                "sent; this command has no normal response and no error response came"
-            )
+            if json {
+                writeln!(
+                    out,
+                    "{}",
+                    serde_json::json!({"type": "sent", "reply": "none"})
+                )
+            } else {
+                writeln!(
+                    out,
+                    "sent; this command has no normal response and no error response came"
+                )
+            }
             .map_err(out_err)?;
             return Ok(ExitCode::SUCCESS);
         }
         Outcome::Failed(e) => e,
     };
-    Err(describe(&e, &target, detail).into())
+    let message = describe(&e, &target, detail);
+    if json {
+        writeln!(out, "{}", failure_json(&e, &message)).map_err(out_err)?;
+        out.flush().map_err(out_err)?;
+        return Err(Failure::Exit(1, message));
+    }
+    Err(message.into())
 }

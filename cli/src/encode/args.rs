@@ -3,19 +3,44 @@
 use std::collections::BTreeMap;
 
 use iai_protocol_b::field::{encode_signed, encode_unsigned, FieldSpec, Radix};
+use iai_protocol_b::frame::Header;
 use iai_protocol_b::message::GroupInfo;
 
 use crate::fields::{Node, Val};
+use crate::meaning::{self, Code};
+
+/// The message a body is written for: which fields take names and which
+/// may be left out.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Rules {
+    pub(crate) id: u16,
+    pub(crate) header: Header,
+}
+
+impl Rules {
+    /// The names field `name` accepts for its codes.
+    pub(crate) fn codes(&self, name: &str) -> &'static [Code] {
+        meaning::codes(self.id, self.header, name)
+    }
+
+    /// Whether `name` may be left out (it has a documented meaning for 0).
+    pub(crate) fn optional(&self, name: &str) -> bool {
+        meaning::default_meaning(self.id, name).is_some()
+    }
+}
 
 /// User values by field name, each split into items.
 pub(crate) struct Args {
     pub(crate) values: BTreeMap<String, String>,
     pub(crate) used: BTreeMap<String, bool>,
+    pub(crate) rules: Rules,
+    /// Fields that must be given and were not, as the user would name them.
+    pub(crate) missing: Vec<String>,
 }
 
 impl Args {
     /// `field=value` arguments; a field given twice is an error.
-    pub(crate) fn parse(assignments: &[String]) -> Result<Self, String> {
+    pub(crate) fn parse(assignments: &[String], rules: Rules) -> Result<Self, String> {
         let mut values = BTreeMap::new();
         for a in assignments {
             let (k, v) = a
@@ -28,6 +53,8 @@ impl Args {
         Ok(Args {
             values,
             used: BTreeMap::new(),
+            rules,
+            missing: Vec::new(),
         })
     }
 
@@ -94,9 +121,28 @@ pub(crate) fn write_value(
     text: Option<&str>,
     fixed: Option<&[u8]>,
     name: &str,
+    codes: &[Code],
     out: &mut Vec<u8>,
 ) -> Result<(), String> {
-    write_value_as(spec, text, fixed, name, true, out)
+    write_value_as(spec, text, fixed, name, true, codes, out)
+}
+
+/// The value of `name` among `codes` (case, `_` and `-` alike).
+pub(crate) fn code_value(codes: &[Code], name: &str) -> Option<u64> {
+    let norm = |s: &str| s.to_ascii_lowercase().replace('_', "-");
+    codes
+        .iter()
+        .find(|(n, _, _)| norm(n) == norm(name))
+        .map(|(_, v, _)| *v)
+}
+
+/// "off=0, on=1".
+pub(crate) fn code_list(codes: &[Code]) -> String {
+    codes
+        .iter()
+        .map(|(n, v, _)| format!("{n}={v}"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 pub(crate) fn write_value_as(
@@ -105,6 +151,7 @@ pub(crate) fn write_value_as(
     fixed: Option<&[u8]>,
     name: &str,
     escaped: bool,
+    codes: &[Code],
     out: &mut Vec<u8>,
 ) -> Result<(), String> {
     let width = usize::from(spec.width);
@@ -142,13 +189,24 @@ pub(crate) fn write_value_as(
     }
     let v = match text {
         None => 0,
-        Some(t) => crate::text::parse_int(t).ok_or_else(|| {
-            format!(
-                "{name}: {t:?} is not a number (decimal or 0x hex, one optional '-'; {} {})",
-                describe(spec),
-                range_of(spec)
-            )
-        })?,
+        Some(t) => match crate::text::parse_int(t).or_else(|| code_value(codes, t).map(i128::from)) {
+            Some(v) => v,
+            None if !codes.is_empty() => {
+                return Err(format!(
+                    "{name}: {t:?} is neither a name of this field ({}) nor a number (decimal or 0x hex; {} {})",
+                    code_list(codes),
+                    describe(spec),
+                    range_of(spec)
+                ))
+            }
+            None => {
+                return Err(format!(
+                    "{name}: {t:?} is not a number (decimal or 0x hex, one optional '-'; {} {})",
+                    describe(spec),
+                    range_of(spec)
+                ))
+            }
+        },
     };
     let res = if spec.signed {
         let v = i64::try_from(v).map_err(|_| {
@@ -273,9 +331,31 @@ pub(crate) fn write_level(
                 // defaulted one only covers them (the group's maximum is
                 // checked then).
                 let given = text.is_some();
-                if !given && name.ends_with("pattern") && next_is_axes {
+                let defaulted = !given && name.ends_with("pattern") && next_is_axes;
+                if defaulted {
                     let n = counts.get(group_no).copied().unwrap_or(0).min(8);
                     text = Some(((1u32 << n) - 1).to_string());
+                    if n == 0 {
+                        // No values, no pattern: the axes are not given.
+                        let group =
+                            nodes
+                                .get(i + 1..)
+                                .unwrap_or(&[])
+                                .iter()
+                                .find_map(|n| match n {
+                                    Node::Group { name, .. } => Some(*name),
+                                    _ => None,
+                                });
+                        args.missing.push(format!(
+                            "{} (one value per axis; {name} follows from their number)",
+                            group.unwrap_or("the axis values")
+                        ));
+                    }
+                } else if !given && fixed.is_none() && !args.rules.optional(name) {
+                    args.missing.push(match (path.last(), index) {
+                        (Some(g), [.., k]) => format!("{name} of {g}[{k}]"),
+                        _ => name.to_string(),
+                    });
                 }
                 if given && name.ends_with("pattern") && next_is_axes {
                     let bits = text
@@ -284,7 +364,8 @@ pub(crate) fn write_level(
                         .unwrap_or(0);
                     pattern = Some((name, u64::try_from(bits).unwrap_or(0)));
                 }
-                write_value(*spec, text.as_deref(), fixed, name, out)?;
+                let codes = args.rules.codes(name);
+                write_value(*spec, text.as_deref(), fixed, name, codes, out)?;
             }
             Node::Group { name, info, items } => {
                 let count = counts.get(group_no).copied().unwrap_or(0);
@@ -292,7 +373,7 @@ pub(crate) fn write_level(
                 check_count(name, info, count, pattern.take())?;
                 if let Some(cf) = info.count_field {
                     let units = (count * info.per_item).to_string();
-                    write_value(cf, Some(&units), None, name, out)?;
+                    write_value(cf, Some(&units), None, name, &[], out)?;
                 }
                 if char_group(n).is_some() {
                     let text = args.get(path, name).unwrap_or_default();

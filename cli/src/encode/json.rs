@@ -3,15 +3,21 @@
 
 use iai_protocol_b::field::{FieldSpec, Radix};
 
-use super::args::{char_group, check_count, write_value, write_value_as};
+use super::args::{
+    char_group, check_count, code_list, code_value, write_value, write_value_as, Rules,
+};
 use crate::fields::{Node, Val};
 
 /// Writes one level of the layout from a JSON object in the form that
 /// `iai inspect --json` prints under `fields`.
+/// Fields that must be given and are not go to `missing` (the body is
+/// written with 0 in their place; the caller refuses it).
 pub(crate) fn write_json_level(
     nodes: &[Node],
     obj: &serde_json::Map<String, serde_json::Value>,
     path: &str,
+    rules: Rules,
+    missing: &mut Vec<String>,
     out: &mut Vec<u8>,
 ) -> Result<(), String> {
     use serde_json::Value as J;
@@ -44,16 +50,29 @@ pub(crate) fn write_json_level(
                 };
                 let given = obj.get(*name);
                 let mut text = given.map(|v| text_of(name, v, Some(*spec))).transpose()?;
+                let codes = rules.codes(name);
                 if let (Some(J::String(s)), None, true) = (given, fixed, spec.radix != Radix::Text)
                 {
-                    return Err(format!(
-                        "{path}{name}: expected a number, found the string {s:?}"
-                    ));
+                    if code_value(codes, s).is_none() {
+                        let names = if codes.is_empty() {
+                            String::new()
+                        } else {
+                            format!(" or one of its names ({})", code_list(codes))
+                        };
+                        return Err(format!(
+                            "{path}{name}: expected a number{names}, found the string {s:?}"
+                        ));
+                    }
                 }
                 let next_is_axes = matches!(
                     nodes.get(i + 1..).unwrap_or(&[]).iter().find(|n| matches!(n, Node::Group { .. })),
                     Some(Node::Group { info, .. }) if info.count_field.is_none()
                 );
+                let pattern_defaulted = name.ends_with("pattern") && next_is_axes && text.is_none();
+                if text.is_none() && fixed.is_none() && !pattern_defaulted && !rules.optional(name)
+                {
+                    missing.push(format!("{path}{name}"));
+                }
                 if name.ends_with("pattern") && next_is_axes {
                     if text.is_none() {
                         // Default: the first N axes for N values.
@@ -69,6 +88,20 @@ pub(crate) fn write_json_level(
                             })
                             .unwrap_or(0)
                             .min(8);
+                        if count == 0 {
+                            missing.push(format!(
+                                "{path}{} (one value per axis; {name} follows from their number)",
+                                nodes
+                                    .get(i + 1..)
+                                    .unwrap_or(&[])
+                                    .iter()
+                                    .find_map(|n| match n {
+                                        Node::Group { name, .. } => Some(*name),
+                                        _ => None,
+                                    })
+                                    .unwrap_or("the axis values")
+                            ));
+                        }
                         text = Some(((1u32 << count) - 1).to_string());
                     }
                     let bits = text
@@ -78,7 +111,7 @@ pub(crate) fn write_json_level(
                     pattern = Some((name, u64::try_from(bits).unwrap_or(0)));
                 }
                 let full = format!("{path}{name}");
-                write_value_as(*spec, text.as_deref(), fixed, &full, false, out)?;
+                write_value_as(*spec, text.as_deref(), fixed, &full, false, codes, out)?;
             }
             Node::Group { name, info, items } => {
                 let full = format!("{path}{name}");
@@ -102,6 +135,7 @@ pub(crate) fn write_json_level(
                             Some(&(t.len() * info.per_item).to_string()),
                             None,
                             &full,
+                            &[],
                             out,
                         )?;
                     }
@@ -120,6 +154,7 @@ pub(crate) fn write_json_level(
                         Some(&(list.len() * info.per_item).to_string()),
                         None,
                         &full,
+                        &[],
                         out,
                     )?;
                 }
@@ -136,11 +171,11 @@ pub(crate) fn write_json_level(
                         (true, v) if !v.is_object() => {
                             let mut one = serde_json::Map::new();
                             one.insert(name.to_string(), v.clone());
-                            write_json_level(sample, &one, "", out).map_err(|e| {
-                                e.replacen(&format!("{name}: "), &format!("{full}[{k}]: "), 1)
-                            })?;
+                            write_json_level(sample, &one, "", rules, missing, out).map_err(
+                                |e| e.replacen(&format!("{name}: "), &format!("{full}[{k}]: "), 1),
+                            )?;
                         }
-                        (_, J::Object(o)) => write_json_level(sample, o, &p, out)?,
+                        (_, J::Object(o)) => write_json_level(sample, o, &p, rules, missing, out)?,
                         (_, other) => {
                             return Err(format!("{full}[{k}]: expected an object, found {other}"))
                         }
