@@ -12,6 +12,7 @@ pub mod fields;
 pub mod inspect;
 pub mod link;
 pub mod meaning;
+pub mod probe;
 pub mod resume;
 pub mod send;
 pub mod sim;

@@ -12,9 +12,6 @@ use std::process::ExitCode;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use cmd::Failure;
-use iai_cli::link::Target;
-use iai_cli::table::Plan;
-use iai_protocol_b::frame::Station;
 use iai_protocol_b::profile::Profile;
 
 /// IAI protocol B tools: captures, messages, position tables, a simulator.
@@ -77,7 +74,7 @@ pub(crate) enum Cmd {
     #[command(after_help = help::MONITOR)]
     Monitor {
         #[command(flatten)]
-        line: LineArgs,
+        line: LinkArgs,
         /// One JSON object per line.
         #[arg(long)]
         json: bool,
@@ -117,9 +114,44 @@ pub(crate) enum Cmd {
         #[command(subcommand)]
         op: TableCmd,
     },
+    /// List the serial ports of this machine (name, kind, USB IDs).
+    #[command(after_help = help::PORTS)]
+    Ports {
+        /// One JSON object per port.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Find what answers on a line: at each baud rate, a 200H test call
+    /// with a nonce to each station (99 and 00 unless given, then any
+    /// station that replies show); says what came back. Exit status 0 when
+    /// a controller answered.
+    #[command(after_help = help::PROBE)]
+    Probe(ProbeArgs),
     /// Run the controller simulator.
     #[command(after_help = help::SIMULATE)]
     Simulate(SimArgs),
+}
+
+#[derive(Args)]
+pub(crate) struct ProbeArgs {
+    #[command(flatten)]
+    pub(crate) target: Where,
+    /// Baud rates to try, comma-separated [default: 9600,19200,38400,57600,115200].
+    #[arg(long, value_delimiter = ',')]
+    pub(crate) baud: Vec<u32>,
+    #[command(flatten)]
+    pub(crate) serial: SerialArgs,
+    /// Stations to try (two hex digits each, comma-separated) [default:
+    /// 99,00].
+    #[arg(long, value_parser = parse_station, value_delimiter = ',')]
+    pub(crate) station: Vec<u8>,
+    /// How long to wait after each test call, ms.
+    #[arg(long, value_name = "MS", default_value_t = 500,
+          value_parser = clap::value_parser!(u32).range(10..=60_000))]
+    pub(crate) timeout: u32,
+    /// One JSON object per try, then the result.
+    #[arg(long)]
+    pub(crate) json: bool,
 }
 
 #[derive(Subcommand)]
@@ -234,53 +266,64 @@ pub(crate) struct Where {
     tcp: Option<String>,
 }
 
+/// Where the line is, and a serial port's settings.
+#[derive(Args)]
+pub(crate) struct LinkArgs {
+    #[command(flatten)]
+    pub(crate) target: Where,
+    /// Baud rate of the serial port [default: 38400].
+    #[arg(long)]
+    pub(crate) baud: Option<u32>,
+    #[command(flatten)]
+    pub(crate) serial: SerialArgs,
+}
+
+/// A serial port's framing and flow control (the controller's I/O
+/// parameters Nos. 93-95 must match).
+#[derive(Args)]
+pub(crate) struct SerialArgs {
+    /// Data bits of the serial port, 7 or 8 (I/O parameter No. 93) [default: 8].
+    #[arg(long, value_parser = clap::value_parser!(u8).range(7..=8))]
+    pub(crate) data_bits: Option<u8>,
+    /// Parity of the serial port (No. 95) [default: none].
+    #[arg(long, value_enum)]
+    pub(crate) parity: Option<ParityArg>,
+    /// Stop bits of the serial port, 1 or 2 (No. 94) [default: 1].
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=2))]
+    pub(crate) stop_bits: Option<u8>,
+    /// Flow control: xonxoff (over TCP, done by iai), rtscts (a serial
+    /// port's modem lines) or none [default: none; xonxoff with --bridge].
+    #[arg(long, value_enum)]
+    pub(crate) flow: Option<FlowArg>,
+}
+
+/// A line to a controller: where, which station and kind, and chapter 5's
+/// timeout and resends.
 #[derive(Args)]
 pub(crate) struct LineArgs {
     #[command(flatten)]
-    target: Where,
-    /// Baud rate of the serial port.
-    #[arg(long, default_value_t = 38_400)]
-    baud: u32,
+    pub(crate) link: LinkArgs,
     /// Station code (two hex digits, I/O parameter No. 91).
     #[arg(long, default_value = "99", value_parser = parse_station)]
-    station: u8,
+    pub(crate) station: u8,
     /// Controller kind: buffer sizes and messages.
     #[arg(long, value_enum, default_value = "tta")]
-    profile: ProfileArg,
+    pub(crate) profile: ProfileArg,
     /// How long after a reply a copy of it may still come, ms, on a line
     /// that repeats frames (an echoing converter). A command goes out only
     /// when no copy could pass for its reply. Default 0: a direct line.
     #[arg(long, default_value_t = 0)]
-    duplicate_window_ms: u32,
-}
-
-impl LineArgs {
-    fn target(&self) -> Target {
-        match (&self.target.port, &self.target.tcp) {
-            (Some(path), _) => Target::Serial {
-                path: path.clone(),
-                baud: self.baud,
-            },
-            (None, Some(addr)) => Target::Tcp(addr.clone()),
-            // clap requires one of the two.
-            (None, None) => Target::Tcp(String::new()),
-        }
-    }
-    fn plan(&self) -> Plan {
-        let mut plan = Plan::new(self.profile.profile(), Station(self.station));
-        plan.line = plan.line.with_duplicate_window(self.duplicate_window_ms);
-        plan
-    }
-    /// What a state file records of the line: a resume elsewhere is
-    /// refused.
-    fn identity(&self) -> String {
-        format!(
-            "{} station {:02X} profile {}",
-            self.target(),
-            self.station,
-            self.profile.profile().name()
-        )
-    }
+    pub(crate) duplicate_window_ms: u32,
+    /// How long a reply may take after the command was sent, ms (2003
+    /// p. 62: 3000).
+    #[arg(long, value_name = "MS", default_value_t = 3_000,
+          value_parser = clap::value_parser!(u32).range(1..=600_000))]
+    pub(crate) timeout: u32,
+    /// Sends of a command after the first when no reply came (2003 p. 62:
+    /// 2 or 3); a command that is unsafe to repeat is sent once.
+    #[arg(long, value_name = "N", default_value_t = 2,
+          value_parser = clap::value_parser!(u8).range(0..=9))]
+    pub(crate) retries: u8,
 }
 
 #[derive(Args)]
@@ -333,6 +376,20 @@ pub(crate) struct SimArgs {
 pub(crate) enum FormatArg {
     Raw,
     Text,
+}
+
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub(crate) enum ParityArg {
+    None,
+    Odd,
+    Even,
+}
+
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub(crate) enum FlowArg {
+    None,
+    Xonxoff,
+    Rtscts,
 }
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
@@ -403,6 +460,8 @@ fn main() -> ExitCode {
             TableCmd::Read(a) => cmd::table_read::table_read(&a),
             TableCmd::Clear(a) => cmd::table_clear::table_clear(&a),
         },
+        Cmd::Ports { json } => cmd::diag::ports_cmd(json),
+        Cmd::Probe(a) => cmd::diag::probe_cmd(&a),
         Cmd::Simulate(args) => cmd::simulate::simulate_cmd(&args),
     };
     match r {

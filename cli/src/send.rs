@@ -47,8 +47,14 @@ pub fn request(link: &mut Link, frame: &[u8], detail: bool) -> std::io::Result<O
 }
 
 /// What a failed request means, for the user: `target` is the line,
-/// `asked_detail` whether 216H was asked for.
-pub fn describe(e: &Failure, target: &impl std::fmt::Display, asked_detail: bool) -> String {
+/// `asked_detail` whether 216H was asked for, `timeout_ms` the wait for
+/// each reply.
+pub fn describe(
+    e: &Failure,
+    target: &impl std::fmt::Display,
+    asked_detail: bool,
+    timeout_ms: u32,
+) -> String {
     match *e {
         Failure::Controller {
             code,
@@ -76,13 +82,25 @@ pub fn describe(e: &Failure, target: &impl std::fmt::Display, asked_detail: bool
             m
         }
         Failure::Timeout { sends } => {
-            format!("no valid reply from {target} after {sends} send(s), 3 s each")
+            format!(
+                "no valid reply from {target} after {sends} send(s), {} each",
+                wait_text(timeout_ms)
+            )
         }
         Failure::OutcomeUnknown { sends } => format!(
             "no valid reply from {target} after {sends} send(s); not sent again, since a second send could repeat the operation: check the controller's state (212H)"
         ),
         Failure::Protocol(e) => format!("the reply does not decode: {e}"),
         e => format!("{e}"),
+    }
+}
+
+/// "3 s" or "200 ms".
+pub fn wait_text(ms: u32) -> String {
+    if ms.is_multiple_of(1000) {
+        format!("{} s", ms / 1000)
+    } else {
+        format!("{ms} ms")
     }
 }
 

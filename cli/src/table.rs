@@ -87,7 +87,7 @@ impl std::fmt::Display for TableError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             TableError::Engine(Failure::Timeout { sends }) => {
-                write!(f, "the controller did not answer ({sends} sends, 3 s each)")
+                write!(f, "the controller did not answer ({sends} send(s))")
             }
             TableError::Engine(Failure::Controller { code, .. }) => {
                 write!(f, "{}", crate::codes::answered_with(*code))

@@ -115,3 +115,22 @@ Examples:
 Its refusal codes (its own; the manuals publish none): 0E1 injected
 (--faults error=P), 0E2 malformed or unknown message, 0E3 not modelled,
 0E4 servo off, 0E5 not homed, 0E6 axis busy, 0E7 position not defined.";
+
+pub(crate) const PORTS: &str = "\
+Examples:
+  iai ports
+  iai ports --json
+
+A pseudo-terminal (iai simulate --pty) is not listed: give it to --port.";
+
+pub(crate) const PROBE: &str = "\
+Examples:
+  iai probe --port /dev/ttyUSB0                   every baud rate, stations 99 and 00
+  iai probe --port COM3 --baud 38400,115200 --station 01,99
+  iai probe --tcp 127.0.0.1:5000 --json
+
+Each try tells what came back: the test call's text from that station (a
+controller answers: use the --baud and --station it prints), an & reply,
+our own frame (a loopback or an echoing converter), replies from another
+station (tried next), or bytes that are not protocol B (a wrong baud rate
+or framing). It stops at the first baud rate where a controller answers.";

@@ -1,9 +1,11 @@
 //! The commands' handlers: each takes its parsed arguments and returns
 //! the exit status, or a [`Failure`] for `main` to report.
 
+pub(crate) mod diag;
 pub(crate) mod encode;
 pub(crate) mod help;
 pub(crate) mod inspect;
+pub(crate) mod line;
 pub(crate) mod monitor;
 pub(crate) mod send;
 pub(crate) mod simulate;
@@ -13,6 +15,9 @@ pub(crate) mod table_write;
 
 use std::io;
 use std::process::ExitCode;
+
+use iai_cli::link::Link;
+use iai_cli::table::TableError;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
@@ -40,6 +45,33 @@ impl Failure {
             _ => Failure::Failed(msg),
         }
     }
+}
+
+/// Whether `e` means no valid reply came (where the line's hint helps).
+pub(crate) fn unanswered(e: &iai_protocol_b::Failure) -> bool {
+    matches!(
+        e,
+        iai_protocol_b::Failure::Timeout { .. } | iai_protocol_b::Failure::OutcomeUnknown { .. }
+    )
+}
+
+/// A table operation's failure on `link`: "TARGET: what went wrong WHAT",
+/// with the line's hint when no reply came; exit 130 when interrupted.
+pub(crate) fn table_failure(link: &Link, e: TableError, what: &str) -> Failure {
+    let mut msg = match &e {
+        TableError::Engine(iai_protocol_b::Failure::Timeout { sends }) => format!(
+            "{}: the controller did not answer ({sends} send(s), {} each){what}",
+            link.target(),
+            iai_cli::send::wait_text(link.line().config().timeout_ms)
+        ),
+        _ => format!("{}: {e}{what}", link.target()),
+    };
+    if let TableError::Engine(f) = &e {
+        if let (true, Some(h)) = (unanswered(f), link.hint()) {
+            msg.push_str(&format!("\n  hint: {h}"));
+        }
+    }
+    Failure::of_table(&e, msg)
 }
 
 impl From<String> for Failure {

@@ -7,10 +7,12 @@ use std::sync::atomic::Ordering;
 use std::time::Instant;
 
 use iai_cli::inspect;
-use iai_cli::link::Link;
+use iai_cli::link::{Flow, Link};
+use iai_protocol_b::frame::Station;
+use iai_protocol_b::LineConfig;
 
 use super::{out_err, stop_flag, Run, EXIT_INTERRUPTED};
-use crate::LineArgs;
+use crate::LinkArgs;
 
 pub(crate) fn print_item(out: &mut impl Write, item: &inspect::Item, json: bool) -> io::Result<()> {
     if json {
@@ -51,12 +53,13 @@ fn print_timed(
 }
 
 pub(crate) fn monitor_cmd(
-    line: &LineArgs,
+    line: &LinkArgs,
     json: bool,
     timestamps: bool,
     save: Option<&Path>,
 ) -> Run {
-    let mut link = Link::open(&line.target(), line.plan().line)?;
+    let target = line.resolve(Flow::None);
+    let mut link = Link::open(&target, LineConfig::new(Station(0x99)))?;
     let mut saved = match save {
         Some(p) => Some((
             io::BufWriter::new(
@@ -81,7 +84,7 @@ pub(crate) fn monitor_cmd(
     while !stop.load(Ordering::SeqCst) {
         let n = link
             .read_for(&mut buf, std::time::Duration::from_millis(100))
-            .map_err(|e| format!("{}: {e}", line.target()))?;
+            .map_err(|e| format!("{target}: {e}"))?;
         let got = buf.get(..n).unwrap_or(&[]);
         if let Some((f, count)) = saved.as_mut() {
             f.write_all(got).and_then(|_| f.flush()).map_err(save_err)?;

@@ -4,12 +4,11 @@ use std::io::{self, Write};
 use std::process::ExitCode;
 
 use iai_cli::inspect;
-use iai_cli::link::Link;
 use iai_cli::send::{describe, failure_json, plain_failure_json, request, Outcome};
 
 use super::encode::build;
 use super::monitor::print_item;
-use super::{out_err, Failure, Run};
+use super::{out_err, unanswered, Failure, Run};
 use crate::{LineArgs, MessageArgs};
 
 pub(crate) fn show_frame(out: &mut impl Write, frame: &[u8], json: bool) -> io::Result<()> {
@@ -53,8 +52,8 @@ fn exchange(msg: &MessageArgs, line: &LineArgs, json: bool, detail: bool) -> Run
             .check_command_len(frame.len())
             .map_err(|e| format!("{:03X}H: {e}", f.code()))?;
     }
-    let target = line.target();
-    let mut link = Link::open(&target, line.plan().line)?;
+    let mut link = line.open()?;
+    let target = link.target().clone();
     let mut out = io::stdout().lock();
     let outcome = request(&mut link, &frame, detail).map_err(|e| format!("{target}: {e}"))?;
     let e = match outcome {
@@ -80,11 +79,23 @@ fn exchange(msg: &MessageArgs, line: &LineArgs, json: bool, detail: bool) -> Run
         }
         Outcome::Failed(e) => e,
     };
-    let message = describe(&e, &target, detail);
+    let hint = if unanswered(&e) { link.hint() } else { None };
+    let mut message = describe(&e, &target, detail, link.line().config().timeout_ms);
     if json {
-        writeln!(out, "{}", failure_json(&e, &message)).map_err(out_err)?;
+        let mut v: serde_json::Value =
+            serde_json::from_str(&failure_json(&e, &message)).unwrap_or_default();
+        if let Some(h) = &hint {
+            v["hint"] = serde_json::json!(h);
+        }
+        writeln!(out, "{v}").map_err(out_err)?;
         out.flush().map_err(out_err)?;
+        if let Some(h) = &hint {
+            message.push_str(&format!("\n  hint: {h}"));
+        }
         return Err(Failure::Exit(1, message));
+    }
+    if let Some(h) = &hint {
+        message.push_str(&format!("\n  hint: {h}"));
     }
     Err(message.into())
 }

@@ -9,7 +9,7 @@ use iai_cli::link::Link;
 use iai_cli::table::{self, Hooks, TableError, CLEAR_LAST, COUNT_MAX};
 use iai_protocol_b::Failure as CoreFailure;
 
-use super::{progress_bar, stop_flag, Failure, Run};
+use super::{progress_bar, stop_flag, table_failure, Failure, Run};
 use crate::ClearArgs;
 
 /// 208H's count, when it can give one (below its largest value, not
@@ -43,8 +43,7 @@ pub(crate) fn table_clear(a: &ClearArgs) -> Run {
     };
     // Checked before connecting: a range 246H cannot express sends nothing.
     let cmds = table::clear_commands(lo, hi).map_err(|e| format!("{e}; nothing was sent"))?;
-    let target = line.target();
-    let mut link = Link::open(&target, plan.line)?;
+    let mut link = line.open()?;
     let stop = stop_flag();
     let stopped = || stop.load(Ordering::SeqCst);
     let note = |m: &str| eprintln!("{m}");
@@ -52,8 +51,8 @@ pub(crate) fn table_clear(a: &ClearArgs) -> Run {
         note: &note,
         stop: &stopped,
     };
-    let fail = |e: TableError, what: &str| Failure::of_table(&e, format!("{target}: {e}{what}"));
-    let before = count(&mut link, &hooks).map_err(|e| fail(e, "; nothing was cleared"))?;
+    let before =
+        count(&mut link, &hooks).map_err(|e| table_failure(&link, e, "; nothing was cleared"))?;
     let bar = progress_bar(u64::from(hi - lo) + 1, "clearing", "positions");
     let mut cleared_to = None;
     let r = table::clear(
@@ -78,11 +77,12 @@ pub(crate) fn table_clear(a: &ClearArgs) -> Run {
             ),
             None => format!("; positions {lo}..={hi} may not be cleared"),
         };
-        return Err(fail(e, &done));
+        return Err(table_failure(&link, e, &done));
     }
     bar.finish_and_clear();
     println!("cleared positions {lo}..={hi} ({} x 246H)", cmds.len());
-    let after = count(&mut link, &hooks).map_err(|e| fail(e, " (208H, after the clear)"))?;
+    let after = count(&mut link, &hooks)
+        .map_err(|e| table_failure(&link, e, " (208H, after the clear)"))?;
     match (before, after) {
         (Some(b), Some(n)) => println!(
             "{} defined position(s) removed; the table defines {n} now (208H)",

@@ -19,7 +19,7 @@ use iai_cli::table::{self, Hooks, TableError, COUNT_MAX};
 use iai_protocol_b::position::{PositionRecord, RecordLayout};
 use iai_protocol_b::Failure as CoreFailure;
 
-use super::{out_err, progress_bar, stop_flag, Failure, Run};
+use super::{out_err, progress_bar, stop_flag, table_failure, Failure, Run};
 use crate::ReadArgs;
 
 /// The CSV of `recs` with `axes` axis columns (default: the highest used).
@@ -99,8 +99,7 @@ pub(crate) fn table_read(a: &ReadArgs) -> Run {
             p.display()
         );
     }
-    let target = line.target();
-    let mut link = Link::open(&target, plan.line)?;
+    let mut link = line.open()?;
     let stop = stop_flag();
     let stopped = || stop.load(Ordering::SeqCst);
     let note = |m: &str| eprintln!("{m}");
@@ -109,8 +108,7 @@ pub(crate) fn table_read(a: &ReadArgs) -> Run {
         stop: &stopped,
     };
     let expected = if a.all {
-        expect(&mut link, &hooks, hi)
-            .map_err(|e| Failure::of_table(&e, format!("{target}: 208H: {e}")))?
+        expect(&mut link, &hooks, hi).map_err(|e| table_failure(&link, e, " (208H)"))?
     } else {
         None
     };
@@ -157,7 +155,15 @@ pub(crate) fn table_read(a: &ReadArgs) -> Run {
     let bytes = csv_bytes(&recs, a.axes);
     if let Err(e) = result {
         return Err(keep_partial(
-            a, &mut state, lo, hi, covered, &recs, &bytes, &e, &identity,
+            a,
+            &mut state,
+            (lo, hi),
+            covered,
+            &recs,
+            &bytes,
+            e,
+            &link,
+            &identity,
         ));
     }
     put(out, &bytes)?;
@@ -212,16 +218,14 @@ fn expect(link: &mut Link, hooks: &Hooks<'_>, hi: u16) -> Result<Option<usize>, 
 fn keep_partial(
     a: &ReadArgs,
     state: &mut Option<ReadState>,
-    lo: u16,
-    hi: u16,
+    (lo, hi): (u16, u16),
     covered: Option<u16>,
     recs: &BTreeMap<u16, PositionRecord>,
     bytes: &[u8],
-    e: &TableError,
+    e: TableError,
+    link: &Link,
     identity: &str,
 ) -> Failure {
-    let target = a.line.target();
-    let head = format!("{target}: {e}");
     let read = match covered {
         Some(c) => format!(
             "positions {lo}..={c} of {lo}..={hi} were read ({} defined record(s))",
@@ -256,5 +260,5 @@ fn keep_partial(
         }
         None => " and are printed above (give -o FILE to keep them for a --resume)".to_string(),
     };
-    Failure::of_table(e, format!("{head}; {read}{tail}"))
+    table_failure(link, e, &format!("; {read}{tail}"))
 }

@@ -15,7 +15,7 @@ use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::transfer::{Guarantee, Verify as CoreVerify};
 use iai_protocol_b::Failure as CoreFailure;
 
-use super::{progress_bar, stop_flag, Failure, Run};
+use super::{progress_bar, stop_flag, table_failure, Failure, Run};
 use crate::{Verify, WriteArgs};
 
 /// Exit status of a write that completed but leaves records confirmed by
@@ -85,8 +85,7 @@ pub(crate) fn table_write(a: &WriteArgs) -> Run {
     if a.resume {
         eprintln!("resuming after record {skip} of {total}");
     }
-    let target = line.target();
-    let mut link = Link::open(&target, plan.line)?;
+    let mut link = line.open()?;
     let stop = stop_flag();
     let stopped = || stop.load(Ordering::SeqCst);
     let note = |m: &str| eprintln!("{m}");
@@ -94,18 +93,22 @@ pub(crate) fn table_write(a: &WriteArgs) -> Run {
         note: &note,
         stop: &stopped,
     };
-    let fail = |e: TableError, what: &str| Failure::of_table(&e, format!("{target}: {e}{what}"));
     if a.replace && !state.replace {
         let reach = replace_reach(&plan);
         eprintln!("--replace: clearing positions 0..={reach} first (246H)");
-        table::clear(&mut link, 0, reach, |_| {}, &hooks)
-            .map_err(|e| fail(e, "; the table may be cleared in part, nothing was written"))?;
+        table::clear(&mut link, 0, reach, |_| {}, &hooks).map_err(|e| {
+            table_failure(
+                &link,
+                e,
+                "; the table may be cleared in part, nothing was written",
+            )
+        })?;
         state.replace = true;
         state.save(file);
     }
     if records.is_empty() {
         ResumeState::remove(file);
-        return replaced(&mut link, &plan, 0, &hooks).map_err(|e| fail(e, ""))?;
+        return replaced(&mut link, &plan, 0, &hooks).map_err(|e| table_failure(&link, e, ""))?;
     }
     let policy = match verify {
         Verify::Off => CoreVerify::Off,
@@ -118,7 +121,7 @@ pub(crate) fn table_write(a: &WriteArgs) -> Run {
     let redo = if skip > 0 && policy == CoreVerify::Full {
         eprintln!("reading back the {skip} records confirmed before the resume");
         let redo = table::not_held(&mut link, &plan, prefix, &hooks)
-            .map_err(|e| fail(e, "; nothing was written"))?;
+            .map_err(|e| table_failure(&link, e, "; nothing was written"))?;
         if let Some(first) = redo.first() {
             eprintln!(
                 "{} of them are not held as the file says (first: position {}); writing them again",
@@ -173,7 +176,7 @@ pub(crate) fn table_write(a: &WriteArgs) -> Run {
                 if verify == Verify::Off { "" } else { " and verified" },
                 state_path.display()
             );
-            return Err(fail(e, &what));
+            return Err(table_failure(&link, e, &what));
         }
     };
     bar.finish_and_clear();
@@ -223,7 +226,8 @@ pub(crate) fn table_write(a: &WriteArgs) -> Run {
         ),
     }
     if a.replace {
-        let code = replaced(&mut link, &plan, total, &hooks).map_err(|e| fail(e, ""))??;
+        let code = replaced(&mut link, &plan, total, &hooks)
+            .map_err(|e| table_failure(&link, e, ""))??;
         if code != ExitCode::SUCCESS {
             return Ok(code);
         }
