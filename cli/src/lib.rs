@@ -5,6 +5,7 @@
 //! The protocol facts (message layouts, limits, engines) all come from the
 //! core crate `iai-protocol-b`; this crate only drives them.
 
+pub mod bridge;
 pub mod codes;
 pub mod csvtable;
 pub mod encode;

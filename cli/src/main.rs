@@ -114,6 +114,11 @@ pub(crate) enum Cmd {
         #[command(subcommand)]
         op: TableCmd,
     },
+    /// The bridge firmware on the line.
+    Bridge {
+        #[command(subcommand)]
+        op: BridgeCmd,
+    },
     /// List the serial ports of this machine (name, kind, USB IDs).
     #[command(after_help = help::PORTS)]
     Ports {
@@ -130,6 +135,34 @@ pub(crate) enum Cmd {
     /// Run the controller simulator.
     #[command(after_help = help::SIMULATE)]
     Simulate(SimArgs),
+}
+
+#[derive(Subcommand)]
+pub(crate) enum BridgeCmd {
+    /// Ask the bridge for its status (B00H to its own station) and show
+    /// it decoded: configuration, counters, last error.
+    #[command(after_help = help::BRIDGE_STATUS)]
+    Status(BridgeStatusArgs),
+}
+
+#[derive(Args)]
+pub(crate) struct BridgeStatusArgs {
+    #[command(flatten)]
+    pub(crate) link: LinkArgs,
+    /// The bridge's own station (two hex digits).
+    #[arg(long, default_value = "BB", value_parser = parse_station)]
+    pub(crate) bridge_station: u8,
+    /// How long the reply may take, ms.
+    #[arg(long, value_name = "MS", default_value_t = 3_000,
+          value_parser = clap::value_parser!(u32).range(1..=600_000))]
+    pub(crate) timeout: u32,
+    /// Queries after the first when no reply came.
+    #[arg(long, value_name = "N", default_value_t = 2,
+          value_parser = clap::value_parser!(u8).range(0..=9))]
+    pub(crate) retries: u8,
+    /// One JSON object: the fields and what they mean.
+    #[arg(long)]
+    pub(crate) json: bool,
 }
 
 #[derive(Args)]
@@ -149,6 +182,10 @@ pub(crate) struct ProbeArgs {
     #[arg(long, value_name = "MS", default_value_t = 500,
           value_parser = clap::value_parser!(u32).range(10..=60_000))]
     pub(crate) timeout: u32,
+    /// The station a bridge would answer its status query at (two hex
+    /// digits); asked at each baud rate first.
+    #[arg(long, default_value = "BB", value_parser = parse_station)]
+    pub(crate) bridge_station: u8,
     /// One JSON object per try, then the result.
     #[arg(long)]
     pub(crate) json: bool,
@@ -178,9 +215,10 @@ pub(crate) struct WriteArgs {
     #[command(flatten)]
     pub line: LineArgs,
     /// Read the table back and compare: always (full), only after a
-    /// timeout, error reply or line error (after-fault), or never (off).
-    #[arg(long, value_enum, default_value = "full")]
-    pub verify: Verify,
+    /// timeout, error reply or line error (after-fault), or never (off)
+    /// [default: full; with --bridge the bridge reads every chunk back].
+    #[arg(long, value_enum)]
+    pub verify: Option<Verify>,
     /// Continue after the last confirmed record of an interrupted
     /// write (state kept in FILE.csv.iai-state).
     #[arg(long, conflicts_with = "restart")]
@@ -193,6 +231,15 @@ pub(crate) struct WriteArgs {
     /// exactly the file's records.
     #[arg(long)]
     pub replace: bool,
+    /// Send the whole table to the bridge firmware as one 26DH (it writes
+    /// it in controller-sized commands and reads every one back); its `#`
+    /// means the controller holds every record. Flow control defaults to
+    /// XON/XOFF, the bridge's.
+    #[arg(long, conflicts_with = "resume")]
+    pub bridge: bool,
+    /// The bridge's own station (two hex digits), for --bridge.
+    #[arg(long, default_value = "BB", value_parser = parse_station, requires = "bridge")]
+    pub bridge_station: u8,
 }
 
 #[derive(Args)]
@@ -398,10 +445,11 @@ pub(crate) enum OutputArg {
     Json,
 }
 
-#[derive(Clone, Copy, ValueEnum, PartialEq, Eq, Debug)]
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq, Debug, Default)]
 pub(crate) enum Verify {
     Off,
     AfterFault,
+    #[default]
     Full,
 }
 
@@ -460,6 +508,9 @@ fn main() -> ExitCode {
             TableCmd::Read(a) => cmd::table_read::table_read(&a),
             TableCmd::Clear(a) => cmd::table_clear::table_clear(&a),
         },
+        Cmd::Bridge {
+            op: BridgeCmd::Status(a),
+        } => cmd::bridge::status_cmd(&a),
         Cmd::Ports { json } => cmd::diag::ports_cmd(json),
         Cmd::Probe(a) => cmd::diag::probe_cmd(&a),
         Cmd::Simulate(args) => cmd::simulate::simulate_cmd(&args),

@@ -257,6 +257,10 @@ fn probe_over_tcp_follows_the_stations_replies_show() {
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
+    // The bridge's status query first: the simulator is no bridge.
+    assert_eq!(lines[0]["type"], "bridge");
+    assert_eq!(lines[0]["result"], "silent");
+    let lines: Vec<serde_json::Value> = lines.into_iter().skip(1).collect();
     assert_eq!(lines[0]["station"], "99");
     assert_eq!(lines[0]["result"], "answered");
     assert_eq!(lines[1]["result"], "silent");

@@ -6,6 +6,7 @@ use std::io::{self, Write};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
+use iai_cli::bridge::{decode_status, query_status, status_json};
 use iai_cli::link::{Flow, Link, Target, BAUD_RATES};
 use iai_cli::probe::{nonce, observe, test_call, Observation};
 use iai_protocol_b::frame::Station;
@@ -143,6 +144,7 @@ pub(crate) fn probe_cmd(a: &ProbeArgs) -> Run {
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(1, |d| d.as_nanos() as u64);
     let mut found: Vec<(Option<u32>, u8)> = Vec::new();
+    let mut bridges: Vec<(Option<u32>, u8)> = Vec::new();
     let mut seen_kinds: BTreeSet<&'static str> = BTreeSet::new();
     for baud in bauds {
         let target = match (&base, baud) {
@@ -156,6 +158,42 @@ pub(crate) fn probe_cmd(a: &ProbeArgs) -> Run {
         let mut link = Link::open(&target, LineConfig::new(Station(0x99)))?;
         let mut queue: VecDeque<u8> = stations.iter().copied().collect();
         let mut tried = BTreeSet::new();
+        let rate = baud.map_or_else(|| "tcp".to_string(), |b| format!("{b} baud"));
+        // A bridge says which station its controller has.
+        drain(&mut link, Duration::from_millis(30)).map_err(|e| format!("{target}: {e}"))?;
+        let bridge = query_status(&mut link, a.bridge_station, wait, 1, &|| false)
+            .map_err(|e| format!("{target}: {e}"))?
+            .map(|r| decode_status(&r));
+        let said = match &bridge {
+            Some(Ok(s)) => {
+                let c = s.get("controller_station") as u8;
+                if !queue.contains(&c) {
+                    queue.push_front(c);
+                }
+                bridges.push((baud, a.bridge_station));
+                format!(
+                    "a bridge answers its status query: controller station {c:02X}, {} baud to the controller, flow control {}",
+                    s.get("downstream_baud"),
+                    ["none", "XON/XOFF", "RTS/CTS"].get(s.get("flow_control") as usize).unwrap_or(&"?")
+                )
+            }
+            Some(Err(e)) => format!("something answered the bridge's status query: {e}"),
+            None => "no bridge answers".to_string(),
+        };
+        if a.json {
+            let v = serde_json::json!({
+                "type": "bridge",
+                "baud": baud,
+                "station": format!("{:02X}", a.bridge_station),
+                "result": match &bridge { Some(Ok(_)) => "answered", Some(Err(_)) => "other", None => "silent" },
+                "status": match &bridge { Some(Ok(s)) => status_json(s), _ => serde_json::Value::Null },
+                "detail": said,
+            });
+            writeln!(out, "{v}").map_err(out_err)?;
+        } else {
+            writeln!(out, "  {rate:>12}, bridge {:02X}: {said}", a.bridge_station)
+                .map_err(out_err)?;
+        }
         while let Some(st) = queue.pop_front() {
             if !tried.insert(st) {
                 continue;
@@ -170,7 +208,6 @@ pub(crate) fn probe_cmd(a: &ProbeArgs) -> Run {
             }
             // A reply from another station is worth a try at that station.
             queue.extend(o.foreign.iter().copied().filter(|s| !tried.contains(s)));
-            let rate = baud.map_or_else(|| "tcp".to_string(), |b| format!("{b} baud"));
             if a.json {
                 let v = serde_json::json!({
                     "type": "try",
@@ -190,7 +227,7 @@ pub(crate) fn probe_cmd(a: &ProbeArgs) -> Run {
             }
         }
         // A controller listens at one rate: the others need no try.
-        if !found.is_empty() {
+        if !found.is_empty() || !bridges.is_empty() {
             break;
         }
     }
@@ -202,6 +239,7 @@ pub(crate) fn probe_cmd(a: &ProbeArgs) -> Run {
         let v = serde_json::json!({
             "type": "result",
             "found": found.iter().map(|(b, s)| serde_json::json!({"baud": b, "station": format!("{s:02X}")})).collect::<Vec<_>>(),
+            "bridges": bridges.iter().map(|(b, s)| serde_json::json!({"baud": b, "station": format!("{s:02X}")})).collect::<Vec<_>>(),
         });
         writeln!(out, "{v}").map_err(out_err)?;
     } else if !found.is_empty() {
@@ -211,6 +249,11 @@ pub(crate) fn probe_cmd(a: &ProbeArgs) -> Run {
             found.iter().map(advice).collect::<Vec<_>>().join(", or ")
         )
         .map_err(out_err)?;
+        if !bridges.is_empty() {
+            writeln!(out, "through a bridge: `iai bridge status` shows it, `iai table write --bridge` sends it whole tables").map_err(out_err)?;
+        }
+    } else if !bridges.is_empty() {
+        writeln!(out, "found a bridge, but its controller did not answer through it: `iai bridge status` shows the bridge's counters").map_err(out_err)?;
     } else {
         let why = if seen_kinds.contains("echo") {
             "our own frames came back: a loopback or an echoing converter, no controller"
@@ -224,7 +267,7 @@ pub(crate) fn probe_cmd(a: &ProbeArgs) -> Run {
         writeln!(out, "not found: {why}").map_err(out_err)?;
     }
     out.flush().map_err(out_err)?;
-    Ok(if found.is_empty() {
+    Ok(if found.is_empty() && bridges.is_empty() {
         ExitCode::from(1)
     } else {
         ExitCode::SUCCESS

@@ -62,6 +62,7 @@ Examples:
   iai table write table.csv --tcp 127.0.0.1:5000 --verify after-fault
   iai table write table.csv --tcp 127.0.0.1:5000 --resume      after an interruption
   iai table write table.csv --tcp 127.0.0.1:5000 --replace     the table becomes the file's
+  iai table write table.csv --port /dev/ttyUSB0 --baud 115200 --bridge
 
 The CSV format:
   number,acceleration,deceleration,speed,axis1,axis2,axis3
@@ -82,7 +83,18 @@ cell is checked before anything is sent. Positions not in the file keep
 their values, unless --replace: it clears every position 246H reaches
 (0..=8189) first and checks with 208H afterwards that the table holds the
 file's records only. An interrupted write leaves FILE.csv.iai-state:
---resume continues it, --restart starts over.";
+--resume continues it, --restart starts over.
+
+--bridge: the bridge firmware must answer its status query (station BB,
+--bridge-station); the whole table goes to it as one 26DH (up to 20,000
+records; larger tables in several), XON/XOFF honoured. Its # with the count
+means the controller holds every record of the message, each read back by
+the bridge and compared, and the message's checksum was right. Its & says
+only that it failed, not how far: any prefix of the records may be written
+(after B01, B04 or B07 also records decoded from the corrupted bytes);
+sending the table again puts every record right (position writes are
+idempotent), which iai does for the bridge's transport codes up to
+--retries times. No state file: there is nothing to resume.";
 
 pub(crate) const TABLE_READ: &str = "\
 Examples:
@@ -134,3 +146,13 @@ controller answers: use the --baud and --station it prints), an & reply,
 our own frame (a loopback or an echoing converter), replies from another
 station (tried next), or bytes that are not protocol B (a wrong baud rate
 or framing). It stops at the first baud rate where a controller answers.";
+
+pub(crate) const BRIDGE_STATUS: &str = "\
+Examples:
+  iai bridge status --tcp 127.0.0.1:PORT          the gateway (tools/gateway.sh)
+  iai bridge status --port /dev/ttyUSB0 --baud 115200 --json
+  iai bridge status --port COM3 --bridge-station B1
+
+Shows the bridge's configuration (stations, baud rates, flow control,
+policy), its counters (forwarded, relayed, 26DH ok/failed, records, chunks,
+retries, overruns...) and its last own & code with what it means.";

@@ -1,6 +1,7 @@
 //! The commands' handlers: each takes its parsed arguments and returns
 //! the exit status, or a [`Failure`] for `main` to report.
 
+pub(crate) mod bridge;
 pub(crate) mod diag;
 pub(crate) mod encode;
 pub(crate) mod help;

@@ -8,10 +8,10 @@ use std::sync::atomic::Ordering;
 
 use iai_cli::codes::answered_with;
 use iai_cli::csvtable;
-use iai_cli::link::Link;
+use iai_cli::link::{Flow, Link};
 use iai_cli::resume::{self, refuse_stale, write_progress, ResumeState};
 use iai_cli::table::{self, Hooks, Plan, TableError, CLEAR_LAST, COUNT_MAX};
-use iai_protocol_b::position::PositionRecord;
+use iai_protocol_b::position::{PositionRecord, PositionStream};
 use iai_protocol_b::transfer::{Guarantee, Verify as CoreVerify};
 use iai_protocol_b::Failure as CoreFailure;
 
@@ -50,8 +50,19 @@ fn replace_reach(plan: &Plan) -> u16 {
 }
 
 pub(crate) fn table_write(a: &WriteArgs) -> Run {
-    let (file, line, verify) = (a.file.as_path(), &a.line, a.verify);
+    let (file, line) = (a.file.as_path(), &a.line);
+    let verify = a.verify.unwrap_or_default();
     let plan = line.plan();
+    if a.bridge && plan.write_stream().id != PositionStream::CHANGE_2.id {
+        return Err(format!(
+            "--bridge sends the table as one 26DH, a message of the TTA profile, not of {}",
+            plan.profile.name()
+        )
+        .into());
+    }
+    if a.bridge && a.verify.is_some() {
+        eprintln!("iai: warning: --verify does not apply with --bridge: the bridge reads every chunk back itself");
+    }
     let (bytes, records) = load(file, &plan)?;
     if records.is_empty() && !a.replace {
         return Err(format!(
@@ -85,7 +96,11 @@ pub(crate) fn table_write(a: &WriteArgs) -> Run {
     if a.resume {
         eprintln!("resuming after record {skip} of {total}");
     }
-    let mut link = line.open()?;
+    let mut link = if a.bridge {
+        line.open_with(Flow::XonXoff)?
+    } else {
+        line.open()?
+    };
     let stop = stop_flag();
     let stopped = || stop.load(Ordering::SeqCst);
     let note = |m: &str| eprintln!("{m}");
@@ -109,6 +124,16 @@ pub(crate) fn table_write(a: &WriteArgs) -> Run {
     if records.is_empty() {
         ResumeState::remove(file);
         return replaced(&mut link, &plan, 0, &hooks).map_err(|e| table_failure(&link, e, ""))?;
+    }
+    if a.bridge {
+        // One message, answered once: no state to resume from.
+        ResumeState::remove(file);
+        super::bridge::write_table(a, &records, &mut link, &hooks)?;
+        if a.replace {
+            return replaced(&mut link, &plan, total, &hooks)
+                .map_err(|e| table_failure(&link, e, ""))?;
+        }
+        return Ok(ExitCode::SUCCESS);
     }
     let policy = match verify {
         Verify::Off => CoreVerify::Off,
