@@ -495,3 +495,66 @@ fn write_all(inner: &mut Inner, bytes: &[u8]) -> io::Result<()> {
         Inner::Tcp(s) => s.write_all(bytes),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use iai_protocol_b::frame::Station;
+    use std::net::TcpListener;
+
+    /// Over TCP with `--flow xonxoff`, an XOFF stops the writing until XON
+    /// (a chunk may be under way), and neither reaches the received data.
+    #[test]
+    fn an_xoff_over_tcp_stops_the_writing_until_xon() {
+        let l = TcpListener::bind("127.0.0.1:0").unwrap();
+        let addr = l.local_addr().unwrap().to_string();
+        let peer = std::thread::spawn(move || {
+            let (mut c, _) = l.accept().unwrap();
+            c.write_all(&[XOFF]).unwrap();
+            std::thread::sleep(Duration::from_millis(400));
+            c.set_nonblocking(true).unwrap();
+            let mut buf = vec![0u8; 65536];
+            let during = c.read(&mut buf).unwrap_or(0);
+            c.set_nonblocking(false).unwrap();
+            c.write_all(&[XON, b'#', XOFF, XON]).unwrap();
+            let mut all = buf[..during].to_vec();
+            while all.len() < 10_000 {
+                let n = c.read(&mut buf).unwrap();
+                assert!(n > 0);
+                all.extend_from_slice(&buf[..n]);
+            }
+            (during, all)
+        });
+        let target = Target::Tcp {
+            addr,
+            flow: Flow::XonXoff,
+        };
+        let mut link = Link::open(&target, LineConfig::new(Station(0x99))).unwrap();
+        // The XOFF is there before the first chunk goes.
+        std::thread::sleep(Duration::from_millis(100));
+        let data: Vec<u8> = (0..10_000u32).map(|i| b'0' + (i % 10) as u8).collect();
+        let t0 = Instant::now();
+        link.write_all(&data).unwrap();
+        assert!(
+            t0.elapsed() >= Duration::from_millis(250),
+            "{:?}",
+            t0.elapsed()
+        );
+        let (during, all) = peer.join().unwrap();
+        assert!(
+            during <= FLOW_CHUNK,
+            "{during} bytes went out during the XOFF"
+        );
+        assert_eq!(all, data);
+        // The data byte between the flow-control bytes is kept, alone.
+        let mut got = link.take_pending();
+        let mut buf = [0u8; 16];
+        let end = Instant::now() + Duration::from_millis(300);
+        while got.is_empty() && Instant::now() < end {
+            let n = link.read_for(&mut buf, Duration::from_millis(50)).unwrap();
+            got.extend_from_slice(&buf[..n]);
+        }
+        assert_eq!(got, b"#");
+    }
+}

@@ -109,27 +109,19 @@ fn signalled(args: &[&str], ms: u64, signal: i32) -> Output {
 /// positions that covers, and exits 130; a new start is refused while the
 /// state file exists; `--resume` completes the same table.
 #[cfg(unix)]
-#[test]
-fn an_interrupted_read_keeps_its_part_and_resumes() {
-    let sim = Sim::tcp(&["--quiet", "--reply-delay-ms", "15"]);
-    let at = sim.at.clone();
+fn interrupted_read_on(line: &[&str], sim: Sim) {
+    let tag = line[0].trim_start_matches('-');
     let csv = csv_table(3_000, 3, 43);
-    let path = temp("resume-read.csv", csv.as_bytes());
-    let out = iai(&[
-        "table",
-        "write",
-        path.to_str().unwrap(),
-        "--tcp",
-        &at,
-        "--verify",
-        "off",
-    ]);
+    let path = temp(&format!("resume-read-{tag}.csv"), csv.as_bytes());
+    let out = with_line(
+        &["table", "write", path.to_str().unwrap(), "--verify", "off"],
+        line,
+    );
     assert!(out.status.success(), "{}", stderr(&out));
-    let got = temp("resume-read-out.csv", b"");
+    let got = temp(&format!("resume-read-out-{tag}.csv"), b"");
     let o = got.to_str().unwrap();
-    let read = [
-        "table", "read", "--first", "1", "--count", "3000", "-o", o, "--tcp", &at,
-    ];
+    let mut read = vec!["table", "read", "--first", "1", "--count", "3000", "-o", o];
+    read.extend_from_slice(line);
     let out = signalled(&read, 1_500, libc::SIGINT);
     assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
     let e = stderr(&out);
@@ -183,6 +175,22 @@ fn an_interrupted_read_keeps_its_part_and_resumes() {
     assert_eq!(std::fs::read_to_string(&got).unwrap(), csv);
     assert!(!std::path::Path::new(&format!("{o}.iai-read-state")).exists());
     sim.stop();
+}
+
+#[cfg(unix)]
+#[test]
+fn an_interrupted_read_keeps_its_part_and_resumes_tcp() {
+    let sim = Sim::tcp(&["--quiet", "--reply-delay-ms", "15"]);
+    let at = sim.at.clone();
+    interrupted_read_on(&["--tcp", &at], sim);
+}
+
+#[cfg(unix)]
+#[test]
+fn an_interrupted_read_keeps_its_part_and_resumes_pty() {
+    let sim = Sim::start(&["--pty", "--quiet", "--reply-delay-ms", "15"]);
+    let at = sim.at.clone();
+    interrupted_read_on(&["--port", &at, "--baud", "115200"], sim);
 }
 
 /// A read whose controller goes away prints what it read and the range
@@ -303,26 +311,21 @@ fn clear_takes_an_explicit_range_or_all_pty() {
 
 /// `--replace` makes the controller's table the file's: what the file
 /// does not define is gone (within 246H's reach), 208H counts the file.
-#[test]
-fn replace_leaves_exactly_the_file() {
-    let sim = Sim::tcp(&["--quiet"]);
-    let at = sim.at.clone();
-    let old = temp("replace-old.csv", csv_table(30, 2, 53).as_bytes());
-    assert!(
-        iai(&["table", "write", old.to_str().unwrap(), "--tcp", &at])
-            .status
-            .success()
+fn replace_on(line: &[&str], sim: Sim) {
+    let tag = line[0].trim_start_matches('-');
+    let old = temp(
+        &format!("replace-old-{tag}.csv"),
+        csv_table(30, 2, 53).as_bytes(),
     );
+    assert!(with_line(&["table", "write", old.to_str().unwrap()], line)
+        .status
+        .success());
     let new = format!("{HEADER}7,0.30,0.30,100,1.000,2.000\n12,0.00,0.00,0,,3.000\n");
-    let path = temp("replace-new.csv", new.as_bytes());
-    let out = iai(&[
-        "table",
-        "write",
-        path.to_str().unwrap(),
-        "--tcp",
-        &at,
-        "--replace",
-    ]);
+    let path = temp(&format!("replace-new-{tag}.csv"), new.as_bytes());
+    let out = with_line(
+        &["table", "write", path.to_str().unwrap(), "--replace"],
+        line,
+    );
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(
         stdout(&out).contains(
@@ -331,12 +334,12 @@ fn replace_leaves_exactly_the_file() {
         "{}",
         stdout(&out)
     );
-    assert_eq!(stdout(&iai(&["table", "read", "--all", "--tcp", &at])), new);
+    assert_eq!(stdout(&with_line(&["table", "read", "--all"], line)), new);
     // A header-only file is no table to write, but with --replace it
     // empties the table.
-    let empty = temp("replace-empty.csv", HEADER.as_bytes());
+    let empty = temp(&format!("replace-empty-{tag}.csv"), HEADER.as_bytes());
     let e = empty.to_str().unwrap();
-    let out = iai(&["table", "write", e, "--tcp", &at]);
+    let out = with_line(&["table", "write", e], line);
     assert_eq!(out.status.code(), Some(1));
     assert!(
         stderr(&out).contains("no records (only the header); nothing was sent"),
@@ -344,14 +347,14 @@ fn replace_leaves_exactly_the_file() {
         stderr(&out)
     );
     assert!(!stdout(&out).contains("verified"), "{}", stdout(&out));
-    let out = iai(&["table", "write", e, "--tcp", &at, "--replace"]);
+    let out = with_line(&["table", "write", e, "--replace"], line);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(
         stdout(&out).contains("defines no position now (208H: 0)"),
         "{}",
         stdout(&out)
     );
-    let out = iai(&["table", "read", "--all", "--tcp", &at]);
+    let out = with_line(&["table", "read", "--all"], line);
     assert_eq!(
         stdout(&out),
         "number,acceleration,deceleration,speed,axis1\n"
@@ -363,22 +366,16 @@ fn replace_leaves_exactly_the_file() {
     );
     // A position past 246H's reach survives a replace: said, exit 1.
     let far = temp(
-        "replace-far.csv",
+        &format!("replace-far-{tag}.csv"),
         format!("{HEADER}9000,0.00,0.00,0,1.000,\n").as_bytes(),
     );
-    assert!(
-        iai(&["table", "write", far.to_str().unwrap(), "--tcp", &at])
-            .status
-            .success()
+    assert!(with_line(&["table", "write", far.to_str().unwrap()], line)
+        .status
+        .success());
+    let out = with_line(
+        &["table", "write", path.to_str().unwrap(), "--replace"],
+        line,
     );
-    let out = iai(&[
-        "table",
-        "write",
-        path.to_str().unwrap(),
-        "--tcp",
-        &at,
-        "--replace",
-    ]);
     assert_eq!(out.status.code(), Some(1), "{}", stdout(&out));
     assert!(
         stderr(&out).contains("1 defined position(s) past 8189 remain, out of 246H's reach"),
@@ -386,6 +383,21 @@ fn replace_leaves_exactly_the_file() {
         stderr(&out)
     );
     sim.stop();
+}
+
+#[test]
+fn replace_leaves_exactly_the_file_tcp() {
+    let sim = Sim::tcp(&["--quiet"]);
+    let at = sim.at.clone();
+    replace_on(&["--tcp", &at], sim);
+}
+
+#[cfg(unix)]
+#[test]
+fn replace_leaves_exactly_the_file_pty() {
+    let sim = Sim::start(&["--pty", "--quiet"]);
+    let at = sim.at.clone();
+    replace_on(&["--port", &at, "--baud", "115200"], sim);
 }
 
 /// A write's state file stops a new start; `--restart` starts over; a
