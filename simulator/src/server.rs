@@ -505,3 +505,78 @@ pub mod pty {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn text_frames_show_each_frame_once_complete_escaped_and_cut() {
+        let mut log = TextFrames::default();
+        assert!(log.entries(b"!99212").is_empty(), "half a frame waits");
+        assert_eq!(
+            log.entries(b"01\x7F89\r\n#99"),
+            vec![vec!["!9921201\\x7F89\\r\\n".to_string()]]
+        );
+        let long = [b"#99".as_slice(), &[b'0'; 300], b"\r\n"].concat();
+        let entries = log.entries(&long);
+        assert_eq!(entries.len(), 1);
+        let line = &entries[0][0];
+        // The "#99" of the previous call, then the new frame's first bytes.
+        assert!(line.starts_with("#99#99000"), "{line}");
+        assert!(line.ends_with('…'), "{line}");
+        assert_eq!(line.chars().count(), SHOWN_FRAME + 1);
+        // The next frame is whole again.
+        assert_eq!(
+            log.entries(b"&99E1\r\n"),
+            vec![vec!["&99E1\\r\\n".to_string()]]
+        );
+    }
+
+    #[test]
+    fn the_log_prefixes_entries_and_cuts_long_ones() {
+        let mut out = Vec::new();
+        let entry: Vec<String> = (0..10).map(|i| format!("line {i}")).collect();
+        entry_lines("<", vec![vec!["one".into()], entry], &mut out);
+        assert_eq!(out.first().map(String::as_str), Some("  < one"));
+        assert_eq!(out.len(), 1 + 7 + 1);
+        assert_eq!(out.get(7).map(String::as_str), Some("  < line 6"));
+        assert_eq!(out.last().map(String::as_str), Some("  <     …"));
+    }
+
+    #[test]
+    fn a_tcp_connection_reads_nothing_data_then_closed() {
+        let l = TcpListener::bind("127.0.0.1:0").unwrap();
+        let mut c = TcpStream::connect(l.local_addr().unwrap()).unwrap();
+        let (mut s, _) = l.accept().unwrap();
+        let mut buf = [0u8; 16];
+        // Short waits poll, long ones use a socket timeout: both report
+        // nothing as `None`.
+        for ms in [2, 30] {
+            assert_eq!(
+                Conn::read_for(&mut s, &mut buf, Duration::from_millis(ms)).unwrap(),
+                None
+            );
+        }
+        c.write_all(b"!99").unwrap();
+        let mut got = Vec::new();
+        while got.len() < 3 {
+            if let Some(n) = Conn::read_for(&mut s, &mut buf, Duration::from_millis(5)).unwrap() {
+                assert!(n > 0);
+                got.extend_from_slice(&buf[..n]);
+            }
+        }
+        assert_eq!(got, b"!99");
+        drop(c);
+        let end = Instant::now() + Duration::from_secs(5);
+        let closed = loop {
+            match Conn::read_for(&mut s, &mut buf, Duration::from_millis(5)).unwrap() {
+                Some(0) => break true,
+                _ if Instant::now() > end => break false,
+                _ => {}
+            }
+        };
+        assert!(closed, "the closed connection was not seen");
+    }
+}
