@@ -1,21 +1,27 @@
 //! The protocol-B host on TCP: which connection is the host, and the
 //! bridge's upstream [`Port`] on its socket.
 //!
-//! Two TCP sockets listen on the port, so that a connection made while the
-//! host is connected (or while its connection is closing) can be answered.
+//! [`SOCKETS`] TCP sockets listen on the port, so that a connection made
+//! while the host is connected (or while its connection is closing) can be
+//! answered.
 //! Each socket has a [`Role`]:
 //!
 //! - the first connection established while nobody is served becomes the
 //!   **host**: its bytes are the bridge's upstream and the bridge's
 //!   answers go to it;
-//! - a connection established while another is the host is **refused**:
-//!   it gets `&` + the bridge's station + [`codes::HOST_BUSY`] (B0B) + SC
-//!   CR LF at once and is closed (reset if it is not gone within
-//!   [`REFUSE_LIMIT_MS`]); while both sockets are taken, a third
-//!   connection is reset by the stack;
-//! - a connection established while the bridge still finishes what the
-//!   last host started **waits**, unread, and becomes the host once the
-//!   bridge is idle.
+//! - a connection established while another is the host is **held**,
+//!   unread, for [`HOLD_MS`]: if the host leaves meanwhile, it waits as
+//!   below (a client that closes and connects again before its close
+//!   reached the bridge is not refused); otherwise it is **refused**: it
+//!   gets `&` + the bridge's station + [`codes::HOST_BUSY`] (B0B) + SC CR
+//!   LF and is closed (what it sends is read and dropped; it is reset if
+//!   it is not gone within [`REFUSE_LIMIT_MS`]); while all [`SOCKETS`]
+//!   are taken, one more connection is reset by the stack;
+//! - a connection established while the host is leaving (it closed its
+//!   sending side; the bridge may still be reading what it sent) or while
+//!   the bridge still finishes what the last host started **waits**,
+//!   unread, and becomes the host once the bridge is idle: a client that
+//!   closes and connects again at once is not refused.
 //!
 //! **Flow control.** The bridge reads the socket only when it can use the
 //! bytes; while it cannot (a 26DH chunk being confirmed and read back), the
@@ -51,6 +57,10 @@ use crate::serial::Port;
 /// A host that takes none of the bytes waiting for it for this long is
 /// reset.
 pub const HOST_STALL_MS: u32 = 10_000;
+/// How long a connection made while a host is served is held before it
+/// is refused (the host may be leaving: its close can still be on the
+/// way behind the data it sent last).
+pub const HOLD_MS: u32 = 1_000;
 /// A refused connection still open after this long is reset.
 pub const REFUSE_LIMIT_MS: u32 = 2_000;
 /// A connection closing (after the host's close) still open after this
@@ -61,14 +71,23 @@ pub const KEEP_ALIVE_MS: u64 = 5_000;
 /// A connection that hears nothing from its peer for this long (keep-
 /// alives unanswered, data unacknowledged) is reset by the stack.
 pub const SILENCE_LIMIT_MS: u64 = 20_000;
-/// Sockets listening on the port.
-pub const SOCKETS: usize = 2;
+/// Sockets listening on the port: the host's, one for a connection made
+/// while it is served (held, then refused or admitted) and one more, so
+/// that a client that closes and connects again at once still finds one
+/// listening while the last host's socket finishes its close.
+pub const SOCKETS: usize = 3;
 
 /// What one socket is doing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Role {
     /// Listening, or connected and waiting to become the host.
     Listen,
+    /// Connected while a host is served, unread; refused if that host is
+    /// still served [`HOLD_MS`] after `since`.
+    Held {
+        /// Tick when it was first seen connected.
+        since: u32,
+    },
     /// The host's connection.
     Host,
     /// The host left; closing our side since `since`.
@@ -124,6 +143,8 @@ pub struct Hosts {
     tx_still_since: u32,
     /// The bridge was told that the host's input ended.
     input_ended: bool,
+    /// The host closed its sending side (or its connection is gone).
+    leaving: bool,
     stats: HostStats,
 }
 
@@ -146,6 +167,7 @@ impl Hosts {
             tx_queue: 0,
             tx_still_since: 0,
             input_ended: false,
+            leaving: false,
             stats: HostStats::default(),
         }
     }
@@ -194,7 +216,15 @@ impl Hosts {
         if self.session == Session::Draining && bridge.end_of_input() && bridge.host_idle() {
             self.session = Session::Vacant;
         }
-        for n in 0..SOCKETS {
+        // The host's socket first: a host that left and a connection made
+        // just after it seen in the same round, the one leaves before the
+        // other is judged (which is then admitted, not refused).
+        let first = match self.session {
+            Session::Host(h) => h,
+            _ => 0,
+        };
+        for k in 0..SOCKETS {
+            let n = (first + k) % SOCKETS;
             let (Some(&handle), Some(role)) = (self.handles.get(n), self.roles.get(n).copied())
             else {
                 continue;
@@ -203,12 +233,13 @@ impl Hosts {
             let next = match role {
                 // The reset went out with the last poll.
                 Role::Reset => Role::Listen,
-                Role::Listen => self.on_listening(socket, n, bridge, now),
+                Role::Listen => self.on_listening(socket, n, None, bridge, now),
+                Role::Held { since } => self.on_listening(socket, n, Some(since), bridge, now),
                 Role::Host => self.on_host(socket, bridge, now),
                 Role::Closing { since } => settle(socket, since, CLOSE_LIMIT_MS, now, role),
                 Role::Refused { since } => settle(socket, since, REFUSE_LIMIT_MS, now, role),
             };
-            if let (Role::Listen, Role::Refused { .. }) = (role, next) {
+            if matches!(next, Role::Refused { .. }) && !matches!(role, Role::Refused { .. }) {
                 refuse(socket, station);
                 self.stats.refused = self.stats.refused.wrapping_add(1);
             }
@@ -222,12 +253,13 @@ impl Hosts {
         }
     }
 
-    /// A listening socket: a connection established on it becomes the
-    /// host, waits, or is refused.
+    /// A listening socket (or one `held` since then): a connection
+    /// established on it becomes the host, waits, is held or is refused.
     fn on_listening(
         &mut self,
         socket: &mut tcp::Socket<'_>,
         n: usize,
+        held: Option<u32>,
         bridge: &Bridge,
         now: u32,
     ) -> Role {
@@ -245,18 +277,25 @@ impl Hosts {
                 self.tx_queue = 0;
                 self.tx_still_since = now;
                 self.input_ended = false;
+                self.leaving = false;
                 self.stats.hosts = self.stats.hosts.wrapping_add(1);
                 Role::Host
             }
-            Session::Host(_) => Role::Refused { since: now },
-            // The bridge still finishes the last host's work: wait.
-            _ => Role::Listen,
+            Session::Host(_) if !self.leaving => match held {
+                None => Role::Held { since: now },
+                Some(since) if now.wrapping_sub(since) >= HOLD_MS => Role::Refused { since: now },
+                Some(since) => Role::Held { since },
+            },
+            // The host is leaving, or the bridge still finishes the last
+            // host's work: wait.
+            _ => held.map_or(Role::Listen, |since| Role::Held { since }),
         }
     }
 
     /// The host's socket: its end, or a stall.
     fn on_host(&mut self, socket: &mut tcp::Socket<'_>, bridge: &mut Bridge, now: u32) -> Role {
         let gone = !matches!(socket.state(), State::Established | State::CloseWait);
+        self.leaving = gone || !socket.may_recv();
         if gone {
             // Reset by the peer, timed out, or closed under us: the
             // bridge's answers go nowhere.
@@ -307,6 +346,13 @@ impl Hosts {
 /// A socket closing after the host left or after a refusal: listens again
 /// once closed, is reset if it lingers past `limit_ms`.
 fn settle(socket: &mut tcp::Socket<'_>, since: u32, limit_ms: u32, now: u32, role: Role) -> Role {
+    // What the peer still sends is dropped: its window stays open, so it
+    // reads our close instead of stalling.
+    while socket.can_recv() {
+        if socket.recv(|b| (b.len(), ())).is_err() {
+            break;
+        }
+    }
     match socket.state() {
         State::Closed => Role::Listen,
         // Our close went first and the peer's came: nothing more to say.

@@ -168,19 +168,16 @@ impl<'a> Net<'a> {
         iface_cfg.random_seed = seed;
         let iface = Interface::new(iface_cfg, device, clock.at(now));
         let mut sockets = SocketSet::new(slots.as_mut_slice());
-        let Buffers {
-            rx: [rx0, rx1],
-            tx: [tx0, tx1],
-        } = buffers;
-        let mut add = |rx: &'a mut [u8; SOCKET_BUFFER], tx: &'a mut [u8; SOCKET_BUFFER]| {
+        let Buffers { rx, tx } = buffers;
+        let mut handles = [SocketHandle::default(); SOCKETS];
+        for ((handle, rx), tx) in handles.iter_mut().zip(rx.iter_mut()).zip(tx.iter_mut()) {
             let mut socket = tcp::Socket::new(
                 tcp::SocketBuffer::new(rx.as_mut_slice()),
                 tcp::SocketBuffer::new(tx.as_mut_slice()),
             );
             host::configure(&mut socket);
-            sockets.add(socket)
-        };
-        let handles = [add(rx0, tx0), add(rx1, tx1)];
+            *handle = sockets.add(socket);
+        }
         let dhcp = (cfg.addressing == Addressing::Dhcp).then(|| sockets.add(dhcpv4::Socket::new()));
         let mut net = Net {
             iface,
