@@ -54,10 +54,11 @@ pub const UNKNOWN_QUERY: u16 = 0xB09;
 /// after two rewrites (the bridge reads every chunk back with 21FH before
 /// it takes more from the host).
 pub const VERIFY_MISMATCH: u16 = 0xB0A;
-/// `&` B0B (protocol B over TCP, [`crate::net`]): another host holds the
-/// bridge. A connection made while one is being served gets this reply on
-/// the bridge's own station, sent unasked at once, and is then closed; the
-/// host being served is not disturbed.
+/// `&` B0B (protocol B over TCP, module `net`): another host holds the
+/// bridge. A connection made while one is being served is held, unread,
+/// for 1 s (`net::host::HOLD_MS`); if that host is still served then, it
+/// gets this reply on the bridge's own station, unasked, and is closed.
+/// The host being served is not disturbed.
 pub const HOST_BUSY: u16 = 0xB0B;
 
 /// What each code says, in a few words (for tools that show them).
