@@ -634,13 +634,19 @@ impl EthernetGateway {
                 gw.qemu.stdout_so_far()
             ));
         }
-        gw.listening = gw
-            .qemu
-            .stdout_so_far()
-            .lines()
-            .find(|l| l.contains(TCP_LISTENING))
-            .map(|l| l.trim().to_owned())
-            .unwrap_or_default();
+        // The whole line: semihosting output may come in pieces.
+        let end = Instant::now() + Duration::from_secs(2);
+        gw.listening = loop {
+            let out = gw.qemu.stdout_so_far();
+            let line = out
+                .split_inclusive('\n')
+                .find(|l| l.contains(TCP_LISTENING))
+                .unwrap_or_default();
+            if line.ends_with('\n') || Instant::now() >= end {
+                break line.trim().to_owned();
+            }
+            thread::sleep(Duration::from_millis(10));
+        };
         tcp_status_query(addr, cfg.bridge_station, FENCE_TIMEOUT)
             .map_err(|e| format!("the bridge did not answer over TCP: {e}"))?;
         Ok(gw)
