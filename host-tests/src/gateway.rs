@@ -47,7 +47,7 @@
 use std::collections::VecDeque;
 use std::io::{self, Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::thread::{self, JoinHandle};
@@ -60,10 +60,11 @@ use iai_protocol_b::frame::Station;
 
 use crate::bridge::{status_query, status_query_frame, HostLink, SimThread};
 use crate::qemu::{
-    build_ethernet_firmware, build_firmware, Board, ExitOutcome, QemuSession, QUIT_GUARD,
-    QUIT_SEQUENCE, READY_MARKER,
+    build_ethernet_firmware, build_firmware, symbol_address, target_dir, Board, ExitOutcome,
+    QemuSession, QUIT_GUARD, QUIT_SEQUENCE, READY_MARKER,
 };
 use crate::sim::{Faults, Simulator};
+use firmware_example::net::config::{NetConfig, BLOCK_OFFSET, DEFAULT_PORT};
 
 /// What the gateway runs.
 #[derive(Debug, Clone)]
@@ -89,6 +90,11 @@ pub struct Options {
     /// Ethernet only: the bridge honours the quit sequence (for test runs
     /// that end with [`EthernetGateway::quit`]).
     pub quit_sequence: bool,
+    /// Ethernet only: a network block written into the configuration page
+    /// (`None`: blank, so DHCP and port 5020). Its port is the one QEMU
+    /// forwards to; a static address must be QEMU's guest address,
+    /// 10.0.2.15.
+    pub network: Option<NetConfig>,
 }
 
 impl Default for Options {
@@ -103,6 +109,7 @@ impl Default for Options {
             elf: None,
             ethernet: false,
             quit_sequence: false,
+            network: None,
         }
     }
 }
@@ -597,16 +604,21 @@ impl EthernetGateway {
             quit_sequence: opts.quit_sequence,
             ..config(opts.baud)
         };
-        let nic = format!(
-            "user,model=stellaris,restrict=on,hostfwd=tcp:127.0.0.1:{port}-:{}",
-            firmware_example::net::config::DEFAULT_PORT
-        );
+        let guest_port = opts.network.map_or(DEFAULT_PORT, |n| n.port);
+        let nic =
+            format!("user,model=stellaris,restrict=on,hostfwd=tcp:127.0.0.1:{port}-:{guest_port}");
+        let mut args = vec!["-nic".to_owned(), nic];
+        if let Some(net) = &opts.network {
+            args.push("-device".to_owned());
+            args.push(network_loader_arg(&elf, net)?);
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
         let qemu = QemuSession::start_tied(
             Board::Lm3s6965,
             &elf,
             BOOT_TIMEOUT,
             Some(READY_MARKER),
-            &["-nic", &nic],
+            &args,
             Some(&cfg),
         )
         .map_err(|e| format!("starting QEMU: {e}"))?;
@@ -724,6 +736,25 @@ pub fn run_ethernet(
         Err(e) => log(&format!("stopped; {e}")),
     }
     result
+}
+
+/// QEMU's `-device loader` argument that puts `net`'s block where the
+/// Ethernet firmware reads it: [`BLOCK_OFFSET`] bytes past
+/// `_bridge_config`.
+fn network_loader_arg(elf: &Path, net: &NetConfig) -> Result<String, String> {
+    static SERIAL: AtomicU64 = AtomicU64::new(0);
+    let addr =
+        symbol_address(elf, "_bridge_config").map_err(|e| e.to_string())? + BLOCK_OFFSET as u64;
+    let dir = target_dir().join("qemu-config");
+    let file = dir.join(format!(
+        "net-{}-{}.bin",
+        std::process::id(),
+        SERIAL.fetch_add(1, Ordering::Relaxed)
+    ));
+    std::fs::create_dir_all(&dir)
+        .and_then(|()| std::fs::write(&file, net.to_block()))
+        .map_err(|e| format!("writing {}: {e}", file.display()))?;
+    Ok(format!("loader,file={},addr={addr:#x}", file.display()))
 }
 
 /// A port on 127.0.0.1 free a moment ago.

@@ -26,6 +26,9 @@
 //!    the last record sent was never written; garbage on the port and a
 //!    connection dropped in the middle of a frame leave a bridge that
 //!    answers the next host.
+//! 4. `static_address_and_port_from_the_network_block`: a network block
+//!    in the configuration page gives a static address and port 6020; the
+//!    firmware says so and answers there.
 //!
 //! Needs `qemu-system-arm` and the `thumbv7m-none-eabi` rustup target.
 
@@ -510,4 +513,42 @@ fn dropped_connections_and_garbage() {
     assert!(!written.is_empty());
     assert!(written.len() < cut.len(), "{} written", written.len());
     assert_eq!(written[..], cut[..written.len()]);
+}
+
+#[test]
+fn static_address_and_port_from_the_network_block() {
+    use firmware_example::net::config::{Addressing, Ipv4Setting, NetConfig};
+    let elf = build_ethernet_firmware().expect("build lm3s6965-eth");
+    let net = NetConfig {
+        addressing: Addressing::Static,
+        port: 6020,
+        address: Ipv4Setting {
+            // QEMU's user network forwards to its guest address.
+            address: [10, 0, 2, 15],
+            prefix: 24,
+            gateway: Some([10, 0, 2, 2]),
+        },
+    };
+    let opts = Options {
+        elf: Some(elf),
+        ethernet: true,
+        network: Some(net),
+        ..Options::default()
+    };
+    let gw = EthernetGateway::start(&opts).unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        gw.listening
+            .ends_with("protocol-b-tcp listening on 10.0.2.15:6020 (static)"),
+        "{}",
+        gw.listening
+    );
+    assert!(
+        gw.qemu.stdout_so_far().contains("network block Block"),
+        "{}",
+        gw.qemu.stdout_so_far()
+    );
+    let (bridge, _) = stations();
+    let fields = tcp_status_query(gw.addr, bridge, Duration::from_secs(15)).unwrap();
+    assert_eq!(field(&fields, "own_queries"), 2, "{fields:?}");
+    gw.stop().expect("simulator");
 }
