@@ -9,26 +9,39 @@
 # Arguments go to the gateway binary: --port P (default: a free port),
 # --baud B (default 115200), --board lm3s6965|mps2-an386,
 # --reply-delay-ms MS, --faults SPEC (as iai simulate), --seed S.
+# --ethernet: protocol B over TCP instead. The Ethernet build
+# (lm3s6965-eth: smoltcp on the Stellaris MAC, lm3s6965 only) boots with
+# QEMU's user network forwarding 127.0.0.1:PORT to the bridge's port 5020,
+# the simulator on the controller UART; prints `protocol-b-tcp
+# 127.0.0.1:PORT` once the bridge answers over TCP. No relay: clients
+# talk to the firmware's TCP stack, one at a time (others get & B0B).
 # Also builds the iai tool (target/release/iai).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ./tools/setup.sh >&2
 board=lm3s6965
+ethernet=no
 args=("$@")
 for ((i = 0; i < ${#args[@]}; i++)); do
   case "${args[i]}" in
     --board) board=${args[i + 1]:-} ;;
     --board=*) echo "gateway.sh: write --board NAME (two words)" >&2; exit 2 ;;
+    --ethernet) ethernet=yes ;;
   esac
 done
 case "$board" in
-  lm3s6965 | lm3s6965evb) target=thumbv7m-none-eabi; bin=lm3s6965 ;;
-  mps2-an386) target=thumbv7em-none-eabihf; bin=mps2-an386 ;;
+  lm3s6965 | lm3s6965evb) target=thumbv7m-none-eabi; bin=lm3s6965; features=board-lm3s6965 ;;
+  mps2-an386) target=thumbv7em-none-eabihf; bin=mps2-an386; features=board-mps2-an386 ;;
   *) echo "gateway.sh: --board takes lm3s6965 or mps2-an386, not '$board'" >&2; exit 2 ;;
 esac
+if [ "$ethernet" = yes ]; then
+  [ "$bin" = lm3s6965 ] || { echo "gateway.sh: --ethernet runs on lm3s6965 only" >&2; exit 2; }
+  bin=lm3s6965-eth
+  features=board-lm3s6965,ethernet
+fi
 echo "==> building the firmware ($bin)" >&2
 cargo build -q -p firmware-example --profile firmware --target "$target" \
-  --no-default-features --features "board-$bin" --bin "$bin"
+  --no-default-features --features "$features" --bin "$bin"
 echo "==> building the gateway and iai (release)" >&2
 cargo build -q -p host-tests --release --bin gateway
 cargo build -q -p iai-cli --release --bin iai

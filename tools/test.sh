@@ -29,8 +29,11 @@ cargo +1.87 build -q -p iai-protocol-b --all-features
 cargo +1.87 build -q -p iai-protocol-b --target thumbv7em-none-eabihf
 echo "ok: core builds with Rust 1.87"
 
-step "firmware: the bridge library (host), three boards, defmt feature, the icount bench, clippy -D warnings"
+step "firmware: the bridge library (host), three boards, the Ethernet board, defmt feature, the icount bench, clippy -D warnings"
 cargo clippy -q -p firmware-example --no-default-features --lib --tests -- -D warnings
+cargo clippy -q -p firmware-example --no-default-features --features ethernet --lib --tests -- -D warnings
+cargo clippy -q -p firmware-example --target thumbv7m-none-eabi \
+  --no-default-features --features board-lm3s6965,ethernet --bin lm3s6965-eth -- -D warnings
 cargo clippy -q -p firmware-example --target thumbv7m-none-eabi -- -D warnings
 cargo clippy -q -p firmware-example --target thumbv7em-none-eabihf \
   --no-default-features --features board-mps2-an386 -- -D warnings
@@ -48,7 +51,9 @@ step "no-panic proof: the decode paths and the bridge library link without a pan
 for t in thumbv7m-none-eabi thumbv7em-none-eabihf; do
   cargo build -q -p firmware-example --release --features no-panic-proof --bin no_panic_proof --target "$t"
 done
-echo "ok: no panic path survives in the decoders or the bridge (see firmware-example/src/bin/no_panic_proof.rs)"
+cargo build -q -p firmware-example --release --features no-panic-proof,ethernet --bin no_panic_proof \
+  --target thumbv7m-none-eabi
+echo "ok: no panic path survives in the decoders, the bridge or the Ethernet driver (see firmware-example/src/bin/no_panic_proof.rs)"
 
 step "iai builds for Windows (x86_64-pc-windows-gnu, mingw-w64)"
 cargo build -q -p iai-cli --target x86_64-pc-windows-gnu
@@ -57,6 +62,7 @@ echo "ok: iai.exe builds"
 step "docs (no warnings) and doctests"
 RUSTDOCFLAGS="-D warnings" cargo doc -q -p iai-protocol-b --no-deps
 RUSTDOCFLAGS="-D warnings" cargo doc -q -p firmware-example --no-deps --no-default-features
+RUSTDOCFLAGS="-D warnings" cargo doc -q -p firmware-example --no-deps --no-default-features --features ethernet
 RUSTDOCFLAGS="-D warnings" cargo doc -q -p iai-cli --no-deps
 RUSTDOCFLAGS="-D warnings" cargo doc -q -p iai-simulator --no-deps
 cargo test -q -p iai-protocol-b -p iai-simulator --doc

@@ -54,6 +54,12 @@ pub const UNKNOWN_QUERY: u16 = 0xB09;
 /// after two rewrites (the bridge reads every chunk back with 21FH before
 /// it takes more from the host).
 pub const VERIFY_MISMATCH: u16 = 0xB0A;
+/// `&` B0B (protocol B over TCP, module `net`): another host holds the
+/// bridge. A connection made while one is being served is held, unread,
+/// for 1 s (`net::host::HOLD_MS`); if that host is still served then, it
+/// gets this reply on the bridge's own station, unasked, and is closed.
+/// The host being served is not disturbed.
+pub const HOST_BUSY: u16 = 0xB0B;
 
 /// What each code says, in a few words (for tools that show them).
 pub const fn meaning(code: u16) -> Option<&'static str> {
@@ -67,12 +73,13 @@ pub const fn meaning(code: u16) -> Option<&'static str> {
         XON_XOFF_IN_TEXT => "the controller's reply carries XON/XOFF in its text",
         UNKNOWN_QUERY => "the bridge does not answer this message ID",
         VERIFY_MISMATCH => "a chunk still read back different after two rewrites",
+        HOST_BUSY => "another host is connected to the bridge",
         _ => return None,
     })
 }
 
 /// Every `&` code the bridge sends, for documentation and tests.
-pub const ALL: [u16; 9] = [
+pub const ALL: [u16; 10] = [
     UPSTREAM_FRAME,
     CONTROLLER_TIMEOUT,
     UPSTREAM_STALLED,
@@ -82,6 +89,7 @@ pub const ALL: [u16; 9] = [
     XON_XOFF_IN_TEXT,
     UNKNOWN_QUERY,
     VERIFY_MISMATCH,
+    HOST_BUSY,
 ];
 
 /// Bytes that end a QEMU test run: ESC `Q` `!` after

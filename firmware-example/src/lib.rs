@@ -8,7 +8,9 @@
 //!   overrun counting and receive-side flow control (XON/XOFF, RTS/CTS);
 //! - [`config`]: the run-time configuration block and the command policy;
 //! - [`status`]: the status query the bridge answers on its own station;
-//! - [`codes`]: the bridge's own `&` codes and message IDs (B00..BFF).
+//! - [`codes`]: the bridge's own `&` codes and message IDs (B00..BFF);
+//! - `net` (feature `ethernet`): the bridge's host side on TCP (smoltcp,
+//!   the Stellaris Ethernet MAC).
 //!
 //! The boards are the binaries of this package (`src/bin/*.rs`): each only
 //! moves bytes between UART registers and a [`serial::IsrEnd`], reads the
@@ -35,6 +37,8 @@ mod log;
 pub mod bridge;
 pub mod codes;
 pub mod config;
+#[cfg(feature = "ethernet")]
+pub mod net;
 pub mod serial;
 pub mod status;
 

@@ -128,7 +128,7 @@ pub fn setup(
 /// stepped at every start. After a reset (the watchdog's) it holds the
 /// last boot's seed, so the next differs; at power-up, whatever the RAM
 /// held.
-fn boot_seed() -> u32 {
+pub fn boot_seed() -> u32 {
     #[link_section = ".uninit.BOOT_SEED"]
     static mut BOOT_SEED: MaybeUninit<u32> = MaybeUninit::uninit();
     let p = core::ptr::addr_of_mut!(BOOT_SEED).cast::<u32>();

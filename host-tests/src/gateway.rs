@@ -47,19 +47,24 @@
 use std::collections::VecDeque;
 use std::io::{self, Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant};
 
+use firmware_example::codes;
 use firmware_example::config::Config;
 use firmware_example::serial::XON;
 use iai_protocol_b::frame::Station;
 
-use crate::bridge::{status_query, HostLink, SimThread};
-use crate::qemu::{build_firmware, Board, QemuSession, READY_MARKER};
+use crate::bridge::{status_query, status_query_frame, HostLink, SimThread};
+use crate::qemu::{
+    build_ethernet_firmware, build_firmware, symbol_address, target_dir, Board, ExitOutcome,
+    QemuSession, QUIT_GUARD, QUIT_SEQUENCE, READY_MARKER,
+};
 use crate::sim::{Faults, Simulator};
+use firmware_example::net::config::{NetConfig, BLOCK_OFFSET, DEFAULT_PORT};
 
 /// What the gateway runs.
 #[derive(Debug, Clone)]
@@ -78,6 +83,18 @@ pub struct Options {
     pub seed: u64,
     /// The firmware ELF (default: built with the `firmware` profile).
     pub elf: Option<PathBuf>,
+    /// Protocol B over TCP: the Ethernet build (`lm3s6965-eth`) with
+    /// QEMU's user network forwarding 127.0.0.1:`port` to the bridge's
+    /// protocol-B port (see [`run_ethernet`]).
+    pub ethernet: bool,
+    /// Ethernet only: the bridge honours the quit sequence (for test runs
+    /// that end with [`EthernetGateway::quit`]).
+    pub quit_sequence: bool,
+    /// Ethernet only: a network block written into the configuration page
+    /// (`None`: blank, so DHCP and port 5020). Its port is the one QEMU
+    /// forwards to; a static address must be QEMU's guest address,
+    /// 10.0.2.15.
+    pub network: Option<NetConfig>,
 }
 
 impl Default for Options {
@@ -90,6 +107,9 @@ impl Default for Options {
             faults: Faults::default(),
             seed: 1,
             elf: None,
+            ethernet: false,
+            quit_sequence: false,
+            network: None,
         }
     }
 }
@@ -135,6 +155,9 @@ pub fn run(
             opts.baud,
             firmware_example::config::BAUD_RATES
         ));
+    }
+    if opts.ethernet {
+        return run_ethernet(opts, stop, on_ready);
     }
     let listener = TcpListener::bind(("127.0.0.1", opts.port))
         .map_err(|e| format!("cannot listen on 127.0.0.1:{}: {e}", opts.port))?;
@@ -532,4 +555,329 @@ fn forward_down(mut conn: TcpStream, link: &HostLink, done: &AtomicBool, sent: &
     }
     done.store(true, Ordering::Relaxed);
     let _ = conn.shutdown(Shutdown::Both);
+}
+
+/// What the Ethernet firmware prints once protocol B listens on TCP
+/// (followed by `A.B.C.D:PORT (dhcp|static|fallback)`).
+pub const TCP_LISTENING: &str = "protocol-b-tcp listening on ";
+/// How long the Ethernet firmware may take to get an address (DHCP, or
+/// its fallback address after `DHCP_FALLBACK_MS`).
+const ADDRESS_TIMEOUT: Duration = Duration::from_secs(30);
+
+/// The Ethernet build under QEMU with the simulator on its controller
+/// UART: `lm3s6965-eth` with QEMU's user network
+/// (`-nic user,model=stellaris,restrict=on`) forwarding [`Self::addr`]
+/// to the bridge's protocol-B port. Nothing relays the host's bytes: a
+/// client talks to the firmware's TCP stack. Dropping it stops QEMU.
+pub struct EthernetGateway {
+    /// The QEMU session (its upstream UART is not used).
+    pub qemu: QemuSession,
+    /// Where protocol B is reached (127.0.0.1, forwarded by QEMU).
+    pub addr: SocketAddr,
+    /// The firmware's [`TCP_LISTENING`] line.
+    pub listening: String,
+    sim: SimThread,
+}
+
+impl EthernetGateway {
+    /// Boots the firmware (built unless `opts.elf` names one), puts the
+    /// simulator behind it, waits for [`TCP_LISTENING`] and for the bridge
+    /// to answer its status query over TCP. `opts.port` 0: a free port.
+    pub fn start(opts: &Options) -> Result<EthernetGateway, String> {
+        if opts.board != Board::Lm3s6965 {
+            return Err(format!(
+                "--ethernet runs on lm3s6965 (QEMU models the Stellaris Ethernet MAC there), not {}",
+                opts.board
+            ));
+        }
+        let port = match opts.port {
+            0 => free_port()?,
+            p => p,
+        };
+        let addr = SocketAddr::from(([127, 0, 0, 1], port));
+        let elf = match &opts.elf {
+            Some(p) => p.clone(),
+            None => build_ethernet_firmware()
+                .map_err(|e| format!("building the Ethernet firmware: {e}"))?,
+        };
+        let cfg = Config {
+            quit_sequence: opts.quit_sequence,
+            ..config(opts.baud)
+        };
+        let guest_port = opts.network.map_or(DEFAULT_PORT, |n| n.port);
+        let nic =
+            format!("user,model=stellaris,restrict=on,hostfwd=tcp:127.0.0.1:{port}-:{guest_port}");
+        let mut args = vec!["-nic".to_owned(), nic];
+        if let Some(net) = &opts.network {
+            args.push("-device".to_owned());
+            args.push(network_loader_arg(&elf, net)?);
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let qemu = QemuSession::start_tied(
+            Board::Lm3s6965,
+            &elf,
+            BOOT_TIMEOUT,
+            Some(READY_MARKER),
+            &args,
+            Some(&cfg),
+        )
+        .map_err(|e| format!("starting QEMU: {e}"))?;
+        let mut sim = Simulator::tta(cfg.controller_station);
+        sim.response_delay_ms = opts.reply_delay_ms;
+        sim.refuse = true;
+        let sim = sim.with_faults(opts.faults.clone(), opts.seed);
+        let downstream = qemu
+            .downstream
+            .try_clone()
+            .map_err(|e| format!("controller side: {e}"))?;
+        let sim = SimThread::spawn(sim, downstream, Some(opts.baud));
+        let mut gw = EthernetGateway {
+            qemu,
+            addr,
+            listening: String::new(),
+            sim,
+        };
+        if !gw
+            .qemu
+            .wait_for_stdout(TCP_LISTENING, Instant::now() + ADDRESS_TIMEOUT)
+        {
+            return Err(format!(
+                "the firmware did not print {TCP_LISTENING:?} within {ADDRESS_TIMEOUT:?}\n{}",
+                gw.qemu.stdout_so_far()
+            ));
+        }
+        // The whole line: semihosting output may come in pieces.
+        let end = Instant::now() + Duration::from_secs(2);
+        gw.listening = loop {
+            let out = gw.qemu.stdout_so_far();
+            let line = out
+                .split_inclusive('\n')
+                .find(|l| l.contains(TCP_LISTENING))
+                .unwrap_or_default();
+            if line.ends_with('\n') || Instant::now() >= end {
+                break line.trim().to_owned();
+            }
+            thread::sleep(Duration::from_millis(10));
+        };
+        tcp_status_query(addr, cfg.bridge_station, FENCE_TIMEOUT)
+            .map_err(|e| format!("the bridge did not answer over TCP: {e}"))?;
+        Ok(gw)
+    }
+
+    /// Records the simulator has stored so far.
+    pub fn records(&self) -> u64 {
+        self.sim.records()
+    }
+
+    /// Ends the run the firmware's way (it must have been started with
+    /// `quit_sequence`): the quit sequence on a new connection after
+    /// [`QUIT_GUARD`] of silence; QEMU's exit (with the firmware's last
+    /// words: its counters and stack peak) within `timeout`, and the
+    /// simulator as it ended.
+    pub fn quit(self, timeout: Duration) -> Result<(ExitOutcome, Simulator), String> {
+        let EthernetGateway {
+            qemu, sim, addr, ..
+        } = self;
+        let sent = TcpStream::connect(addr).and_then(|mut c| {
+            thread::sleep(QUIT_GUARD);
+            c.write_all(&QUIT_SEQUENCE)?;
+            c.flush()?;
+            Ok(c)
+        });
+        let outcome = match sent {
+            Ok(_conn) => qemu.wait(timeout).map_err(|e| e.to_string()),
+            Err(e) => Err(format!("sending the quit sequence: {e}")),
+        };
+        let sim = sim.join().map_err(|e| e.to_string());
+        Ok((outcome?, sim?))
+    }
+
+    /// Stops QEMU; the simulator as it ended.
+    pub fn stop(self) -> io::Result<Simulator> {
+        let EthernetGateway { qemu, sim, .. } = self;
+        // QEMU first: its end closes the controller line, which ends the
+        // simulator's thread.
+        drop(qemu);
+        sim.join()
+    }
+}
+
+/// The Ethernet gateway ([`EthernetGateway`]) for `tools/gateway.sh
+/// --ethernet`: calls `on_ready` with the forwarded address once the
+/// bridge answered over TCP, and runs until `stop` (or fails when QEMU
+/// exits on its own). One client at a time: the firmware answers others
+/// `&` B0B and closes them.
+pub fn run_ethernet(
+    opts: &Options,
+    stop: &AtomicBool,
+    on_ready: impl FnOnce(SocketAddr),
+) -> Result<(), String> {
+    let mut gw = EthernetGateway::start(opts)?;
+    log(&format!(
+        "lm3s6965evb-eth (QEMU pid {}) up; {} forwarded from {}; simulated controller \
+         (station {:02X}) behind it at {} baud; Ctrl-C stops",
+        gw.qemu.pid(),
+        gw.listening,
+        gw.addr,
+        config(opts.baud).controller_station.0,
+        opts.baud
+    ));
+    on_ready(gw.addr);
+    let result = watch(&mut gw.qemu, stop);
+    match gw.stop() {
+        Ok(sim) => {
+            let s = sim.stats();
+            log(&format!(
+                "stopped; the simulator answered {} command(s) and holds {} position(s)",
+                s.commands,
+                sim.table.len()
+            ));
+        }
+        Err(e) => log(&format!("stopped; {e}")),
+    }
+    result
+}
+
+/// QEMU's `-device loader` argument that puts `net`'s block where the
+/// Ethernet firmware reads it: [`BLOCK_OFFSET`] bytes past
+/// `_bridge_config`.
+fn network_loader_arg(elf: &Path, net: &NetConfig) -> Result<String, String> {
+    static SERIAL: AtomicU64 = AtomicU64::new(0);
+    let addr =
+        symbol_address(elf, "_bridge_config").map_err(|e| e.to_string())? + BLOCK_OFFSET as u64;
+    let dir = target_dir().join("qemu-config");
+    let file = dir.join(format!(
+        "net-{}-{}.bin",
+        std::process::id(),
+        SERIAL.fetch_add(1, Ordering::Relaxed)
+    ));
+    std::fs::create_dir_all(&dir)
+        .and_then(|()| std::fs::write(&file, net.to_block()))
+        .map_err(|e| format!("writing {}: {e}", file.display()))?;
+    Ok(format!("loader,file={},addr={addr:#x}", file.display()))
+}
+
+/// A port on 127.0.0.1 free a moment ago.
+fn free_port() -> Result<u16, String> {
+    TcpListener::bind(("127.0.0.1", 0))
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .map_err(|e| format!("finding a free port: {e}"))
+}
+
+/// Waits until `stop` (`Ok`) or QEMU exits on its own (an error).
+fn watch(qemu: &mut QemuSession, stop: &AtomicBool) -> Result<(), String> {
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            return Ok(());
+        }
+        match qemu.try_wait() {
+            Ok(None) => thread::sleep(POLL),
+            Ok(Some(status)) => {
+                // A Ctrl-C on the terminal reaches QEMU as well as us.
+                let end = Instant::now() + Duration::from_millis(500);
+                while !stop.load(Ordering::Relaxed) && Instant::now() < end {
+                    thread::sleep(POLL);
+                }
+                if stop.load(Ordering::Relaxed) {
+                    return Ok(());
+                }
+                return Err(format!(
+                    "QEMU exited on its own ({status})\n{}",
+                    qemu.stderr_so_far()
+                ));
+            }
+            Err(e) => return Err(format!("QEMU: {e}")),
+        }
+    }
+}
+
+/// The bridge's status query over a TCP connection to `addr` (retried
+/// while the connection is refused or closed unanswered, as while the
+/// firmware is still getting its address, until `timeout`): the named
+/// fields of its reply. Frames before the reply are skipped; the
+/// connection is closed after it.
+pub fn tcp_status_query(
+    addr: SocketAddr,
+    bridge: Station,
+    timeout: Duration,
+) -> Result<Vec<(&'static str, u64)>, String> {
+    let deadline = Instant::now() + timeout;
+    let mut last = String::from("no attempt");
+    while Instant::now() < deadline {
+        match status_over(addr, bridge, deadline) {
+            Ok(fields) => return Ok(fields),
+            Err(e) => last = e,
+        }
+        thread::sleep(Duration::from_millis(200));
+    }
+    Err(format!(
+        "no status reply from {addr} within {timeout:?} ({last})"
+    ))
+}
+
+fn status_over(
+    addr: SocketAddr,
+    bridge: Station,
+    deadline: Instant,
+) -> Result<Vec<(&'static str, u64)>, String> {
+    use iai_protocol_b::frame::{Frame, Header};
+    let left = deadline.saturating_duration_since(Instant::now());
+    let mut conn = TcpStream::connect_timeout(&addr, left.max(Duration::from_millis(1)))
+        .map_err(|e| format!("connect: {e}"))?;
+    conn.set_nodelay(true).map_err(|e| e.to_string())?;
+    conn.write_all(&status_query_frame(bridge))
+        .map_err(|e| format!("send: {e}"))?;
+    let mut pending = Vec::new();
+    let mut buf = [0u8; 512];
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err("timed out".into());
+        }
+        conn.set_read_timeout(Some(left.min(Duration::from_secs(1))))
+            .map_err(|e| e.to_string())?;
+        let n = match conn.read(&mut buf) {
+            Ok(0) => return Err("closed without the reply".into()),
+            Ok(n) => n,
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+                ) =>
+            {
+                continue
+            }
+            Err(e) => return Err(format!("read: {e}")),
+        };
+        pending.extend_from_slice(buf.get(..n).unwrap_or_default());
+        while let Some(end) = pending.windows(2).position(|w| w == b"\r\n") {
+            let line: Vec<u8> = pending.drain(..end + 2).collect();
+            let start = line
+                .iter()
+                .position(|&b| b == b'#' || b == b'&')
+                .unwrap_or(line.len());
+            let Some(frame) = line.get(start..) else {
+                continue;
+            };
+            let Ok(f) = Frame::new_checked(frame, Default::default()) else {
+                continue;
+            };
+            if f.header() == Header::Error && f.station() == bridge {
+                return Err(format!(
+                    "the bridge answered {:?}",
+                    String::from_utf8_lossy(frame)
+                ));
+            }
+            if f.header() != Header::Response
+                || f.station() != bridge
+                || f.code() != codes::STATUS_QUERY
+            {
+                continue;
+            }
+            return firmware_example::status::parse(f.body())
+                .map(|f| f.to_vec())
+                .ok_or_else(|| format!("bad status reply {:?}", String::from_utf8_lossy(frame)));
+        }
+    }
 }

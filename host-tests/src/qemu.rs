@@ -157,20 +157,39 @@ pub fn build_firmware_with(
     features: &[&str],
     target_dir_override: Option<&Path>,
 ) -> io::Result<PathBuf> {
+    build_bin(board, board.bin(), profile, features, target_dir_override)
+}
+
+/// The Ethernet board's binary (protocol B over TCP on `lm3s6965evb`).
+pub const ETHERNET_BIN: &str = "lm3s6965-eth";
+
+/// Build the bridge with its host side on Ethernet ([`ETHERNET_BIN`],
+/// features `board-lm3s6965` and `ethernet`) with [`FIRMWARE_PROFILE`];
+/// the ELF path. It runs on [`Board::Lm3s6965`].
+pub fn build_ethernet_firmware() -> io::Result<PathBuf> {
+    build_bin(
+        Board::Lm3s6965,
+        ETHERNET_BIN,
+        FIRMWARE_PROFILE,
+        &["ethernet"],
+        None,
+    )
+}
+
+fn build_bin(
+    board: Board,
+    bin: &str,
+    profile: &str,
+    features: &[&str],
+    target_dir_override: Option<&Path>,
+) -> io::Result<PathBuf> {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let mut feature_list = vec![board.feature()];
     feature_list.extend_from_slice(features);
     let mut command = Command::new(&cargo);
     command
         .current_dir(workspace_root())
-        .args([
-            "build",
-            "--quiet",
-            "-p",
-            FIRMWARE_PACKAGE,
-            "--bin",
-            board.bin(),
-        ])
+        .args(["build", "--quiet", "-p", FIRMWARE_PACKAGE, "--bin", bin])
         .args(["--profile", profile])
         .args(["--target", board.target()])
         .args(["--no-default-features", "--features"])
@@ -199,7 +218,7 @@ pub fn build_firmware_with(
         .map_or_else(target_dir, Path::to_path_buf)
         .join(board.target())
         .join(profile_dir)
-        .join(board.bin());
+        .join(bin);
     if elf.is_file() {
         Ok(elf)
     } else {
@@ -539,6 +558,12 @@ impl QemuSession {
     /// QEMU's stdout so far (the firmware's semihosting output).
     pub fn stdout_so_far(&self) -> String {
         self.stdout.text()
+    }
+
+    /// Waits until QEMU's stdout holds `needle` (true) or `deadline`
+    /// passes (false).
+    pub fn wait_for_stdout(&self, needle: &str, deadline: Instant) -> bool {
+        self.stdout.wait_for(needle, deadline)
     }
 
     /// QEMU's stderr so far.

@@ -33,6 +33,7 @@
 
 mod passthrough;
 pub mod pipeline;
+mod session;
 mod stream;
 mod upstream;
 

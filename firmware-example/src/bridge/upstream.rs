@@ -45,6 +45,11 @@ pub(super) struct Upstream {
 }
 
 impl Upstream {
+    /// Host bytes read from the port and not yet sorted.
+    pub(super) fn staged(&self) -> usize {
+        self.in_len.saturating_sub(self.in_pos)
+    }
+
     pub(super) const fn new() -> Self {
         Upstream {
             head: [0; ENVELOPE_LEN],

@@ -3,7 +3,10 @@
 //! cable at the line rate with XON/XOFF (see [`host_tests::gateway`]).
 //!
 //! Prints exactly one line on stdout, `protocol-b 127.0.0.1:PORT`, once
-//! the bridge answers through the relay; everything else goes to stderr.
+//! the bridge answers through the relay (with `--ethernet`:
+//! `protocol-b-tcp 127.0.0.1:PORT` once the Ethernet build answers over
+//! TCP, QEMU's user network forwarding that port to the firmware's);
+//! everything else goes to stderr.
 //! Runs until SIGINT, SIGTERM or SIGHUP (Ctrl-C), then stops QEMU and the
 //! simulator. Exit code 0 after such a stop, 1 if anything failed (QEMU
 //! exiting on its own included), 2 for bad arguments.
@@ -12,7 +15,8 @@
 //! port), `--baud B` (9600, 19200, 38400, 57600 or 115200, default
 //! 115200), `--board lm3s6965|mps2-an386`, `--reply-delay-ms MS` (the
 //! simulated controller's time per command, default 2), `--faults SPEC`
-//! (as `iai simulate --faults`), `--seed S`, `--elf PATH`.
+//! (as `iai simulate --faults`), `--seed S`, `--elf PATH`, `--ethernet`
+//! (protocol B over TCP: the `lm3s6965-eth` build, lm3s6965 only).
 
 use std::io::{self, Write};
 use std::path::PathBuf;
@@ -24,7 +28,8 @@ use host_tests::gateway::{self, Options};
 use host_tests::qemu::Board;
 
 const USAGE: &str = "usage: gateway [--port P] [--baud B] [--board lm3s6965|mps2-an386] \
-                     [--reply-delay-ms MS] [--faults SPEC] [--seed S] [--elf PATH]";
+                     [--reply-delay-ms MS] [--faults SPEC] [--seed S] [--elf PATH] \
+                     [--ethernet]";
 
 fn parse_args() -> Result<Options, String> {
     let mut o = Options::default();
@@ -63,6 +68,7 @@ fn parse_args() -> Result<Options, String> {
                     .map_err(|_| "--seed takes a number".to_owned())?;
             }
             "--elf" => o.elf = Some(PathBuf::from(value()?)),
+            "--ethernet" => o.ethernet = true,
             "-h" | "--help" => return Err(USAGE.to_owned()),
             other => return Err(format!("unknown argument {other:?}\n{USAGE}")),
         }
@@ -84,9 +90,14 @@ fn main() -> ExitCode {
         eprintln!("gateway: cannot handle signals: {e}");
         return ExitCode::FAILURE;
     }
+    let prefix = if opts.ethernet {
+        "protocol-b-tcp"
+    } else {
+        "protocol-b"
+    };
     let ready = |addr| {
         let mut out = io::stdout().lock();
-        let _ = writeln!(out, "protocol-b {addr}");
+        let _ = writeln!(out, "{prefix} {addr}");
         let _ = out.flush();
     };
     match gateway::run(&opts, &stop, ready) {

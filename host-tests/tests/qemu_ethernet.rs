@@ -1,0 +1,554 @@
+//! Protocol B over TCP end to end: the Ethernet build (`lm3s6965-eth`,
+//! smoltcp on the Stellaris MAC) under QEMU `lm3s6965evb` with QEMU's user
+//! network forwarding a port of 127.0.0.1 to the bridge's, and the
+//! simulator on the controller UART.
+//!
+//! 1. `iai_over_tcp`: the gateway binary with `--ethernet` (what
+//!    `tools/gateway.sh --ethernet` runs) prints `protocol-b-tcp
+//!    127.0.0.1:PORT`; `iai send 212` gets the typed axis status; a second
+//!    connection while one is served gets `&` BB B0B and is closed, the
+//!    first goes on; `iai table write` (one command per record) and `iai
+//!    table write --bridge` (one 26DH, chunks read back by the bridge) of
+//!    200 records x 8 axes report `verified`, `iai table read` gives the
+//!    same CSV back; SIGTERM stops it.
+//! 2. `a_26dh_over_tcp_is_verified_and_timed`: one 26DH written whole to
+//!    the socket (TCP's window holds the host back), answered `#` with the
+//!    record count; the simulator's table equal to the source; prints the
+//!    throughput against the downstream line's limit; the run ends with
+//!    the quit sequence over TCP and the firmware's stack peak is printed
+//!    (`stack lm3s6965-eth N`, read by `tools/size-report.sh`).
+//!    `IAI_ETH_RECORDS` sets the record count (default 200; 20000 for the
+//!    full table).
+//! 3. `dropped_connections_and_garbage`: a connection dropped in the
+//!    middle of a 26DH, then a new connection works; the bridge counts the
+//!    failed stream and its last code is B04; what reached the controller
+//!    is a prefix of that message's records, each equal to its source, and
+//!    the last record sent was never written; garbage on the port and a
+//!    connection dropped in the middle of a frame leave a bridge that
+//!    answers the next host.
+//! 4. `static_address_and_port_from_the_network_block`: a network block
+//!    in the configuration page gives a static address and port 6020; the
+//!    firmware says so and answers there.
+//!
+//! Needs `qemu-system-arm` and the `thumbv7m-none-eabi` rustup target.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{Shutdown, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::mpsc::{channel, Receiver};
+use std::time::{Duration, Instant};
+
+use host_tests::bridge::{check_table, command_26dh, reply_26dh, status_query_frame, Throughput};
+use host_tests::gateway::{tcp_status_query, EthernetGateway, Options};
+use host_tests::qemu::{build_ethernet_firmware, workspace_root};
+use host_tests::table::table;
+use iai_protocol_b::frame::{Frame, Header, Station};
+use iai_protocol_b::position::PositionRecord;
+use iai_protocol_b::LineConfig;
+
+use firmware_example::codes;
+
+/// The bridge's and the controller's stations in the gateway's
+/// configuration.
+fn stations() -> (Station, Station) {
+    let cfg = host_tests::gateway::config(115_200);
+    (cfg.bridge_station, cfg.controller_station)
+}
+
+/// Builds the `iai` binary in this test's profile; its path.
+fn iai_binary() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable");
+    let dir = exe
+        .parent()
+        .and_then(Path::parent)
+        .expect("target/<profile>")
+        .to_path_buf();
+    let profile = match dir.file_name().and_then(|n| n.to_str()) {
+        Some("debug") => "dev".to_owned(),
+        Some(other) => other.to_owned(),
+        None => panic!("no profile directory in {}", exe.display()),
+    };
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let out = Command::new(cargo)
+        .current_dir(workspace_root())
+        .args(["build", "--quiet", "-p", "iai-cli", "--bin", "iai"])
+        .args(["--profile", &profile])
+        .stdin(Stdio::null())
+        .output()
+        .expect("run cargo");
+    assert!(
+        out.status.success(),
+        "building iai failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let iai = dir.join("iai");
+    assert!(iai.is_file(), "{} missing", iai.display());
+    iai
+}
+
+/// Frames read from a TCP connection, CR LF ended.
+struct Frames {
+    conn: TcpStream,
+    pending: Vec<u8>,
+}
+
+impl Frames {
+    fn new(conn: TcpStream) -> Frames {
+        Frames {
+            conn,
+            pending: Vec::new(),
+        }
+    }
+
+    /// The next frame (from its `#`, `&` or `!` on), `None` at the end of
+    /// the connection; panics after `limit`.
+    fn next(&mut self, limit: Duration) -> Option<Vec<u8>> {
+        let end = Instant::now() + limit;
+        loop {
+            if let Some(at) = self.pending.windows(2).position(|w| w == b"\r\n") {
+                let line: Vec<u8> = self.pending.drain(..at + 2).collect();
+                let start = line
+                    .iter()
+                    .position(|b| matches!(b, b'#' | b'&' | b'!'))
+                    .unwrap_or(line.len());
+                return Some(line[start..].to_vec());
+            }
+            let left = end.saturating_duration_since(Instant::now());
+            assert!(!left.is_zero(), "no frame within {limit:?}");
+            self.conn.set_read_timeout(Some(left)).unwrap();
+            let mut buf = [0u8; 4096];
+            match self.conn.read(&mut buf) {
+                Ok(0) => return None,
+                Ok(n) => self.pending.extend_from_slice(&buf[..n]),
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                    ) => {}
+                Err(e) => panic!("read: {e}"),
+            }
+        }
+    }
+
+    /// Sends the bridge's status query and returns its fields, skipping
+    /// the frames before the reply.
+    fn status(&mut self, bridge: Station) -> Vec<(&'static str, u64)> {
+        self.conn.write_all(&status_query_frame(bridge)).unwrap();
+        loop {
+            let frame = self.next(Duration::from_secs(15)).expect("still open");
+            let Ok(f) = Frame::new_checked(&frame, Default::default()) else {
+                continue;
+            };
+            if f.header() == Header::Response
+                && f.station() == bridge
+                && f.code() == codes::STATUS_QUERY
+            {
+                return firmware_example::status::parse(f.body())
+                    .expect("status fields")
+                    .to_vec();
+            }
+        }
+    }
+}
+
+fn field(fields: &[(&str, u64)], name: &str) -> u64 {
+    fields
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, v)| *v)
+        .unwrap_or_else(|| panic!("no {name} in {fields:?}"))
+}
+
+fn connect(addr: std::net::SocketAddr) -> TcpStream {
+    let c = TcpStream::connect(addr).expect("connect");
+    c.set_nodelay(true).unwrap();
+    c
+}
+
+/// The bridge refuses `conn` (a connection made while another host is
+/// served): `&` + its station + B0B, then the end of the connection.
+fn assert_refused(conn: TcpStream, bridge: Station) {
+    let mut frames = Frames::new(conn);
+    let frame = frames
+        .next(Duration::from_secs(5))
+        .expect("a refusal, not a silent close");
+    let f = Frame::new_checked(&frame, Default::default()).expect("a valid frame");
+    assert_eq!(f.header(), Header::Error);
+    assert_eq!(f.station(), bridge);
+    assert_eq!(f.code(), codes::HOST_BUSY);
+    assert_eq!(frames.next(Duration::from_secs(5)), None, "closed after it");
+}
+
+/// The gateway binary with `--ethernet`; SIGTERM (then SIGKILL) when
+/// dropped.
+struct GatewayProcess {
+    child: Child,
+    addr: String,
+    log: Receiver<String>,
+}
+
+impl GatewayProcess {
+    fn start(elf: &Path) -> GatewayProcess {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_gateway"))
+            .arg("--ethernet")
+            .arg("--elf")
+            .arg(elf)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start the gateway");
+        let lines = |pipe: Box<dyn Read + Send>| {
+            let (tx, rx) = channel();
+            std::thread::spawn(move || {
+                for l in BufReader::new(pipe).lines() {
+                    let Ok(l) = l else { break };
+                    if tx.send(l).is_err() {
+                        break;
+                    }
+                }
+            });
+            rx
+        };
+        let stdout = lines(Box::new(child.stdout.take().expect("stdout")));
+        let log = lines(Box::new(child.stderr.take().expect("stderr")));
+        let first = stdout
+            .recv_timeout(Duration::from_secs(90))
+            .unwrap_or_else(|_| {
+                panic!(
+                    "no ready line: {}",
+                    log.try_iter().collect::<Vec<_>>().join("\n")
+                )
+            });
+        let addr = first
+            .strip_prefix("protocol-b-tcp ")
+            .filter(|a| a.starts_with("127.0.0.1:"))
+            .unwrap_or_else(|| panic!("first line {first:?}"))
+            .to_owned();
+        assert!(stdout.recv_timeout(Duration::from_millis(200)).is_err());
+        GatewayProcess { child, addr, log }
+    }
+
+    fn iai(&self, iai: &Path, args: &[&str]) -> Output {
+        let out = Command::new(iai)
+            .args(args)
+            .args(["--tcp", &self.addr])
+            .stdin(Stdio::null())
+            .output()
+            .expect("run iai");
+        assert!(
+            out.status.success(),
+            "iai {args:?}: {}\n{}\n{}\ngateway:\n{}",
+            out.status,
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr),
+            self.log.try_iter().collect::<Vec<_>>().join("\n")
+        );
+        out
+    }
+
+    fn stop(&mut self) -> std::process::ExitStatus {
+        let _ = Command::new("kill")
+            .arg("-TERM")
+            .arg(self.child.id().to_string())
+            .status();
+        let end = Instant::now() + Duration::from_secs(10);
+        loop {
+            if let Some(status) = self.child.try_wait().expect("wait") {
+                return status;
+            }
+            assert!(Instant::now() < end, "the gateway did not stop");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+impl Drop for GatewayProcess {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = Command::new("kill")
+                .arg("-TERM")
+                .arg(self.child.id().to_string())
+                .status();
+            std::thread::sleep(Duration::from_secs(2));
+            let _ = self.child.kill();
+        }
+        let _ = self.child.wait();
+    }
+}
+
+fn csv_of(records: u32, seed: u32) -> Vec<u8> {
+    let mut csv = Vec::new();
+    iai_cli::csvtable::write_header(&mut csv, 8).unwrap();
+    for r in table(records, 8, seed) {
+        iai_cli::csvtable::write_row(&mut csv, &r, 8).unwrap();
+    }
+    csv
+}
+
+#[test]
+fn iai_over_tcp() {
+    let elf = build_ethernet_firmware().expect("build lm3s6965-eth");
+    let iai = iai_binary();
+    let mut gw = GatewayProcess::start(&elf);
+    let (bridge, _) = stations();
+    let addr: std::net::SocketAddr = gw.addr.parse().unwrap();
+
+    // An axis status query, typed.
+    let out = gw.iai(&iai, &["send", "212", "query_axis_pattern=1"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("212H Axis Status Query"), "{text}");
+    assert!(text.contains("axis_pattern = 0x01"), "{text}");
+
+    // One host at a time: the first is served (its status query is
+    // answered), a second gets & B0B and is closed, the first goes on.
+    let mut first = Frames::new(connect(addr));
+    let before = first.status(bridge);
+    assert_refused(connect(addr), bridge);
+    let after = first.status(bridge);
+    assert_eq!(
+        field(&after, "own_queries"),
+        field(&before, "own_queries") + 1
+    );
+    drop(first);
+
+    // A table, one command per record, then as one 26DH through the
+    // bridge; read back equal each time.
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
+    for (seed, bridge_flag) in [(77, false), (78, true)] {
+        let csv = csv_of(200, seed);
+        let path = dir.join(format!("eth-{}-{seed}.csv", std::process::id()));
+        std::fs::write(&path, &csv).unwrap();
+        let file = path.to_str().expect("UTF-8 path");
+        let mut args = vec!["table", "write", file];
+        if bridge_flag {
+            args.push("--bridge");
+        }
+        let out = gw.iai(&iai, &args);
+        let text = String::from_utf8_lossy(&out.stdout);
+        let want = if bridge_flag {
+            "verified by the bridge: the controller holds all 200 records"
+        } else {
+            "verified: the controller holds all 200 records"
+        };
+        assert!(
+            text.contains(want),
+            "{text}\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let back = gw.iai(&iai, &["table", "read", "--first", "1", "--count", "200"]);
+        assert!(
+            back.stdout == csv,
+            "read back:\n{}",
+            String::from_utf8_lossy(&back.stdout)
+        );
+        let _ = std::fs::remove_file(&path);
+    }
+
+    let status = gw.stop();
+    let log = gw.log.try_iter().collect::<Vec<_>>().join("\n");
+    assert!(status.success(), "{status}\n{log}");
+    assert!(log.contains("stopped;"), "{log}");
+}
+
+/// Writes `message` to a new connection from a thread (TCP holds it back
+/// while the bridge works) and waits for the bridge's answer; the answer
+/// and the seconds from the first byte to it.
+fn send_26dh(addr: std::net::SocketAddr, message: Vec<u8>, limit: Duration) -> (Vec<u8>, f64) {
+    let conn = connect(addr);
+    let mut writer = conn.try_clone().unwrap();
+    let started = Instant::now();
+    let sender = std::thread::spawn(move || writer.write_all(&message));
+    let mut frames = Frames::new(conn);
+    let reply = frames.next(limit).expect("an answer");
+    let secs = started.elapsed().as_secs_f64();
+    sender.join().unwrap().expect("the whole message written");
+    (reply, secs)
+}
+
+#[test]
+fn a_26dh_over_tcp_is_verified_and_timed() {
+    let n: u32 = std::env::var("IAI_ETH_RECORDS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(200);
+    let elf = build_ethernet_firmware().expect("build lm3s6965-eth");
+    let opts = Options {
+        elf: Some(elf),
+        ethernet: true,
+        quit_sequence: true,
+        ..Options::default()
+    };
+    let gw = EthernetGateway::start(&opts).unwrap_or_else(|e| panic!("{e}"));
+    let (bridge, controller) = stations();
+    let records: Vec<PositionRecord> = table(n, 8, 5).collect();
+    let message = command_26dh(controller, &records);
+    let host_bytes = message.len() as u64;
+    let limit = Duration::from_secs(60 + u64::from(n) / 20);
+    let (reply, secs) = send_26dh(gw.addr, message, limit);
+    let count = u16::try_from(n).unwrap();
+    assert_eq!(
+        String::from_utf8_lossy(&reply),
+        String::from_utf8_lossy(&reply_26dh(controller, count))
+    );
+    let fields = tcp_status_query(gw.addr, bridge, Duration::from_secs(15)).unwrap();
+    assert_eq!(field(&fields, "streams_ok"), 1);
+    assert_eq!(field(&fields, "streams_failed"), 0);
+    assert_eq!(field(&fields, "records"), u64::from(n));
+    let chunks = field(&fields, "chunks_sent");
+    let (exit, sim) = gw
+        .quit(Duration::from_secs(20))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(exit.success(), "{}\n{}", exit.stdout, exit.stderr);
+    let stack: u64 = exit
+        .stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("firmware-example: stack peak "))
+        .and_then(|v| v.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no stack peak in:\n{}", exit.stdout));
+    println!("stack lm3s6965-eth {stack}");
+    check_table(&sim.table, &records).unwrap_or_else(|e| panic!("{e}"));
+    let s = sim.stats();
+    let throughput = Throughput {
+        baud: 115_200,
+        host_bytes,
+        seconds: secs,
+        downstream_bytes: s.bytes_in + s.bytes_out,
+        commands: s.commands,
+        per_command_ms: Options::default().reply_delay_ms
+            + LineConfig::new(controller).turnaround_ms,
+    };
+    println!("{}", throughput.line("tcp"));
+    eprintln!(
+        "{n} records x 8 axes over TCP: {host_bytes} bytes in {secs:.1} s, {chunks} chunks; \
+         {:.1}% of the line rate against the downstream limit of {:.1}% ({:.0}% of the limit)",
+        throughput.percent(),
+        throughput.limit_percent(),
+        throughput.percent() / throughput.limit_percent() * 100.0
+    );
+}
+
+#[test]
+fn dropped_connections_and_garbage() {
+    let elf = build_ethernet_firmware().expect("build lm3s6965-eth");
+    let opts = Options {
+        elf: Some(elf),
+        ethernet: true,
+        ..Options::default()
+    };
+    let gw = EthernetGateway::start(&opts).unwrap_or_else(|e| panic!("{e}"));
+    let (bridge, controller) = stations();
+
+    // A 26DH of 150 records numbered 501.., cut after about two thirds
+    // of its bytes (several chunks' worth), the connection then dropped.
+    let cut: Vec<PositionRecord> = table(150, 8, 9)
+        .enumerate()
+        .map(|(i, mut r)| {
+            r.number = 501 + u16::try_from(i).unwrap();
+            r
+        })
+        .collect();
+    let message = command_26dh(controller, &cut);
+    let sent = message.len() * 2 / 3;
+    let mut host = connect(gw.addr);
+    host.write_all(&message[..sent]).unwrap();
+    // Let the bridge take what TCP holds, then drop the connection.
+    let end = Instant::now() + Duration::from_secs(30);
+    while gw.records() == 0 {
+        assert!(Instant::now() < end, "no record reached the controller");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    host.shutdown(Shutdown::Both).unwrap();
+    drop(host);
+
+    // A new host is served (after the bridge ended the stream: until
+    // then it is refused, and tcp_status_query tries again).
+    let fields = tcp_status_query(gw.addr, bridge, Duration::from_secs(30)).unwrap();
+    assert_eq!(field(&fields, "streams_failed"), 1, "{fields:?}");
+    assert_eq!(field(&fields, "streams_ok"), 0, "{fields:?}");
+    assert_eq!(
+        field(&fields, "last_error"),
+        u64::from(codes::UPSTREAM_STALLED),
+        "{fields:?}"
+    );
+
+    // Garbage: noise with no frame in it, then a status query on the
+    // same connection is answered.
+    let mut frames = Frames::new(connect(gw.addr));
+    let noise: Vec<u8> = (0..2000u32).map(|i| (i * 37 % 251) as u8).collect();
+    frames.conn.write_all(&noise).unwrap();
+    frames.conn.write_all(b"\r\n").unwrap();
+    let f = frames.status(bridge);
+    assert!(field(&f, "rejected") > 0, "{f:?}");
+    // Then a partial frame, and the connection dropped in its middle.
+    frames.conn.write_all(b"!99212").unwrap();
+    drop(frames);
+    // Another garbage host: NULs and 0xFF, dropped without a CR LF.
+    let mut noisy = connect(gw.addr);
+    noisy.write_all(&[0u8; 700]).unwrap();
+    noisy.write_all(&[0xFF; 700]).unwrap();
+    drop(noisy);
+
+    // The next host works: a whole 26DH, verified.
+    let records: Vec<PositionRecord> = table(50, 8, 10).collect();
+    let (reply, _) = send_26dh(
+        gw.addr,
+        command_26dh(controller, &records),
+        Duration::from_secs(60),
+    );
+    assert_eq!(
+        String::from_utf8_lossy(&reply),
+        String::from_utf8_lossy(&reply_26dh(controller, 50))
+    );
+
+    let sim = gw.stop().expect("simulator");
+    // Positions 1..=50: the last message, equal to its source. 501..:
+    // what was written of the cut message, a prefix of its records each
+    // equal to its source, and not all of them.
+    let mut whole = sim.table.clone();
+    let written: Vec<PositionRecord> = whole.split_off(&501).into_values().collect();
+    check_table(&whole, &records).unwrap_or_else(|e| panic!("{e}"));
+    assert!(!written.is_empty());
+    assert!(written.len() < cut.len(), "{} written", written.len());
+    assert_eq!(written[..], cut[..written.len()]);
+}
+
+#[test]
+fn static_address_and_port_from_the_network_block() {
+    use firmware_example::net::config::{Addressing, Ipv4Setting, NetConfig};
+    let elf = build_ethernet_firmware().expect("build lm3s6965-eth");
+    let net = NetConfig {
+        addressing: Addressing::Static,
+        port: 6020,
+        address: Ipv4Setting {
+            // QEMU's user network forwards to its guest address.
+            address: [10, 0, 2, 15],
+            prefix: 24,
+            gateway: Some([10, 0, 2, 2]),
+        },
+    };
+    let opts = Options {
+        elf: Some(elf),
+        ethernet: true,
+        network: Some(net),
+        ..Options::default()
+    };
+    let gw = EthernetGateway::start(&opts).unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        gw.listening
+            .ends_with("protocol-b-tcp listening on 10.0.2.15:6020 (static)"),
+        "{}",
+        gw.listening
+    );
+    assert!(
+        gw.qemu.stdout_so_far().contains("network block Block"),
+        "{}",
+        gw.qemu.stdout_so_far()
+    );
+    let (bridge, _) = stations();
+    let fields = tcp_status_query(gw.addr, bridge, Duration::from_secs(15)).unwrap();
+    assert_eq!(field(&fields, "own_queries"), 2, "{fields:?}");
+    gw.stop().expect("simulator");
+}
