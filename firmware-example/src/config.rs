@@ -385,7 +385,7 @@ impl Config {
             return Err(BlockError::Field(52));
         }
         let poll_period_ms = u16::from_le_bytes([byte(56), byte(57)]);
-        if poll_period_ms < 10 || poll_period_ms > 60_000 {
+        if !(10..=60_000).contains(&poll_period_ms) {
             return Err(BlockError::Field(56));
         }
         let axes = byte(58);

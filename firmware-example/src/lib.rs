@@ -8,7 +8,9 @@
 //!   overrun counting and receive-side flow control (XON/XOFF, RTS/CTS);
 //! - [`config`]: the run-time configuration block and the command policy;
 //! - [`status`]: the status query the bridge answers on its own station;
-//! - [`codes`]: the bridge's own `&` codes and message IDs (B00..BFF).
+//! - [`codes`]: the bridge's own `&` codes and message IDs (B00..BFF);
+//! - [`modbus`]: the PLC gateway, a Modbus RTU server in front of protocol
+//!   B sharing the bridge's controller line.
 //!
 //! The boards are the binaries of this package (`src/bin/*.rs`): each only
 //! moves bytes between UART registers and a [`serial::IsrEnd`], reads the
@@ -35,6 +37,7 @@ mod log;
 pub mod bridge;
 pub mod codes;
 pub mod config;
+pub mod modbus;
 pub mod serial;
 pub mod status;
 

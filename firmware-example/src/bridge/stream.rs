@@ -187,7 +187,9 @@ impl Bridge {
         self.tx_blocked = false;
         self.stream_deadline = None;
         let was_full = self.queue_full();
-        if self.stream.started {
+        if self.guest_holds {
+            // The guest finishes its exchange first.
+        } else if self.stream.started {
             let (job, line) = (&mut self.job, &mut self.line);
             let mut buf = [0u8; 16];
             while down.read_ready().map_err(Error::Downstream)? {
