@@ -5,6 +5,7 @@
 pub mod bridge;
 pub mod gateway;
 pub mod link;
+pub mod modbus_model;
 pub mod naive;
 pub mod qemu;
 pub mod table;

@@ -80,7 +80,10 @@ impl Framer {
     /// while a frame is still open or none is.
     pub fn take(&mut self, now_us: u32) -> Option<Result<&[u8], Dropped>> {
         let last = self.last_us?;
-        if now_us.wrapping_sub(last) < self.silence_us {
+        let quiet = now_us.wrapping_sub(last);
+        // A stamp ahead of `now_us` (a clock read before the byte's
+        // interrupt) is no silence.
+        if quiet < self.silence_us || quiet >= 0x8000_0000 {
             return None;
         }
         let (len, overflow) = (self.len, self.overflow);
