@@ -199,7 +199,7 @@ fn the_policy_refuses_with_01_and_counts() {
     assert_eq!(write(&mut rig, 0x0D00, &[0x1000]), Err(1));
     assert_eq!(write(&mut rig, 0x21F0, &[1]), Ok(()), "a query is allowed");
     assert_eq!(read(&mut rig, 0xB008, 1), [1], "one refused");
-    assert_eq!(rig.sim.axes[0].servo, false);
+    assert!(!rig.sim.axes[0].servo);
 }
 
 #[test]
