@@ -188,6 +188,39 @@ impl Guest for NoGuest {
     }
 }
 
+/// A port with nothing attached: reads nothing, takes every byte (the
+/// protocol-B upstream of a two-UART board whose one upstream port speaks
+/// Modbus).
+pub struct NoPort;
+
+impl embedded_io::ErrorType for NoPort {
+    type Error = core::convert::Infallible;
+}
+impl embedded_io::ReadReady for NoPort {
+    fn read_ready(&mut self) -> Result<bool, Self::Error> {
+        Ok(false)
+    }
+}
+impl embedded_io::Read for NoPort {
+    fn read(&mut self, _buf: &mut [u8]) -> Result<usize, Self::Error> {
+        Ok(0)
+    }
+}
+impl embedded_io::WriteReady for NoPort {
+    fn write_ready(&mut self) -> Result<bool, Self::Error> {
+        Ok(true)
+    }
+}
+impl embedded_io::Write for NoPort {
+    fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}
+impl Port for NoPort {}
+
 /// The 26DH transfer: records from the upstream decoder through a bounded
 /// queue to controller-sized commands.
 type Job = Transfer<RecordQueue<QUEUE_LEN>>;

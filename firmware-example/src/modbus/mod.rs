@@ -36,8 +36,9 @@ use rmodbus::consts::ModbusFunction;
 use rmodbus::server::{ModbusFrame, Read, Write};
 use rmodbus::{ErrorKind, ModbusProto};
 
-use crate::bridge::{write_some, Guest, GuestWait, Port};
+use crate::bridge::{write_some, Bridge, Error, Guest, GuestWait, Poll, Port};
 use crate::config::{ModbusConfig, Policy};
+use crate::status::Stats;
 use line::Engines;
 pub use registers::Registers;
 use rtu::Framer;
@@ -266,6 +267,50 @@ impl Guest for Gateway {
         GuestWait {
             deadline,
             down_write,
+        }
+    }
+}
+
+/// Runs the bridge and the gateway over their three ports until the quit
+/// sequence (on the protocol-B upstream) or a port error, as
+/// [`crate::bridge::run`] does for the bridge alone; `now_us` is the
+/// board's microsecond clock (the silence between Modbus frames). The
+/// Modbus port's errors are reported as the upstream's.
+#[allow(clippy::too_many_arguments)]
+pub fn run<U: Port, D: Port, M: Port<Error = U::Error>>(
+    bridge: &mut Bridge,
+    gateway: &mut Gateway,
+    upstream: &mut U,
+    downstream: &mut D,
+    modbus: &mut M,
+    now_ms: impl Fn() -> u32,
+    now_us: impl Fn() -> u32,
+    mut sleep: impl FnMut(&mut dyn FnMut() -> bool),
+    mut feed: impl FnMut(),
+) -> Result<Stats, Error<U::Error, D::Error>> {
+    loop {
+        feed();
+        let served = gateway
+            .serve(modbus, now_ms(), now_us())
+            .map_err(Error::Upstream)?;
+        match bridge.poll_with(upstream, downstream, gateway, now_ms())? {
+            Poll::Quit => return Ok(bridge.stats()),
+            Poll::Busy => {}
+            Poll::Wait(_) if served => {}
+            Poll::Wait(w) => {
+                let i = w.interest;
+                let start = now_ms();
+                let sending = gateway.sending();
+                sleep(&mut || {
+                    now_ms() != start
+                        || modbus.read_ready().unwrap_or(true)
+                        || (sending && modbus.write_ready().unwrap_or(true))
+                        || (i.up_read && upstream.read_ready().unwrap_or(true))
+                        || (i.down_read && downstream.read_ready().unwrap_or(true))
+                        || (i.up_write && upstream.write_ready().unwrap_or(true))
+                        || (i.down_write && downstream.write_ready().unwrap_or(true))
+                });
+            }
         }
     }
 }
