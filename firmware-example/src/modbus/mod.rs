@@ -33,7 +33,7 @@ pub mod rtu;
 
 use iai_protocol_b::line::Line;
 use rmodbus::consts::ModbusFunction;
-use rmodbus::server::{ModbusFrame, Read, Write};
+use rmodbus::server::{ModbusFrame, Read};
 use rmodbus::{ErrorKind, ModbusProto};
 
 use crate::bridge::{write_some, Bridge, Error, Guest, GuestWait, Poll, Port};
@@ -198,18 +198,32 @@ fn answer(
                 Err(e) => Err(e),
             }
         } else {
-            match f.get_external_write() {
-                Ok(Write::Words(w)) => {
-                    let res = regs.write_words(w.address, w.count, w.data);
-                    f.process_external_write(res)
-                }
-                Ok(Write::Bits(w)) => {
-                    let res = regs.write_bits(w.address, w.count, w.data);
-                    f.process_external_write(res)
-                }
-                // A bad coil value: rmodbus has set exception 03.
-                Err(ErrorKind::IllegalDataValue) => Ok(()),
-                Err(e) => Err(e),
+            // The write is read from the frame here (checked by
+            // `rtu::check`): rmodbus's own write helpers index the frame
+            // where the optimiser cannot see its length checks.
+            let field = |at: usize| {
+                let hi = frame.get(at).copied().unwrap_or(0);
+                u16::from_be_bytes([hi, frame.get(at + 1).copied().unwrap_or(0)])
+            };
+            let data = frame.get(7..frame.len().saturating_sub(2)).unwrap_or(&[]);
+            let value = frame.get(4..6).unwrap_or(&[]);
+            let res = match f.func {
+                ModbusFunction::SetHolding => regs.write_words(f.reg, 1, value),
+                ModbusFunction::SetHoldingsBulk => regs.write_words(f.reg, f.count, data),
+                ModbusFunction::SetCoil => match field(4) {
+                    0xFF00 => regs.write_bits(f.reg, 1, &[1]),
+                    0x0000 => regs.write_bits(f.reg, 1, &[0]),
+                    _ => Err(ErrorKind::IllegalDataValue),
+                },
+                ModbusFunction::SetCoilsBulk => regs.write_bits(f.reg, f.count, data),
+                _ => Err(ErrorKind::IllegalFunction),
+            };
+            match res {
+                Ok(()) => f
+                    .response
+                    .extend_from_slice(frame.get(..6).unwrap_or(&[]))
+                    .map_err(|_| ErrorKind::OOB),
+                Err(e) => f.set_modbus_error_if_unset(&e),
             }
         };
         if done.is_err() {
