@@ -62,8 +62,21 @@ fn wait_dss1(rig: &mut Rig, bits: u16) -> u64 {
 }
 
 fn rig() -> Rig {
-    let mut rig = Rig::new(Config::DEFAULT);
-    // The first poll round.
+    start(Config::DEFAULT)
+}
+
+/// A rig whose gateway was addressed (it polls from then on) and has
+/// polled a round.
+fn start(cfg: Config) -> Rig {
+    let mut rig = Rig::new(cfg);
+    rig.run_for(300);
+    assert_eq!(
+        rig.sim.stats().commands,
+        0,
+        "no polls before a master speaks"
+    );
+    let (r, _) = rig.request(&read_request(4, 0xB000, 1)).unwrap();
+    assert_eq!(registers(&r).unwrap(), [0], "link not up yet");
     rig.run_for(300);
     rig
 }
@@ -194,8 +207,7 @@ fn the_table_window_writes_read_back_and_reads() {
 fn the_policy_refuses_with_01_and_counts() {
     let mut cfg = Config::DEFAULT;
     cfg.policy = Policy::ReadOnly;
-    let mut rig = Rig::new(cfg);
-    rig.run_for(300);
+    let mut rig = start(cfg);
     assert_eq!(write(&mut rig, 0x0D00, &[0x1000]), Err(1));
     assert_eq!(write(&mut rig, 0x21F0, &[1]), Ok(()), "a query is allowed");
     assert_eq!(read(&mut rig, 0xB008, 1), [1], "one refused");

@@ -44,8 +44,8 @@ use iai_protocol_b::{
 };
 
 use firmware_example::bridge::{Bridge, Port};
-use firmware_example::modbus::Gateway;
 use firmware_example::config::Config;
+use firmware_example::modbus::Gateway;
 use firmware_example::serial::{self, FlowControl, Watermarks};
 
 extern "C" {

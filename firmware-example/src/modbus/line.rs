@@ -112,7 +112,7 @@ impl Engines {
 
     /// Whether it has something for the line at `now`.
     pub fn wants_line(regs: &Registers, now: u32) -> bool {
-        regs.hs.queued() || regs.schedule.due_at().is_none_or(|t| reached(now, t))
+        regs.hs.queued() || (regs.active && regs.schedule.due_at().is_none_or(|t| reached(now, t)))
     }
 
     /// Starts the next exchange (a queued command first) and drives the
@@ -190,6 +190,9 @@ impl Engines {
             return true;
         }
         let policy = regs.policy;
+        if !regs.active {
+            return false;
+        }
         let Some(q) = regs.schedule.next(now, |q| policy.allows(q.message().id)) else {
             return false;
         };

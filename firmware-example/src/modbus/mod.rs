@@ -13,7 +13,9 @@
 //!   line while the bridge grants it ([`Guest`]); the protocol-B host goes
 //!   first (a poll in its way is abandoned, a command finishes).
 //!
-//! The register map is one table ([`map::MAP`]). Broadcasts (unit 0) are
+//! The gateway polls once a master has addressed it (a bridge without a
+//! PLC leaves the line to its host). The register map is one table
+//! ([`map::MAP`]). Broadcasts (unit 0) are
 //! executed if they are writes and never answered; frames for other
 //! units, with a wrong CRC or a length that does not fit their function,
 //! are not answered.
@@ -176,6 +178,10 @@ fn answer(
         stats.dropped = stats.dropped.wrapping_add(1);
         return;
     }
+    if f.processing_required || f.response_required {
+        // Addressed (its unit or a broadcast): polling starts.
+        regs.active = true;
+    }
     if f.processing_required {
         let done = if f.readonly {
             let inputs = f.func == ModbusFunction::GetInputs;
@@ -274,9 +280,11 @@ impl Guest for Gateway {
             deadline
         } else if self.wants_line(now) {
             Some(now)
-        } else {
+        } else if self.regs.active {
             // The next poll round.
             self.regs.schedule.due_at()
+        } else {
+            None
         };
         GuestWait {
             deadline,

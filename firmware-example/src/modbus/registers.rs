@@ -46,6 +46,9 @@ pub struct Registers {
     pub window: [u16; WINDOW_WORDS],
     /// Records of a table write, until the controller holds them.
     pub staged: [u16; WINDOW_WORDS],
+    /// A master has addressed the gateway: it polls from then on (a
+    /// bridge with no PLC on its Modbus port leaves the line alone).
+    pub active: bool,
 }
 
 impl Registers {
@@ -64,6 +67,7 @@ impl Registers {
             head: 0,
             window: [0; WINDOW_WORDS],
             staged: [0; WINDOW_WORDS],
+            active: false,
         }
     }
 
