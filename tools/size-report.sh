@@ -8,6 +8,9 @@
 #   flash <board> <bytes>
 # and, for the QEMU (Cortex-M3/M4) boards, whether the goal is met:
 #   goal <board> ram met|missed flash met|missed
+# The lm3s6965 build carries the Modbus gateway beside the bridge (both
+# upstreams at once): its RAM goal is 12 KiB; the others run the bridge
+# alone (8 KiB).
 # The stm32g030 (Cortex-M0+, STM32G030x8) is built and sized only: QEMU has
 # no model of it (its one Cortex-M0 board, microbit, has a single UART).
 set -euo pipefail
@@ -53,10 +56,12 @@ for b in "${boards[@]}"; do
     echo "ram $board static $static stack $stack total $((static + stack))"
     echo "flash $board $flash"
     verdict() { [ "$1" -le "$2" ] && echo met || echo missed; }
-    echo "goal $board ram $(verdict $((static + stack)) 8192) flash $(verdict "$flash" 32768)"
+    ram_goal=8192
+    [ "$board" = lm3s6965 ] && ram_goal=12288
+    echo "goal $board ram $(verdict $((static + stack)) $ram_goal) (<= $ram_goal) flash $(verdict "$flash" 32768)"
   else
     echo "ram $board static $static stack unmeasured total unmeasured"
     echo "flash $board $flash"
   fi
 done
-echo "goal (Cortex-M3/M4 boards): total RAM <= 8192, flash <= 32768"
+echo "goal (Cortex-M3/M4 boards): total RAM <= 12288 with the gateway (lm3s6965), <= 8192 without; flash <= 32768"
