@@ -23,8 +23,14 @@ fn rows() -> Vec<String> {
                     _ => "read 01, write 05 (a command)",
                 },
             };
-            let access = if e.space == Space::Discretes { "read (02)" } else { access };
-            let message = e.message.map_or(String::new(), |m| format!("{:03X}H", m.id));
+            let access = if e.space == Space::Discretes {
+                "read (02)"
+            } else {
+                access
+            };
+            let message = e
+                .message
+                .map_or(String::new(), |m| format!("{:03X}H", m.id));
             let blocks = if e.blocks > 1 {
                 format!("{} per axis, axes 1-{}", e.size, e.blocks)
             } else {

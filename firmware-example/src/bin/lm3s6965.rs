@@ -228,6 +228,31 @@ fn feed_watchdog() {
     write(WDT_ICR, 1);
 }
 
+/// Builds the gateway in its static and hands the Modbus port's interrupt
+/// end over. Not inlined, so that its stack frame (the gateway may be
+/// built on the way into its static) is gone before the loop runs.
+#[inline(never)]
+fn setup_gateway(
+    cfg: firmware_example::config::Config,
+) -> (
+    &'static mut Gateway,
+    firmware_example::serial::ThreadEnd<'static>,
+) {
+    // SAFETY: called once from `main`; these are the only references to
+    // these statics, and UART2's interrupt is unmasked only after its end
+    // was handed over.
+    unsafe {
+        let gateway = (*addr_of_mut!(GATEWAY)).write(Gateway::new(cfg.modbus, cfg.policy));
+        let (isr, thread) = (*addr_of_mut!(MODBUS_LINE)).split(
+            FlowControl::None,
+            firmware_example::serial::UPSTREAM_MARKS,
+            &pend_modbus,
+        );
+        cortex_m::interrupt::free(|cs| MODBUS_END.borrow(cs).set(Some(isr)));
+        (gateway, thread)
+    }
+}
+
 #[entry]
 fn main() -> ! {
     let Some(core) = cortex_m::Peripherals::take() else {
@@ -258,17 +283,7 @@ fn main() -> ! {
         }
     };
     let (bridge, mut up, mut down) = runtime::setup(statics, cfg, source);
-    // SAFETY: as above, for the Modbus port and the gateway.
-    let (gateway, mut modbus) = unsafe {
-        let gateway = (*addr_of_mut!(GATEWAY)).write(Gateway::new(cfg.modbus, cfg.policy));
-        let (isr, thread) = (*addr_of_mut!(MODBUS_LINE)).split(
-            FlowControl::None,
-            firmware_example::serial::UPSTREAM_MARKS,
-            &pend_modbus,
-        );
-        cortex_m::interrupt::free(|cs| MODBUS_END.borrow(cs).set(Some(isr)));
-        (gateway, thread)
-    };
+    let (gateway, mut modbus) = setup_gateway(cfg);
     // SAFETY: the handlers only touch their ends, handed over above.
     unsafe {
         NVIC::unmask(Interrupt::UART0);
