@@ -130,53 +130,49 @@ def le(v, n):
     return (v & ((1 << (8 * n)) - 1)).to_bytes(n, "little")
 
 
-def transfer_seed(kind_index, verify_index, size, frame_room, script, shape=0, resp_room=7):
-    # kind + 5 x verify policy (Full, AfterFault, Off); station; size; table
-    # seed; shape; range start; first number; frame room (x4); reply room
-    # (8-axis records); timeout byte (x20 ms); sends and rewrites;
-    # turnaround; late window; duplicate window; start tick; resumes; then
-    # the script (empty: a well-behaved controller).
-    cfg = bytes([kind_index + 5 * verify_index, 0x99, size, 7, shape]) + le(1, 2) + le(1, 2)
-    cfg += bytes([frame_room, resp_room, 10, 0x06, 0]) + le(500, 2) + le(300, 2)
-    cfg += le(1000, 4) + bytes([2])
+def link(flags=0x02, timeout=10, turnaround=1, late=500, dup=300, seed=0x1234, base=1000, station=0x99):
+    # The line of the engine targets (common/link.rs): station; timeout
+    # byte (1 + 20 x b ms); flags (bits 0-1 sends 1-4, 0x04 resend unsafe,
+    # 0x08 fences off, 0x10 raw noise, 0x20-0x80 the target's); turnaround
+    # byte; late window; duplicate window; fence seed; start tick.
+    return bytes([station, timeout, flags, turnaround]) + le(late, 2) + le(dup, 2) + le(seed, 2) + le(base, 4)
+
+
+def transfer_seed(kind_index, verify_index, size, frame_room, script, shape=0, resp_room=7, line=None, b=0xFC, resumes=2):
+    # the line; kind + 5 x verify policy (Full, AfterFault, Off); size;
+    # table seed; shape; range start; first number; frame room (x4); reply
+    # room (8-axis records); rewrites (b % 4) and max_records (1 + b / 4);
+    # resumes; then the script (empty: a well-behaved controller).
+    cfg = (line or link()) + bytes([kind_index + 5 * verify_index, size, 7, shape]) + le(1, 2) + le(1, 2)
+    cfg += bytes([frame_room, resp_room, b, resumes])
     return cfg + bytes(script)
 
 
-def readback_seed(kind_index, first, span, room, asked_records):
-    # mode 0 (arbitrary replies): kind (c % 3) with bit 7 = station 99;
-    # first; span; reply room; timeout; sends; turnaround; late window;
-    # duplicate window; start tick; resumes; then ops.
-    cfg = bytes([0x80 | kind_index]) + le(first, 2) + bytes([span, room, 10, 2, 0])
-    cfg += le(500, 2) + le(300, 2) + le(1000, 4) + bytes([1])
-    extended = kind_index == 1
-    script = b""
-    for n in asked_records:
-        # op 2: a normal reply of n records numbered from the window start.
-        script += bytes([2, n, 1])
-        for i in range(n):
-            script += le(0, 2) + bytes([0x03]) + le(1000 * i, 4) + le(-5 * i, 4)
-            if extended:
-                script += bytes([i])
-            script += le(30, 2) + le(30, 2) + le(100, 2)
-        script += bytes([5])  # let the turnaround pass
-    return cfg + script
-
-
-def readback_table_seed(kind_index, first, span, room, mask, script):
-    # mode 1 (a controller with a table): bit 6 of the first byte; the
-    # table's seed and the mask of defined positions follow the config.
-    cfg = bytes([0xC0 | kind_index]) + le(first, 2) + bytes([span, room, 10, 3, 0])
-    cfg += le(500, 2) + le(300, 2) + le(1000, 4) + bytes([1]) + bytes([5]) + le(mask, 4)
+def readback_seed(kind_index, first, span, room, mask, script, confirm=True, line=None, resumes=1):
+    # the line; kind (c % 3) | 0x10 confirmed reads; first; span; reply
+    # room; table seed; mask of defined positions; resumes; then the script.
+    c = kind_index | (0x10 if confirm else 0)
+    cfg = (line or link()) + bytes([c]) + le(first, 2) + bytes([span, room, 5]) + le(mask, 4) + bytes([resumes])
     return cfg + bytes(script)
 
 
-def client_seed(flags, picks, script=b"", timeout=10):
-    # station; timeout byte; sends (0-4) | resend unsafe 0x08 | 216H
-    # detail 0x10 | requests - 1 in bits 5-6; turnaround; late window;
-    # duplicate window; start tick; the first request's pick, then the
-    # script (picks of later requests are read when they start).
-    cfg = bytes([0x99, timeout, flags, 0]) + le(500, 2) + le(300, 2) + le(1000, 4)
+def client_seed(picks, script=b"", flags=0x02, requests=1, line=None):
+    # the line (flags 0x20: 216H detail, 0x40: not for bridge codes);
+    # requests - 1; the first request's pick, then the script (picks of
+    # later requests are read when they start).
+    cfg = (line or link(flags=flags)) + bytes([requests - 1])
     return cfg + bytes(picks) + bytes(script)
+
+
+def line_seed(ops, flags=0x03, timeout=10, turnaround=1, late=500, dup=300, seed=0x123456, base=1000):
+    # station; timeout byte; flags (sends % 5, 0x08 resend unsafe, 0x10
+    # fences off, 0x20 @@); turnaround; late window; duplicate window;
+    # fence seed (u32); start tick; then operations (0 start + pick, 1
+    # start_raw + id + sends, 2 poll, 3 sent, 4 reply + k + digits, 5 & +
+    # k + code, 6 200H + k, 7 foreign + k, 8 broken + k, 9 unread, 10
+    # abandon, 11 clock + k + amount, 12 poll and send + ms).
+    cfg = bytes([0x99, timeout, flags, turnaround]) + le(late, 2) + le(dup, 2) + le(seed, 4) + le(base, 4)
+    return cfg + bytes(ops)
 
 
 def main():
@@ -195,6 +191,11 @@ def main():
     write("decoder", "all-frames", bytes([0x00, 0x00]) + stream)
     write("decoder", "all-frames-reject-cut", bytes([0x01, 0x03, 4, 0, 17]) + stream)
     write("decoder", "all-frames-accept-small", bytes([0x06, 0x02, 9, 1]) + stream)
+    # The skipper against the decoder: bad checksums, `@@`, lower-case SC,
+    # a 200H whose text holds a header byte.
+    skip = b"!9925B3D\r\n!9925B@@\r\n#99212A\r\n!99200!9921201391A\r\n#992322c\r\n#992322C\r\n"
+    for pol in (0, 1, 2):
+        write("decoder", f"skipper-policy{pol}", bytes([pol, 0x00]) + skip)
     write("decoder", "noise-between", bytes([0x08, 0x00]) + b"\x00xx\r\n".join(f for _, f in frames))
     # position_record round trips: layout, mode 1, then number, axes, acc,
     # dec, speed, ext, extra, coordinates (little-endian i32).
@@ -219,57 +220,59 @@ def main():
         rec_bytes = bytes(rng.randrange(256) for _ in range(40 * n))
         write("stream_decoder", f"roundtrip-{n}", bytes([0x01, 0x02, 4, 9, 0x99]) + le(0x123, 2) + bytes([n]) + rec_bytes)
     # transfer: well-behaved controllers (empty script) for every kind and
-    # policy, then faults: an SC-preserving swap, a lost reply, a late
-    # duplicate, an & reply, a partial write, read-back lies, noise.
+    # policy, then one seed per fault (op byte of the first write: bits 3-4
+    # fate, 3 = swap; bits 5-7 the reply's fault, then extra and delay).
     for ki in range(5):
         for vi in range(3):
             write("transfer", f"kind{ki}-verify{vi}-clean", transfer_seed(ki, vi, 12, 40, []))
         write("transfer", f"kind{ki}-one-frame", transfer_seed(ki, 0, 3, 255, []))
-    write("transfer", "swap", transfer_seed(0, 0, 6, 40, [0x19]))
-    write("transfer", "swap-reupload", transfer_seed(0, 0, 6, 40, [0x19], shape=0x04))
-    write("transfer", "lost-reply", transfer_seed(0, 1, 6, 40, [0x21, 0x00] + list(le(0, 2))))
-    write("transfer", "late-duplicate", transfer_seed(0, 2, 6, 40, [0x61, 0x20] + list(le(4000, 2))))
-    write("transfer", "error-reply", transfer_seed(0, 0, 6, 40, [0xA1, 0x01] + list(le(2, 2))))
-    write("transfer", "partial-write", transfer_seed(1, 0, 6, 60, [0xC1, 0x01] + list(le(2, 2))))
-    write("transfer", "readback-wrong", transfer_seed(0, 0, 6, 40, [0x01, 0x81, 0x10] + list(le(2, 2))))
-    write("transfer", "readback-stale", transfer_seed(0, 0, 6, 40, [0x01, 0x81, 0x40] + list(le(2, 2))))
-    write("transfer", "noise", transfer_seed(0, 0, 4, 40, [0x01, 0x01, 12] + list(b"#9926D0001\r?")))
+    write("transfer", "swap", transfer_seed(0, 0, 6, 40, [0x01, 0x19]))
+    write("transfer", "swap-reupload", transfer_seed(0, 0, 6, 40, [0x01, 0x19], shape=0x04))
+    write("transfer", "lost-reply", transfer_seed(0, 1, 6, 40, [0x01, 0x21, 0x00] + list(le(0, 2))))
+    write("transfer", "late-copy", transfer_seed(0, 2, 6, 40, [0x01, 0xE1, 0x20] + list(le(400, 2))))
+    write("transfer", "error-reply", transfer_seed(0, 0, 6, 40, [0x01, 0xA1, 0x01] + list(le(2, 2))))
+    write("transfer", "partial-write", transfer_seed(1, 0, 6, 60, [0x01, 0x81, 0x01] + list(le(2, 2))))
+    write("transfer", "readback-lie", transfer_seed(0, 0, 6, 40, [0x01, 0x01, 0x81, 0x03] + list(le(2, 2))))
+    write("transfer", "readback-stale", transfer_seed(0, 0, 6, 40, [0x01, 0x01, 0x01, 0xC1, 0x00] + list(le(2, 2))))
+    write("transfer", "noise", transfer_seed(0, 0, 4, 40, [0x01, 0x01, 0x01, 12] + list(b"#9926D0001\r?")))
     write("transfer", "repeated-record", transfer_seed(0, 0, 9, 40, [], shape=0x06))
     write("transfer", "empty-table", transfer_seed(0, 0, 0, 40, []))
-    # readback: one reply per window (mode 0), and a controller's table
-    # (mode 1), clean and with a late duplicate.
+    write("transfer", "fences-off", transfer_seed(0, 0, 6, 40, [], line=link(flags=0x0A)))
+    # readback: confirmed and not, a lie, a stale answer, a late copy,
+    # near position 0xFFFF, an empty table.
     for ki in range(3):
-        write("readback", f"kind{ki}-one-window", readback_seed(ki, 1, 5, 7, [3]))
-        write("readback", f"kind{ki}-three-windows", readback_seed(ki, 1, 20, 0, [1, 0, 1] + [1] * 20))
-        write("readback", f"kind{ki}-table", readback_table_seed(ki, 1, 60, 1, 0x0F0F00FF, []))
-    write("readback", "near-top", readback_seed(0, 0xFFF8, 20, 1, [2, 2, 2, 2, 2]))
-    write("readback", "table-duplicate", readback_table_seed(0, 1, 60, 0, 0x0F0F00FF, [0x61, 0x20] + list(le(100, 2))))
-    write("readback", "table-empty", readback_table_seed(0, 1, 60, 0, 0, []))
-    # client: each kind of request, answered at once; an & with the 216H
-    # detail; a lost reply (resend); 25BH; several requests in a row.
+        write("readback", f"kind{ki}-confirmed", readback_seed(ki, 1, 60, 1, 0x0F0F00FF, []))
+        write("readback", f"kind{ki}-unconfirmed", readback_seed(ki, 1, 60, 1, 0x0F0F00FF, [], confirm=False))
+    write("readback", "lie", readback_seed(0, 1, 20, 0, 0xFFFFFFFF, [0x01, 0x81, 0x00] + list(le(2, 2))))
+    write("readback", "stale", readback_seed(0, 1, 20, 0, 0xFFFFFFFF, [0x01, 0x01, 0x01, 0xC1, 0x00] + list(le(2, 2))))
+    write("readback", "late-copy", readback_seed(0, 1, 60, 0, 0x0F0F00FF, [0x01, 0xE1, 0x20] + list(le(400, 2))))
+    write("readback", "near-top", readback_seed(0, 0xFFF8, 20, 1, 0xFFFF, []))
+    write("readback", "empty", readback_seed(0, 1, 60, 0, 0, []))
+    # client: each kind of request answered at once; an & with and without
+    # the 216H detail (controller and bridge code); a lost reply; an unsafe
+    # command timing out; a late copy; a software reset then a query.
     for pick in range(5):
-        write("client", f"pick{pick}", client_seed(0x03, [pick]))
+        write("client", f"pick{pick}", client_seed([pick]))
     for i in (0, 10, 20, 30, 40):
-        write("client", f"catalogue{i}", client_seed(0x03, [5, i]))
-    write("client", "error-detail", client_seed(0x13, [0], [0x19, 0x01]))
-    write("client", "bridge-code", client_seed(0x13, [0], [0x19, 0x00]))
-    write("client", "lost-reply", client_seed(0x03, [0], [0x11, 0x00]))
-    write("client", "unsafe-timeout", client_seed(0x03, [1], [0x11, 0x00]))
-    write("client", "late-duplicate", client_seed(0x63, [0], [0xC1, 0x10] + list(le(2500, 2)) + [0, 0]))
-    write("client", "reset-then-query", client_seed(0x23, [2], [0x01, 0x00]))
-    # exchange: station, timeout byte, sends | resend unsafe 0x08 |
-    # ByContent 0x10, turnaround, late window, duplicate window, start tick,
-    # then operations (0 start + pick, 1 poll, 2 advance + u16, 3 sent,
-    # 4 offer + kind byte, 6 lost/broken, 7 abandon, 8 settings).
-    def exchange_seed(flags, ops):
-        return bytes([0x99, 10, flags, 0]) + le(500, 2) + le(300, 2) + le(1000, 4) + bytes(ops)
-    write("exchange", "reply", exchange_seed(0x03, [0, 10, 1, 3, 4, 0x00, 1]))
-    write("exchange", "timeouts", exchange_seed(0x03, [0, 10, 1, 3]))
-    write("exchange", "error-reply", exchange_seed(0x03, [0, 10, 1, 3, 4, 0x02] + list(le(0xC74, 2)) + [1]))
-    write("exchange", "mismatch-then-reply", exchange_seed(0x03, [0, 10, 1, 3, 4, 0x10, 4, 0x00, 1]))
-    write("exchange", "no-normal-reply", exchange_seed(0x03, [0, 0x82] + list(le(10000, 2)) + [1, 3]))
-    write("exchange", "abandon-while-sending", exchange_seed(0x03, [0, 10, 1, 7, 0, 10, 1]))
-    write("exchange", "by-content", exchange_seed(0x13, [0, 10, 1, 3, 6, 0x00, 1, 1, 3, 4, 0x00, 0, 10, 1]))
+        write("client", f"catalogue{i}", client_seed([5, i]))
+    write("client", "error-detail", client_seed([0], [0x01, 0x81, 0x01] + list(le(2, 2)), flags=0x22))
+    write("client", "bridge-code-no-detail", client_seed([0], [0x01, 0x81, 0x00] + list(le(2, 2)), flags=0x62))
+    write("client", "lost-reply", client_seed([0], [0x01, 0x21, 0x00] + list(le(0, 2))))
+    write("client", "unsafe-timeout", client_seed([1], [0x01, 0x21, 0x00] + list(le(0, 2))))
+    write("client", "late-copy", client_seed([0, 0], [0x01, 0xE1, 0x10] + list(le(300, 2)), requests=2))
+    write("client", "reset-then-query", client_seed([2, 0], [0x01, 0x01], requests=2))
+    write("client", "fences-off", client_seed([0, 0], [], flags=0x0A, requests=2))
+    # line: a reply, timeouts, an &, a mismatch then the reply, a command
+    # without normal response, an abandon during a send, a copy waited
+    # out, a clock that wraps.
+    write("line", "fence-then-reply", line_seed([0, 10, 2, 3, 6, 0, 2, 11, 0, 5, 2, 3, 4, 0x02, 1, 2, 2]))
+    write("line", "timeouts", line_seed([0, 10, 12, 0, 6, 0, 12, 0, 11, 2] + list(le(600, 2)) + [12, 0, 11, 2] + list(le(600, 2)) + [12, 0]))
+    write("line", "error-reply", line_seed([0, 10, 12, 0, 6, 0, 12, 0, 5, 0] + list(le(0xC74, 2)) + [2]))
+    write("line", "mismatch-then-reply", line_seed([0, 10, 12, 0, 6, 0, 12, 0, 4, 0x81, 0, 4, 0x00, 2]))
+    write("line", "no-normal-reply", line_seed([1] + list(le(0x25B, 2)) + [1, 12, 0, 6, 0, 12, 0, 11, 2] + list(le(4000, 2)) + [2, 0, 10, 2]))
+    write("line", "abandon-while-sending", line_seed([0, 10, 2, 10, 0, 10, 2]))
+    write("line", "copy-waited-out", line_seed([0, 10, 12, 0, 6, 0, 12, 0, 4, 0, 0, 10, 2, 11, 1, 200, 2, 11, 2] + list(le(400, 2)) + [2]))
+    write("line", "wrapping", line_seed([0, 10, 12, 0, 6, 0, 12, 0, 11, 3] + list(le(0x7FFFFFFF, 4)) + [2, 0, 10, 2], base=0xFFFFFF00))
     # bridge_policy: mode (policy, flow), [allow-list map], tick step, host bytes.
     allow = bytearray(32)
     for i in (0x12, 0x16, 0x6D):

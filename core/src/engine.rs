@@ -63,7 +63,9 @@ pub fn feed<G: Engine + ?Sized>(engine: &mut G, line: &mut Line, bytes: &[u8], n
 ///
 /// Bytes read in the same chunk after a result the engine still holds are
 /// dropped: they came after the reply and before the next command, so they
-/// answer nothing (the line's ledger already counts copies of that reply).
+/// answer nothing, but they may hold a reply whose copy is still to come,
+/// so the line hears that bytes went unread ([`Line::unread`]). A driver
+/// that can keep them for the next engine should (`hosted::StdLink` does).
 pub fn poll_nb<G, U, C>(
     engine: &mut G,
     line: &mut Line,
@@ -83,7 +85,9 @@ where
             return Err(nb::Error::Other(Failure::Closed));
         }
         let chunk = buf.get(..n).unwrap_or(&[]);
-        if feed(engine, line, chunk, clock.now_ms()) < n {
+        let now = clock.now_ms();
+        if feed(engine, line, chunk, now) < n {
+            line.unread(now);
             break;
         }
     }
@@ -146,7 +150,9 @@ where
                 return Err(Failure::Closed);
             }
             let chunk = buf.get(..n).unwrap_or(&[]);
-            if feed(engine, line, chunk, clock.now_ms()) < n {
+            let now = clock.now_ms();
+            if feed(engine, line, chunk, now) < n {
+                line.unread(now);
                 break;
             }
         }
@@ -167,5 +173,134 @@ where
             Step::Done(Ok(out)) => return Ok(out),
             Step::Done(Err(e)) => return Err(e.widen()),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! The blocking driver over a scripted UART on a virtual clock.
+
+    extern crate std;
+    use core::cell::Cell;
+    use std::collections::VecDeque;
+    use std::rc::Rc;
+    use std::vec::Vec;
+
+    use crate::checksum::Checksum;
+    use crate::client::Client;
+    use crate::frame::Station;
+    use crate::line::{Line, LineConfig};
+    use crate::message::{AxisStatusQuery, SystemStatusQuery};
+
+    /// `body` with its SC, CR and LF.
+    fn framed(body: &[u8]) -> Vec<u8> {
+        let mut f = body.to_vec();
+        f.extend_from_slice(std::format!("{:02X}\r\n", Checksum::of(body)).as_bytes());
+        f
+    }
+
+    /// A converter that repeats frames, in front of a controller that
+    /// answered a 212H's two sends in one burst: the late reply to the
+    /// first and `&` C74 to the second. Each command written schedules
+    /// what comes back.
+    struct Scripted {
+        now: Rc<Cell<u32>>,
+        written: Vec<u8>,
+        due: Vec<(u32, Vec<u8>)>,
+        rx: VecDeque<u8>,
+        sends_212: u32,
+    }
+
+    impl Scripted {
+        fn command(&mut self, frame: &[u8]) {
+            let t = self.now.get();
+            let body = frame.get(..frame.len() - 4).unwrap_or(&[]);
+            match body.get(3..6) {
+                Some(b"200") => {
+                    let mut echo = body.to_vec();
+                    echo[0] = b'#';
+                    self.due.push((t + 5, framed(&echo)));
+                }
+                Some(b"212") => {
+                    self.sends_212 += 1;
+                    if self.sends_212 == 2 {
+                        let mut burst = framed(b"#9921200");
+                        burst.extend_from_slice(&framed(b"&99C74"));
+                        self.due.push((t + 10, burst));
+                        self.due.push((t + 2_010, framed(b"&99C74")));
+                    }
+                }
+                Some(b"215") => self.due.push((t + 2_500, framed(b"#99215100000000000000"))),
+                _ => {}
+            }
+        }
+    }
+
+    impl embedded_io::ErrorType for Scripted {
+        type Error = core::convert::Infallible;
+    }
+    impl embedded_io::ReadReady for Scripted {
+        fn read_ready(&mut self) -> Result<bool, Self::Error> {
+            let now = self.now.get();
+            let (ready, later): (Vec<_>, Vec<_>) = self.due.drain(..).partition(|(t, _)| *t <= now);
+            self.due = later;
+            for (_, bytes) in ready {
+                self.rx.extend(bytes);
+            }
+            Ok(!self.rx.is_empty())
+        }
+    }
+    impl embedded_io::Read for Scripted {
+        fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
+            let n = buf.len().min(self.rx.len());
+            for (b, v) in buf.iter_mut().zip(self.rx.drain(..n)) {
+                *b = v;
+            }
+            Ok(n)
+        }
+    }
+    impl embedded_io::Write for Scripted {
+        fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+            for &b in buf {
+                self.written.push(b);
+                if b == b'\n' {
+                    let frame = core::mem::take(&mut self.written);
+                    self.command(&frame);
+                }
+            }
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> Result<(), Self::Error> {
+            Ok(())
+        }
+    }
+
+    /// Fuzz finding F16: bytes the driver reads after the reply it hands
+    /// back (here an `&` to a later send of the same command) answer
+    /// nothing, but their copy may still come. The line hears that they
+    /// went unread, so the next command waits out the copy window and
+    /// gets its own reply instead of the copy of the `&`.
+    #[test]
+    fn bytes_read_after_a_held_reply_still_hold_back_their_copies() {
+        let now = Rc::new(Cell::new(0u32));
+        let mut uart = Scripted {
+            now: now.clone(),
+            written: Vec::new(),
+            due: Vec::new(),
+            rx: VecDeque::new(),
+            sends_212: 0,
+        };
+        let tick = now.clone();
+        let mut clock = move || {
+            tick.set(tick.get() + 1);
+            tick.get()
+        };
+        let cfg = LineConfig::new(Station(0x99)).with_duplicate_window(3_000);
+        let mut line = Line::new(cfg, 7);
+        let mut c: Client<64, 128> = Client::new();
+        let q = AxisStatusQuery::of(&[1]).unwrap();
+        assert!(c.call(&mut line, &mut uart, &mut clock, &q).is_ok());
+        let r = c.call(&mut line, &mut uart, &mut clock, &SystemStatusQuery {});
+        assert_eq!(r.map(|s| s.system_mode), Ok(1));
     }
 }

@@ -31,6 +31,8 @@
 //!   (`engine::run_async`, `Client::call_async`, `Transfer::run_async`,
 //!   `ReadBack::run_async`) and the `AsyncClock` trait in [`clock`].
 //! - `defmt`: `defmt::Format` for the public types.
+//! - `std`: `hosted::StdLink`, the engines over a TCP
+//!   socket or a serial port, blocking without spinning.
 //!
 //! Neither is on by default. The minimum supported Rust version is 1.87.
 //!
@@ -64,6 +66,8 @@ pub mod frame;
 pub mod guide;
 mod header;
 pub mod hex;
+#[cfg(feature = "std")]
+pub mod hosted;
 pub mod io;
 pub mod limits;
 pub mod line;

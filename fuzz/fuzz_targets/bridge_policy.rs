@@ -3,19 +3,25 @@
 //! Input layout: byte 0 picks the policy (0 forward all, 1 read-only,
 //! 2 allow-list) and the flow control (bits 4-5); with an allow-list the
 //! next 32 bytes are its bitmap (IDs 200H..2FFH); byte after that: ticks
-//! (x 256 ms) between polls; everything else is what the host sends, fed in
-//! 16-byte pieces. The controller never answers (every forwarded command
-//! times out).
+//! (x 256 ms) between pieces; everything else is what the host sends, fed in
+//! 16-byte pieces, each followed by polls until the bridge waits (at most
+//! 64). The controller never answers (every forwarded command times out).
 //!
 //! Checked: no panic; every frame the bridge writes downstream is a
-//! command for the controller's station whose ID the policy allows; every
-//! frame it writes upstream is a valid `&` from the bridge or a status
-//! reply (the controller said nothing, so nothing can be relayed).
+//! command for the controller's station whose ID the policy allows,
+//! except the bridge's own fences: its downstream line fences its first
+//! command and every command after one left unanswered with a 200H whose
+//! ten characters are the six hex digits of the seed (`005EED`) and a
+//! sequence number counting from 1; those are not host commands, they are
+//! recognised in that order (never more than `line_stats().fences`) and
+//! left out; every frame it writes upstream is a valid `&` with a bridge
+//! code (`codes::RANGE`) or a status reply (the controller said nothing,
+//! so nothing can be relayed).
 #![no_main]
 
 use std::convert::Infallible;
 
-use firmware_example::bridge::{Bridge, Port};
+use firmware_example::bridge::{Bridge, Poll, Port};
 use firmware_example::codes;
 use firmware_example::config::{AllowList, Config, Policy, Source};
 use firmware_example::serial::FlowControl;
@@ -23,6 +29,9 @@ use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::frame::Header;
 use libfuzzer_sys::fuzz_target;
+
+/// The bridge's fence seed.
+const SEED: u32 = 0x5EED;
 
 #[derive(Default)]
 struct Fake {
@@ -87,22 +96,36 @@ fuzz_target!(|data: &[u8]| {
         flow,
         ..Config::DEFAULT
     };
-    let mut bridge = Bridge::new(cfg, Source::Default, 0x5EED);
+    let mut bridge = Bridge::new(cfg, Source::Default, SEED);
     let (mut up, mut down) = (Fake::default(), Fake::default());
     let mut now = 0u32;
     for piece in host.chunks(16).chain(std::iter::repeat_n(&[][..], 8)) {
         up.input.extend_from_slice(piece);
+        // Until it waits for something (nothing more moves at this tick
+        // without new bytes), at most 64 polls.
         for _ in 0..64 {
-            let _ = bridge.poll(&mut up, &mut down, now);
+            match bridge.poll(&mut up, &mut down, now) {
+                Ok(Poll::Busy) => {}
+                Ok(Poll::Wait(w)) if w.deadline == Some(now) => {}
+                _ => break,
+            }
         }
         now = now.wrapping_add(u32::from(step) * 256 + 1);
     }
 
+    // The bridge's own fences: 200H with the seed's text, in sequence.
+    let fences = bridge.line_stats().fences;
+    let mut next_fence = 1u32;
     let mut dec: FrameDecoder<4096> = FrameDecoder::with_policy(BypassPolicy::Accept);
     for &b in &down.output {
         if let Event::Frame(f) = dec.push(b) {
             assert_eq!(f.header(), Header::Command);
             assert_eq!(f.station(), cfg.controller_station);
+            let fence_text = format!("{:06X}{:04X}", SEED & 0xFF_FFFF, next_fence);
+            if next_fence <= fences && f.code() == 0x200 && f.body() == fence_text.as_bytes() {
+                next_fence += 1;
+                continue;
+            }
             assert!(
                 policy.allows(f.code()),
                 "{:03X} reached the controller",
@@ -114,7 +137,7 @@ fuzz_target!(|data: &[u8]| {
     for &b in &up.output {
         match dec.push(b) {
             Event::Frame(f) => match f.header() {
-                Header::Error => assert!(codes::is_bridge_code(f.code())),
+                Header::Error => assert!(codes::RANGE.contains(&f.code())),
                 Header::Response => assert!(
                     f.station() == cfg.bridge_station && f.code() == codes::STATUS_QUERY
                         || f.code() == 0x26D

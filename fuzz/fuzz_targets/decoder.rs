@@ -28,7 +28,23 @@
 //!   the capacity, and is what `last_frame()` shows; `FrameTooLong` names
 //!   the capacity; `stats()` count the frames and errors seen;
 //! - every frame goes through `decode_any` and the field visitor (see
-//!   `common/mod.rs`).
+//!   `common/mod.rs`);
+//! - `decoder::FrameSkipper` (a frame passed over without a buffer): every
+//!   frame the decoder returns (but a 216H reply, whose counted text the
+//!   skipper does not know), skipped from its envelope on, gives
+//!   `NeedMore` for each byte and `End { checksum_ok: true }` at its LF;
+//!   and the whole stream is scanned with it on its own (at each header
+//!   byte the envelope is read, then the skipper runs to `End` or
+//!   `Broken`, a header byte that broke it starting the next frame): every
+//!   `End` comes at an LF, and for frames without a text field beyond a
+//!   200H's (216H replies' counted text is not the skipper's) `End {
+//!   checksum_ok }` agrees with the decoder's check under the same policy
+//!   (`Frame::new_checked`, what the decoder runs on a complete frame,
+//!   which checks the checksum last): `checksum_ok` is exactly whether it
+//!   accepts the frame, whenever it accepts it or refuses it for its
+//!   checksum (a wrong sum, a refused `@@`, a non-hex SC).
+//!
+//! Decoders answer `decoder::Received { consumed, event }`.
 //!
 //! Changed with the decoder's re-decoding of failed text frames (200H,
 //! 216H): an event may come with `consumed == 0`; the byte-by-byte side
@@ -39,9 +55,10 @@
 #[path = "common/mod.rs"]
 mod common;
 
+use iai_protocol_b::catalogue::text_span;
 use iai_protocol_b::checksum::{BypassPolicy, Checksum, ChecksumField};
-use iai_protocol_b::decoder::{Event, FrameDecoder, DEFAULT_CAPACITY};
-use iai_protocol_b::frame::Frame;
+use iai_protocol_b::decoder::{Event, FrameDecoder, FrameSkipper, Skipped, DEFAULT_CAPACITY};
+use iai_protocol_b::frame::{Frame, Header, ENVELOPE_LEN};
 use iai_protocol_b::Error;
 use libfuzzer_sys::fuzz_target;
 
@@ -93,10 +110,114 @@ fn check_frame<const N: usize>(f: &Frame<'_>, policy: BypassPolicy) {
         ChecksumField::Sum(s) => assert_eq!(s, Checksum::of(&bytes[..sc_at])),
         ChecksumField::Bypass => assert!(policy.allows(f.header())),
     }
+    // Skipped instead of decoded, the frame ends with a right checksum.
+    if !counted_text(bytes) {
+        let env: &[u8; ENVELOPE_LEN] = bytes[..ENVELOPE_LEN].try_into().expect("envelope");
+        let mut sk = FrameSkipper::new(f.header(), env, policy);
+        let (last, body) = bytes[ENVELOPE_LEN..]
+            .split_last()
+            .expect("a frame ends with LF");
+        for &b in body {
+            assert_eq!(
+                sk.push(b),
+                Skipped::NeedMore,
+                "the skipper broke a valid frame"
+            );
+        }
+        assert_eq!(
+            sk.push(*last),
+            Skipped::End { checksum_ok: true },
+            "the skipper refused a valid frame"
+        );
+    }
     let _ = common::decode_and_visit(f);
 }
 
+/// Whether the frame `bytes` (header through LF) has a text field the
+/// skipper does not know: a counted one (216H replies).
+fn counted_text(bytes: &[u8]) -> bool {
+    let header = Header::from_byte(bytes[0]).expect("a header byte");
+    let id = bytes.get(3..6);
+    let test_call = id == Some(&b"200"[..]);
+    text_span(header, bytes).is_some() && !test_call
+}
+
+/// A frame the skipper ended with `checksum_ok`: compared with the frame
+/// check the decoder runs (`Frame::new_checked`, `frame::validate`),
+/// which checks the checksum last: when it fails on the checksum (a
+/// wrong sum, a refused `@@`, a non-hex SC), nothing else was wrong.
+fn skipped_frame(bytes: &[u8], checksum_ok: bool, policy: BypassPolicy) {
+    if counted_text(bytes) {
+        return;
+    }
+    let sc_at = bytes.len().saturating_sub(4);
+    let verdict = match Frame::new_checked(bytes, policy) {
+        Ok(_) => Some(true),
+        Err(Error::ChecksumMismatch { .. } | Error::ChecksumBypassRejected) => Some(false),
+        Err(Error::InvalidHexDigit { offset, .. }) if offset >= sc_at && sc_at >= 6 => Some(false),
+        // Something else than the checksum is wrong: the skipper does not
+        // look at it.
+        Err(_) => None,
+    };
+    if let Some(accepted) = verdict {
+        assert_eq!(
+            checksum_ok,
+            accepted,
+            "the skipper and the decoder disagree on {:?}",
+            String::from_utf8_lossy(bytes)
+        );
+    }
+}
+
+/// `FrameSkipper` over the stream: at each header byte, the envelope is
+/// read, then the skipper runs to `End` or `Broken` (a header byte that
+/// broke it starts the next frame).
+fn skip_scan(policy: BypassPolicy, stream: &[u8]) {
+    let is_header = |b: u8| Header::from_byte(b).is_some();
+    let mut i = 0;
+    'hunt: while i < stream.len() {
+        if !is_header(stream[i]) {
+            i += 1;
+            continue;
+        }
+        let start = i;
+        let Some(env) = stream.get(start..start + ENVELOPE_LEN) else {
+            return;
+        };
+        if let Some(p) = env[1..]
+            .iter()
+            .position(|&b| is_header(b) || b == b'\r' || b == b'\n')
+        {
+            i = start + 1 + p;
+            continue;
+        }
+        let header = Header::from_byte(env[0]).expect("a header byte");
+        let env: &[u8; ENVELOPE_LEN] = env.try_into().expect("envelope");
+        let mut sk = FrameSkipper::new(header, env, policy);
+        i = start + ENVELOPE_LEN;
+        while i < stream.len() {
+            let b = stream[i];
+            i += 1;
+            match sk.push(b) {
+                Skipped::NeedMore => {}
+                Skipped::End { checksum_ok } => {
+                    assert_eq!(b, b'\n');
+                    skipped_frame(&stream[start..i], checksum_ok, policy);
+                    continue 'hunt;
+                }
+                Skipped::Broken => {
+                    if is_header(b) {
+                        i -= 1;
+                    }
+                    continue 'hunt;
+                }
+            }
+        }
+    }
+}
+
 fn check<const N: usize>(policy: BypassPolicy, cuts: &[u8], stream: &[u8]) {
+    skip_scan(policy, stream);
     let mut dec = FrameDecoder::<N>::with_policy(policy);
     let mut other = ByByte::<N> {
         dec: FrameDecoder::with_policy(policy),

@@ -13,10 +13,10 @@
 #[path = "common/mod.rs"]
 mod common;
 
-use iai_protocol_b::catalogue;
+use iai_protocol_b::catalogue::{self, text_span};
 use iai_protocol_b::checksum::{BypassPolicy, Checksum, ChecksumField};
 use iai_protocol_b::decoder::{Event, FrameDecoder};
-use iai_protocol_b::frame::{text_span, Frame, Header};
+use iai_protocol_b::frame::{Frame, Header};
 use iai_protocol_b::message::*;
 use libfuzzer_sys::fuzz_target;
 

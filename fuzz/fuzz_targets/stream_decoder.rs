@@ -1,20 +1,26 @@
 //! The position-stream decoder (`stream::PositionStreamDecoder`) and
 //! encoder (`stream::PositionStreamEncoder`).
 //!
-//! Input layout: byte 0 bit 0 picks the mode, bits 1-2 the bypass policy;
-//! byte 1: number k of chunk lengths (0-15); k chunk lengths (+1 each; the
-//! last chunk takes the rest, cuts are reused cyclically).
-//! - mode 0: the rest is a byte stream. Two decoders run side by side: one
-//!   fed in those chunks through `decode`, one byte by byte through `push`;
-//!   each event of the first is compared at once with the next event of the
-//!   second (nothing is stored). Checked: no panic; the same events;
-//!   `Start` at most once and first, `Record`s no more than announced and
-//!   each with one coordinate per axis, `End { records }` = records seen =
-//!   announced, `Error { records_ok }` = `Record` events before it; an event
-//!   consumes at least one byte; `offset()` never goes back; after `End` /
-//!   `Error`, `decode` and `push` consume nothing (and say `NeedMore`) until
-//!   `reset`, which zeroes `offset`, `records_done` and
-//!   `records_announced` (the driver then resets and decodes the rest).
+//! Input layout: byte 0 bit 0 picks the mode, bits 1-2 the bypass policy,
+//! bits 3-5 the room of the bulk decoder's record slice (1-8); byte 1:
+//! number k of chunk lengths (0-15); k chunk lengths (+1 each; the last
+//! chunk takes the rest, cuts are reused cyclically).
+//! - mode 0: the rest is a byte stream. Three decoders run side by side:
+//!   one fed in those chunks through `decode`, one byte by byte through
+//!   `push`, one in the same chunks through the bulk `decode_records` (its
+//!   records and event handed out one at a time); each event of the first
+//!   is compared at once with the next event of the other two (nothing is
+//!   stored). Checked: no panic; the same events; `Start` at most once and
+//!   first, `Record`s no more than announced and each with one coordinate
+//!   per axis, `End { records }` = records seen = announced, `Error {
+//!   records_ok }` = `Record` events before it; an event consumes at least
+//!   one byte; `offset()` never goes back; after `End` / `Error`, `decode`,
+//!   `decode_records` and `push` consume nothing (and say `NeedMore`) until
+//!   `reset`, which zeroes `offset`, `records_done` and `records_announced`
+//!   (the driver then resets and decodes the rest); `decode_records`
+//!   consumes at most its input, writes at most its room, never answers
+//!   `Record`, and answers `NeedMore` with input left only when its slice
+//!   is full; at the end the three agree on `offset()` and `records_done()`.
 //! - mode 1: the rest builds up to 11 records; for every kind of
 //!   `PositionStream::ALL`, they are encoded by `PositionStreamEncoder`
 //!   (pulled in chunks of the cut lengths), the frame has the expected
@@ -22,6 +28,8 @@
 //!   chunks) gives back `Start` (kind, station, start, count), the same
 //!   records in order and `End`, compared as they come.
 //!
+//! The decoders answer `decoder::Received { consumed, event }`
+//! (`decode_records`: `event` = (records written, event)).
 //! The harness keeps everything on the stack (records, encoded frame,
 //! encoder output chunks): no allocation per input.
 #![no_main]
@@ -30,13 +38,18 @@
 mod records;
 
 use iai_protocol_b::checksum::BypassPolicy;
+use iai_protocol_b::decoder::Received;
 use iai_protocol_b::frame::{Frame, Station};
-use iai_protocol_b::position::PositionRecord;
-use iai_protocol_b::stream::{
-    PositionStream, PositionStreamDecoder, PositionStreamEncoder, StreamEvent,
-};
+use iai_protocol_b::position::{PositionRecord, PositionStream};
+use iai_protocol_b::stream::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
 use libfuzzer_sys::fuzz_target;
 use records::Input;
+
+/// What a finished decoder answers until `reset`.
+const NOTHING: Received<StreamEvent> = Received {
+    consumed: 0,
+    event: StreamEvent::NeedMore,
+};
 
 /// Records a round trip builds at most.
 const MAX_RECORDS: usize = 11;
@@ -128,11 +141,85 @@ impl ByByte<'_> {
     }
 }
 
-fn arbitrary_stream(policy: BypassPolicy, cuts: &[u8], stream: &[u8]) {
+/// The bulk decoder (`decode_records` into `out[..room]`), fed in the same
+/// chunks, its records and events handed out one at a time.
+struct Bulk<'s, 'c> {
+    dec: PositionStreamDecoder,
+    rest: &'s [u8],
+    chunk: &'s [u8],
+    lens: Lens<'c>,
+    out: [PositionRecord; 8],
+    room: usize,
+    /// Records of the last call not handed out yet (`out[next..have]`), then
+    /// its event.
+    next: usize,
+    have: usize,
+    event: Option<StreamEvent>,
+}
+
+impl Bulk<'_, '_> {
+    fn next(&mut self) -> Option<StreamEvent> {
+        loop {
+            if self.next < self.have {
+                self.next += 1;
+                return Some(StreamEvent::Record(self.out[self.next - 1].clone()));
+            }
+            if let Some(ev) = self.event.take() {
+                if is_final(&ev) {
+                    // Nothing more is taken until reset.
+                    let r = self.dec.decode_records(b"!", &mut self.out[..self.room]);
+                    assert_eq!((r.consumed, r.event), (0, (0, StreamEvent::NeedMore)));
+                    self.dec.reset();
+                }
+                return Some(ev);
+            }
+            if self.chunk.is_empty() {
+                if self.rest.is_empty() {
+                    return None;
+                }
+                let n = self.lens.next().min(self.rest.len());
+                (self.chunk, self.rest) = self.rest.split_at(n);
+            }
+            let r = self
+                .dec
+                .decode_records(self.chunk, &mut self.out[..self.room]);
+            let (k, ev) = r.event;
+            assert!(r.consumed <= self.chunk.len());
+            assert!(k <= self.room, "{k} records written into {}", self.room);
+            assert!(
+                !matches!(ev, StreamEvent::Record(_)),
+                "decode_records gave a Record event"
+            );
+            if ev == StreamEvent::NeedMore {
+                assert!(
+                    r.consumed == self.chunk.len() || k == self.room,
+                    "NeedMore with input left and room in out"
+                );
+            }
+            self.chunk = &self.chunk[r.consumed..];
+            self.next = 0;
+            self.have = k;
+            self.event = (ev != StreamEvent::NeedMore).then_some(ev);
+        }
+    }
+}
+
+fn arbitrary_stream(policy: BypassPolicy, room: usize, cuts: &[u8], stream: &[u8]) {
     let mut dec = PositionStreamDecoder::new(policy);
     let mut other = ByByte {
         dec: PositionStreamDecoder::new(policy),
         rest: stream,
+    };
+    let mut bulk = Bulk {
+        dec: PositionStreamDecoder::new(policy),
+        rest: stream,
+        chunk: &[],
+        lens: Lens { cuts, i: 0 },
+        out: Default::default(),
+        room,
+        next: 0,
+        have: 0,
+        event: None,
     };
     let mut g = Grammar::default();
     let mut rest = stream;
@@ -143,7 +230,10 @@ fn arbitrary_stream(policy: BypassPolicy, cuts: &[u8], stream: &[u8]) {
         rest = &rest[n..];
         while !chunk.is_empty() {
             let before = dec.offset();
-            let (used, ev) = dec.decode(chunk);
+            let Received {
+                consumed: used,
+                event: ev,
+            } = dec.decode(chunk);
             assert!(used <= chunk.len());
             assert!(dec.offset() >= before, "offset went back");
             if ev == StreamEvent::NeedMore {
@@ -154,12 +244,14 @@ fn arbitrary_stream(policy: BypassPolicy, cuts: &[u8], stream: &[u8]) {
             g.see(&ev);
             let theirs = other.next().expect("the byte-by-byte decoder ran dry");
             assert_eq!(ev, theirs, "events depend on the chunking");
+            let bulk_ev = bulk.next().expect("the bulk decoder ran dry");
+            assert_eq!(ev, bulk_ev, "decode_records differs from decode");
             chunk = &chunk[used..];
             if is_final(&ev) {
                 // Nothing is consumed until reset, whatever follows.
-                assert_eq!(dec.decode(chunk), (0, StreamEvent::NeedMore));
-                assert_eq!(dec.decode(rest), (0, StreamEvent::NeedMore));
-                assert_eq!(dec.decode(b"!"), (0, StreamEvent::NeedMore));
+                for later in [chunk, rest, b"!"] {
+                    assert_eq!(dec.decode(later), NOTHING);
+                }
                 assert_eq!(dec.push(b'#'), StreamEvent::NeedMore);
                 dec.reset();
                 assert_eq!(
@@ -177,6 +269,9 @@ fn arbitrary_stream(policy: BypassPolicy, cuts: &[u8], stream: &[u8]) {
         None,
         "the byte-by-byte decoder has more events"
     );
+    assert_eq!(bulk.next(), None, "the bulk decoder has more events");
+    assert_eq!(dec.offset(), bulk.dec.offset());
+    assert_eq!(dec.records_done(), bulk.dec.records_done());
     assert_eq!(dec.offset(), other.dec.offset());
     assert_eq!(dec.records_done(), other.dec.records_done());
 }
@@ -233,7 +328,10 @@ fn round_trip(policy: BypassPolicy, cuts: &[u8], mut input: Input<'_>) {
         let mut at = 0usize;
         while !rest.is_empty() {
             let k = lens.next().min(rest.len());
-            let (used, ev) = dec.decode(&rest[..k]);
+            let Received {
+                consumed: used,
+                event: ev,
+            } = dec.decode(&rest[..k]);
             rest = &rest[used..];
             if ev == StreamEvent::NeedMore {
                 assert_eq!(used, k);
@@ -251,7 +349,7 @@ fn round_trip(policy: BypassPolicy, cuts: &[u8], mut input: Input<'_>) {
                     "{kind:?}"
                 ),
                 i if i <= n => match &ev {
-                    StreamEvent::Record(r) => assert_eq!(r, &recs[i - 1], "{kind:?} record {i}"),
+                    StreamEvent::Record(r) => assert_eq!(*r, recs[i - 1], "{kind:?} record {i}"),
                     other => panic!("{kind:?}: {other:?} instead of record {i}"),
                 },
                 i if i == n + 1 => {
@@ -276,7 +374,8 @@ fuzz_target!(|data: &[u8]| {
         _ => BypassPolicy::Accept,
     };
     if config & 1 == 0 {
-        arbitrary_stream(policy, cuts, input.0);
+        let room = 1 + usize::from((config >> 3) & 7);
+        arbitrary_stream(policy, room, cuts, input.0);
     } else {
         round_trip(policy, cuts, input);
     }

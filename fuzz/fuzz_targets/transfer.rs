@@ -1,133 +1,111 @@
-//! The transfer engine (`transfer::Transfer`) against a simulated
-//! controller that holds a position table and misbehaves as the input says.
+//! The transfer engine (`transfer::Transfer`) over a `line::Line`, on a
+//! virtual clock, against a simulated controller that holds a position
+//! table, applies every write it gets and answers in order.
 //!
-//! Input layout: a config (write kind 26DH / 245H / 244H / 290H / 291H,
-//! verification policy, station, table size 0-47, seed and shape, range
-//! start, first position number, what the controller holds beforehand,
-//! frame and reply size limits, timeout, sends, rewrites, turnaround, late
-//! and duplicate windows, start tick, resumes 0-3), then a script. The
-//! engine runs on a virtual millisecond clock (the harness keeps a 64-bit
-//! time; the engine sees it wrapped from the start tick).
+//! Input layout: the line (`common/link.rs`: station, timeout, flags with
+//! sends 1-4, `resend_unsafe`, fences off, raw noise, turnaround, late and
+//! duplicate windows, fence seed, start tick); a byte: write kind (`% 5`:
+//! 26DH, 245H, 244H, 290H, 291H) and verification policy (`/ 5 % 3`:
+//! `Full`, `AfterFault`, `Off`); table size (`% 48`); table seed; shape
+//! (bits 0-1: sequential, reversed, a record repeated, a number reused
+//! with other content; bits 2-3: what the controller holds beforehand:
+//! nothing, the source, other records at its positions); range start
+//! (u16, for 244H / 290H, so that the table ends inside the start field);
+//! first position number (u16); frame room (u8: `max_frame` = one 8-axis
+//! record + 4 x b bytes); reply room (`% 8`); a byte: rewrites (`% 4`) and
+//! `max_records` (1 + b / 4); resumes (`% 4`); then a script.
 //!
-//! The controller applies every write it receives to its table and answers
-//! every read-back query (21FH, 22DH, 209H) from that table; replies are
-//! scheduled and delivered in time order. Script bytes choose, per frame
-//! sent: how long the transmission takes (replies due meanwhile arrive
-//! *before* `sent`), whether the frame is lost, corrupted (the SC fails:
-//! the controller stays silent and executes nothing) or, for a write,
-//! altered by an SC-preserving swap of two digits of a coordinate (the
-//! controller stores the wrong value); and for its reply: a delay (up to
-//! far beyond the timeout), a duplicate later on, loss, a corrupted byte,
-//! an `&` reply (controller or bridge code), a partial write (the first k
-//! records stored, count k reported), and for a read-back reply a wrong
-//! record (never the one the source holds), a missing record, a swapped
-//! digit, or a stale reply (an earlier real reply of the controller sent
-//! again). While the engine waits, script bytes advance the clock, deliver
-//! what is due, inject noise (never a LF, so noise cannot complete a
-//! frame; with the raw-noise bit of the config any bytes, as the old target
-//! did), or replay an earlier write or read-back reply. When the script
-//! ends the controller is well-behaved (replies after 1 ms), so every run
-//! ends.
+//! The controller receives each transmission at its end and answers in
+//! order: fences with their echo; a write is applied to its table and
+//! answered with its count; a read-back query (21FH, 22DH, 209H) with the
+//! defined records of its window. Per transmission the script picks its
+//! length (replies due meanwhile arrive before `sent`), whether the
+//! controller gets it (lost: nothing applied), for a write an SC-preserving
+//! swap of two digits (the controller stores the wrong value; only reading
+//! back sees it), and the reply's fate: at once, lost, a corrupted byte, a
+//! copy later, a partial write (k records stored, k reported) or for a
+//! read-back a lie (a record altered, missing or swapped, never showing
+//! the source's value), an `&` (for a write after storing part of it), a
+//! stale answer (an earlier reply sent again: a lie outside the contract),
+//! a delay with a copy.
+//!
+//! While the engine waits, a script byte (`% 5`): 0 advances the clock
+//! (u16 ms) delivering what is due, 1 injects noise (a byte `k`, `k % 64`
+//! bytes, no LF unless raw noise is on; with `k & 0x40` the next delivery
+//! follows with no poll between), 2 sends a copy of any reply made before
+//! (a byte: which, `& 0x80` broken), 3 delivers the next delivery, 4 waits
+//! until the deadline; when the script ends, the deadline or the next
+//! delivery, whichever comes first. A transmission's op byte: bits 0-2
+//! its length (ms), bits 3-4 = 2 the command lost, = 3 a swap in a write,
+//! bits 5-7 the reply's fault (then a byte and a u16 delay): 0 at once, 1
+//! lost, 2 a corrupted byte, 3 a copy later, 4 a partial write / a
+//! read-back lie, 5 an `&`, 6 a stale answer, 7 a delay with a copy;
+//! fences are echoed (4 and 5: an `&` instead).
+//!
+//! Deliveries keep the contract as in `Link::arrives` (originals within
+//! `timeout + late_window` of their send and in order, copies within
+//! `duplicate_window` of a first arrival that kept it, no lies, no raw
+//! noise).
 //!
 //! Checked:
-//! - no panic; it stops (`Complete`, or `Failed` with no resume left)
-//!   within a bounded number of steps; `NeedRecords` never (an iterator is
-//!   never pending);
-//! - every write sent is a valid frame of the kind, within `max_frame`,
-//!   carrying the next unconfirmed records of the source in order (with
-//!   the right start number for a range write); every read-back query is a
-//!   valid query of the matching kind (21FH for 26DH, 22DH for 290H/291H,
-//!   209H for 244H/245H) for a window of at most `window(max_response)`
-//!   positions, starting at a position of the frame being verified; the
-//!   controller's reply to it fits `max_response`;
-//! - `records_confirmed` never exceeds the source, never shrinks, and
-//!   grows only by the record count of the last write frame sent, and only
-//!   after its `sent`; `Confirmed { records }` only for a write reply with
-//!   exactly that count (and start), never before `sent`; `CountMismatch`
-//!   only for a write reply with another count or start, and it never
-//!   confirms; `Rejected { code }` only for an `&` reply with that code;
-//!   `Compared { head, .. }` only for the window last asked, from a
-//!   read-back reply whose records all lie in it (the reply fed, or, since
-//!   bytes of a failed text frame are decoded again, one fed earlier since
-//!   the last transmission);
-//! - no wait before the first send, none longer than the longest hold
-//!   (timeout + late window + duplicate window + turnaround);
-//! - `Complete` only with every record confirmed, the guarantee of the
-//!   policy (`Full` -> `Verified`, `AfterFault` -> `FaultsVerified`, `Off` ->
-//!   `Unverified`), and: with `Verified`, the controller's table holds
-//!   exactly the source at every source position (exact compare: never a
-//!   false success, also when a late or duplicated copy of a read-back
-//!   reply from before a rewrite came within the engine's contract:
-//!   finding F5, fixed; no claim once such a reply came outside it, later
-//!   than `timeout + late_window` after its query and not within
-//!   `duplicate_window` of an original that came in time); with
-//!   `FaultsVerified` or `Unverified`, the same unless an SC-preserving swap
-//!   was applied to a write, a write reply arrived outside the engine's
-//!   guard windows (later than `timeout + late_window` after its send, and
-//!   later than `duplicate_window` after the engine confirmed that frame),
-//!   or a partial write's count reached a later frame: the faults those
-//!   policies do not claim to catch (and no table claim at all once raw
-//!   noise held a frame that passed for a reply: a forged reply can confirm
-//!   or verify anything);
-//! - `Failed` only with `Timeout`, `Controller { code }` (a code the
-//!   controller sent, outside the bridge range), `Bridge { code }` (inside
-//!   it) or `Mismatch { first_position, records }` (a position of the frame
-//!   being verified, `records >= 1`), never with every record confirmed.
+//! - no panic; it ends (`Done(Ok)`, or a failure with no resume left)
+//!   within a bounded number of steps; `Idle` never (an iterator source is
+//!   never pending); no wait before the first transmission of a line with
+//!   fences, none in the past or beyond the longest hold;
+//! - fences are 200H with the seed's text; every write is a valid frame of
+//!   the kind within `max_frame` carrying the next unconfirmed records of
+//!   the source in order (the right start number for a range write), at
+//!   most `max_records`; every read-back query is of the matching kind
+//!   (21FH for 26DH, 22DH for 290H / 291H, 209H for 244H / 245H), starts at
+//!   a position of the frame last written and asks at most
+//!   `window(max_response)` positions; the controller's reply fits
+//!   `max_response`; a resend comes no earlier than `sent + timeout` unless
+//!   a broken frame came after `sent`;
+//! - `records_confirmed` never shrinks, never passes the source, and grows
+//!   only by the record count of the last write frame, after its `sent`;
+//! - an `Answer` while a write is awaited comes from a write reply with
+//!   its count (and start) among the bytes fed since the send, an
+//!   `Answer` to a query from a read-back reply holding only positions of
+//!   its window, `Rejected(code)` from an `&` with that code, `Fence` from
+//!   the echo of the last fence sent;
+//! - `Done(Ok(g))` with the policy's guarantee and every record confirmed;
+//!   **with `Verified` the controller's table holds exactly the source at
+//!   every source position (never a false success)**, unless a delivery
+//!   outside the contract (or raw noise) was among the bytes that made a
+//!   reply or an echo taken; with `FaultsVerified` / `Unverified` the same
+//!   unless a write was swapped (what those policies do not claim to
+//!   catch);
+//! - a failure is `Timeout` / `OutcomeUnknown` (by the resend safety of the
+//!   command, with its sends), `Controller { code }` after an `&` with that
+//!   code, or `Mismatch { first_position, records }` naming a position of
+//!   the frame last written, `records >= 1`; never with every record
+//!   confirmed; `resume` goes on.
 //!
-//! What changed with the verifying engine: an `&` is not resent (the run
-//! fails with `Controller` / `Bridge`, then resumes), frames may carry fewer
-//! records than fit (late-reply count guard) and shrink after timeouts (the
-//! "next records in order" check covers both), and the old "`Complete`
-//! only with every record confirmed" became the exact table compare.
+//! Removed with the redesign: the checks of the engine's guard windows and
+//! holds (the line decides now when a command may go out: the `line`
+//! target checks that), and of the events `Confirmed` / `CountMismatch` /
+//! `Compared`, which no longer exist (the line's `Heard` replaces them).
 #![no_main]
 
 #[path = "common/controller.rs"]
 mod controller;
+#[path = "common/link.rs"]
+mod link;
 #[path = "common/records.rs"]
 mod records;
 
 use controller::Table;
-use iai_protocol_b::checksum::ChecksumMode;
-use iai_protocol_b::error::BRIDGE_CODES;
-use iai_protocol_b::exchange::ExchangeConfig;
-use iai_protocol_b::frame::Station;
+use iai_protocol_b::catalogue::{self, Resend};
+use iai_protocol_b::checksum::BypassPolicy;
+use iai_protocol_b::engine::Step;
+use iai_protocol_b::error::Failure;
+use iai_protocol_b::frame::Frame;
+use iai_protocol_b::line::{Heard, Line};
 use iai_protocol_b::position::{PositionRecord, PositionStream};
-use iai_protocol_b::transfer::{
-    Guarantee, Step, Transfer, TransferConfig, TransferError, TransferEvent, Verify,
-};
+use iai_protocol_b::transfer::{Guarantee, Transfer, TransferConfig, Verify};
 use libfuzzer_sys::fuzz_target;
+use link::{Delivery, Kind, Link, Setup};
 use records::Input;
-
-/// Finding F11 (fixed in the core; the check is strict) (fuzz/README.md): after a rewrite, the read-back hold
-/// (the F5 fix: `duplicate_window_ms` after the rewrite) is checked against
-/// the horizon of the transfer's exchange, which runs with
-/// `duplicate_window_ms = 0`; a hold further ahead than that horizon reads
-/// as expired, so with a duplicate window longer than the horizon an old
-/// read-back reply verifies a rewritten frame again (a false `Verified`).
-/// Before the fix, the table check
-/// tolerates exactly that: an old reply compared within the contract, with
-/// such a duplicate window.
-const F11_FIXED: bool = true;
-
-/// Finding F8 (fixed in the core; the check is strict) (fuzz/README.md), as far as `Transfer` goes: its
-/// exchange runs with `duplicate_window_ms = 0`, so the F6 fix (a stale
-/// reply extends the quarantine by the duplicate window) does not apply: a
-/// late read-back reply from before a rewrite that arrives while the next
-/// read-back is held is dropped, and a copy of it after the hold verifies
-/// the rewritten frame. Before the fix, the
-/// table check tolerates exactly that: a compared old reply within the
-/// duplicate window of a copy of it heard after the last write to its
-/// window.
-const F8_FIXED: bool = true;
-
-/// Finding F12 (fixed in the core; the check is strict) (fuzz/README.md): after `Failed` and `resume`, the
-/// transfer's guard and its `AfterFault` policy see only the sends since
-/// the resume: the frame counts as answered at its first send (no late
-/// window kept for the send before the resume, whose late reply then
-/// confirms the next frame of that count) and as not faulted (no
-/// read-back). Before the fix, the guard
-/// model counts sends since the last resume, as the engine does.
-const F12_FIXED: bool = true;
 
 /// The engine's frame buffer: the TTA's receive limit.
 const N: usize = iai_protocol_b::limits::TTA.command;
@@ -140,117 +118,338 @@ const WRITES: [PositionStream; 5] = [
     PositionStream::CHANGE_3,
 ];
 
-/// What a scheduled delivery is.
-#[derive(Debug, Clone, PartialEq)]
-enum What {
-    /// A write reply: (start, count), the write frame it answers, and
-    /// whether it still lies inside the engine's guard windows is judged
-    /// at delivery from `sent_at`.
-    WriteReply {
+/// What a reply the controller made says (by made index).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Said {
+    Count {
         start: u16,
         count: u16,
-        frame: usize,
-        sent_at: u64,
-        partial: bool,
     },
-    /// A read-back reply for the window (head, asked).
-    ReadReply { head: u16, asked: u16, made_at: u64 },
-    /// An `&` reply.
+    Records {
+        head: u16,
+        asked: u16,
+    },
     Error(u16),
-    /// Bytes that cannot complete a frame (noise, a corrupted frame).
-    Noise,
-    /// Arbitrary bytes: they may hold a valid frame that passes for a reply.
-    Forged,
+    /// The echo of fence command `cmd`.
+    Echo(usize),
 }
 
-#[derive(Debug, Clone)]
-struct Delivery {
-    at: u64,
-    bytes: Vec<u8>,
-    what: What,
+/// The write frame last sent: first source index, records, start.
+#[derive(Debug, Clone, Copy)]
+struct Write {
+    from: usize,
+    n: u16,
+    start: u16,
 }
 
-/// The simulated line and controller.
-struct Sim {
+struct H<'a> {
+    input: Input<'a>,
+    setup: Setup,
     kind: PositionStream,
     rb: PositionStream,
-    station: Station,
     table: Table,
-    /// Deliveries to the engine, in time order.
-    outbox: Vec<Delivery>,
-    /// Every write reply and read-back reply made, for stale replays.
-    history: Vec<Delivery>,
-    /// Faults the weaker policies do not claim to catch.
-    unguarded: bool,
-    /// Deliveries fed since the last transmission (the frame behind an
-    /// event may come from one of them, see `made_by`).
-    recent: Vec<What>,
-    /// Noise may hold LF (config), and a frame in it passed for a reply.
-    raw_noise: bool,
-    forged: bool,
-    /// When each write frame (first index, count) was sent.
-    sent_at: Vec<((usize, u16), u64)>,
-    /// The frame answered last, and whether the engine has seen a late or
-    /// duplicated reply (a stale one, or a count mismatch).
-    last_answered: Option<(usize, u16)>,
-    line_showed_dups: bool,
-    /// When each position was last written.
-    written_at: std::collections::BTreeMap<u16, u64>,
-    /// A read-back reply made before the last write to its window was
-    /// compared although it came outside the engine's contract (later than
-    /// `timeout + late_window` after its query, and no copy of an original
-    /// that came in time, within `duplicate_window` of it): nothing can
-    /// tell it from the answer, so no table claim.
-    old_out_of_contract: bool,
-    /// ... and one that came within it (open finding F11), or a copy of
-    /// a late reply that first arrived after the last write to its window
-    /// (open finding F8, as far as `Transfer` goes).
-    old_in_contract: bool,
-    old_copy_of_late: bool,
-    /// When each read-back reply (made at, head, asked) first arrived
-    /// intact, and when a copy of it arrived last before the one being fed.
-    read_first: std::collections::BTreeMap<(u64, u16, u16), u64>,
-    read_last: std::collections::BTreeMap<(u64, u16, u16), u64>,
-    read_prev: Option<u64>,
-    /// When the run was last resumed (open finding F12).
-    resumed_at: Option<u64>,
-    /// Write frames sent (index = frame id): the first source index and
-    /// record count of each, and when the engine confirmed those records.
-    frames: Vec<(usize, u16, Option<u64>)>,
+    expected: Table,
+    link: Link,
+    line: Line,
+    t: Transfer<std::vec::IntoIter<PositionRecord>, N>,
+    clock: u64,
+    said: Vec<Said>,
+    /// Deliveries fed since the engine last reset its decoders (at each
+    /// send): the frame behind an event is one of them.
+    recent: Vec<Delivery>,
+    write: Option<Write>,
+    write_sent: bool,
+    /// The query last sent (head, asked).
+    query: Option<(u16, u16)>,
+    awaiting: bool,
+    last_sent: u64,
+    broken_since_sent: bool,
+    /// No table claim: a reply or echo was taken with bytes outside the
+    /// contract among its candidates.
+    no_claim: bool,
+    swapped: bool,
+    rejected: Vec<u16>,
+    /// The last fence sent (controller command index), if it got there.
+    last_fence: Option<usize>,
+    transmitted: bool,
 }
 
-impl Sim {
-    fn apply(&mut self, recs: &[PositionRecord], clock: u64) {
-        controller::apply(&mut self.table, recs);
-        for r in recs {
-            self.written_at.insert(r.number, clock);
+impl H<'_> {
+    fn now(&self) -> u32 {
+        self.setup.base.wrapping_add(self.clock as u32)
+    }
+
+    fn deliver_until(&mut self, to: u64) {
+        while let Some(d) = self.link.due(to) {
+            self.clock = self.clock.max(d.at);
+            self.feed(d);
         }
     }
 
-    fn schedule(&mut self, d: Delivery) {
-        let i = self.outbox.partition_point(|e| e.at <= d.at);
-        self.outbox.insert(i, d);
+    fn feed(&mut self, mut d: Delivery) {
+        d.at = self.clock;
+        self.link.arrives(&mut d, self.clock);
+        self.recent.push(d.clone());
+        let mut rest = &d.bytes[..];
+        let now = self.now();
+        loop {
+            let errors = self.line.stats().line_errors;
+            let r = self.t.received(&mut self.line, rest, now);
+            if self.line.stats().line_errors > errors {
+                // A broken frame (the read-back path reports none).
+                self.broken_since_sent = true;
+            }
+            trace!(
+                "t={} RX {:?} -> {:?} ({:?})",
+                self.clock,
+                String::from_utf8_lossy(&rest[..r.consumed]),
+                r.event,
+                d.kind
+            );
+            assert!(r.consumed <= rest.len());
+            rest = &rest[r.consumed..];
+            self.heard(r.event);
+            if r.event == Heard::NeedMore {
+                assert!(rest.is_empty(), "a transfer refused bytes");
+                return;
+            }
+        }
+    }
+
+    /// The deliveries fed since the send that `fits`.
+    fn candidates(&self, fits: impl Fn(&Said) -> bool) -> Vec<&Delivery> {
+        self.recent
+            .iter()
+            .filter(|d| match d.kind {
+                Kind::Reply { made, .. } => fits(&self.said[made]),
+                Kind::Forged => true,
+                _ => false,
+            })
+            .collect()
+    }
+
+    fn heard(&mut self, heard: Heard) {
+        match heard {
+            Heard::Answer => {
+                assert!(self.awaiting, "a reply taken while none was awaited");
+                let kind = self.kind;
+                let cands: Vec<&Delivery> = match (self.query, self.write) {
+                    (Some((qh, qa)), _) => {
+                        let rb = self.rb;
+                        self.recent
+                            .iter()
+                            .filter(|d| match d.kind {
+                                Kind::Reply { .. } => fits_window(rb, &d.bytes, qh, qa),
+                                Kind::Forged => true,
+                                _ => false,
+                            })
+                            .collect()
+                    }
+                    (None, Some(w)) => self.candidates(|s| match *s {
+                        Said::Count { start, count } => {
+                            count == w.n && (kind.start_width == 0 || start == w.start)
+                        }
+                        _ => false,
+                    }),
+                    (None, None) => panic!("a reply taken before anything was sent"),
+                };
+                assert!(!cands.is_empty(), "a reply taken that no delivery made");
+                if cands.iter().any(|d| !d.ok()) {
+                    self.no_claim = true;
+                }
+                self.awaiting = false;
+            }
+            Heard::Fence => {
+                let last = self.last_fence;
+                let cands = self.candidates(|s| Some(*s) == last.map(Said::Echo));
+                assert!(!cands.is_empty(), "no echo of the last fence was fed");
+                if cands.iter().any(|d| !d.ok()) {
+                    self.no_claim = true;
+                }
+            }
+            Heard::Rejected(code) => {
+                assert!(self.awaiting, "an & taken while no reply was awaited");
+                let cands = self.candidates(|s| *s == Said::Error(code));
+                assert!(!cands.is_empty(), "rejected ({code:03X}) by no delivery");
+                self.rejected.push(code);
+                self.awaiting = false;
+            }
+            Heard::Broken(_) => self.broken_since_sent = true,
+            _ => {}
+        }
+    }
+
+    /// Applies `recs` (already numbered by position).
+    fn apply(&mut self, recs: &[PositionRecord]) {
+        controller::apply(&mut self.table, recs);
+    }
+
+    fn reply(
+        &mut self,
+        bytes: Vec<u8>,
+        said: Said,
+        cmd: usize,
+        at: u64,
+        f: &link::Fate,
+        lie: bool,
+    ) {
+        let first = self.link.made.len();
+        self.link.answer(bytes, cmd, at, f, lie);
+        while self.said.len() < self.link.made.len() {
+            self.said.push(said);
+        }
+        debug_assert!(self.said.len() > first);
+    }
+
+    /// The controller got command `cmd` at the clock.
+    fn answer(&mut self, cmd: usize, bytes: &[u8], f: &link::Fate) {
+        let at = if f.fault == 0 {
+            self.clock + 1
+        } else {
+            self.clock + f.delay
+        };
+        let station = self.setup.line.station;
+        let error_code = 0x0A0 + u16::from(f.extra);
+        if self.setup.is_fence(bytes) {
+            let echo = self.link.echo(bytes);
+            match f.fault {
+                4 | 5 => {
+                    let e = controller::error_reply(station, error_code);
+                    self.reply(
+                        e,
+                        Said::Error(error_code),
+                        cmd,
+                        at,
+                        &link::Fate::default(),
+                        false,
+                    );
+                }
+                _ => self.reply(echo, Said::Echo(cmd), cmd, at, f, false),
+            }
+            return;
+        }
+        // A stale answer: an earlier reply of the same kind again.
+        let stale = |h: &H<'_>, want: fn(&Said) -> bool| -> Option<(Vec<u8>, Said)> {
+            let olds: Vec<usize> = (0..h.said.len()).filter(|&i| want(&h.said[i])).collect();
+            let i = *olds.get(usize::from(f.extra) % olds.len().max(1))?;
+            Some((h.link.made[i].bytes.clone(), h.said[i]))
+        };
+        let plain = link::Fate { fault: 0, ..*f };
+        if let Some((start, mut recs)) = controller::parse_write(self.kind, bytes) {
+            if f.special
+                && controller::swap_digits(&mut recs, u32::from(f.extra) | (f.delay as u32) << 8)
+                    .is_some()
+            {
+                self.swapped = true;
+            }
+            let n = recs.len() as u16;
+            match f.fault {
+                4 if n > 1 => {
+                    let k = 1 + usize::from(f.extra) % (recs.len() - 1);
+                    self.apply(&recs[..k]);
+                    let b = controller::write_reply(self.kind, station, start, k as u16);
+                    let said = Said::Count {
+                        start,
+                        count: k as u16,
+                    };
+                    self.reply(b, said, cmd, at, &plain, false);
+                }
+                5 => {
+                    let k = usize::from(f.extra) % (recs.len() + 1);
+                    self.apply(&recs[..k]);
+                    let e = controller::error_reply(station, error_code);
+                    self.reply(e, Said::Error(error_code), cmd, at, &plain, false);
+                }
+                6 => {
+                    self.apply(&recs);
+                    let old = stale(self, |s| matches!(s, Said::Count { .. }));
+                    if let Some((b, said)) = old {
+                        self.reply(b, said, cmd, at, &plain, true);
+                    }
+                }
+                _ => {
+                    self.apply(&recs);
+                    let b = controller::write_reply(self.kind, station, start, n);
+                    self.reply(b, Said::Count { start, count: n }, cmd, at, f, false);
+                }
+            }
+            return;
+        }
+        let (head, asked) =
+            controller::parse_query(self.rb, station, bytes).expect("a write or a query");
+        let mut recs = controller::window(&self.table, head, asked);
+        match f.fault {
+            4 => {
+                // A lie the SC does not show, never showing the source's
+                // value where the table differs.
+                match f.extra % 3 {
+                    0 if !recs.is_empty() => {
+                        let i = usize::from(f.extra / 3) % recs.len();
+                        let mut r = recs[i].clone();
+                        r.speed = r.speed.wrapping_add(1);
+                        if self.expected.get(&r.number) == Some(&r) {
+                            r.speed = r.speed.wrapping_add(1);
+                        }
+                        recs[i] = r;
+                    }
+                    1 if !recs.is_empty() => {
+                        recs.remove(usize::from(f.extra / 3) % recs.len());
+                    }
+                    _ => {
+                        let mut swapped = recs.clone();
+                        if let Some(i) =
+                            controller::swap_digits(&mut swapped, u32::from(f.extra) * 131 + 7)
+                        {
+                            if self.expected.get(&swapped[i].number) != Some(&swapped[i]) {
+                                recs = swapped;
+                            }
+                        }
+                    }
+                }
+            }
+            5 => {
+                let e = controller::error_reply(station, error_code);
+                self.reply(e, Said::Error(error_code), cmd, at, &plain, false);
+                return;
+            }
+            6 => {
+                if let Some((b, said)) = stale(self, |s| matches!(s, Said::Records { .. })) {
+                    self.reply(b, said, cmd, at, &plain, true);
+                    return;
+                }
+            }
+            _ => {}
+        }
+        let reply = controller::query_reply(self.rb, station, &recs);
+        let max_response = self.t.config().max_response;
+        assert!(
+            reply.len() <= max_response,
+            "a read-back reply of {} bytes for a window the engine asked (max {max_response})",
+            reply.len()
+        );
+        self.reply(reply, Said::Records { head, asked }, cmd, at, f, false);
     }
 }
 
-struct Cfg {
-    exchange: ExchangeConfig,
-    max_frame: usize,
-    max_response: usize,
+enum S {
+    Transmit(Vec<u8>),
+    Wait(u32),
+    Idle,
+    Done(Result<Guarantee, Failure>),
 }
 
 fuzz_target!(|data: &[u8]| {
     let mut input = Input(data);
+    let setup = link::setup(&mut input);
     let c = input.u8();
     let kind = WRITES[usize::from(c % 5)];
     let verify = [Verify::Full, Verify::AfterFault, Verify::Off][usize::from(c / 5 % 3)];
     let rb = kind.read_back();
-    let station = Station(input.u8());
     let size = usize::from(input.u8() % 48);
     let seed = input.u8();
     let shape = input.u8();
     // Range writes (244H, 290H): the table ends inside the start field's
-    // range, up to exactly its top (which once failed; fixed in the core).
+    // range, up to exactly its top.
     let start_max = match kind.start_width {
         0 => 0u32,
         w => (1u32 << (4 * u32::from(w))) - 1,
@@ -262,15 +461,9 @@ fuzz_target!(|data: &[u8]| {
     let max_frame = min_frame + usize::from(input.u8()) * 4;
     let min_response = rb.overhead() + rb.layout.record_len(8);
     let max_response = min_response + usize::from(input.u8() % 8) * rb.layout.record_len(8);
-    let mut exchange = ExchangeConfig::new(station);
-    exchange.timeout_ms = 1 + u32::from(input.u8()) * 20;
     let b = input.u8();
-    exchange.max_sends = 1 + b % 4;
-    let rewrites = (b >> 2) % 4;
-    exchange.turnaround_ms = 1 + u32::from(input.u8() % 4);
-    exchange.late_window_ms = u32::from(input.u16());
-    exchange.duplicate_window_ms = u32::from(input.u16());
-    let base = input.u32();
+    let rewrites = b % 4;
+    let max_records = 1 + u16::from(b >> 2);
     let mut resumes = input.u8() % 4;
 
     // The source: sequential numbers, or reversed, or with a record
@@ -291,23 +484,6 @@ fuzz_target!(|data: &[u8]| {
         }
     }
     let expected = controller::expected(kind, start, &source);
-
-    let mut cfg = TransferConfig::tta(station).with_verify(verify);
-    cfg.exchange = exchange;
-    cfg.stream = kind;
-    cfg.start = start;
-    cfg.max_frame = max_frame;
-    cfg.max_response = max_response;
-    cfg.checksum = ChecksumMode::Compute;
-    cfg.rewrites = rewrites;
-    let lim = Cfg {
-        exchange,
-        max_frame,
-        max_response,
-    };
-
-    // What the controller holds beforehand: nothing, the source itself (a
-    // table uploaded again), or other records at the same positions.
     let mut table = Table::new();
     match (shape >> 2) & 3 {
         1 => table = expected.clone(),
@@ -320,78 +496,87 @@ fuzz_target!(|data: &[u8]| {
         }
         _ => {}
     }
-    let mut sim = Sim {
+    let cfg = TransferConfig {
+        stream: kind,
+        start,
+        max_frame,
+        max_response,
+        verify,
+        rewrites,
+        max_records,
+    };
+    trace!("{:?} {cfg:?} {} records", setup.line, source.len());
+    let mut h = H {
+        input,
+        setup,
         kind,
         rb,
-        station,
         table,
-        outbox: Vec::new(),
-        history: Vec::new(),
-        unguarded: false,
-        sent_at: Vec::new(),
-        last_answered: None,
-        line_showed_dups: false,
+        expected,
+        link: Link::new(setup),
+        line: Line::new(setup.line, setup.seed),
+        t: Transfer::new(cfg, source.clone().into_iter()),
+        clock: 0,
+        said: Vec::new(),
         recent: Vec::new(),
-        raw_noise: shape & 0x10 != 0,
-        forged: false,
-        written_at: Default::default(),
-        old_out_of_contract: false,
-        old_in_contract: false,
-        old_copy_of_late: false,
-        read_first: Default::default(),
-        read_last: Default::default(),
-        read_prev: None,
-        resumed_at: None,
-        frames: Vec::new(),
+        write: None,
+        write_sent: false,
+        query: None,
+        awaiting: false,
+        last_sent: 0,
+        broken_since_sent: false,
+        no_claim: setup.raw_noise,
+        swapped: false,
+        rejected: Vec::new(),
+        last_fence: None,
+        transmitted: false,
     };
-
-    trace!(
-        "{:03X} {verify:?} {} records, exchange {exchange:?}, rewrites {rewrites}",
-        kind.id,
-        source.len()
-    );
-    let mut t: Transfer<_, N> = Transfer::new(cfg, source.clone().into_iter());
+    let ex = setup.line;
     let max_steps = 2_000
         + 16 * data.len()
         + 64 * (size + 1)
-            * usize::from(exchange.max_sends)
+            * usize::from(ex.max_sends)
             * (1 + usize::from(rewrites))
             * (1 + usize::from(resumes));
-
-    let mut clock: u64 = 0;
-    let now = |clock: u64| base.wrapping_add(clock as u32);
-    // The write frame last transmitted: (frame id, first index, records,
-    // start) and whether `sent` was called for it.
-    let mut write: Option<(usize, usize, u16, u16)> = None;
-    let mut write_sent = false;
-    // The read-back query last transmitted (head, asked) and its frame.
-    let mut query: Option<(u16, u16)> = None;
-    let mut confirmed = 0u32;
     let mut steps = 0usize;
-
+    let mut confirmed = 0u32;
     loop {
         steps += 1;
         assert!(steps <= max_steps, "no end after {steps} steps");
-        let step = t.poll(now(clock));
+        let now = h.now();
+        let before = h.line.stats();
+        let step = match h.t.poll(&mut h.line, now) {
+            Step::Transmit(b) => S::Transmit(b.to_vec()),
+            Step::WaitUntil(t) => S::Wait(t),
+            Step::Idle => S::Idle,
+            Step::Done(r) => S::Done(r),
+        };
+        let after = h.line.stats();
+        let fresh = after.sends > before.sends;
+        if fresh {
+            // The engine resets its reply decoders for every send.
+            h.recent.clear();
+        }
+        check_progress(&h, &mut confirmed, source.len());
         match step {
-            Step::Transmit(bytes) => {
-                let bytes = bytes.to_vec();
-                // The engine resets its reply decoder for every send.
-                sim.recent.clear();
+            S::Idle => panic!("an iterator source is never pending"),
+            S::Transmit(bytes) => {
                 trace!(
-                    "t={clock} now={} TX {}",
-                    now(clock),
+                    "t={} TX {}",
+                    h.clock,
                     String::from_utf8_lossy(&bytes).trim_end()
                 );
-                let op = input.next();
-                let is_write = bytes.get(3..6) == Some(hex3(kind.id).as_slice());
-                // The write as the controller reads it (checked below).
-                let mut parsed = None;
-                if is_write {
-                    let (s, recs) = controller::parse_write(kind, &bytes)
-                        .expect("the engine sent an invalid write");
+                h.transmitted = true;
+                let fence = setup.is_fence(&bytes);
+                if fence {
+                    link::check_fence(&setup, &bytes);
+                } else if let Some((s, recs)) = controller::parse_write(kind, &bytes) {
                     assert!(bytes.len() <= max_frame, "a frame over max_frame");
                     assert!(!recs.is_empty(), "a write without records");
+                    assert!(
+                        recs.len() <= usize::from(max_records),
+                        "more than max_records"
+                    );
                     let from = confirmed as usize;
                     assert!(
                         from + recs.len() <= source.len(),
@@ -409,15 +594,16 @@ fuzz_target!(|data: &[u8]| {
                             "wrong start number"
                         );
                     }
-                    let id = sim.frames.len();
-                    sim.frames.push((from, recs.len() as u16, None));
-                    write = Some((id, from, recs.len() as u16, s));
-                    parsed = Some((s, recs));
-                    write_sent = false;
-                    query = None;
+                    h.write = Some(Write {
+                        from,
+                        n: recs.len() as u16,
+                        start: s,
+                    });
+                    h.write_sent = false;
+                    h.query = None;
                 } else {
-                    let (head, asked) = controller::parse_query(rb, station, &bytes)
-                        .expect("the engine sent neither a write nor a read-back query");
+                    let (head, asked) = controller::parse_query(rb, ex.station, &bytes)
+                        .expect("neither a fence, a write nor a read-back query");
                     assert!(
                         asked >= 1 && asked <= rb.window(max_response),
                         "window {asked}"
@@ -426,176 +612,116 @@ fuzz_target!(|data: &[u8]| {
                         u64::from(head) + u64::from(asked) - 1 <= rb.count_field().max_unsigned(),
                         "window past the position field"
                     );
-                    let (_, from, n, _) = write.expect("a read-back before any write");
-                    let positions: Vec<u16> = (0..usize::from(n))
-                        .map(|i| controller::position_of(kind, start, from + i, &source[from + i]))
+                    let w = h.write.expect("a read-back before any write");
+                    let positions: Vec<u16> = (0..usize::from(w.n))
+                        .map(|i| {
+                            controller::position_of(kind, start, w.from + i, &source[w.from + i])
+                        })
                         .collect();
                     assert!(
                         positions.contains(&head),
                         "a window that starts outside the frame: {head}+{asked} for {positions:?}"
                     );
-                    query = Some((head, asked));
+                    h.query = Some((head, asked));
                 }
-                // The transmission takes `dur` ms; what is due meanwhile
-                // arrives before `sent`.
-                let dur = u64::from(op.map_or(1, |o| o & 7));
-                deliver_until(
-                    &mut t,
-                    &mut sim,
-                    &lim,
-                    clock + dur,
-                    true,
-                    &mut clock,
-                    base,
-                    write,
-                    write_sent,
-                    query,
-                );
-                clock += dur;
-                t.sent(now(clock));
-                if is_write {
-                    write_sent = true;
-                    if let Some((_, from, n, _)) = write {
-                        sim.sent_at.push(((from, n), clock));
+                if !fence && fresh && h.line.sends() > 1 {
+                    assert!(
+                        h.clock >= h.last_sent + u64::from(ex.timeout_ms) || h.broken_since_sent,
+                        "resent at {} after a send that ended at {}",
+                        h.clock,
+                        h.last_sent
+                    );
+                }
+                h.awaiting = false;
+                let op = h.input.next();
+                let fate = h.link.fate(&mut h.input, op);
+                let to = h.clock + fate.dur;
+                h.deliver_until(to);
+                h.clock = to;
+                let now = h.now();
+                h.t.sent(&mut h.line, now);
+                if !fence {
+                    h.awaiting = true;
+                    h.last_sent = h.clock;
+                    h.broken_since_sent = false;
+                    if h.query.is_none() {
+                        h.write_sent = true;
                     }
                 }
-                check_progress(&t, &mut confirmed, write, write_sent, source.len());
-                controller_answers(
-                    &mut sim, &mut input, op, &bytes, parsed, clock, &lim, &expected, write,
-                );
+                if fence {
+                    h.last_fence = None;
+                }
+                if !fate.lost {
+                    let cmd = h.link.received(&bytes, h.clock);
+                    if fence {
+                        h.last_fence = Some(cmd);
+                    }
+                    h.answer(cmd, &bytes, &fate);
+                }
             }
-            Step::WaitUntil(deadline) => {
-                trace!("t={clock} now={} WAIT until {deadline}", now(clock));
-                // The longest hold: the late-reply guard (timeout + late
-                // window, or a duplicate window) and the turnaround.
-                let bound = u64::from(exchange.timeout_ms)
-                    + u64::from(exchange.late_window_ms)
-                    + u64::from(exchange.duplicate_window_ms)
-                    + u64::from(exchange.turnaround_ms)
-                    + 2;
-                let ahead = records::check_wait(now(clock), deadline, bound, sim.frames.is_empty());
-                let until = clock + u64::from(ahead);
-                match input.next() {
+            S::Wait(t) => {
+                let nothing_sent = !h.transmitted && ex.fences;
+                let ahead = records::check_wait(now, t, setup.horizon(), nothing_sent);
+                trace!("t={} WAIT {ahead}", h.clock);
+                let until = h.clock + u64::from(ahead);
+                match h.input.next() {
                     None => {
-                        let next = sim.outbox.first().map_or(until, |d| d.at.min(until));
-                        deliver_until(
-                            &mut t, &mut sim, &lim, next, false, &mut clock, base, write,
-                            write_sent, query,
-                        );
-                        clock = clock.max(next);
+                        let next = h.link.outbox.first().map_or(until, |d| d.at.min(until));
+                        h.deliver_until(next);
+                        h.clock = h.clock.max(next);
                     }
-                    Some(op) => match op % 6 {
+                    Some(op) => match op % 5 {
                         0 => {
-                            let to = clock + u64::from(input.u16());
-                            deliver_until(
-                                &mut t, &mut sim, &lim, to, false, &mut clock, base, write,
-                                write_sent, query,
-                            );
-                            clock = to;
+                            let to = h.clock + u64::from(h.input.u16());
+                            h.deliver_until(to);
+                            h.clock = h.clock.max(to);
                         }
                         1 => {
-                            // Noise: anything but LF (so it cannot complete a
-                            // frame), or with the raw-noise bit anything at all.
-                            let n = usize::from(input.u8() % 64);
-                            let raw = sim.raw_noise;
-                            let bytes: Vec<u8> = input
-                                .take(n)
-                                .iter()
-                                .map(|&b| if b == b'\n' && !raw { b'?' } else { b })
-                                .collect();
-                            let d = Delivery {
-                                at: clock,
-                                bytes,
-                                what: if raw { What::Forged } else { What::Noise },
-                            };
-                            feed(
-                                &mut t, &mut sim, &lim, &d, false, clock, base, write, write_sent,
-                                query,
-                            );
+                            let (d, then_next) = h.link.noise(&mut h.input, h.clock);
+                            h.feed(d);
+                            if then_next {
+                                if let Some(at) = h.link.outbox.first().map(|d| d.at) {
+                                    h.deliver_until(at);
+                                }
+                            }
                         }
                         2 => {
-                            // An earlier real reply, again (late or stale).
-                            if !sim.history.is_empty() {
-                                let i = usize::from(input.u8()) % sim.history.len();
-                                let mut d = sim.history[i].clone();
-                                d.at = clock;
-                                feed(
-                                    &mut t, &mut sim, &lim, &d, false, clock, base, write,
-                                    write_sent, query,
-                                );
+                            // A copy of any reply made before.
+                            if let Some(d) = h.link.copy(&mut h.input, h.clock) {
+                                h.feed(d);
                             }
                         }
                         3 => {
-                            // The next delivery, now or when due.
-                            if let Some(at) = sim.outbox.first().map(|d| d.at) {
-                                deliver_until(
-                                    &mut t, &mut sim, &lim, at, false, &mut clock, base, write,
-                                    write_sent, query,
-                                );
-                                clock = clock.max(at);
+                            if let Some(at) = h.link.outbox.first().map(|d| d.at) {
+                                h.deliver_until(at);
                             }
                         }
                         _ => {
-                            deliver_until(
-                                &mut t, &mut sim, &lim, until, false, &mut clock, base, write,
-                                write_sent, query,
-                            );
-                            clock = clock.max(until);
+                            h.deliver_until(until);
+                            h.clock = h.clock.max(until);
                         }
                     },
                 }
-                check_progress(&t, &mut confirmed, write, write_sent, source.len());
             }
-            Step::NeedRecords => panic!("an iterator source is never pending"),
-            Step::Complete(report) => {
-                trace!("t={clock} COMPLETE {report:?}");
-                assert_eq!(report.stats, t.stats());
+            S::Done(Ok(g)) => {
+                trace!("t={} COMPLETE {g:?}", h.clock);
+                assert_eq!(g, cfg.guarantee(), "another guarantee than the policy's");
                 assert_eq!(
-                    report.stats.records_confirmed as usize,
+                    h.t.stats().records_confirmed as usize,
                     source.len(),
-                    "Complete before every record was confirmed"
+                    "complete with records unconfirmed"
                 );
-                let want = match verify {
-                    Verify::Full => Guarantee::Verified,
-                    Verify::AfterFault => Guarantee::FaultsVerified,
-                    Verify::Off => Guarantee::Unverified,
-                };
-                assert_eq!(report.guarantee, want);
-                // A frame forged by arbitrary bytes can confirm or verify
-                // anything: no claim then.
-                // (Nor after an old read-back reply that came outside the
-                // engine's contract was compared: see `old_out_of_contract`.)
-                if !sim.forged
-                    && !sim.old_out_of_contract
-                    && (report.guarantee == Guarantee::Verified || !sim.unguarded)
-                {
-                    // Finding F11 (fixed in the core; the check is strict) (fuzz/README.md): the hold after a
-                    // rewrite lies `duplicate_window` ahead, further than the
-                    // horizon of the engine's exchange (which runs without a
-                    // duplicate window), so it reads as expired.
-                    let short = ExchangeConfig {
-                        duplicate_window_ms: 0,
-                        ..lim.exchange
-                    }
-                    .horizon();
-                    let f11 = !F11_FIXED
-                        && sim.old_in_contract
-                        && lim.exchange.duplicate_window_ms > short;
-                    // Finding F8 (fixed in the core; the check is strict): the transfer's exchange runs without
-                    // a duplicate window, so a late reply that arrives
-                    // while the read-back is held starts none: its copy
-                    // can verify the rewritten frame.
-                    let f8 = !F8_FIXED && sim.old_copy_of_late;
-                    for (n, r) in &expected {
+                let claim = !h.no_claim && (verify == Verify::Full || !h.swapped);
+                if claim {
+                    for (n, r) in &h.expected {
                         assert!(
-                            sim.table.get(n) == Some(r) || f11 || f8,
-                            "false success ({:?}): position {n} holds {:?}, the source {r:?}",
-                            report.guarantee,
-                            sim.table.get(n)
+                            h.table.get(n) == Some(r),
+                            "false success ({g:?}): position {n} holds {:?}, the source {r:?}",
+                            h.table.get(n)
                         );
                     }
                 }
-                let s = report.stats;
+                let s = h.t.stats();
                 assert!(s.frames_confirmed <= s.frames_sent);
                 if verify == Verify::Full {
                     assert!(s.records_verified as usize >= source.len());
@@ -605,540 +731,111 @@ fuzz_target!(|data: &[u8]| {
                 }
                 break;
             }
-            Step::Failed(e) => {
-                trace!("t={clock} FAILED {e:?}");
+            S::Done(Err(e)) => {
+                trace!("t={} FAILED {e:?}", h.clock);
                 match e {
-                    TransferError::Timeout => {}
-                    TransferError::Controller { code } => {
-                        assert!(!BRIDGE_CODES.contains(&code), "a bridge code as Controller")
+                    Failure::Timeout { sends } | Failure::OutcomeUnknown { sends } => {
+                        let id = match h.query {
+                            Some(_) => rb.id,
+                            None => kind.id,
+                        };
+                        let unsafe_ =
+                            catalogue::request_rules(id).is_none_or(|(r, _)| r == Resend::Unsafe);
+                        assert_eq!(
+                            matches!(e, Failure::OutcomeUnknown { .. }),
+                            unsafe_,
+                            "{e:?}"
+                        );
+                        assert_eq!(sends, h.line.sends());
+                        assert!(
+                            h.clock >= h.last_sent + u64::from(ex.timeout_ms)
+                                || h.broken_since_sent,
+                            "gave up at {} after a send that ended at {}",
+                            h.clock,
+                            h.last_sent
+                        );
                     }
-                    TransferError::Bridge { code } => {
-                        assert!(BRIDGE_CODES.contains(&code), "a controller code as Bridge")
+                    Failure::Controller { code, detail: None } => {
+                        assert!(h.rejected.contains(&code), "Controller without that &")
                     }
-                    TransferError::Mismatch {
+                    Failure::Mismatch {
                         first_position,
                         records,
                     } => {
                         assert!(records >= 1);
-                        let (_, from, n, _) = write.expect("a mismatch before any write");
-                        let positions: Vec<u16> = (0..usize::from(n))
+                        let w = h.write.expect("a mismatch before any write");
+                        let positions: Vec<u16> = (0..usize::from(w.n))
                             .map(|i| {
-                                controller::position_of(kind, start, from + i, &source[from + i])
+                                controller::position_of(
+                                    kind,
+                                    start,
+                                    w.from + i,
+                                    &source[w.from + i],
+                                )
                             })
                             .collect();
                         assert!(
                             positions.contains(&first_position),
                             "mismatch names {first_position}"
                         );
-                        assert!(usize::from(records) <= usize::from(n));
+                        assert!(records <= w.n);
                     }
                     other => panic!("unexpected failure {other:?}"),
                 }
-                assert!((t.stats().records_confirmed as usize) < source.len());
+                assert!((h.t.stats().records_confirmed as usize) < source.len());
                 if resumes == 0 {
                     break;
                 }
                 resumes -= 1;
-                t.resume(now(clock));
-                sim.resumed_at = Some(clock);
+                let now = h.now();
+                h.t.resume(&mut h.line, now);
             }
         }
-        check_progress(&t, &mut confirmed, write, write_sent, source.len());
     }
-    let s = t.stats();
+    let s = h.t.stats();
     assert!(s.frames_confirmed <= s.frames_sent);
 });
 
-/// The 3 hex digits of a message ID as on the wire.
-fn hex3(id: u16) -> [u8; 3] {
-    let d = |n: u16| b"0123456789ABCDEF"[usize::from(n & 0xF)];
-    [d(id >> 8), d(id >> 4), d(id)]
+/// Whether `bytes` is a read-back reply of `rb` with at most `asked`
+/// records, all in `head..head + asked`.
+fn fits_window(rb: PositionStream, bytes: &[u8], head: u16, asked: u16) -> bool {
+    let Ok(f) = Frame::new_checked(bytes, BypassPolicy::Reject) else {
+        return false;
+    };
+    if f.code() != rb.id {
+        return false;
+    }
+    let mut r = f.reader();
+    let Ok((_, count)) = rb.read_prefix(&mut r) else {
+        return false;
+    };
+    if count > asked {
+        return false;
+    }
+    (0..count).all(|_| {
+        rb.layout.read_record(&mut r).is_ok_and(|rec| {
+            let n = u32::from(rec.number);
+            n >= u32::from(head) && n < u32::from(head) + u32::from(asked)
+        })
+    })
 }
 
 /// `records_confirmed` grows only by the last write frame's count, after
 /// its `sent`, and never past the source.
-fn check_progress<I: iai_protocol_b::transfer::RecordSource>(
-    t: &Transfer<I, N>,
-    confirmed: &mut u32,
-    write: Option<(usize, usize, u16, u16)>,
-    write_sent: bool,
-    total: usize,
-) {
-    let now = t.stats().records_confirmed;
+fn check_progress(h: &H<'_>, confirmed: &mut u32, total: usize) {
+    let now = h.t.stats().records_confirmed;
     assert!(now as usize <= total, "more confirmed than the source");
     if now != *confirmed {
         let grew = now.checked_sub(*confirmed).expect("confirmed shrank");
-        match write {
-            Some((_, from, n, _)) if write_sent && from == *confirmed as usize => {
-                assert_eq!(grew, u32::from(n), "confirmed grew by a count never sent")
+        match h.write {
+            Some(w) if h.write_sent && w.from == *confirmed as usize => {
+                assert_eq!(grew, u32::from(w.n), "confirmed grew by a count never sent")
             }
-            other => panic!("confirmed grew by {grew} with frame {other:?} (sent: {write_sent})"),
+            other => panic!(
+                "confirmed grew by {grew} with frame {other:?} (sent: {})",
+                h.write_sent
+            ),
         }
         *confirmed = now;
-    }
-}
-
-/// What made the frame behind an event: the delivery being fed, or (when
-/// bytes of a failed text frame are decoded again) an earlier one since the
-/// last transmission; the most recent that `fits`.
-fn made_by(sim: &Sim, fits: impl Fn(&What) -> bool) -> Option<What> {
-    sim.recent.iter().rev().find(|w| fits(w)).cloned()
-}
-
-/// Delivers everything due up to `to` (moving the clock to each delivery).
-#[allow(clippy::too_many_arguments)]
-fn deliver_until<I: iai_protocol_b::transfer::RecordSource>(
-    t: &mut Transfer<I, N>,
-    sim: &mut Sim,
-    lim: &Cfg,
-    to: u64,
-    before_sent: bool,
-    clock: &mut u64,
-    base: u32,
-    write: Option<(usize, usize, u16, u16)>,
-    write_sent: bool,
-    query: Option<(u16, u16)>,
-) {
-    while sim.outbox.first().is_some_and(|d| d.at <= to) {
-        let d = sim.outbox.remove(0);
-        *clock = (*clock).max(d.at);
-        feed(
-            t,
-            sim,
-            lim,
-            &d,
-            before_sent,
-            *clock,
-            base,
-            write,
-            write_sent,
-            query,
-        );
-    }
-}
-
-/// Feeds one delivery, checking each event it causes.
-#[allow(clippy::too_many_arguments)]
-fn feed<I: iai_protocol_b::transfer::RecordSource>(
-    t: &mut Transfer<I, N>,
-    sim: &mut Sim,
-    lim: &Cfg,
-    d: &Delivery,
-    before_sent: bool,
-    clock: u64,
-    base: u32,
-    write: Option<(usize, usize, u16, u16)>,
-    write_sent: bool,
-    query: Option<(u16, u16)>,
-) {
-    let now = base.wrapping_add(clock as u32);
-    sim.recent.push(d.what.clone());
-    if let What::ReadReply {
-        head,
-        asked,
-        made_at,
-    } = d.what
-    {
-        sim.read_first
-            .entry((made_at, head, asked))
-            .or_insert(clock);
-        sim.read_prev = sim.read_last.insert((made_at, head, asked), clock);
-    }
-    // A write reply outside the engine's guard windows (module docs of
-    // `transfer`): a frame's replies are guarded until `timeout +
-    // late_window` after its last send while it is unanswered or was sent
-    // more than once; once answered at its first send, only duplicates of
-    // the reply can come, guarded for `duplicate_window` after the answer
-    // if it was the last frame answered or the line has shown a late or
-    // duplicated reply before (the first duplicate on a line is outside).
-    if let What::WriteReply {
-        frame,
-        sent_at,
-        partial,
-        ..
-    } = d.what
-    {
-        let ex = &lim.exchange;
-        let (from, n, answered) = sim.frames[frame];
-        // Finding F12 (fixed in the core; the check is strict) (fuzz/README.md): the engine's guard counts only
-        // the sends since the last resume, so a frame sent before and after
-        // a resume counts as answered at its first send. Until fixed, the
-        // model counts the same way (a reply to a send before the resume is
-        // then outside the guard windows: no claim).
-        let since = if F12_FIXED {
-            0
-        } else {
-            sim.resumed_at.unwrap_or(0)
-        };
-        let sends = sim
-            .sent_at
-            .iter()
-            .filter(|&&(k, t)| k == (from, n) && t >= since)
-            .count();
-        let last_send = sim
-            .sent_at
-            .iter()
-            .filter(|&&(k, _)| k == (from, n))
-            .map(|&(_, t)| t)
-            .max()
-            .unwrap_or(sent_at);
-        let late_ok = clock < last_send + u64::from(ex.timeout_ms) + u64::from(ex.late_window_ms);
-        let guarded = match answered {
-            None => late_ok,
-            Some(_) if sends > 1 && late_ok => true,
-            Some(a) => {
-                clock < a + u64::from(ex.duplicate_window_ms)
-                    && (sim.last_answered == Some((from, n)) || sim.line_showed_dups)
-            }
-        };
-        if !guarded {
-            sim.unguarded = true;
-        }
-        // A partial write's count was never sent by the engine: no guard
-        // can keep it from a later frame with that count.
-        if partial && write.is_some_and(|(_, f, k, _)| (f, k) != (from, n)) {
-            sim.unguarded = true;
-        }
-    }
-    let mut rest = &d.bytes[..];
-    loop {
-        let r = t.received(rest, now);
-        trace!(
-            "t={clock} RX {:?} -> {:?}",
-            String::from_utf8_lossy(&rest[..r.consumed]),
-            r.event
-        );
-        assert!(r.consumed <= rest.len());
-        rest = &rest[r.consumed..];
-        match r.event {
-            TransferEvent::NeedMore => {
-                assert!(rest.is_empty(), "NeedMore with bytes left");
-                break;
-            }
-            TransferEvent::Confirmed { records } => {
-                assert!(!before_sent, "a reply confirmed a frame before it was sent");
-                let (_, from, n, s) = write.expect("confirmed without a write");
-                assert!(write_sent);
-                assert_eq!(records, n, "confirmed another count");
-                // The frame may come from an earlier delivery: bytes of a
-                // failed text frame are decoded again.
-                let by = made_by(sim, |w| match w {
-                    What::WriteReply { start, count, .. } => {
-                        *count == n && (sim.kind.start_width == 0 || *start == s)
-                    }
-                    What::Forged => true,
-                    _ => false,
-                });
-                match by {
-                    Some(What::Forged) => sim.forged = true,
-                    Some(_) => {}
-                    None => panic!("confirmed by {:?}: no reply with count {n} was fed", d.what),
-                }
-                for f in sim.frames.iter_mut() {
-                    if (f.0, f.1) == (from, n) && f.2.is_none() {
-                        f.2 = Some(clock);
-                    }
-                }
-                sim.last_answered = Some((from, n));
-            }
-            TransferEvent::CountMismatch { sent, reported } => {
-                sim.line_showed_dups = true;
-                let (_, _, n, s) = write.expect("a mismatch without a write");
-                assert_eq!(sent, n);
-                let by = made_by(sim, |w| match w {
-                    What::WriteReply { start, count, .. } => {
-                        *count == reported
-                            && (*count != n || (sim.kind.start_width > 0 && *start != s))
-                    }
-                    What::Forged => true,
-                    _ => false,
-                });
-                assert!(by.is_some(), "count mismatch {reported} from {:?}", d.what);
-            }
-            TransferEvent::Rejected { code } => {
-                let by = made_by(sim, |w| {
-                    matches!(w, What::Error(c) if *c == code) || *w == What::Forged
-                });
-                assert!(by.is_some(), "rejected ({code:03X}) by {:?}", d.what);
-            }
-            TransferEvent::Compared {
-                head,
-                equal,
-                differ,
-            } => {
-                assert!(
-                    !before_sent,
-                    "a read-back reply counted before the query was sent"
-                );
-                let (qh, qa) = query.expect("compared without a query");
-                assert_eq!(head, qh);
-                // The reply taken holds at most the window's positions, all
-                // inside it (it may be a stale reply to another window).
-                match d.what {
-                    What::ReadReply {
-                        head: h,
-                        asked: a,
-                        made_at,
-                    } => {
-                        // A reply made before the last write to a position of
-                        // the window (an old copy) is compared. Since F5 was
-                        // fixed the engine holds its query until no such
-                        // reply can come within the contract; one that came
-                        // outside it cannot be told from the answer.
-                        let end = u32::from(qh) + u32::from(qa);
-                        let old = sim
-                            .written_at
-                            .range(qh..)
-                            .take_while(|(&p, _)| u32::from(p) < end)
-                            .any(|(_, &w)| w > made_at);
-                        let late = made_at
-                            + u64::from(lim.exchange.timeout_ms)
-                            + u64::from(lim.exchange.late_window_ms);
-                        // The first arrival: within `timeout + late_window` of
-                        // its query; a copy: within `duplicate_window` of the
-                        // last copy before it, of an original in time.
-                        let in_contract = match sim.read_prev {
-                            None => clock <= late,
-                            Some(l) => {
-                                sim.read_first
-                                    .get(&(made_at, h, a))
-                                    .is_some_and(|&f| f <= late)
-                                    && clock <= l + u64::from(lim.exchange.duplicate_window_ms)
-                            }
-                        };
-                        if old && !in_contract {
-                            sim.old_out_of_contract = true;
-                        }
-                        let last_write = sim
-                            .written_at
-                            .range(qh..)
-                            .take_while(|(&p, _)| u32::from(p) < end)
-                            .map(|(_, &w)| w)
-                            .max()
-                            .unwrap_or(0);
-                        // A copy heard after the last write, within the
-                        // duplicate window of this one.
-                        let dup = u64::from(lim.exchange.duplicate_window_ms);
-                        let prev = sim.read_prev;
-                        if old && in_contract {
-                            if prev.is_some_and(|l| l > last_write && clock <= l + dup) {
-                                sim.old_copy_of_late = true;
-                            } else {
-                                sim.old_in_contract = true;
-                            }
-                        }
-                        let f = iai_protocol_b::frame::Frame::new_checked(
-                            &d.bytes,
-                            iai_protocol_b::checksum::BypassPolicy::Reject,
-                        )
-                        .expect("a read-back reply the controller made");
-                        let mut r = f.reader();
-                        let (_, count) = sim.rb.read_prefix(&mut r).expect("prefix");
-                        assert!(count <= qa, "a reply of {count} records for {qa} positions");
-                        for _ in 0..count {
-                            let rec = sim.rb.layout.read_record(&mut r).expect("record");
-                            let n = u32::from(rec.number);
-                            assert!(
-                                n >= u32::from(qh) && n < u32::from(qh) + u32::from(qa),
-                                "record {n} of a reply to {h}+{a} taken for {qh}+{qa}"
-                            );
-                        }
-                    }
-                    What::Forged => sim.forged = true,
-                    ref other => panic!("compared with {other:?}"),
-                }
-                assert!(u32::from(equal) + u32::from(differ) <= u32::from(qa));
-            }
-            TransferEvent::Stale => sim.line_showed_dups = true,
-            TransferEvent::Foreign | TransferEvent::Broken(_) => {}
-        }
-    }
-    let _ = lim.max_frame;
-}
-
-/// The controller receives the frame just sent at `clock` and schedules
-/// its answer.
-#[allow(clippy::too_many_arguments)]
-fn controller_answers(
-    sim: &mut Sim,
-    input: &mut Input<'_>,
-    op: Option<u8>,
-    bytes: &[u8],
-    parsed: Option<(u16, Vec<PositionRecord>)>,
-    clock: u64,
-    lim: &Cfg,
-    expected: &Table,
-    write: Option<(usize, usize, u16, u16)>,
-) {
-    let is_write = parsed.is_some();
-    // Fate of the command: bits 3-4 of op (0, 1: arrives; 2: lost or
-    // corrupted, the controller is silent and executes nothing; 3: a write
-    // swapped, SC-preserving).
-    let op = op.unwrap_or(0);
-    let fate = (op >> 3) & 3;
-    if fate == 2 {
-        return;
-    }
-    // Reply faults: bits 5-7 of op and one more byte when there are any.
-    let fault = op >> 5;
-    let extra = if fault != 0 { input.u8() } else { 0 };
-    let delay = if fault == 0 {
-        1
-    } else {
-        u64::from(input.u16())
-            % (3 * u64::from(lim.exchange.timeout_ms) + u64::from(lim.exchange.late_window_ms) + 2)
-    };
-    let at = clock + delay;
-    let station = sim.station;
-    let mut out: Option<Delivery> = None;
-    if is_write {
-        let (start, mut recs) = parsed.expect("a write");
-        let (frame, ..) = write.expect("a write is in flight");
-        if fate == 3
-            && controller::swap_digits(&mut recs, u32::from(extra) | u32::from(op) << 8).is_some()
-        {
-            sim.unguarded = true;
-        }
-        let n = recs.len() as u16;
-        match fault {
-            // An `&` reply; how far the write went is not said.
-            5 => {
-                let k = usize::from(extra) % (recs.len() + 1);
-                sim.apply(&recs[..k], clock);
-                let code = if extra & 1 == 0 {
-                    *BRIDGE_CODES.start() + u16::from(extra >> 1) % 0x20
-                } else {
-                    0x0A0 + u16::from(extra)
-                };
-                out = Some(Delivery {
-                    at,
-                    bytes: controller::error_reply(station, code),
-                    what: What::Error(code),
-                });
-            }
-            // A partial write: the first k records stored, k reported.
-            6 if n > 1 => {
-                let k = 1 + usize::from(extra) % (recs.len() - 1);
-                sim.apply(&recs[..k], clock);
-                out = Some(Delivery {
-                    at,
-                    bytes: controller::write_reply(sim.kind, station, start, k as u16),
-                    what: What::WriteReply {
-                        start,
-                        count: k as u16,
-                        frame,
-                        sent_at: clock,
-                        partial: true,
-                    },
-                });
-            }
-            _ => {
-                sim.apply(&recs, clock);
-                out = Some(Delivery {
-                    at,
-                    bytes: controller::write_reply(sim.kind, station, start, n),
-                    what: What::WriteReply {
-                        start,
-                        count: n,
-                        frame,
-                        sent_at: clock,
-                        partial: false,
-                    },
-                });
-            }
-        }
-    } else if let Some((head, asked)) = controller::parse_query(sim.rb, station, bytes) {
-        let mut recs = controller::window(&sim.table, head, asked);
-        let reply_fault = (extra >> 4) & 7;
-        if fault == 4 {
-            match reply_fault {
-                // A wrong record: never what the source holds there.
-                0 | 1 if !recs.is_empty() => {
-                    let i = usize::from(extra) % recs.len();
-                    let mut r = recs[i].clone();
-                    r.speed = r.speed.wrapping_add(1);
-                    if expected.get(&r.number) == Some(&r) {
-                        r.speed = r.speed.wrapping_add(1);
-                    }
-                    recs[i] = r;
-                }
-                // A record missing.
-                2 if !recs.is_empty() => {
-                    recs.remove(usize::from(extra) % recs.len());
-                }
-                // A digit swapped, unless that shows what the source holds.
-                3 => {
-                    let mut swapped = recs.clone();
-                    if let Some(i) =
-                        controller::swap_digits(&mut swapped, u32::from(extra) << 3 | u32::from(op))
-                    {
-                        if expected.get(&swapped[i].number) != Some(&swapped[i]) {
-                            recs = swapped;
-                        }
-                    }
-                }
-                // A stale reply: an earlier real reply of the controller.
-                4 | 5 => {
-                    let olds: Vec<&Delivery> = sim
-                        .history
-                        .iter()
-                        .filter(|d| matches!(d.what, What::ReadReply { .. }))
-                        .collect();
-                    if !olds.is_empty() {
-                        let mut d = olds[usize::from(extra) % olds.len()].clone();
-                        d.at = at;
-                        sim.schedule(d);
-                        return;
-                    }
-                }
-                _ => {}
-            }
-        }
-        let reply = controller::query_reply(sim.rb, station, &recs);
-        assert!(
-            reply.len() <= lim.max_response,
-            "a read-back reply of {} bytes for a window the engine asked (max {})",
-            reply.len(),
-            lim.max_response
-        );
-        out = Some(Delivery {
-            at,
-            bytes: reply,
-            what: What::ReadReply {
-                head,
-                asked,
-                made_at: clock,
-            },
-        });
-        if fault == 5 {
-            let code = 0x0A0 + u16::from(extra);
-            out = Some(Delivery {
-                at,
-                bytes: controller::error_reply(station, code),
-                what: What::Error(code),
-            });
-        }
-    }
-    let Some(mut d) = out else { return };
-    if !matches!(d.what, What::Error(_)) {
-        sim.history.push(d.clone());
-    }
-    match fault {
-        // Lost.
-        1 => {}
-        // A corrupted byte: the SC fails.
-        2 => {
-            controller::corrupt_byte(&mut d.bytes, u32::from(extra) * 977 + u32::from(op));
-            d.what = What::Noise;
-            sim.schedule(d);
-        }
-        // Twice: the duplicate later.
-        3 => {
-            let mut dup = d.clone();
-            dup.at += u64::from(extra) * 50;
-            sim.schedule(d);
-            sim.schedule(dup);
-        }
-        _ => sim.schedule(d),
     }
 }

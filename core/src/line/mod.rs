@@ -642,6 +642,7 @@ impl Line {
                 now,
                 pending,
             );
+            self.replied(now);
             return Heard::Rejected(code);
         }
         if !content_ok {
@@ -650,6 +651,7 @@ impl Line {
             return Heard::Mismatch;
         }
         self.finish(Ok(()), now, pending);
+        self.replied(now);
         Heard::Answer
     }
 
@@ -705,7 +707,9 @@ impl Line {
             return;
         }
         let soon = self.turnaround_after(now);
-        if crate::clock::reached(deadline, soon) {
+        // A deadline already over (even one passed more than 2^31 ms ago,
+        // with no poll since) stays: the poll times out at once.
+        if !self.over(now, deadline) && crate::clock::reached(deadline, soon) {
             self.phase = Phase::Await { deadline: soon };
         }
     }
@@ -751,9 +755,13 @@ impl Line {
             self.ledger.owe(until, now);
             self.faulted |= !no_reply;
         }
-        if !no_reply && matches!(r, Ok(()) | Err(Failure::Controller { .. })) {
-            self.not_before = Some(later(self.next_send(now), self.turnaround_after(now)));
-        }
+    }
+
+    /// A reply was taken at `now`: the turnaround holds the next send
+    /// (2003 p. 8), after any reply, an `&` to a command without normal
+    /// response too.
+    fn replied(&mut self, now: u32) {
+        self.not_before = Some(later(self.next_send(now), self.turnaround_after(now)));
     }
 }
 

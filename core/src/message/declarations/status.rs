@@ -107,6 +107,91 @@ wire! {
     }
 }
 
+/// Bits 1-2 of [`AxisStatus::axis_status`]: the axis's home return
+/// (manual p. 27).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Homing {
+    /// 0: not yet performed.
+    NotDone,
+    /// 1: returning to the origin.
+    Returning,
+    /// 2: completed.
+    Done,
+    /// 3: not defined by the manual.
+    Undefined,
+}
+
+/// How an operation command ended, by the check the manual gives for
+/// IAI-protocol moves (p. 27): once bit 0 (axis in use) is off, bit 4
+/// says it completed, bit 5 that a push failed, neither that it was
+/// cancelled (error, emergency stop).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum MoveOutcome {
+    /// Bit 4: positioning completed successfully.
+    Completed,
+    /// Bit 5: push error detected.
+    PushError,
+    /// Neither: cancelled by an error, an emergency stop or similar.
+    Cancelled,
+}
+
+impl AxisStatus {
+    /// Bit 0: a task holds the axis (moving, paused, servo switching).
+    pub const fn in_use(&self) -> bool {
+        self.axis_status & 0x01 != 0
+    }
+    /// Bits 1-2: the home return.
+    pub const fn homing(&self) -> Homing {
+        match (self.axis_status >> 1) & 0x03 {
+            0 => Homing::NotDone,
+            1 => Homing::Returning,
+            2 => Homing::Done,
+            _ => Homing::Undefined,
+        }
+    }
+    /// Bit 3: servo on.
+    pub const fn servo_on(&self) -> bool {
+        self.axis_status & 0x08 != 0
+    }
+    /// Bit 4: the last operation command completed successfully (valid
+    /// only as a completion check after such a command).
+    pub const fn completed(&self) -> bool {
+        self.axis_status & 0x10 != 0
+    }
+    /// Bit 5: push error detected.
+    pub const fn push_error(&self) -> bool {
+        self.axis_status & 0x20 != 0
+    }
+    /// How the last operation command ended; `None` while the axis is in
+    /// use. A push error wins over completion if both bits are set
+    /// (**inferred**: the manual lists the cases, not their precedence).
+    pub const fn outcome(&self) -> Option<MoveOutcome> {
+        if self.in_use() {
+            None
+        } else if self.push_error() {
+            Some(MoveOutcome::PushError)
+        } else if self.completed() {
+            Some(MoveOutcome::Completed)
+        } else {
+            Some(MoveOutcome::Cancelled)
+        }
+    }
+    /// Sensor input bit 0: creep sensor on.
+    pub const fn creep_sensor(&self) -> bool {
+        self.sensor_input_status & 0x01 != 0
+    }
+    /// Sensor input bit 1: overrun sensor on.
+    pub const fn overrun_sensor(&self) -> bool {
+        self.sensor_input_status & 0x02 != 0
+    }
+    /// Sensor input bit 2: origin sensor on.
+    pub const fn origin_sensor(&self) -> bool {
+        self.sensor_input_status & 0x04 != 0
+    }
+}
+
 impl AxisStatusQuery {
     /// The status of these axes (1..=8).
     pub fn of(axes: &[u8]) -> Result<Self> {
@@ -304,5 +389,45 @@ mod tests {
             record_number: 1,
         };
         assert!(bad.emit(ST, &mut [0u8; 32]).is_err());
+    }
+
+    /// 212H for axes 1 and 2 (manual p. 27): axis 1 `1C` = homed, servo
+    /// on, move completed, at 2.200 mm; axis 2 `0D` = in use, homed, servo
+    /// on, origin sensor on, at -1.596 mm.
+    #[test]
+    fn a_212h_reply_reads_as_its_status_bits() {
+        let r: AxisStatusResponse =
+            parse(b"#99212031C000000000008980D400000FFFFF9C460\r\n").unwrap();
+        let (a1, a2) = (r.axes.first().unwrap(), r.axes.get(1).unwrap());
+        assert_eq!(
+            (a1.in_use(), a1.homing(), a1.servo_on(), a1.completed()),
+            (false, Homing::Done, true, true)
+        );
+        assert_eq!(a1.outcome(), Some(MoveOutcome::Completed));
+        assert_eq!(a1.current_position, 2_200);
+        assert_eq!(
+            (a2.in_use(), a2.homing(), a2.servo_on()),
+            (true, Homing::Done, true)
+        );
+        assert_eq!(a2.outcome(), None);
+        assert!(a2.origin_sensor() && !a2.overrun_sensor() && !a2.creep_sensor());
+        assert_eq!(a2.current_position, -1_596);
+        let done = |s: u8| {
+            AxisStatus {
+                axis_status: s,
+                ..*a1
+            }
+            .outcome()
+        };
+        assert_eq!(done(0x20), Some(MoveOutcome::PushError));
+        assert_eq!(done(0x00), Some(MoveOutcome::Cancelled));
+        assert_eq!(
+            AxisStatus {
+                axis_status: 0x02,
+                ..*a1
+            }
+            .homing(),
+            Homing::Returning
+        );
     }
 }

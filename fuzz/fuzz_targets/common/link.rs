@@ -1,0 +1,567 @@
+//! The line between an engine and a simulated controller, for the
+//! `client`, `readback` and `transfer` targets: the line's settings from
+//! the input, the controller's replies scheduled in order (a reply never
+//! overtakes one made before it; copies may, within the duplicate
+//! window), the fences echoed, and the contract each delivery keeps or
+//! breaks (see [`Link::arrives`]).
+//!
+//! Also [`Shadow`]: a plain `FrameDecoder` fed the same bytes as an
+//! engine's reply decoder, which tells which delivery made each frame the
+//! engine heard.
+#![allow(dead_code)]
+
+use iai_protocol_b::catalogue::LONGEST_RESTART_MS;
+use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
+use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::frame::{emit_frame, Frame, Header, Station};
+use iai_protocol_b::line::{Heard, LineConfig};
+
+use crate::records::Input;
+
+/// Flag bits of the link's config byte that the engine targets use for
+/// their own settings.
+pub const FLAG_A: u8 = 0x20;
+pub const FLAG_B: u8 = 0x40;
+pub const FLAG_C: u8 = 0x80;
+
+/// The line's settings, read from the input.
+#[derive(Debug, Clone, Copy)]
+pub struct Setup {
+    pub line: LineConfig,
+    pub seed: u32,
+    pub base: u32,
+    /// Noise may hold any byte (so a frame that passes for a reply).
+    pub raw_noise: bool,
+    pub flags: u8,
+}
+
+/// Reads station; timeout byte (1 + 20 x b ms); flags (bits 0-1 sends
+/// 1-4, 0x04 `resend_unsafe`, 0x08 fences off, 0x10 raw noise, 0x20-0x80
+/// the target's); turnaround byte (`% 16` ms); late window u16; duplicate
+/// window u16; fence seed u16; start tick u32.
+pub fn setup(input: &mut Input<'_>) -> Setup {
+    let mut line = LineConfig::new(Station(input.u8()));
+    line.timeout_ms = 1 + u32::from(input.u8()) * 20;
+    let flags = input.u8();
+    line.max_sends = 1 + flags % 4;
+    line.resend_unsafe = flags & 0x04 != 0;
+    line.fences = flags & 0x08 == 0;
+    line.turnaround_ms = u32::from(input.u8() % 16);
+    line.late_window_ms = u32::from(input.u16());
+    line.duplicate_window_ms = u32::from(input.u16());
+    let seed = u32::from(input.u16()) << 4 | 0x00C0_0000;
+    let base = input.u32();
+    Setup {
+        line,
+        seed,
+        base,
+        raw_noise: flags & 0x10 != 0,
+        flags,
+    }
+}
+
+impl Setup {
+    /// The longest hold the line may place (`WaitUntil` bound).
+    pub fn horizon(&self) -> u64 {
+        let c = &self.line;
+        let sum = u64::from(c.timeout_ms)
+            + u64::from(c.late_window_ms)
+            + u64::from(c.duplicate_window_ms)
+            + u64::from(c.turnaround_ms)
+            + 2;
+        sum.max(u64::from(LONGEST_RESTART_MS))
+    }
+
+    /// Whether `bytes` is the line's fence: a 200H command for the station
+    /// whose text begins with the six hex digits of the seed.
+    pub fn is_fence(&self, bytes: &[u8]) -> bool {
+        let head = format!(
+            "!{:02X}200{:06X}",
+            self.line.station.0,
+            self.seed & 0xFF_FFFF
+        );
+        bytes.starts_with(head.as_bytes())
+    }
+}
+
+/// What a delivery is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    /// A reply the controller made (index into `Link::made`), or a copy.
+    Reply { made: usize, copy: bool },
+    /// The same with a byte changed (its SC fails; its envelope is intact).
+    Broken { made: usize, copy: bool },
+    /// Bytes that cannot complete a frame.
+    Noise,
+    /// Arbitrary bytes: a frame in them passes for anything.
+    Forged,
+}
+
+#[derive(Debug, Clone)]
+pub struct Delivery {
+    pub at: u64,
+    pub bytes: Vec<u8>,
+    pub kind: Kind,
+    /// Whether it kept the contract, judged when it first reached the
+    /// engine (`Link::arrives`).
+    pub ok: Option<bool>,
+}
+
+impl Delivery {
+    pub fn new(at: u64, bytes: Vec<u8>, kind: Kind) -> Self {
+        Delivery {
+            at,
+            bytes,
+            kind,
+            ok: None,
+        }
+    }
+
+    /// Whether it kept the contract (see `Link::arrives`).
+    pub fn ok(&self) -> bool {
+        self.ok.expect("judged when it arrived")
+    }
+}
+
+/// A reply the controller made.
+#[derive(Debug, Clone)]
+pub struct Made {
+    pub bytes: Vec<u8>,
+    /// The command frame it answers (index into `Link::cmds`).
+    pub cmd: usize,
+    /// The end of that command's transmission.
+    pub sent_at: u64,
+    /// When it first reached the engine (whole or broken, the original or
+    /// a copy), and whether that first arrival kept the contract.
+    pub arrived: Option<u64>,
+    pub first_ok: bool,
+    /// Not the controller's answer to that command (an earlier reply sent
+    /// again, ...): outside the contract whenever it comes.
+    pub lie: bool,
+}
+
+/// A command frame the controller received.
+#[derive(Debug, Clone)]
+pub struct Cmd {
+    pub bytes: Vec<u8>,
+    pub at: u64,
+    pub fence: bool,
+}
+
+pub struct Link {
+    pub setup: Setup,
+    /// Deliveries in time order (originals in the order they were made).
+    pub outbox: Vec<Delivery>,
+    pub made: Vec<Made>,
+    pub cmds: Vec<Cmd>,
+    last_original: u64,
+}
+
+/// What the script says about one transmission: its length, whether the
+/// controller gets it, and what happens to the reply.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Fate {
+    /// Transmission time, ms (0-7).
+    pub dur: u64,
+    /// The command is lost (or arrives broken): no reply, nothing done.
+    pub lost: bool,
+    /// The target's own command fault (bit 4 of the op with bit 3 set).
+    pub special: bool,
+    /// Reply fault 0-7 (see each target), and its byte.
+    pub fault: u8,
+    pub extra: u8,
+    /// When the reply comes after the end of the transmission.
+    pub delay: u64,
+}
+
+impl Link {
+    pub fn new(setup: Setup) -> Self {
+        Link {
+            setup,
+            outbox: Vec::new(),
+            made: Vec::new(),
+            cmds: Vec::new(),
+            last_original: 0,
+        }
+    }
+
+    pub fn station(&self) -> Station {
+        self.setup.line.station
+    }
+
+    /// Op byte of a transmission: bits 0-2 its duration, bits 3-4 the
+    /// command's fate (2: lost, 3: special), bits 5-7 the reply's fault;
+    /// with a fault, one more byte and a delay (u16, up to three timeouts
+    /// and the late window past the end of the transmission).
+    pub fn fate(&self, input: &mut Input<'_>, op: Option<u8>) -> Fate {
+        let op = op.unwrap_or(0);
+        let fault = op >> 5;
+        let (extra, delay) = if fault == 0 {
+            (0, 1)
+        } else {
+            let c = &self.setup.line;
+            let span = 3 * u64::from(c.timeout_ms) + u64::from(c.late_window_ms) + 2;
+            (input.u8(), u64::from(input.u16()) % span)
+        };
+        Fate {
+            dur: u64::from(op & 7),
+            lost: (op >> 3) & 3 == 2,
+            special: (op >> 3) & 3 == 3,
+            fault,
+            extra,
+            delay,
+        }
+    }
+
+    /// The controller received command frame `bytes` at `at` (the end of
+    /// its transmission).
+    pub fn received(&mut self, bytes: &[u8], at: u64) -> usize {
+        let fence = self.setup.is_fence(bytes);
+        self.cmds.push(Cmd {
+            bytes: bytes.to_vec(),
+            at,
+            fence,
+        });
+        self.cmds.len() - 1
+    }
+
+    /// The echo of fence `bytes`.
+    pub fn echo(&self, bytes: &[u8]) -> Vec<u8> {
+        let f = Frame::new_checked(bytes, BypassPolicy::Accept).expect("a valid fence");
+        assert_eq!(f.body().len(), 10, "a fence of ten characters");
+        frame(Header::Response, self.station(), 0x200, f.body())
+    }
+
+    /// Schedules reply `bytes` to command `cmd` at `at` or later (after
+    /// every original made before it); returns its index.
+    pub fn reply(&mut self, bytes: Vec<u8>, cmd: usize, at: u64, lie: bool) -> usize {
+        let at = at.max(self.last_original);
+        self.last_original = at;
+        let sent_at = self.cmds[cmd].at;
+        self.made.push(Made {
+            bytes: bytes.clone(),
+            cmd,
+            sent_at,
+            arrived: None,
+            first_ok: false,
+            lie,
+        });
+        let made = self.made.len() - 1;
+        self.schedule(Delivery::new(at, bytes, Kind::Reply { made, copy: false }));
+        made
+    }
+
+    /// The common reply faults: 1 lost, 2 a corrupted byte, 3 a copy
+    /// `extra x 50` ms later, 7 a copy `extra x 20` ms later; the target
+    /// handles the others (and 0: at once) by calling `reply` itself.
+    /// Schedules `bytes` as the reply to `cmd` under `f`.
+    pub fn answer(&mut self, bytes: Vec<u8>, cmd: usize, at: u64, f: &Fate, lie: bool) {
+        match f.fault {
+            1 => {
+                // Lost: made, never delivered.
+                self.made.push(Made {
+                    bytes,
+                    cmd,
+                    sent_at: self.cmds[cmd].at,
+                    arrived: None,
+                    first_ok: false,
+                    lie,
+                });
+            }
+            2 => {
+                let made = self.reply(bytes, cmd, at, lie);
+                let d = self
+                    .outbox
+                    .iter_mut()
+                    .rev()
+                    .find(|d| d.kind == Kind::Reply { made, copy: false });
+                if let Some(d) = d {
+                    corrupt_body(&mut d.bytes, u32::from(f.extra) * 977 + f.delay as u32);
+                    d.kind = Kind::Broken { made, copy: false };
+                }
+            }
+            3 | 7 => {
+                let made = self.reply(bytes.clone(), cmd, at, lie);
+                let step = if f.fault == 3 { 50 } else { 20 };
+                let first = self.outbox_at(made);
+                self.schedule(Delivery::new(
+                    first + u64::from(f.extra) * step,
+                    bytes,
+                    Kind::Reply { made, copy: true },
+                ));
+            }
+            _ => {
+                self.reply(bytes, cmd, at, lie);
+            }
+        }
+    }
+
+    fn outbox_at(&self, made: usize) -> u64 {
+        self.outbox
+            .iter()
+            .find(|d| d.kind == Kind::Reply { made, copy: false })
+            .map_or(0, |d| d.at)
+    }
+
+    pub fn schedule(&mut self, d: Delivery) {
+        let i = self.outbox.partition_point(|e| e.at <= d.at);
+        self.outbox.insert(i, d);
+    }
+
+    /// The next delivery due by `to`.
+    pub fn due(&mut self, to: u64) -> Option<Delivery> {
+        if self.outbox.first().is_some_and(|d| d.at <= to) {
+            Some(self.outbox.remove(0))
+        } else {
+            None
+        }
+    }
+
+    /// Puts the rest of a delivery the engine did not take back in front.
+    pub fn put_back(&mut self, d: Delivery) {
+        self.outbox.insert(0, d);
+    }
+
+    /// Delivery `d` reaches the engine at `clock` (the first time: a
+    /// delivery put back keeps its verdict). Whether it keeps the contract
+    /// of the line's settings: the first arrival of a reply is the
+    /// original, within `timeout + late_window` of the end of the send it
+    /// answers (in order: the schedule keeps that; a copy that came first
+    /// breaks it); every later arrival (a copy) within `duplicate_window`
+    /// of the first, if that one kept the contract (none with a window of
+    /// 0); noise always (it cannot complete a frame); raw bytes
+    /// and lies never.
+    pub fn arrives(&mut self, d: &mut Delivery, clock: u64) -> bool {
+        if let Some(ok) = d.ok {
+            return ok;
+        }
+        let c = self.setup.line;
+        let ok = match d.kind {
+            Kind::Reply { made, copy } | Kind::Broken { made, copy } => {
+                let m = &mut self.made[made];
+                let ok = match m.arrived {
+                    None => {
+                        let ok = !copy
+                            && !m.lie
+                            && clock
+                                <= m.sent_at
+                                    + u64::from(c.timeout_ms)
+                                    + u64::from(c.late_window_ms);
+                        m.arrived = Some(clock);
+                        m.first_ok = ok;
+                        ok
+                    }
+                    // A line with no duplicate window never repeats a
+                    // frame; a copy of a first arrival outside the
+                    // contract (which may have come after the next
+                    // command went out) is outside it too.
+                    Some(a) => {
+                        let dup = u64::from(c.duplicate_window_ms);
+                        m.first_ok && dup > 0 && clock <= a + dup
+                    }
+                };
+                ok && !m.lie
+            }
+            Kind::Noise => true,
+            Kind::Forged => false,
+        };
+        d.ok = Some(ok);
+        ok
+    }
+
+    /// The command a delivery answers, if it is the controller's.
+    pub fn origin(&self, d: &Delivery) -> Option<usize> {
+        match d.kind {
+            Kind::Reply { made, .. } | Kind::Broken { made, .. } => Some(self.made[made].cmd),
+            _ => None,
+        }
+    }
+
+    /// Noise: a byte `k`, then `k % 64` bytes of the script, LF replaced
+    /// unless raw noise is on; with `k & 0x40` the next delivery follows
+    /// right behind it (no poll between: the noise may hold a frame's
+    /// start that takes the next frame in).
+    pub fn noise(&self, input: &mut Input<'_>, clock: u64) -> (Delivery, bool) {
+        let k = input.u8();
+        let n = usize::from(k % 64);
+        let raw = self.setup.raw_noise;
+        let bytes = input
+            .take(n)
+            .iter()
+            .map(|&b| if b == b'\n' && !raw { b'?' } else { b })
+            .collect();
+        let kind = if raw { Kind::Forged } else { Kind::Noise };
+        (Delivery::new(clock, bytes, kind), k & 0x40 != 0)
+    }
+}
+
+impl Link {
+    /// A copy of a reply made before, now: a byte `i` picks it (`(i &
+    /// 0x7F) % made`), and with `i & 0x80` a byte of it is changed.
+    pub fn copy(&self, input: &mut Input<'_>, clock: u64) -> Option<Delivery> {
+        if self.made.is_empty() {
+            return None;
+        }
+        let i = input.u8();
+        let made = usize::from(i & 0x7F) % self.made.len();
+        let mut bytes = self.made[made].bytes.clone();
+        let kind = if i & 0x80 != 0 && corrupt_body(&mut bytes, u32::from(i) * 131 + 17) {
+            Kind::Broken { made, copy: true }
+        } else {
+            Kind::Reply { made, copy: true }
+        };
+        Some(Delivery::new(clock, bytes, kind))
+    }
+}
+
+/// A frame with a computed checksum.
+pub fn frame(header: Header, station: Station, code: u16, body: &[u8]) -> Vec<u8> {
+    let mut buf = vec![0u8; body.len() + 16];
+    let n = emit_frame(
+        &mut buf,
+        header,
+        station,
+        code,
+        ChecksumMode::Compute,
+        |w| w.put(body),
+    )
+    .expect("a frame fits");
+    buf.truncate(n);
+    buf
+}
+
+/// Replaces one byte after the envelope (a body digit or the SC) with
+/// another that is no header byte, CR or LF, so that the frame fails its
+/// check with its envelope intact. Returns whether it changed a byte.
+pub fn corrupt_body(frame: &mut [u8], pick: u32) -> bool {
+    if frame.len() < 10 {
+        return false;
+    }
+    for k in 0..64u32 {
+        let at = 6 + (pick as usize + k as usize) % (frame.len() - 8);
+        let old = frame[at];
+        let mut new = (pick >> 8).wrapping_add(k) as u8;
+        for _ in 0..256 {
+            if new != old && !matches!(new, b'!' | b'#' | b'&' | b'%' | b'\r' | b'\n') {
+                break;
+            }
+            new = new.wrapping_add(1);
+        }
+        frame[at] = new;
+        if Frame::new_checked(frame, BypassPolicy::Accept).is_err() {
+            return true;
+        }
+        frame[at] = old;
+    }
+    false
+}
+
+/// A plain decoder beside an engine's: fed the same bytes, reset when the
+/// engine resets its own, it tells which delivery made each frame.
+pub struct Shadow {
+    dec: FrameDecoder<4096>,
+    /// Bytes fed since the last reset, and where each delivery's begin.
+    stream: Vec<u8>,
+    fed: Vec<(usize, Delivery)>,
+    cursor: usize,
+}
+
+/// Who made a frame the engine heard.
+#[derive(Debug, Clone)]
+pub enum Source {
+    /// A delivery of the controller's (or noise).
+    Delivery(Delivery),
+    /// Bytes of raw noise are in it: anything.
+    Forged,
+}
+
+impl Default for Shadow {
+    fn default() -> Self {
+        Shadow {
+            dec: FrameDecoder::with_policy(BypassPolicy::Reject),
+            stream: Vec::new(),
+            fed: Vec::new(),
+            cursor: 0,
+        }
+    }
+}
+
+impl Shadow {
+    pub fn reset(&mut self) {
+        self.dec.reset();
+        self.stream.clear();
+        self.fed.clear();
+        self.cursor = 0;
+    }
+
+    /// A delivery begins.
+    pub fn begin(&mut self, d: &Delivery) {
+        self.fed.push((self.stream.len(), d.clone()));
+    }
+
+    /// The engine consumed `used` bytes of `rest` and heard `heard`: the
+    /// shadow decodes the same bytes. Returns the frame heard (its bytes
+    /// and source), if any.
+    pub fn decoded(
+        &mut self,
+        rest: &[u8],
+        used: usize,
+        heard: &Heard,
+    ) -> Option<(Vec<u8>, Source)> {
+        if used == 0 && *heard == Heard::NeedMore {
+            // The engine took nothing (it holds a reply, or had nothing to
+            // decode again): bytes waiting to be decoded again come first
+            // in the next call either way.
+            return None;
+        }
+        let s = self.dec.decode(rest);
+        assert_eq!(s.consumed, used, "the engine decodes otherwise");
+        self.stream.extend_from_slice(&rest[..used]);
+        let frame = match (heard, s.event) {
+            (Heard::NeedMore, Event::NeedMore) => return None,
+            (Heard::Broken(a), Event::Error(b)) => {
+                assert_eq!(*a, b, "the engine decodes otherwise");
+                return None;
+            }
+            (Heard::Broken(_) | Heard::NeedMore, e) => {
+                panic!("the engine heard {heard:?}, the decoder {e:?}")
+            }
+            (_, Event::Frame(f)) => f.as_bytes().to_vec(),
+            (_, e) => panic!("the engine heard {heard:?}, the decoder {e:?}"),
+        };
+        // Frames come out in stream order (bytes of a failed text frame
+        // are decoded again, so a frame may come from an earlier delivery).
+        let at = self.stream[self.cursor..]
+            .windows(frame.len())
+            .position(|w| w == frame.as_slice())
+            .expect("a frame that is not in the bytes fed")
+            + self.cursor;
+        let end = at + frame.len();
+        self.cursor = end;
+        let first = self.fed.iter().rposition(|(s, _)| *s <= at).expect("fed");
+        let last = self.fed.iter().rposition(|(s, _)| *s < end).expect("fed");
+        let span = &self.fed[first..=last];
+        let src = if span.iter().any(|(_, d)| d.kind == Kind::Forged) || first != last {
+            Source::Forged
+        } else {
+            Source::Delivery(span[0].1.clone())
+        };
+        Some((frame, src))
+    }
+}
+
+/// Checks a 200H fence an engine transmitted.
+pub fn check_fence(setup: &Setup, bytes: &[u8]) {
+    let f = Frame::new_checked(bytes, BypassPolicy::Accept).expect("an invalid fence");
+    assert_eq!(
+        (f.header(), f.station(), f.code()),
+        (Header::Command, setup.line.station, 0x200)
+    );
+    assert_eq!(f.body().len(), 10);
+    let nonce = format!("{:06X}", setup.seed & 0xFF_FFFF);
+    assert!(
+        f.body().starts_with(nonce.as_bytes()),
+        "a fence without the seed's text: {:?}",
+        String::from_utf8_lossy(bytes)
+    );
+}
