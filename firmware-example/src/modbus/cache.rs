@@ -3,25 +3,11 @@
 //! doing. Ages are published in the health block.
 
 use iai_protocol_b::message::{
-    AxisStatusResponse, ErrorDetailResponse, ProgramStatusResponse, SystemStatusResponse,
+    AxisStatus, AxisStatusResponse, ErrorDetailResponse, Homing, MoveOutcome,
+    ProgramStatusResponse, SystemStatusResponse,
 };
 
 use super::map::{ALMH, BITS, HEND, INTEGERS, PEND, PWR, SV};
-
-/// One axis as 212H reported it.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct AxisData {
-    /// 212H status byte.
-    pub status: u8,
-    /// Sensor inputs.
-    pub sensors: u8,
-    /// Error code.
-    pub error: u16,
-    /// Encoder status.
-    pub encoder: u8,
-    /// Current position, 0.001 mm.
-    pub position: i32,
-}
 
 /// A group of polled data and when it was last answered.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -45,8 +31,8 @@ impl Stamp {
 /// The polled data.
 #[derive(Debug, Clone, Default)]
 pub struct Cache {
-    /// The axes.
-    pub axes: [AxisData; 8],
+    /// The axes as 212H last reported them.
+    pub axes: [AxisStatus; 8],
     /// Axes whose cached status predates a motion command the controller
     /// confirmed: PEND and HEND read 0 until a 212H sent after it answers.
     pub stale: u8,
@@ -90,13 +76,7 @@ impl Cache {
     pub fn axes(&mut self, r: &AxisStatusResponse, fresh: bool, now: u32) {
         for (n, a) in r.axis_pattern.iter().zip(r.axes.iter()) {
             if let Some(slot) = self.axes.get_mut(usize::from(n).wrapping_sub(1)) {
-                *slot = AxisData {
-                    status: a.axis_status,
-                    sensors: a.sensor_input_status,
-                    error: a.error_code,
-                    encoder: a.encoder_status,
-                    position: a.current_position,
-                };
+                slot.clone_from(a);
             }
         }
         if fresh {
@@ -149,16 +129,18 @@ impl Cache {
         if self.link_up {
             w |= PWR;
         }
-        if a.status & 0b1000 != 0 {
+        if a.servo_on() {
             w |= SV;
         }
-        if a.error != 0 {
+        if a.error_code != 0 {
             w |= ALMH;
         }
-        if fresh && (a.status >> 1) & 0b11 == 2 {
+        if fresh && a.homing() == Homing::Done {
             w |= HEND;
         }
-        if fresh && a.status & 0b1_0001 == 0b1_0000 {
+        // PEND: the manual's completion check says the last operation
+        // completed (not a push error, not cancelled) and the axis is free.
+        if fresh && a.outcome() == Some(MoveOutcome::Completed) {
             w |= PEND;
         }
         w

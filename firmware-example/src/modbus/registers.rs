@@ -15,6 +15,7 @@ use super::map::{
 };
 use super::poll::Schedule;
 use crate::config::{ModbusConfig, Policy};
+use iai_protocol_b::message::AxisStatus;
 
 /// Registers of the table window.
 pub const WINDOW_WORDS: usize = WINDOW_RECORDS * RECORD_WORDS;
@@ -106,15 +107,18 @@ impl Registers {
         let b = usize::from(at.block);
         let o = usize::from(at.offset);
         let c = &self.cache;
-        let axis = c.axes.get(b).copied().unwrap_or_default();
+        let none = AxisStatus::default();
+        let axis = c.axes.get(b).unwrap_or(&none);
         let pick = |ws: &[u16]| ws.get(o).copied().unwrap_or(0);
         match at.entry.item {
             Item::Drg1 => pick(self.drg1.get(b..).unwrap_or(&[])),
             Item::Posr => pick(self.posr.get(b..).unwrap_or(&[])),
-            Item::Pnow => pick(&words(axis.position as u32)),
-            Item::Almc => axis.error,
-            Item::AxisStatus => u16::from(axis.status),
-            Item::AxisIo => u16::from(axis.encoder) << 8 | u16::from(axis.sensors),
+            Item::Pnow => pick(&words(axis.current_position as u32)),
+            Item::Almc => axis.error_code,
+            Item::AxisStatus => u16::from(axis.axis_status),
+            Item::AxisIo => {
+                u16::from(axis.encoder_status) << 8 | u16::from(axis.sensor_input_status)
+            }
             Item::Dss1 => c.dss1(b),
             Item::NumericMove => self.movn.get(b).map_or(0, |m| pick(m)),
             Item::ProgramNumber => u16::from(self.program),

@@ -89,7 +89,7 @@ const READ_CMDST: [u8; 8] = [0x01, 0x04, 0xB1, 0x00, 0x00, 0x03, 0x97, 0x37];
 #[test]
 fn a_read_is_answered_from_the_cache() {
     let mut gw = gateway(Policy::ForwardAll);
-    gw.regs.cache.axes[0].position = -25_500;
+    gw.regs.cache.axes[0].current_position = -25_500;
     assert_eq!(ask(&mut gw, &READ_PNOW_1), PNOW_1);
     // Function 04 reads the same read-only registers.
     let mut fc4 = READ_PNOW_1;
@@ -105,8 +105,12 @@ fn dss1_waits_for_a_poll_after_a_confirmed_motion_command() {
     let c = &mut gw.regs.cache;
     c.link_up = true;
     // Servo on, homed, last operation completed, at rest.
-    c.axes[0].status = 0b1_1100;
+    c.axes[0].axis_status = 0b1_1100;
     assert_eq!(c.dss1(0), PWR | SV | HEND | PEND);
+    // A push error is not a completion (the core's MoveOutcome).
+    c.axes[0].axis_status = 0b11_1100;
+    assert_eq!(c.dss1(0), PWR | SV | HEND);
+    c.axes[0].axis_status = 0b1_1100;
     c.stale = 1;
     assert_eq!(c.dss1(0), PWR | SV);
 }
@@ -189,7 +193,7 @@ fn silence_for_broadcasts_other_units_and_broken_frames() {
     assert_eq!(ask(&mut gw, &[0x55; 300]), []);
     assert_eq!(gw.stats().dropped, 3);
     // The bus goes on.
-    gw.regs.cache.axes[0].position = -25_500;
+    gw.regs.cache.axes[0].current_position = -25_500;
     assert_eq!(ask(&mut gw, &READ_PNOW_1), PNOW_1);
 }
 
