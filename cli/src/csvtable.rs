@@ -131,20 +131,170 @@ fn cell(raw: &str, spec: FieldSpec, decimals: u32, unit: &str) -> Result<i64, St
     Ok(v)
 }
 
+/// Errors shown at most; the check goes on counting after them.
+pub const SHOWN_ERRORS: usize = 50;
+
+/// What is wrong with a CSV table: the first [`SHOWN_ERRORS`] errors, how
+/// many there were in all, and a hint when the file looks like a
+/// spreadsheet's export in another convention (`;` between cells, decimal
+/// commas).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CsvErrors {
+    /// The first errors, in file order.
+    pub errors: Vec<CellError>,
+    /// Errors found in all (at least `errors.len()`).
+    pub total: usize,
+    /// What probably caused them, when the file says so.
+    pub hint: Option<String>,
+}
+
+impl CsvErrors {
+    fn one(e: CellError, hint: Option<String>) -> Self {
+        CsvErrors {
+            errors: vec![e],
+            total: 1,
+            hint,
+        }
+    }
+
+    /// "3 error(s)" or "120 error(s), the first 50 shown".
+    pub fn count_text(&self) -> String {
+        if self.total > self.errors.len() {
+            format!(
+                "{} error(s), the first {} shown",
+                self.total,
+                self.errors.len()
+            )
+        } else {
+            format!("{} error(s)", self.total)
+        }
+    }
+}
+
+/// The expected header for `n` axis columns.
+fn header_names(n: usize) -> Vec<String> {
+    FIXED
+        .iter()
+        .map(|s| s.to_string())
+        .chain((1..=n).map(|k| format!("axis{k}")))
+        .collect()
+}
+
+/// Whether `names` is a valid header; its axis count if so.
+fn header_axes<S: AsRef<str>>(names: &[S]) -> Option<usize> {
+    let n = names.len().checked_sub(FIXED.len())?;
+    let ok = (1..=MAX_AXES).contains(&n)
+        && names
+            .iter()
+            .zip(header_names(n))
+            .all(|(a, b)| a.as_ref().trim() == b);
+    ok.then_some(n)
+}
+
+/// A number written with a decimal comma: `0,30`, `-25,5`.
+fn decimal_comma(cell: &str) -> bool {
+    let c = cell.trim().trim_start_matches('-');
+    match c.split_once(',') {
+        Some((i, f)) => {
+            !i.is_empty()
+                && !f.is_empty()
+                && i.bytes().all(|b| b.is_ascii_digit())
+                && f.bytes().all(|b| b.is_ascii_digit())
+        }
+        None => false,
+    }
+}
+
+const EXPORT_ADVICE: &str = "save the table as CSV with ',' between cells and '.' as the decimal point (LibreOffice: Save As, Text CSV, field delimiter ','; Excel: \"CSV (Comma delimited)\" with '.' as the decimal separator in its options)";
+
+/// The hint for a header that is not ours: a file whose cells are
+/// separated by `;` or tabs (a spreadsheet set to a European locale), and
+/// whose numbers then often carry decimal commas.
+fn separator_hint(text: &str) -> Option<String> {
+    let first = text.lines().next().unwrap_or("");
+    let (sep, name) = [(';', "';'"), ('\t', "tabs")]
+        .into_iter()
+        .find(|(sep, _)| header_axes(&first.split(*sep).collect::<Vec<_>>()).is_some())?;
+    let comma = text.lines().enumerate().skip(1).find_map(|(i, l)| {
+        l.split(sep)
+            .find(|c| decimal_comma(c))
+            .map(|c| (i + 1, c.trim().to_string()))
+    });
+    let mut h = format!(
+        "the cells are separated by {name}, as a spreadsheet set to a European locale exports CSV"
+    );
+    if let Some((line, cell)) = comma {
+        h.push_str(&format!(
+            ", and numbers carry a decimal comma (line {line}: {cell:?}; write {:?})",
+            cell.replace(',', ".")
+        ));
+    }
+    h.push_str(&format!(": {EXPORT_ADVICE}"));
+    Some(h)
+}
+
+/// The hint for a row with more cells than the header: decimal commas
+/// split numbers in two.
+fn comma_hint(line: u64, row: &csv::StringRecord, want: usize) -> Option<String> {
+    if row.len() <= want {
+        return None;
+    }
+    let cells: Vec<&str> = row.iter().collect();
+    // Two neighbouring cells of digits: the two halves of "0,30".
+    let split = cells.windows(2).any(|w| {
+        let [a, b] = w else { return false };
+        !a.is_empty()
+            && a.trim_start_matches('-')
+                .bytes()
+                .all(|c| c.is_ascii_digit())
+            && !b.is_empty()
+            && b.bytes().all(|c| c.is_ascii_digit())
+    });
+    split.then(|| {
+        format!(
+            "line {line} has {} cells where the header has {want}: numbers written with a decimal comma (\"0,30\" for 0.30) are split in two; {EXPORT_ADVICE}",
+            row.len()
+        )
+    })
+}
+
 /// Reads a whole CSV table for a write message whose records use `layout`.
-/// Returns the records in file order, or every error found (all rows are
-/// checked; at most 50 errors are kept).
-pub fn read(input: impl Read, layout: RecordLayout) -> Result<Vec<PositionRecord>, Vec<CellError>> {
+/// Returns the records in file order, or what is wrong: every row is
+/// checked; the first [`SHOWN_ERRORS`] errors are kept and all are
+/// counted. A header only (no rows) is an empty table, not an error.
+pub fn read(mut input: impl Read, layout: RecordLayout) -> Result<Vec<PositionRecord>, CsvErrors> {
+    let mut bytes = Vec::new();
+    input.read_to_end(&mut bytes).map_err(|e| {
+        CsvErrors::one(
+            CellError {
+                line: 1,
+                column: "-".into(),
+                message: format!("cannot read it: {e}"),
+            },
+            None,
+        )
+    })?;
+    // A spreadsheet's UTF-8 byte-order mark is not part of the header.
+    let body = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&bytes);
+    let text = String::from_utf8_lossy(body);
     let mut rdr = csv::ReaderBuilder::new()
         .has_headers(false)
         .flexible(true)
         .trim(csv::Trim::All)
-        .from_reader(input);
+        .from_reader(body);
     let mut errors = Vec::new();
+    let mut total = 0usize;
+    let mut hint = None;
     let mut out = Vec::new();
     let mut axes = 0usize;
     let mut seen: BTreeMap<u16, u64> = BTreeMap::new();
     let number_spec = FieldSpec::hex(layout.number_width.max(1));
+    let mut push = |errors: &mut Vec<CellError>, e: CellError| {
+        total += 1;
+        if errors.len() < SHOWN_ERRORS {
+            errors.push(e);
+        }
+    };
     for (i, row) in rdr.records().enumerate() {
         let line = row
             .as_ref()
@@ -154,57 +304,67 @@ pub fn read(input: impl Read, layout: RecordLayout) -> Result<Vec<PositionRecord
         let row = match row {
             Ok(r) => r,
             Err(e) => {
-                errors.push(CellError {
-                    line,
-                    column: "-".into(),
-                    message: format!("not readable as CSV: {e}"),
-                });
+                push(
+                    &mut errors,
+                    CellError {
+                        line,
+                        column: "-".into(),
+                        message: format!("not readable as CSV: {e}"),
+                    },
+                );
                 break;
             }
         };
         if i == 0 {
             let names: Vec<&str> = row.iter().collect();
-            let n = names.len().saturating_sub(FIXED.len());
-            let want: Vec<String> = FIXED
-                .iter()
-                .map(|s| s.to_string())
-                .chain((1..=n).map(|k| format!("axis{k}")))
-                .collect();
-            if names.len() < FIXED.len() + 1 || n > MAX_AXES || names != want {
-                errors.push(CellError {
-                    line,
-                    column: "header".into(),
-                    message: format!(
-                        "expected number,acceleration,deceleration,speed,axis1[,axis2…,axis8], found {:?}",
-                        names.join(",")
-                    ),
-                });
-                return Err(errors);
+            match header_axes(&names) {
+                Some(n) => axes = n,
+                None => {
+                    return Err(CsvErrors::one(
+                        CellError {
+                            line,
+                            column: "header".into(),
+                            message: format!(
+                                "expected number,acceleration,deceleration,speed,axis1[,axis2…,axis8], found {:?}",
+                                names.join(",")
+                            ),
+                        },
+                        separator_hint(&text),
+                    ))
+                }
             }
-            axes = n;
             continue;
         }
         if row.iter().all(str::is_empty) {
             continue;
         }
         if row.len() != FIXED.len() + axes {
-            errors.push(CellError {
-                line,
-                column: "-".into(),
-                message: format!(
-                    "{} cell(s), the header has {}",
-                    row.len(),
-                    FIXED.len() + axes
-                ),
-            });
+            if hint.is_none() {
+                hint = comma_hint(line, &row, FIXED.len() + axes);
+            }
+            push(
+                &mut errors,
+                CellError {
+                    line,
+                    column: "-".into(),
+                    message: format!(
+                        "{} cell(s), the header has {}",
+                        row.len(),
+                        FIXED.len() + axes
+                    ),
+                },
+            );
             continue;
         }
         let mut bad = |column: &str, message: String| {
-            errors.push(CellError {
-                line,
-                column: column.to_string(),
-                message,
-            })
+            push(
+                &mut errors,
+                CellError {
+                    line,
+                    column: column.to_string(),
+                    message,
+                },
+            )
         };
         let get = |k: usize| row.get(k).unwrap_or("");
         let number = cell(get(0), number_spec, 0, "");
@@ -256,22 +416,27 @@ pub fn read(input: impl Read, layout: RecordLayout) -> Result<Vec<PositionRecord
             rec.positions = positions;
             out.push(rec);
         }
-        if errors.len() >= 50 {
-            break;
-        }
     }
     if axes == 0 && errors.is_empty() {
-        errors.push(CellError {
-            line: 1,
-            column: "header".into(),
-            message: "the file is empty; expected number,acceleration,deceleration,speed,axis1…"
-                .into(),
-        });
+        return Err(CsvErrors::one(
+            CellError {
+                line: 1,
+                column: "header".into(),
+                message:
+                    "the file is empty; expected number,acceleration,deceleration,speed,axis1…"
+                        .into(),
+            },
+            None,
+        ));
     }
     if errors.is_empty() {
         Ok(out)
     } else {
-        Err(errors)
+        Err(CsvErrors {
+            errors,
+            total,
+            hint,
+        })
     }
 }
 
@@ -354,7 +519,8 @@ mod tests {
                     3,0.30,0.30,-1,3000000\n\
                     1,0.30,0.30,1,1\n";
         let errs = read(text.as_bytes(), RecordLayout::NUMBER_4).unwrap_err();
-        let shown: Vec<String> = errs.iter().map(|e| e.to_string()).collect();
+        assert_eq!(errs.total, 5);
+        let shown: Vec<String> = errs.errors.iter().map(|e| e.to_string()).collect();
         assert_eq!(shown.len(), 5, "{shown:#?}");
         assert!(
             shown[0].starts_with("line 2, column acceleration:"),
@@ -369,6 +535,57 @@ mod tests {
         );
         assert!(shown[4].contains("also on line 2"), "{}", shown[4]);
         let errs = read("number,speed\n".as_bytes(), RecordLayout::NUMBER_4).unwrap_err();
-        assert_eq!(errs[0].column, "header");
+        assert_eq!(errs.errors[0].column, "header");
+        assert_eq!(errs.hint, None);
+    }
+
+    #[test]
+    fn every_error_is_counted_and_the_first_50_are_shown() {
+        let mut text = String::from("number,acceleration,deceleration,speed,axis1\n");
+        for i in 0..120 {
+            text.push_str(&format!("{i},0.301,0.30,100,1.000\n"));
+        }
+        let errs = read(text.as_bytes(), RecordLayout::NUMBER_4).unwrap_err();
+        assert_eq!(errs.total, 120);
+        assert_eq!(errs.errors.len(), SHOWN_ERRORS);
+        assert_eq!(errs.count_text(), "120 error(s), the first 50 shown");
+    }
+
+    #[test]
+    fn a_european_export_gets_a_hint_not_a_bare_header_error() {
+        let text = "number;acceleration;deceleration;speed;axis1\n1;0,30;0,30;100;12,5\n";
+        let errs = read(text.as_bytes(), RecordLayout::NUMBER_4).unwrap_err();
+        let hint = errs.hint.unwrap();
+        assert!(hint.contains("separated by ';'"), "{hint}");
+        assert!(hint.contains("line 2: \"0,30\"; write \"0.30\""), "{hint}");
+        let tabs = "number\tacceleration\tdeceleration\tspeed\taxis1\n";
+        let hint = read(tabs.as_bytes(), RecordLayout::NUMBER_4)
+            .unwrap_err()
+            .hint
+            .unwrap();
+        assert!(hint.contains("separated by tabs"), "{hint}");
+        // Decimal commas in a ','-separated file: more cells than the header.
+        let text = "number,acceleration,deceleration,speed,axis1\n1,0,30,0.30,100,12.500\n";
+        let errs = read(text.as_bytes(), RecordLayout::NUMBER_4).unwrap_err();
+        let hint = errs.hint.unwrap();
+        assert!(
+            hint.contains("line 2 has 6 cells where the header has 5"),
+            "{hint}"
+        );
+        // A byte-order mark is not part of the header.
+        let bom = "\u{feff}number,acceleration,deceleration,speed,axis1\n1,0.30,0.30,100,1.000\n";
+        assert_eq!(
+            read(bom.as_bytes(), RecordLayout::NUMBER_4).unwrap().len(),
+            1
+        );
+    }
+
+    #[test]
+    fn a_header_alone_is_an_empty_table() {
+        let text = "number,acceleration,deceleration,speed,axis1\n";
+        assert_eq!(
+            read(text.as_bytes(), RecordLayout::NUMBER_4).unwrap(),
+            vec![]
+        );
     }
 }

@@ -181,8 +181,23 @@ pub fn unit_suffix(sep: &str, unit: &str) -> String {
     }
 }
 
-/// The listing lines of a tree, each indented by `indent`.
-pub fn text_lines(nodes: &[Node], prefix: &str, indent: &str, out: &mut Vec<String>) {
+/// What a leaf means beside its raw value (name, unit, value), if known.
+pub type Explain<'a> = &'a dyn Fn(&str, &str, &Val) -> Option<String>;
+
+/// ` -> meaning`, or nothing.
+fn meaning_suffix(explain: Explain<'_>, name: &str, unit: &str, value: &Val) -> String {
+    explain(name, unit, value).map_or_else(String::new, |m| format!(" -> {m}"))
+}
+
+/// The listing lines of a tree, each indented by `indent`; `explain` adds
+/// what a value means after it.
+pub fn text_lines(
+    nodes: &[Node],
+    prefix: &str,
+    indent: &str,
+    out: &mut Vec<String>,
+    explain: Explain<'_>,
+) {
     for node in nodes {
         match node {
             Node::Leaf {
@@ -192,9 +207,10 @@ pub fn text_lines(nodes: &[Node], prefix: &str, indent: &str, out: &mut Vec<Stri
                 value,
             } => {
                 out.push(format!(
-                    "{indent}{prefix}{name} = {}{}",
+                    "{indent}{prefix}{name} = {}{}{}",
                     show_value(*spec, value),
-                    unit_suffix(" ", unit)
+                    unit_suffix(" ", unit),
+                    meaning_suffix(explain, name, unit, value)
                 ));
             }
             Node::Group { name, items, .. } if joined_text(items, name).is_some() => {
@@ -211,18 +227,63 @@ pub fn text_lines(nodes: &[Node], prefix: &str, indent: &str, out: &mut Vec<Stri
                     {
                         if is_scalar_group(items, name) {
                             out.push(format!(
-                                "{indent}  {prefix}{name}[{i}] = {}{}",
+                                "{indent}  {prefix}{name}[{i}] = {}{}{}",
                                 show_value(*spec, value),
-                                unit_suffix(" ", unit)
+                                unit_suffix(" ", unit),
+                                meaning_suffix(explain, name, unit, value)
                             ));
                             continue;
                         }
                     }
-                    text_lines(item, &p, &format!("{indent}  "), out);
+                    text_lines(item, &p, &format!("{indent}  "), out, explain);
                 }
             }
         }
     }
+}
+
+/// The meanings of a tree's leaves, by path (`name`, `group[i].name`,
+/// `group[i]` for a group of plain values), for JSON.
+pub fn meanings(
+    nodes: &[Node],
+    prefix: &str,
+    explain: Explain<'_>,
+    out: &mut Vec<(String, String)>,
+) {
+    for node in nodes {
+        match node {
+            Node::Leaf {
+                name, unit, value, ..
+            } => {
+                if let Some(m) = explain(name, unit, value) {
+                    out.push((format!("{prefix}{name}"), m));
+                }
+            }
+            Node::Group { name, items, .. } if joined_text(items, name).is_some() => {}
+            Node::Group { name, items, .. } => {
+                let scalar = is_scalar_group(items, name);
+                for (i, item) in items.iter().enumerate() {
+                    match item.as_slice() {
+                        [Node::Leaf { unit, value, .. }] if scalar => {
+                            if let Some(m) = explain(name, unit, value) {
+                                out.push((format!("{prefix}{name}[{i}]"), m));
+                            }
+                        }
+                        _ => meanings(item, &format!("{prefix}{name}[{i}]."), explain, out),
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// A JSON object of `(path, meaning)` pairs.
+pub fn json_meanings(pairs: &[(String, String)]) -> String {
+    let parts: Vec<String> = pairs
+        .iter()
+        .map(|(k, v)| format!("{}:{}", json_str(k), json_str(v)))
+        .collect();
+    format!("{{{}}}", parts.join(","))
 }
 
 /// Raw text bytes as a string, one character per byte (Latin-1), so that

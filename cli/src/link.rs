@@ -4,6 +4,17 @@
 //! what one command of this process left in flight on it, the next one
 //! knows. [`Link::turn`] moves bytes and time between one of the core's
 //! engines and the line.
+//!
+//! Flow control: on a serial port the driver does it (`--flow xonxoff`:
+//! IXON/IXOFF; `rtscts`: the modem lines). Over TCP (a serial server
+//! that passes XON/XOFF through) `xonxoff` is done here: a received XOFF
+//! stops the writing until XON, and both are taken out of the received
+//! bytes. A [`Witness`] decodes every received byte again and counts what
+//! came back, for [`Link::hint`].
+
+mod witness;
+
+pub use witness::Witness;
 
 use std::io::{self, Read, Write};
 use std::net::TcpStream;
@@ -11,6 +22,67 @@ use std::time::{Duration, Instant};
 
 use iai_protocol_b::engine::{feed, Engine, Step};
 use iai_protocol_b::{Failure, Line, LineConfig};
+
+/// XON (resume), as the bridge and serial drivers send it.
+pub const XON: u8 = 0x11;
+/// XOFF (stop).
+pub const XOFF: u8 = 0x13;
+
+/// How long a write waits for XON after an XOFF before it fails.
+const XOFF_PATIENCE: Duration = Duration::from_secs(10);
+
+/// Bytes written between looks at the input for an XOFF.
+const FLOW_CHUNK: usize = 64;
+
+/// Flow control of a link.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Flow {
+    /// None: the other side must keep up.
+    #[default]
+    None,
+    /// XON/XOFF (software).
+    XonXoff,
+    /// RTS/CTS (hardware; serial ports only).
+    RtsCts,
+}
+
+/// Parity of a serial port.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Parity {
+    /// None (8N1, the usual setting).
+    #[default]
+    None,
+    /// Odd.
+    Odd,
+    /// Even.
+    Even,
+}
+
+/// A serial port's framing and flow control (the controller's I/O
+/// parameters Nos. 93-95 must match: 7 or 8 data bits, 1 or 2 stop bits,
+/// none, odd or even parity; TTA p. 7, 2003 p. 6).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SerialSettings {
+    /// 7 or 8.
+    pub data_bits: u8,
+    /// Parity.
+    pub parity: Parity,
+    /// 1 or 2.
+    pub stop_bits: u8,
+    /// Flow control.
+    pub flow: Flow,
+}
+
+impl Default for SerialSettings {
+    fn default() -> Self {
+        SerialSettings {
+            data_bits: 8,
+            parity: Parity::None,
+            stop_bits: 1,
+            flow: Flow::None,
+        }
+    }
+}
 
 /// Reads from a TCP stream what arrives within `wait`: `None` when nothing
 /// did, `Some(0)` when the peer closed. A socket read timeout overshoots a
@@ -65,16 +137,23 @@ pub enum Target {
         path: String,
         /// Bits per second.
         baud: u32,
+        /// Framing and flow control.
+        settings: SerialSettings,
     },
-    /// `HOST:PORT`.
-    Tcp(String),
+    /// `HOST:PORT`, with XON/XOFF done here or not.
+    Tcp {
+        /// `HOST:PORT`.
+        addr: String,
+        /// [`Flow::XonXoff`] or [`Flow::None`].
+        flow: Flow,
+    },
 }
 
 impl std::fmt::Display for Target {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Target::Serial { path, baud } => write!(f, "serial port {path} at {baud} baud"),
-            Target::Tcp(addr) => write!(f, "tcp {addr}"),
+            Target::Serial { path, baud, .. } => write!(f, "serial port {path} at {baud} baud"),
+            Target::Tcp { addr, .. } => write!(f, "tcp {addr}"),
         }
     }
 }
@@ -92,6 +171,12 @@ pub struct Link {
     /// Bytes received that the engine of the moment did not take yet (it
     /// held a reply): they go to the next one.
     pending: Vec<u8>,
+    /// XON/XOFF done here (TCP).
+    soft_flow: bool,
+    /// An XOFF came and no XON yet.
+    stopped: bool,
+    witness: Witness,
+    target: Target,
 }
 
 /// A seed for the line's fence texts: different at each start.
@@ -109,35 +194,55 @@ impl Link {
     /// Opens `target`, a line with the settings `cfg`. The error names what
     /// the user gave and what was expected.
     pub fn open(target: &Target, cfg: LineConfig) -> Result<Link, String> {
+        let mut soft_flow = false;
         let inner = match target {
-            Target::Serial { path, baud } => {
+            Target::Serial {
+                path,
+                baud,
+                settings,
+            } => {
                 if !BAUD_RATES.contains(baud) {
                     return Err(format!(
                         "--baud {baud}: the controllers use 9600, 19200, 38400, 57600 or 115200"
                     ));
                 }
-                // 8 data bits, no parity, 1 stop bit: the controllers'
-                // parameters Nos. 93-95 must match.
                 let port = serialport::new(path, *baud)
-                    .data_bits(serialport::DataBits::Eight)
-                    .parity(serialport::Parity::None)
-                    .stop_bits(serialport::StopBits::One)
-                    .flow_control(serialport::FlowControl::None)
+                    .data_bits(if settings.data_bits == 7 {
+                        serialport::DataBits::Seven
+                    } else {
+                        serialport::DataBits::Eight
+                    })
+                    .parity(match settings.parity {
+                        Parity::None => serialport::Parity::None,
+                        Parity::Odd => serialport::Parity::Odd,
+                        Parity::Even => serialport::Parity::Even,
+                    })
+                    .stop_bits(if settings.stop_bits == 2 {
+                        serialport::StopBits::Two
+                    } else {
+                        serialport::StopBits::One
+                    })
+                    .flow_control(match settings.flow {
+                        Flow::None => serialport::FlowControl::None,
+                        Flow::XonXoff => serialport::FlowControl::Software,
+                        Flow::RtsCts => serialport::FlowControl::Hardware,
+                    })
                     .timeout(Duration::from_millis(10))
                     .open()
                     .map_err(|e| {
                         format!(
-                            "--port {path:?}: cannot open it as a serial port ({e}); give a device such as /dev/ttyUSB0 or COM3"
+                            "--port {path:?}: cannot open it as a serial port ({e}); give a device such as /dev/ttyUSB0 or COM3 (`iai ports` lists them)"
                         )
                     })?;
                 Inner::Serial(port)
             }
-            Target::Tcp(addr) => {
+            Target::Tcp { addr, flow } => {
                 let s = TcpStream::connect(addr.as_str()).map_err(|e| {
                     format!("--tcp {addr:?}: cannot connect ({e}); give HOST:PORT of a listening controller or adapter")
                 })?;
                 s.set_nodelay(true)
                     .map_err(|e| format!("--tcp {addr:?}: {e}"))?;
+                soft_flow = *flow == Flow::XonXoff;
                 Inner::Tcp(s)
             }
         };
@@ -146,7 +251,27 @@ impl Link {
             t0: Instant::now(),
             line: Line::new(cfg, seed()),
             pending: Vec::new(),
+            soft_flow,
+            stopped: false,
+            witness: Witness::new(cfg.station.0),
+            target: target.clone(),
         })
+    }
+
+    /// Where this line goes.
+    pub fn target(&self) -> &Target {
+        &self.target
+    }
+
+    /// What came back on this line so far.
+    pub fn witness(&self) -> &Witness {
+        &self.witness
+    }
+
+    /// The likely cause of a line that gave no valid reply, from what came
+    /// back (see [`Witness::hint`]).
+    pub fn hint(&self) -> Option<String> {
+        self.witness.hint()
     }
 
     /// The core's memory of this line.
@@ -172,7 +297,16 @@ impl Link {
         let now = self.now();
         match engine.poll(&mut self.line, now) {
             Step::Transmit(bytes) => {
-                write_all(&mut self.inner, bytes)?;
+                self.witness.sent(bytes);
+                send(
+                    &mut self.inner,
+                    self.soft_flow,
+                    &mut self.stopped,
+                    &mut self.pending,
+                    &mut self.witness,
+                    bytes,
+                    &mut |_| {},
+                )?;
                 let end = self.now();
                 engine.sent(&mut self.line, end);
             }
@@ -203,43 +337,153 @@ impl Link {
     }
 
     /// Reads what arrives within `wait` (at least 1 ms); `Ok(0)` when
-    /// nothing did. A closed TCP connection is an error.
+    /// nothing did. A closed TCP connection is an error. XON/XOFF done
+    /// here are taken out (and obeyed).
     pub fn read_for(&mut self, buf: &mut [u8], wait: Duration) -> io::Result<usize> {
-        let wait = wait.max(Duration::from_millis(1));
-        let r = match &mut self.inner {
-            Inner::Serial(p) => {
-                p.set_timeout(wait)?;
-                p.read(buf)
-            }
-            Inner::Tcp(s) => match tcp_read_for(s, buf, wait)? {
-                None => Ok(0),
-                Some(0) => Err(io::Error::new(
-                    io::ErrorKind::UnexpectedEof,
-                    "the connection was closed by the other side",
-                )),
-                Some(n) => Ok(n),
-            },
+        let n = raw_read(&mut self.inner, buf, wait)?;
+        let got = buf.get_mut(..n).unwrap_or(&mut []);
+        let n = if self.soft_flow {
+            strip_flow(got, &mut self.stopped)
+        } else {
+            n
         };
-        match r {
-            // A signal (Ctrl-C) interrupts a read: the caller looks at its stop flag.
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    io::ErrorKind::TimedOut
-                        | io::ErrorKind::WouldBlock
-                        | io::ErrorKind::Interrupted
-                ) =>
-            {
-                Ok(0)
-            }
-            r => r,
-        }
+        self.witness.received(buf.get(..n).unwrap_or(&[]));
+        Ok(n)
     }
 
-    /// Sends all of `bytes`.
+    /// Sends all of `bytes`, honouring XON/XOFF done here; `progress` is
+    /// told the bytes written so far. Bytes that arrive meanwhile are kept
+    /// for the next engine (or [`Link::take_pending`]).
     pub fn write_all(&mut self, bytes: &[u8]) -> io::Result<()> {
-        write_all(&mut self.inner, bytes)
+        self.write_with(bytes, &mut |_| {})
     }
+
+    /// [`Link::write_all`] with progress.
+    pub fn write_with(&mut self, bytes: &[u8], progress: &mut dyn FnMut(usize)) -> io::Result<()> {
+        self.witness.sent(bytes);
+        send(
+            &mut self.inner,
+            self.soft_flow,
+            &mut self.stopped,
+            &mut self.pending,
+            &mut self.witness,
+            bytes,
+            progress,
+        )
+    }
+
+    /// The bytes received and not given to an engine yet.
+    pub fn take_pending(&mut self) -> Vec<u8> {
+        std::mem::take(&mut self.pending)
+    }
+}
+
+/// Reads what arrives within `wait` (at least 1 ms): `Ok(0)` when nothing
+/// did; a closed TCP connection is an error.
+fn raw_read(inner: &mut Inner, buf: &mut [u8], wait: Duration) -> io::Result<usize> {
+    let wait = wait.max(Duration::from_millis(1));
+    let r = match inner {
+        Inner::Serial(p) => {
+            p.set_timeout(wait)?;
+            p.read(buf)
+        }
+        Inner::Tcp(s) => match tcp_read_for(s, buf, wait)? {
+            None => Ok(0),
+            Some(0) => Err(io::Error::new(
+                io::ErrorKind::UnexpectedEof,
+                "the connection was closed by the other side",
+            )),
+            Some(n) => Ok(n),
+        },
+    };
+    match r {
+        // A signal (Ctrl-C) interrupts a read: the caller looks at its stop flag.
+        Err(e)
+            if matches!(
+                e.kind(),
+                io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted
+            ) =>
+        {
+            Ok(0)
+        }
+        r => r,
+    }
+}
+
+/// Takes XON and XOFF out of `bytes` (in place), noting the last one in
+/// `stopped`; returns the length left.
+fn strip_flow(bytes: &mut [u8], stopped: &mut bool) -> usize {
+    let mut n = 0;
+    for i in 0..bytes.len() {
+        let b = bytes.get(i).copied().unwrap_or(0);
+        match b {
+            XOFF => *stopped = true,
+            XON => *stopped = false,
+            _ => {
+                if let Some(slot) = bytes.get_mut(n) {
+                    *slot = b;
+                }
+                n += 1;
+            }
+        }
+    }
+    n
+}
+
+/// Writes `bytes`; with `soft_flow`, in chunks, looking at the input for
+/// XOFF between them and waiting for XON (received data goes to
+/// `pending`).
+fn send(
+    inner: &mut Inner,
+    soft_flow: bool,
+    stopped: &mut bool,
+    pending: &mut Vec<u8>,
+    witness: &mut Witness,
+    bytes: &[u8],
+    progress: &mut dyn FnMut(usize),
+) -> io::Result<()> {
+    if !soft_flow {
+        write_all(inner, bytes)?;
+        progress(bytes.len());
+        return Ok(());
+    }
+    let mut done = 0;
+    let mut buf = [0u8; 4096];
+    for chunk in bytes.chunks(FLOW_CHUNK) {
+        let mut since = Instant::now();
+        loop {
+            let wait = if *stopped {
+                Duration::from_millis(50)
+            } else {
+                Duration::from_millis(1)
+            };
+            let n = raw_read(inner, &mut buf, wait)?;
+            if n > 0 {
+                let got = buf.get_mut(..n).unwrap_or(&mut []);
+                let was = *stopped;
+                let k = strip_flow(got, stopped);
+                let data = buf.get(..k).unwrap_or(&[]);
+                witness.received(data);
+                pending.extend_from_slice(data);
+                if was && !*stopped {
+                    since = Instant::now();
+                }
+            }
+            if !*stopped {
+                break;
+            }
+            if since.elapsed() > XOFF_PATIENCE {
+                return Err(io::Error::other(format!(
+                    "the other side sent XOFF and no XON for {} s",
+                    XOFF_PATIENCE.as_secs()
+                )));
+            }
+        }
+        write_all(inner, chunk)?;
+        done += chunk.len();
+        progress(done);
+    }
+    Ok(())
 }
 
 fn write_all(inner: &mut Inner, bytes: &[u8]) -> io::Result<()> {
@@ -249,5 +493,68 @@ fn write_all(inner: &mut Inner, bytes: &[u8]) -> io::Result<()> {
             p.flush()
         }
         Inner::Tcp(s) => s.write_all(bytes),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use iai_protocol_b::frame::Station;
+    use std::net::TcpListener;
+
+    /// Over TCP with `--flow xonxoff`, an XOFF stops the writing until XON
+    /// (a chunk may be under way), and neither reaches the received data.
+    #[test]
+    fn an_xoff_over_tcp_stops_the_writing_until_xon() {
+        let l = TcpListener::bind("127.0.0.1:0").unwrap();
+        let addr = l.local_addr().unwrap().to_string();
+        let peer = std::thread::spawn(move || {
+            let (mut c, _) = l.accept().unwrap();
+            c.write_all(&[XOFF]).unwrap();
+            std::thread::sleep(Duration::from_millis(400));
+            c.set_nonblocking(true).unwrap();
+            let mut buf = vec![0u8; 65536];
+            let during = c.read(&mut buf).unwrap_or(0);
+            c.set_nonblocking(false).unwrap();
+            c.write_all(&[XON, b'#', XOFF, XON]).unwrap();
+            let mut all = buf[..during].to_vec();
+            while all.len() < 10_000 {
+                let n = c.read(&mut buf).unwrap();
+                assert!(n > 0);
+                all.extend_from_slice(&buf[..n]);
+            }
+            (during, all)
+        });
+        let target = Target::Tcp {
+            addr,
+            flow: Flow::XonXoff,
+        };
+        let mut link = Link::open(&target, LineConfig::new(Station(0x99))).unwrap();
+        // The XOFF is there before the first chunk goes.
+        std::thread::sleep(Duration::from_millis(100));
+        let data: Vec<u8> = (0..10_000u32).map(|i| b'0' + (i % 10) as u8).collect();
+        let t0 = Instant::now();
+        link.write_all(&data).unwrap();
+        assert!(
+            t0.elapsed() >= Duration::from_millis(250),
+            "{:?}",
+            t0.elapsed()
+        );
+        let (during, all) = peer.join().unwrap();
+        assert!(
+            during <= FLOW_CHUNK,
+            "{during} bytes went out during the XOFF"
+        );
+        assert_eq!(all, data);
+        // The data byte between the flow-control bytes is kept, alone.
+        let mut got = link.take_pending();
+        let mut buf = [0u8; 16];
+        let end = Instant::now() + Duration::from_millis(300);
+        while got.is_empty() && Instant::now() < end {
+            let n = link.read_for(&mut buf, Duration::from_millis(50)).unwrap();
+            got.extend_from_slice(&buf[..n]);
+        }
+        assert_eq!(got, b"#");
     }
 }

@@ -1,7 +1,13 @@
-//! The state file of `iai table write` (`FILE.csv.iai-state`): which CSV,
-//! how many of its records the controller confirmed (in file order), and
-//! over which line. A resume continues after those records, on the same
-//! line only: the records are on that controller, not on another.
+//! The state files of an interrupted table command. `iai table write`
+//! keeps `FILE.csv.iai-state` ([`ResumeState`]): which CSV, how many of
+//! its records the controller confirmed (in file order), over which line,
+//! and whether the table was cleared first (`--replace`). `iai table read
+//! -o OUT.csv` keeps `OUT.csv.iai-read-state` ([`ReadState`]): the range
+//! asked, the positions read so far (their records are in `OUT.csv`) and
+//! the line. A resume continues where the state says, on the same line
+//! only: the records are on that controller, not on another. A state file
+//! left behind stops a new start ([`refuse_stale`]) until the user says
+//! `--resume` or `--restart`.
 
 use std::path::{Path, PathBuf};
 
@@ -18,6 +24,10 @@ pub struct ResumeState {
     /// profile.
     #[serde(default)]
     pub line: String,
+    /// A `--replace` write: the positions 246H reaches were cleared
+    /// before the first record was written.
+    #[serde(default)]
+    pub replace: bool,
 }
 
 impl ResumeState {
@@ -29,6 +39,7 @@ impl ResumeState {
             records,
             confirmed: 0,
             line: line.to_string(),
+            replace: false,
         }
     }
 
@@ -69,13 +80,7 @@ impl ResumeState {
 
     /// Writes the state beside `csv` (atomically: a temporary file renamed).
     pub fn save(&self, csv: &Path) {
-        let path = path(csv);
-        if let Ok(text) = serde_json::to_string(self) {
-            let tmp = path.with_extension("iai-state.tmp");
-            if std::fs::write(&tmp, text).is_ok() {
-                let _ = std::fs::rename(&tmp, &path);
-            }
-        }
+        save_json(&path(csv), self);
     }
 
     /// Removes the state of `csv` (the write completed).
@@ -88,6 +93,152 @@ impl ResumeState {
 pub fn path(csv: &Path) -> PathBuf {
     let mut s = csv.as_os_str().to_owned();
     s.push(".iai-state");
+    PathBuf::from(s)
+}
+
+/// Writes `value` as JSON to `path` through a temporary file renamed
+/// over it, so that a crash leaves the old state or the new, never half.
+fn save_json(path: &Path, value: &impl serde::Serialize) {
+    if let Ok(text) = serde_json::to_string(value) {
+        let mut tmp = path.as_os_str().to_owned();
+        tmp.push(".tmp");
+        if std::fs::write(&tmp, text).is_ok() {
+            let _ = std::fs::rename(&tmp, path);
+        }
+    }
+}
+
+/// A new start while `state` (the state file of an interrupted `what`)
+/// exists is refused: it would lose the resume point silently. The
+/// message says what the file holds and how to go on.
+pub fn refuse_stale(state: &Path, what: &str, progress: &str) -> Result<(), String> {
+    if !state.exists() {
+        return Ok(());
+    }
+    Err(format!(
+        "an interrupted {what} left {} ({progress}); run with --resume to continue it, or --restart to start over (the state file is then replaced)",
+        state.display()
+    ))
+}
+
+/// What the write state at `path` says, for [`refuse_stale`].
+pub fn write_progress(path: &Path) -> String {
+    std::fs::read_to_string(path)
+        .ok()
+        .and_then(|t| serde_json::from_str::<ResumeState>(&t).ok())
+        .map_or_else(
+            || "unreadable".to_string(),
+            |s| {
+                format!(
+                    "{} of {} records confirmed over {}",
+                    s.confirmed, s.records, s.line
+                )
+            },
+        )
+}
+
+/// The state of an interrupted `iai table read -o OUT.csv`.
+#[derive(serde::Serialize, serde::Deserialize, PartialEq, Eq, Debug, Clone)]
+pub struct ReadState {
+    /// The first position asked.
+    pub first: u16,
+    /// The last position asked.
+    pub last: u16,
+    /// `--all`: the whole table was asked (first and last are the
+    /// profile's range).
+    pub all: bool,
+    /// The first position not read yet (`last + 1` once done).
+    pub next: u32,
+    /// Defined records read so far (they are in the output file).
+    pub records: u32,
+    /// The line they were read over.
+    pub line: String,
+    /// FNV-1a hash of the output file as this read left it.
+    pub output_hash: String,
+}
+
+impl ReadState {
+    /// Reads the state kept for `out` and checks it belongs to this read:
+    /// the same range (or `--all`), the same line, and an output file as
+    /// the interrupted read left it.
+    pub fn resume(
+        out: &Path,
+        first: u16,
+        last: u16,
+        all: bool,
+        line: &str,
+    ) -> Result<Self, String> {
+        let path = read_path(out);
+        let text = std::fs::read_to_string(&path).map_err(|e| {
+            format!(
+                "--resume: no state file {} ({e}); run without --resume",
+                path.display()
+            )
+        })?;
+        let st: ReadState = serde_json::from_str(&text)
+            .map_err(|e| format!("--resume: {} is damaged ({e})", path.display()))?;
+        let asked = |all: bool, f: u16, l: u16| {
+            if all {
+                "--all".to_string()
+            } else {
+                format!("positions {f}..={l}")
+            }
+        };
+        if st.all != all || (!all && (st.first, st.last) != (first, last)) {
+            return Err(format!(
+                "--resume: the interrupted read asked for {}, this one for {}; run with the same range, or --restart",
+                asked(st.all, st.first, st.last),
+                asked(all, first, last)
+            ));
+        }
+        if st.line != line {
+            return Err(format!(
+                "--resume: the interrupted read went to {}, not to {line}; run with --restart to read this controller from the start",
+                st.line
+            ));
+        }
+        let now = std::fs::read(out).map(|b| fnv(&b)).unwrap_or_default();
+        if now != st.output_hash {
+            return Err(format!(
+                "--resume: {} changed since the interrupted read; run with --restart",
+                out.display()
+            ));
+        }
+        Ok(st)
+    }
+
+    /// Writes the state beside `out`, whose bytes are `written` now.
+    pub fn save(&mut self, out: &Path, written: &[u8]) {
+        self.output_hash = fnv(written);
+        save_json(&read_path(out), self);
+    }
+
+    /// Removes the state of `out` (the read completed).
+    pub fn remove(out: &Path) {
+        let _ = std::fs::remove_file(read_path(out));
+    }
+}
+
+/// What the read state at `path` says, for [`refuse_stale`].
+pub fn read_progress(path: &Path) -> String {
+    std::fs::read_to_string(path)
+        .ok()
+        .and_then(|t| serde_json::from_str::<ReadState>(&t).ok())
+        .map_or_else(
+            || "unreadable".to_string(),
+            |s| {
+                format!(
+                    "positions {}..{} read, {} records, over {}",
+                    s.first, s.next, s.records, s.line
+                )
+            },
+        )
+}
+
+/// Where the state of a read into `out` is kept.
+pub fn read_path(out: &Path) -> PathBuf {
+    let mut s = out.as_os_str().to_owned();
+    s.push(".iai-read-state");
     PathBuf::from(s)
 }
 

@@ -47,8 +47,14 @@ pub fn request(link: &mut Link, frame: &[u8], detail: bool) -> std::io::Result<O
 }
 
 /// What a failed request means, for the user: `target` is the line,
-/// `asked_detail` whether 216H was asked for.
-pub fn describe(e: &Failure, target: &impl std::fmt::Display, asked_detail: bool) -> String {
+/// `asked_detail` whether 216H was asked for, `timeout_ms` the wait for
+/// each reply.
+pub fn describe(
+    e: &Failure,
+    target: &impl std::fmt::Display,
+    asked_detail: bool,
+    timeout_ms: u32,
+) -> String {
     match *e {
         Failure::Controller {
             code,
@@ -76,7 +82,10 @@ pub fn describe(e: &Failure, target: &impl std::fmt::Display, asked_detail: bool
             m
         }
         Failure::Timeout { sends } => {
-            format!("no valid reply from {target} after {sends} send(s), 3 s each")
+            format!(
+                "no valid reply from {target} after {sends} send(s), {} each",
+                wait_text(timeout_ms)
+            )
         }
         Failure::OutcomeUnknown { sends } => format!(
             "no valid reply from {target} after {sends} send(s); not sent again, since a second send could repeat the operation: check the controller's state (212H)"
@@ -84,4 +93,62 @@ pub fn describe(e: &Failure, target: &impl std::fmt::Display, asked_detail: bool
         Failure::Protocol(e) => format!("the reply does not decode: {e}"),
         e => format!("{e}"),
     }
+}
+
+/// "3 s" or "200 ms".
+pub fn wait_text(ms: u32) -> String {
+    if ms.is_multiple_of(1000) {
+        format!("{} s", ms / 1000)
+    } else {
+        format!("{ms} ms")
+    }
+}
+
+/// A failed request as one JSON object (for `iai send --json`, on
+/// stdout): `{"type":"failure","failure":KIND,…,"message":TEXT}`. KIND is
+/// `error_response` (with the `code`, its `meaning` where the tool knows
+/// it, and the 216H `detail` if it came), `timeout`, `outcome_unknown`
+/// (with `sends`), or another failure's kind.
+pub fn failure_json(e: &Failure, message: &str) -> String {
+    use serde_json::json;
+    let mut v = match *e {
+        Failure::Controller { code, detail } => {
+            let mut v = json!({
+                "type": "failure",
+                "failure": "error_response",
+                "code": format!("{code:03X}"),
+            });
+            if let Some(m) = crate::codes::meaning(code) {
+                v["meaning"] = json!(m);
+            }
+            if let Some(d) = detail {
+                v["detail"] = json!({
+                    "error_number": format!("{:03X}", d.error_number),
+                    "matches_code": d.matches_code,
+                    "detail_1": d.detail_1,
+                    "detail_2": d.detail_2,
+                    "detail_3": d.detail_3,
+                    "detail_4": d.detail_4,
+                    "detail_5_to_8": d.detail_5_to_8,
+                });
+            }
+            v
+        }
+        Failure::Timeout { sends } => {
+            json!({"type": "failure", "failure": "timeout", "sends": sends})
+        }
+        Failure::OutcomeUnknown { sends } => {
+            json!({"type": "failure", "failure": "outcome_unknown", "sends": sends})
+        }
+        Failure::Protocol(_) => json!({"type": "failure", "failure": "protocol"}),
+        _ => json!({"type": "failure", "failure": "other"}),
+    };
+    v["message"] = json!(message);
+    v.to_string()
+}
+
+/// A failure before or beside the exchange (bad arguments, a line that
+/// cannot be opened) as one JSON object.
+pub fn plain_failure_json(kind: &str, message: &str) -> String {
+    serde_json::json!({"type": "failure", "failure": kind, "message": message}).to_string()
 }

@@ -10,13 +10,23 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
+use std::cell::Cell;
+use std::ops::RangeInclusive;
+
+use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::engine::Engine;
+use iai_protocol_b::frame::Frame;
+use iai_protocol_b::message::{
+    ClearPositionData, EffectivePositionCountQuery, EffectivePositionCountResponse, Message,
+    Request,
+};
 use iai_protocol_b::position::{PositionRecord, PositionStream};
 use iai_protocol_b::profile::Profile;
-use iai_protocol_b::readback::ReadBackStats;
+use iai_protocol_b::readback::{ReadBackStats, ReplyRecords};
 use iai_protocol_b::transfer::{Guarantee, TransferStats};
 use iai_protocol_b::{
-    Failure, LineConfig, ReadBack, ReadBackConfig, Station, Transfer, TransferConfig, Verify,
+    Client, Failure, LineConfig, ReadBack, ReadBackConfig, Station, Transfer, TransferConfig,
+    Verify,
 };
 
 use crate::link::Link;
@@ -51,6 +61,13 @@ impl Plan {
     fn read_config(&self, first: u16, last: u16) -> ReadBackConfig {
         ReadBackConfig::new(self.profile, first, last)
     }
+
+    /// The highest position number the profile's read-back query carries
+    /// (FFFFH for 21FH's 4 digits, FFFH for 209H's 3).
+    pub fn last_position(&self) -> u16 {
+        let digits = u32::from(self.write_stream().read_back().layout.number_width);
+        u16::try_from((1u32 << (4 * digits)) - 1).unwrap_or(u16::MAX)
+    }
 }
 
 /// Why a table operation stopped.
@@ -62,13 +79,15 @@ pub enum TableError {
     Io(std::io::Error),
     /// The user interrupted.
     Interrupted,
+    /// Nothing was sent: the request cannot be expressed (why).
+    Refused(String),
 }
 
 impl std::fmt::Display for TableError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             TableError::Engine(Failure::Timeout { sends }) => {
-                write!(f, "the controller did not answer ({sends} sends, 3 s each)")
+                write!(f, "the controller did not answer ({sends} send(s))")
             }
             TableError::Engine(Failure::Controller { code, .. }) => {
                 write!(f, "{}", crate::codes::answered_with(*code))
@@ -86,6 +105,7 @@ impl std::fmt::Display for TableError {
             TableError::Engine(e) => write!(f, "{e}"),
             TableError::Io(e) => write!(f, "the line failed: {e}"),
             TableError::Interrupted => write!(f, "interrupted"),
+            TableError::Refused(why) => write!(f, "{why}"),
         }
     }
 }
@@ -189,32 +209,63 @@ pub fn write(
     (result, t.stats())
 }
 
-/// Reads positions `first..=last` over `link`, calling `each` for every
-/// defined record, in order. Error responses are answered as in
+/// One window of a read: the positions it spans and the defined records
+/// in it, in order.
+pub struct Window {
+    /// The positions the window covered (defined or not).
+    pub span: RangeInclusive<u16>,
+    /// Its defined records.
+    pub records: Vec<PositionRecord>,
+}
+
+impl Window {
+    fn of(recs: ReplyRecords<'_>, last: u16) -> Window {
+        let head = recs.head();
+        let end = u32::from(head) + u32::from(recs.asked().max(1)) - 1;
+        let end = u16::try_from(end).unwrap_or(u16::MAX).min(last);
+        Window {
+            span: head..=end,
+            records: recs.collect(),
+        }
+    }
+}
+
+/// Reads positions `first..=last` over `link`, handing each window to
+/// `window` in order; `window` returns `false` to end the read there
+/// (the rest is not needed). Error responses are answered as in
 /// [`write()`].
 pub fn read(
     link: &mut Link,
     plan: &Plan,
     first: u16,
     last: u16,
-    mut each: impl FnMut(PositionRecord),
+    mut window: impl FnMut(Window) -> bool,
     hooks: &Hooks<'_>,
 ) -> Result<ReadBackStats, TableError> {
     let mut rb: ReadBack<FRAME> = ReadBack::new(plan.read_config(first, last));
     let mut refusals = 0;
+    let enough = Cell::new(false);
+    let stop = || enough.get() || (hooks.stop)();
+    let inner = Hooks {
+        note: hooks.note,
+        stop: &stop,
+    };
     loop {
         let mut delivered = false;
         let result = {
             let mut engine = rb.delivering(|recs| {
                 delivered = true;
-                recs.for_each(&mut each);
+                if !enough.get() && !window(Window::of(recs, last)) {
+                    enough.set(true);
+                }
             });
-            run(link, &mut engine, hooks, |_| false, None)
+            run(link, &mut engine, &inner, |_| false, None)
         };
         if delivered {
             refusals = 0;
         }
         match result {
+            Err(TableError::Interrupted) if enough.get() => return Ok(rb.stats()),
             Err(TableError::Engine(Failure::Controller { code, .. }))
                 if refusals < ERROR_RESENDS =>
             {
@@ -228,6 +279,105 @@ pub fn read(
             r => return r,
         }
     }
+}
+
+/// Sends one command `req` and returns its reply frame (empty for a
+/// command without normal response); an `&` reply is
+/// `Engine(Failure::Controller)`.
+pub fn command<'a, R: Request<'a>>(
+    link: &mut Link,
+    req: &R,
+    hooks: &Hooks<'_>,
+) -> Result<Vec<u8>, TableError> {
+    let mut client: Box<Client> = Box::new(Client::new());
+    let now = link.now();
+    client
+        .start(link.line_mut(), req, now)
+        .map_err(|e| TableError::Engine(Failure::Protocol(e)))?;
+    run(link, client.as_mut(), hooks, |_| false, None)?;
+    Ok(client
+        .reply_frame()
+        .map(|f| f.as_bytes().to_vec())
+        .unwrap_or_default())
+}
+
+/// The largest value of 208H's count field (3 hex digits): a table of
+/// this many records or more cannot be counted exactly.
+pub const COUNT_MAX: u16 = 0xFFF;
+
+/// 208H: how many positions the controller's table defines.
+pub fn count(link: &mut Link, hooks: &Hooks<'_>) -> Result<u16, TableError> {
+    let reply = command(link, &EffectivePositionCountQuery {}, hooks)?;
+    let bad = |e| TableError::Engine(Failure::Protocol(e));
+    let frame = Frame::new_checked(&reply, BypassPolicy::Reject).map_err(bad)?;
+    let r = EffectivePositionCountResponse::parse(&frame).map_err(bad)?;
+    Ok(r.number_of_effective_positions)
+}
+
+/// 246H's fields are 3 hex digits (2003 p. 42; the TTA page is lost and
+/// the layout assumed identical): a clear starts at position FFFH at the
+/// latest and spans at most FFFH positions.
+pub const CLEAR_FIELD_MAX: u16 = 0xFFF;
+
+/// The last position a 246H reaches: FFFH + FFFH - 1 = 8189.
+pub const CLEAR_LAST: u16 = CLEAR_FIELD_MAX + CLEAR_FIELD_MAX - 1;
+
+/// The 246H commands (start, count) that clear exactly `first..=last`, in
+/// ascending order; an error says why the range cannot be cleared.
+pub fn clear_commands(first: u16, last: u16) -> Result<Vec<(u16, u16)>, String> {
+    if first > last {
+        return Err(format!("the range {first}..={last} is empty"));
+    }
+    let reach = format!(
+        "246H gives the first position in 3 hex digits (at most {CLEAR_FIELD_MAX}) and clears at most {CLEAR_FIELD_MAX} positions at a time, so it reaches positions 0..={CLEAR_LAST}"
+    );
+    if last > CLEAR_LAST {
+        return Err(format!("position {last} is out of reach: {reach}"));
+    }
+    // From the top down, each command as long as it may be.
+    let mut out = Vec::new();
+    let mut end = u32::from(last);
+    let lo = u32::from(first);
+    loop {
+        let start = lo.max(end.saturating_sub(u32::from(CLEAR_FIELD_MAX) - 1));
+        if start > u32::from(CLEAR_FIELD_MAX) {
+            return Err(format!(
+                "positions {first}..={last} cannot be cleared without clearing others: {reach}"
+            ));
+        }
+        out.push((start as u16, (end - start + 1) as u16));
+        if start == lo {
+            break;
+        }
+        end = start - 1;
+    }
+    out.reverse();
+    Ok(out)
+}
+
+/// 246H: clears positions `first..=last` ([`clear_commands`]); `done` is
+/// told the last position cleared after each command.
+pub fn clear(
+    link: &mut Link,
+    first: u16,
+    last: u16,
+    mut done: impl FnMut(u16),
+    hooks: &Hooks<'_>,
+) -> Result<u32, TableError> {
+    let cmds = clear_commands(first, last).map_err(TableError::Refused)?;
+    let n = cmds.len() as u32;
+    for (start, count) in cmds {
+        command(
+            link,
+            &ClearPositionData {
+                clear_start_position_number: start,
+                number_of_clear_positions: count,
+            },
+            hooks,
+        )?;
+        done(start + (count - 1));
+    }
+    Ok(n)
 }
 
 /// Reads back the positions of `records` (records a state file says were
@@ -253,8 +403,9 @@ pub fn not_held(
         plan,
         first,
         last,
-        |r| {
-            held.insert(r.number, r);
+        |w| {
+            held.extend(w.records.into_iter().map(|r| (r.number, r)));
+            true
         },
         hooks,
     )?;
@@ -263,4 +414,43 @@ pub fn not_held(
         .filter(|r| held.get(&r.number) != Some(*r))
         .cloned()
         .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clears_tile_the_range_within_246h_reach() {
+        assert_eq!(clear_commands(0, 8189), Ok(vec![(0, 4095), (4095, 4095)]));
+        assert_eq!(clear_commands(5, 5), Ok(vec![(5, 1)]));
+        assert_eq!(
+            clear_commands(100, 8189),
+            Ok(vec![(100, 3995), (4095, 4095)])
+        );
+        assert_eq!(
+            clear_commands(0, 10_000),
+            Err("position 10000 is out of reach: 246H gives the first position in 3 hex digits (at most 4095) and clears at most 4095 positions at a time, so it reaches positions 0..=8189".into())
+        );
+        assert!(clear_commands(5000, 5001)
+            .unwrap_err()
+            .starts_with("positions 5000..=5001 cannot be cleared without clearing others"));
+        for (a, b) in [
+            (0, 0),
+            (0, 4094),
+            (0, 4095),
+            (1, 8189),
+            (4095, 8189),
+            (300, 7000),
+        ] {
+            let cmds = clear_commands(a, b).unwrap();
+            let mut next = u32::from(a);
+            for (s, n) in cmds {
+                assert_eq!(u32::from(s), next);
+                assert!(s <= CLEAR_FIELD_MAX && (1..=CLEAR_FIELD_MAX).contains(&n));
+                next += u32::from(n);
+            }
+            assert_eq!(next, u32::from(b) + 1);
+        }
+    }
 }

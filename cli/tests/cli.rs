@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{fixture_file, fixtures, iai, iai_stdin, record, stdout, temp, Sim};
+use common::{fixture_file, fixtures, iai, iai_stdin, record, stderr, stdout, temp, Sim};
 
 use std::io::Write;
 
@@ -146,12 +146,12 @@ fn every_error_of_a_mixed_capture_is_at_its_offset() {
     let out = iai(&["inspect", path.to_str().unwrap()]);
     let text = stdout(&out);
     assert!(
-        text.contains("00000007  command  st 99  212H Axis Status Query"),
+        text.contains("0x00000007  command  st 99  212H Axis Status Query"),
         "{text}"
     );
     assert!(text.contains("query_axis_pattern = 0x03 (3)"), "{text}");
     assert!(
-        text.contains("00000019  ERROR    ChecksumMismatch"),
+        text.contains("0x00000013  ERROR    ChecksumMismatch"),
         "{text}"
     );
     assert!(text.contains("-- 3 frame(s), 6 error(s)"), "{text}");
@@ -202,8 +202,9 @@ fn encode_round_trips_through_inspect() {
         "query_head_position_number=1",
         "number_of_query_records=5",
     ]);
-    assert_eq!(stdout(&out).lines().next(), Some("!9920900100554\\r\\n"));
-    assert!(stdout(&out).contains("checksum 54"));
+    // Only the frame on stdout; its checksum and length on stderr.
+    assert_eq!(stdout(&out), "!9920900100554\\r\\n\n");
+    assert_eq!(stderr(&out), "checksum 54, 16 bytes\n");
 
     let j = encode_then_inspect(&["encode", "AxisStatusQuery", "query_axis_pattern=0x3"]);
     assert_eq!(get(&j, "id"), Some("212"));
@@ -305,7 +306,13 @@ fn simulate_answers_an_axis_status_query_over_tcp() {
     // It logs what it received and sent, and the connection's end.
     sim.wait_for("1 command(s), 1 reply(ies)");
     let log = sim.stop();
-    assert!(log.contains("< 00000000 rx  command  st 99  212H"), "{log}");
-    assert!(log.contains("> 00000000 tx  response st 99  212H"), "{log}");
+    assert!(
+        log.contains("< 0x00000000 rx  command  st 99  212H"),
+        "{log}"
+    );
+    assert!(
+        log.contains("> 0x00000000 tx  response st 99  212H"),
+        "{log}"
+    );
     assert!(log.contains("1 command(s), 1 reply(ies)"), "{log}");
 }

@@ -146,11 +146,11 @@ fn the_text_listing_places_them_too() {
     let text = stdout(&out);
     let first = text.lines().next().unwrap();
     assert!(
-        first.starts_with("00000000  ERROR    Truncated: frame cut short by the end of the capture after 345 bytes, decoded again from offset 93  [93 bytes]"),
+        first.starts_with("0x00000000  ERROR    Truncated: frame cut short by the end of the capture after 345 bytes, decoded again from offset 93  [93 bytes]"),
         "{text}"
     );
     for (i, f) in commands().iter().enumerate() {
-        let at = format!("{:08}  command  st 99  {}H ", 93 + 12 * i, id(f));
+        let at = format!("0x{:08X}  command  st 99  {}H ", 93 + 12 * i, id(f));
         assert!(text.contains(&at), "{at}: {text}");
     }
     assert!(text.ends_with("-- 21 frame(s), 1 error(s)\n"), "{text}");

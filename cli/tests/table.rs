@@ -144,7 +144,8 @@ fn an_interrupted_write_resumes_after_the_last_confirmed_record() {
     // SAFETY: signalling our own child.
     unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
     let out = child.wait_with_output().unwrap();
-    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    // Ctrl-C: exit 130, the state kept.
+    assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
     assert!(stderr(&out).contains("--resume"), "{}", stderr(&out));
     let state = std::fs::read_to_string(format!("{p}.iai-state")).unwrap();
     let out = iai(&[
@@ -236,7 +237,7 @@ fn a_2003_x_sel_takes_3_digit_tables_through_245h_and_209h() {
 #[cfg(unix)]
 fn interrupted_write(p: &str, at: &str, ms: u64, signal: i32) -> std::process::Output {
     let child = std::process::Command::new(env!("CARGO_BIN_EXE_iai"))
-        .args(["table", "write", p, "--tcp", at])
+        .args(["table", "write", p, "--tcp", at, "--restart"])
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
@@ -258,7 +259,7 @@ fn a_resume_on_another_line_is_refused() {
     let path = temp("elsewhere.csv", csv.as_bytes());
     let p = path.to_str().unwrap().to_string();
     let out = interrupted_write(&p, &sim.at, 1_000, libc::SIGINT);
-    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
     let out = iai(&["table", "write", &p, "--tcp", &other.at, "--resume"]);
     assert_eq!(out.status.code(), Some(1), "{}", stdout(&out));
     let e = stderr(&out);
@@ -286,7 +287,8 @@ fn a_resume_on_a_swapped_controller_reads_back_or_says_unverified() {
     let csv = csv_table(1_000, 8, 29);
     let path = temp("swapped.csv", csv.as_bytes());
     let p = path.to_str().unwrap().to_string();
-    // Interrupted by Ctrl-C, then (started over) killed outright.
+    // Interrupted by Ctrl-C, then (started over with --restart) killed
+    // outright.
     for kill in [libc::SIGINT, libc::SIGKILL] {
         let out = interrupted_write(&p, &at, 1_200, kill);
         assert_ne!(out.status.code(), Some(0), "{}", stderr(&out));

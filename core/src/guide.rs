@@ -138,7 +138,7 @@
 //! A position table can hold 20,000 records of 8 axes: far more than one
 //! command frame may carry. [`Transfer`](crate::transfer::Transfer) pulls
 //! records from any source (an iterator here, a
-//! [`RecordQueue`](crate::transfer::RecordQueue) when they arrive over
+//! [`RecordBuffer`](crate::transfer::RecordBuffer) when they arrive over
 //! another link), packs as many as the controller accepts into each 26DH
 //! command, waits for the reply that confirms that count (sending again
 //! after a timeout), then reads the positions back with 21FH and compares

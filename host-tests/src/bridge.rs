@@ -580,3 +580,49 @@ pub fn check_table(
     }
     Ok(())
 }
+
+/// A host's 26DH rate through the bridge against the limit the downstream
+/// line sets: every record crosses it twice (its chunk, then the 21FH
+/// read-back), and every command costs the controller's processing time
+/// and the line's turnaround. The limit is the host's rate if the
+/// downstream line never stood idle.
+#[derive(Debug, Clone, Copy)]
+pub struct Throughput {
+    /// Line rate, baud (8N1), both sides.
+    pub baud: u32,
+    /// Bytes of the host's message.
+    pub host_bytes: u64,
+    /// From the host's first byte to the bridge's reply, seconds.
+    pub seconds: f64,
+    /// Bytes on the downstream line, both directions.
+    pub downstream_bytes: u64,
+    /// Commands the controller answered.
+    pub commands: u32,
+    /// Controller time per command plus the line's turnaround, ms.
+    pub per_command_ms: u32,
+}
+
+impl Throughput {
+    fn line_rate(&self) -> f64 {
+        f64::from(self.baud) / 10.0
+    }
+    /// The host's rate, percent of the line rate.
+    pub fn percent(&self) -> f64 {
+        self.host_bytes as f64 / self.seconds / self.line_rate() * 100.0
+    }
+    /// The downstream line's limit for it, percent of the line rate.
+    pub fn limit_percent(&self) -> f64 {
+        let busy = self.downstream_bytes as f64 / self.line_rate()
+            + f64::from(self.commands) * f64::from(self.per_command_ms) / 1_000.0;
+        self.host_bytes as f64 / busy / self.line_rate() * 100.0
+    }
+    /// `throughput BAUD FLOW N% of line rate, limit M%`.
+    pub fn line(&self, flow: &str) -> String {
+        format!(
+            "throughput {} {flow} {:.0}% of line rate, limit {:.0}%",
+            self.baud,
+            self.percent(),
+            self.limit_percent()
+        )
+    }
+}

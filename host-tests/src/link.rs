@@ -150,7 +150,7 @@ pub fn run_transfer<I: RecordSource, const N: usize>(
 }
 
 /// Like [`run_transfer`], calling `feed` with the transfer's source at
-/// every step (e.g. to push records into a `RecordQueue` as they
+/// every step (e.g. to push records into a `RecordBuffer` as they
 /// "arrive").
 pub fn run_fed<I: RecordSource, const N: usize>(
     t: &mut Transfer<I, N>,

@@ -10,10 +10,11 @@ use std::time::Instant;
 use firmware_example::codes;
 use firmware_example::serial::FlowControl;
 use host_tests::bridge::model::{self, ModelConfig, ModelReport};
-use host_tests::bridge::{check_table, command_26dh, error_reply, reply_26dh};
+use host_tests::bridge::{check_table, command_26dh, error_reply, reply_26dh, Throughput};
 use host_tests::sim::Simulator;
 use host_tests::table::table;
 use iai_protocol_b::position::PositionRecord;
+use iai_protocol_b::LineConfig;
 
 /// Processing time the controller takes per command (writing 24 records).
 const PROCESSING_MS: u32 = 50;
@@ -58,6 +59,21 @@ fn full_table(baud: u32, flow: FlowControl) {
         r.polls,
         started.elapsed()
     );
+    let s = sim.stats();
+    let throughput = Throughput {
+        baud,
+        host_bytes: r.host_bytes,
+        seconds: r.elapsed_ns as f64 / 1e9,
+        downstream_bytes: s.bytes_in + s.bytes_out,
+        commands: s.commands,
+        per_command_ms: PROCESSING_MS + LineConfig::new(station).turnaround_ms,
+    };
+    let flow_name = match flow {
+        FlowControl::XonXoff => "xon-xoff",
+        FlowControl::RtsCts => "rts-cts",
+        FlowControl::None => "none",
+    };
+    println!("{}", throughput.line(flow_name));
     assert_eq!(r.overruns, 0);
     assert_eq!(r.stale_waits, 0);
     assert_eq!(r.replies, vec![Some(reply_26dh(station, 20_000))]);

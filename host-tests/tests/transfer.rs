@@ -8,7 +8,7 @@ use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::position::PositionStream;
 use iai_protocol_b::transfer::{
-    Guarantee, RecordQueue, RecordSource, Transfer, TransferConfig, Verify,
+    packed_len, Guarantee, RecordBuffer, RecordSource, Transfer, TransferConfig, Verify,
 };
 use iai_protocol_b::{Failure, Profile};
 
@@ -253,12 +253,13 @@ fn records_arriving_a_few_at_a_time_through_a_queue_lose_nothing() {
     // As in the bridge: records come from the upstream UART in bursts; the
     // engine waits (NeedRecords) rather than sending short frames.
     let mut sim = Simulator::tta(ST).with_faults(faulty(), 77);
-    let mut t: Transfer<RecordQueue<32>> = Transfer::new(TTA, RecordQueue::new()).with_total(3_000);
+    let mut t: Transfer<RecordBuffer<{ 32 * packed_len(3) }>> =
+        Transfer::new(TTA, RecordBuffer::new()).with_total(3_000);
     let mut src = table(3_000, 3, 21);
     let mut line = line_to(&sim);
     let r = run_fed(&mut t, &mut line, &mut sim, 50, 0, 0, |q| {
         for _ in 0..5 {
-            if q.is_full() || q.is_finished() {
+            if !q.fits(3) || q.is_finished() {
                 break;
             }
             match src.next() {

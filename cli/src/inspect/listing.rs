@@ -7,7 +7,12 @@ use iai_protocol_b::checksum::ChecksumField;
 use iai_protocol_b::frame::Header;
 
 use super::item::{Item, What};
-use crate::fields::{json_object, text_lines};
+use crate::fields::{json_meanings, json_object, meanings, text_lines, Val};
+
+/// What a field of message `id` means (units, status bits, codes).
+fn explainer(id: u16, header: Header) -> impl Fn(&str, &str, &Val) -> Option<String> {
+    move |name: &str, unit: &str, v: &Val| crate::meaning::describe(id, header, name, unit, v)
+}
 use crate::text::{escape, json_str};
 
 fn kind_name(h: Header) -> &'static str {
@@ -47,6 +52,9 @@ pub fn json_line(item: &Item) -> String {
             ];
             if f.header == Header::Error {
                 p.push(format!("\"code\":\"{:03X}\"", f.code));
+                if let Some(m) = crate::codes::meaning(f.code) {
+                    p.push(format!("\"meaning\":{}", json_str(&m)));
+                }
             } else {
                 p.push(format!("\"id\":\"{:03X}\"", f.code));
                 if let Some(n) = catalogue::lookup(f.code).map(|m| m.name) {
@@ -58,6 +66,11 @@ pub fn json_line(item: &Item) -> String {
                 Ok((ty, fields)) => {
                     p.push(format!("\"message\":{}", json_str(ty)));
                     p.push(format!("\"fields\":{}", json_object(fields)));
+                    let mut m = Vec::new();
+                    meanings(fields, "", &explainer(f.code, f.header), &mut m);
+                    if !m.is_empty() {
+                        p.push(format!("\"meanings\":{}", json_meanings(&m)));
+                    }
                 }
                 Err(e) => p.push(format!("\"decode_error\":{}", json_str(e))),
             }
@@ -105,7 +118,7 @@ pub fn json_line(item: &Item) -> String {
 
 /// One entry as listing lines.
 pub fn text_entry(item: &Item) -> Vec<String> {
-    let mut at = format!("{:08}", item.offset);
+    let mut at = format!("0x{:08X}", item.offset);
     if let Some(line) = item.origin.line {
         at.push_str(&format!(" L{line}"));
     }
@@ -117,7 +130,10 @@ pub fn text_entry(item: &Item) -> Vec<String> {
         What::Frame(f) => {
             let (status, sc) = checksum_text(f.checksum);
             let what = if f.header == Header::Error {
-                format!("error code {:03X}", f.code)
+                match crate::codes::meaning(f.code) {
+                    Some(m) => format!("error code {:03X} ({m})", f.code),
+                    None => format!("error code {:03X}", f.code),
+                }
             } else {
                 format!(
                     "{:03X}H {}",
@@ -134,7 +150,9 @@ pub fn text_entry(item: &Item) -> Vec<String> {
                 item.len
             ));
             match &f.decoded {
-                Ok((_, fields)) => text_lines(fields, "", "    ", &mut out),
+                Ok((_, fields)) => {
+                    text_lines(fields, "", "    ", &mut out, &explainer(f.code, f.header))
+                }
                 Err(e) => out.push(format!("    (not decoded: {e})")),
             }
         }
@@ -155,7 +173,13 @@ pub fn text_entry(item: &Item) -> Vec<String> {
             for (label, rec) in [("first", &s.first), ("last", &s.last)] {
                 if let Some(rec) = rec {
                     out.push(format!("    {label} record:"));
-                    text_lines(rec, "", "      ", &mut out);
+                    text_lines(
+                        rec,
+                        "",
+                        "      ",
+                        &mut out,
+                        &explainer(s.kind.id, Header::Command),
+                    );
                 }
             }
         }

@@ -41,7 +41,7 @@ mod build;
 mod source;
 mod verify;
 
-pub use source::{Pull, RecordQueue, RecordSource};
+pub use source::{packed_len, Pull, RecordBuffer, RecordSource};
 
 use verify::Verifier;
 
@@ -393,7 +393,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         &self.cfg
     }
 
-    /// The record source (e.g. to push records into a [`RecordQueue`]).
+    /// The record source (e.g. to push records into a [`RecordBuffer`]).
     pub fn source_mut(&mut self) -> &mut I {
         &mut self.source
     }
@@ -692,7 +692,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
 
     /// Runs the transfer to the end over an `embedded-io-async` UART,
     /// sleeping at most `poll_ms` between checks while it waits (a
-    /// [`RecordQueue`] source is filled by its owner between calls; a
+    /// [`RecordBuffer`] source is filled by its owner between calls; a
     /// pending source just sleeps).
     #[cfg(feature = "async")]
     pub async fn run_async<U, C>(

@@ -11,6 +11,9 @@ use crate::line::LineConfig;
 use crate::message::{ChangePositionData2Response, EffectivePositionResponse2, Message, Repeated};
 use crate::testing::{record, run, Controller, Fault, ST};
 
+/// Room for four 8-axis records.
+type Queue = RecordBuffer<{ 4 * packed_len(8) }>;
+
 fn records(n: u16, axes: u8) -> Vec<PositionRecord> {
     (1..=n)
         .map(|i| {
@@ -97,22 +100,19 @@ fn a_reply_with_another_count_never_confirms_and_a_reply_before_the_send_is_stal
 /// Runs a queue-fed transfer of `recs` (Verify::Off) to its end, answering
 /// every chunk: what it sent.
 fn run_queued(
-    t: &mut Transfer<RecordQueue<4>>,
+    t: &mut Transfer<Queue>,
     l: &mut Line,
     recs: &[PositionRecord],
     mut now: u32,
 ) -> (Vec<Vec<u8>>, Result<Guarantee, Failure>) {
-    let mut rest = recs.iter();
+    let mut rest = recs.iter().peekable();
     let mut sent = Vec::new();
     loop {
-        while !t.source_mut().is_full() {
-            match rest.next() {
-                Some(r) => t.source_mut().push(r.clone()).unwrap(),
-                None => {
-                    t.source_mut().finish();
-                    break;
-                }
-            }
+        while let Some(r) = rest.next_if(|r| t.source_mut().fits(r.positions.len())) {
+            t.source_mut().push(r.clone()).unwrap();
+        }
+        if rest.peek().is_none() {
+            t.source_mut().finish();
         }
         match t.poll(l, now) {
             Step::Transmit(b) => {
@@ -136,13 +136,13 @@ fn a_restarted_transfer_runs_as_a_new_one() {
         ..TTA.with_verify(Verify::Off)
     };
     let recs = records(17, 3);
-    let mut fresh = Transfer::<_>::new(second, RecordQueue::<4>::new()).with_total(17);
+    let mut fresh = Transfer::<_>::new(second, Queue::new()).with_total(17);
     let expected = run_queued(&mut fresh, &mut line(), &recs, 1_000);
 
     // A transfer left half way (a chunk sent, never answered, records
     // queued), its buffer then used to decode something else.
     let mut l = line();
-    let mut t = Transfer::<_>::new(first, RecordQueue::<4>::new());
+    let mut t = Transfer::<_>::new(first, Queue::new());
     for r in &recs[..4] {
         t.source_mut().push(r.clone()).unwrap();
     }
@@ -166,7 +166,7 @@ fn a_restarted_transfer_runs_as_a_new_one() {
     }
     assert_eq!(l.stats().fences, 1);
     let mut fresh_line = line();
-    let mut again = Transfer::<_>::new(second, RecordQueue::<4>::new()).with_total(17);
+    let mut again = Transfer::<_>::new(second, Queue::new()).with_total(17);
     assert_eq!(
         run_queued(&mut again, &mut fresh_line, &recs, 1_000),
         expected

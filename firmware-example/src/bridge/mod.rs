@@ -37,13 +37,14 @@ mod stream;
 mod upstream;
 
 use embedded_io::{Write, WriteReady};
+use iai_protocol_b::axis::MAX_AXES;
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::FrameDecoder;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::line::Line as ControllerLine;
 pub use iai_protocol_b::line::Line;
 use iai_protocol_b::position::PositionStream;
-use iai_protocol_b::transfer::{RecordQueue, Transfer};
+use iai_protocol_b::transfer::{packed_len, RecordBuffer, Transfer};
 use iai_protocol_b::{LineConfig, Profile, TransferConfig};
 
 use crate::config::{Config, Source};
@@ -57,10 +58,15 @@ use upstream::Upstream;
 /// Upstream silence required before the quit sequence.
 pub const QUIT_GUARD_MS: u32 = 20;
 
-/// Records buffered between the upstream decoder and the transfer. The
-/// transfer packs records into its chunk as they come, so a few suffice;
-/// more only lets the host run further ahead while a chunk is confirmed.
-pub const QUEUE_LEN: usize = 8;
+/// Bytes of the buffer between the upstream decoder and the transfer:
+/// room for a whole chunk of 8-axis records (24 in a 2,051-byte frame, 43
+/// bytes each packed), so that the host sends the next chunk while the
+/// controller writes and reads back this one.
+pub const QUEUE_BYTES: usize = FRAME_RECORDS_8_AXES * packed_len(MAX_AXES);
+
+/// 8-axis records in one controller-sized 26DH chunk.
+const FRAME_RECORDS_8_AXES: usize =
+    (FRAME_CAP - STREAM.overhead()) / STREAM.layout.record_len(MAX_AXES);
 
 /// How long a 26DH may pause upstream in its middle (while the bridge is
 /// ready to read) before it is abandoned with
@@ -223,7 +229,7 @@ impl Port for NoPort {}
 
 /// The 26DH transfer: records from the upstream decoder through a bounded
 /// queue to controller-sized commands.
-type Job = Transfer<RecordQueue<QUEUE_LEN>>;
+type Job = Transfer<RecordBuffer<QUEUE_BYTES>>;
 
 /// Where the bridge is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -308,7 +314,7 @@ impl Bridge {
             mode: Mode::Idle,
             up: Upstream::new(),
             line: ControllerLine::new(line_config(&cfg), seed),
-            job: Transfer::new(TransferConfig::new(Profile::TTA), RecordQueue::new()),
+            job: Transfer::new(TransferConfig::new(Profile::TTA), RecordBuffer::new()),
             fence_replies: FrameDecoder::with_policy(BypassPolicy::Reject),
             stream: StreamWork::new(cfg.downstream_baud),
             out_off: 0,

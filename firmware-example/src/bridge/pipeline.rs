@@ -2,10 +2,19 @@
 //! controller: chunk and queue sizes for the downstream rate, so that what
 //! is left when the host's last byte arrives can be written and read back
 //! before the host's reply timeout (3 s after its last byte, 2003 p. 62).
+//!
+//! Two phases. In the middle of a message the buffer holds a whole chunk
+//! of the host's records while the controller writes and reads back the
+//! chunk before: the host's bytes hide under the downstream time. Once the
+//! host has at most [`END_PHASE_RECORDS`] records left to send, the queue
+//! is held to [`Pipeline::queued_records`], so that what is left when the
+//! last byte arrives fits the budget; that many records cannot all sit in
+//! the receive ring, so the host's last byte cannot arrive before the
+//! buffer has drained to that size.
 
 use iai_protocol_b::transfer::MAX_FRAME_RECORDS;
 
-use super::{FRAME_CAP, QUEUE_LEN};
+use super::{FRAME_CAP, STREAM};
 use crate::serial::{self, UPSTREAM_MARKS};
 
 /// Of the host's 3 s for a 26DH reply (counted from the end of its
@@ -33,6 +42,17 @@ const CHUNK_OVERHEAD_BYTES: u64 = CHUNK_ENVELOPE_BYTES + 14 + 18 + 18;
 /// Bytes of an 8-axis 26DH record, the longest (TTA p. 60).
 const LONGEST_RECORD_BYTES: u64 = 82;
 
+/// Most records queued in the end phase (see [`pipeline`]).
+pub const END_QUEUE_RECORDS: usize = 8;
+
+/// Bytes the receive ring may hold when the host stops: its pause mark
+/// plus what the host sends after being told.
+const RING_BYTES: usize = UPSTREAM_MARKS.pause_at + serial::HOST_LATENCY;
+
+/// Records the host may still have to send when the end phase begins:
+/// one more than the shortest records (no axes) that fit [`RING_BYTES`].
+pub const END_PHASE_RECORDS: u16 = (RING_BYTES / STREAM.layout.record_len(0) + 1) as u16;
+
 /// Fewest records per chunk, whatever the rate: below it the two commands
 /// and two replies of each chunk and the controller's time per command
 /// outweigh the records (on a line that repeats frames, three also leave
@@ -46,7 +66,8 @@ const MIN_CHUNK_RECORDS: u16 = 3;
 pub struct Pipeline {
     /// Most records per 26DH chunk.
     pub chunk_records: u16,
-    /// Most records decoded from the host and waiting for a chunk.
+    /// Most records decoded from the host and waiting for a chunk, in the
+    /// end phase (before it, as many as the buffer holds).
     pub queued_records: usize,
 }
 
@@ -64,7 +85,7 @@ const fn line_us(bytes: u64, baud: u64) -> u64 {
 /// most a 2,051-byte frame whatever its records), each chunk with its
 /// commands' overhead and [`PROCESSING_ALLOWANCE_MS`] per command.
 const fn finish_us(chunk: u64, queued: u64, baud: u64) -> u64 {
-    let ring = (UPSTREAM_MARKS.pause_at + serial::HOST_LATENCY) as u64;
+    let ring = RING_BYTES as u64;
     let frame_records = (FRAME_CAP as u64 - CHUNK_ENVELOPE_BYTES) / LONGEST_RECORD_BYTES;
     let chunk_bytes = if chunk < frame_records {
         chunk
@@ -88,7 +109,7 @@ const fn finish_us(chunk: u64, queued: u64, baud: u64) -> u64 {
 /// baud: chunks of 5 records and a queue of 1 (1.93 s left at
 /// the end, worst case); 19,200: 15 and 1 (1.92 s); from 38,400: chunks
 /// as long as a 2,051-byte frame allows (24 8-axis records, more of fewer
-/// axes) and the full queue of [`QUEUE_LEN`] (1.74 s at 38,400, 0.71 s at
+/// axes) and the full end-phase queue of [`END_QUEUE_RECORDS`] (1.74 s at 38,400, 0.71 s at
 /// 115,200).
 pub const fn pipeline(baud: u32) -> Pipeline {
     let baud = if baud == 0 { 1 } else { baud as u64 };
@@ -100,7 +121,7 @@ pub const fn pipeline(baud: u32) -> Pipeline {
         }
         chunk -= 1;
     }
-    let mut queued = QUEUE_LEN as u64;
+    let mut queued = END_QUEUE_RECORDS as u64;
     while queued > 1 && finish_us(chunk, queued, baud) > budget {
         queued -= 1;
     }
@@ -122,8 +143,8 @@ mod tests {
         };
         assert_eq!(pipeline(9_600), p(5, 1));
         assert_eq!(pipeline(19_200), p(15, 1));
-        assert_eq!(pipeline(38_400), p(MAX_FRAME_RECORDS, QUEUE_LEN));
-        assert_eq!(pipeline(u32::MAX), p(MAX_FRAME_RECORDS, QUEUE_LEN));
+        assert_eq!(pipeline(38_400), p(MAX_FRAME_RECORDS, END_QUEUE_RECORDS));
+        assert_eq!(pipeline(u32::MAX), p(MAX_FRAME_RECORDS, END_QUEUE_RECORDS));
         // Too slow for the budget: the smallest pipeline that still runs.
         assert_eq!(pipeline(0), p(MIN_CHUNK_RECORDS, 1));
         assert_eq!(pipeline(1_200), p(MIN_CHUNK_RECORDS, 1));

@@ -10,6 +10,7 @@
 //!
 //! [`Verify::Full`]: iai_protocol_b::transfer::Verify::Full
 
+use iai_protocol_b::axis::MAX_AXES;
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::clock::reached;
 use iai_protocol_b::engine::{feed, Step};
@@ -18,7 +19,7 @@ use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::stream::{PositionStreamDecoder, StreamEvent};
 use iai_protocol_b::{Failure, Profile, TransferConfig};
 
-use super::pipeline::{pipeline, Pipeline};
+use super::pipeline::{pipeline, Pipeline, END_PHASE_RECORDS};
 use super::upstream::Up;
 use super::{write_some, Bridge, Error, Job, Mode, Port, UPSTREAM_STALL_MS};
 use crate::codes;
@@ -70,15 +71,25 @@ impl Bridge {
         log::info!("26DH stream for station {=u8:02X}", station.0);
     }
 
-    /// Whether the 26DH queue holds all the records the pipeline allows
-    /// (see [`pipeline`]): the bridge then stops reading the host.
+    /// Whether the 26DH buffer holds all the records the pipeline allows
+    /// (see [`pipeline`]): the bridge then stops reading the host. Before
+    /// the end phase, as many as fit (room for an 8-axis record is kept);
+    /// in it, [`Pipeline::queued_records`].
     pub(super) fn queue_full(&mut self) -> bool {
         if !self.stream.started {
             return false;
         }
-        let limit = self.stream.pipeline.queued_records;
+        let decoder = &self.stream.decoder;
+        let to_come = decoder
+            .records_announced()
+            .saturating_sub(decoder.records_done());
+        let limit = if to_come > END_PHASE_RECORDS {
+            usize::MAX
+        } else {
+            self.stream.pipeline.queued_records
+        };
         let q = self.job.source_mut();
-        q.is_full() || q.len() >= limit
+        !q.fits(MAX_AXES) || q.len() >= limit
     }
 
     /// The 26DH mode: decode upstream bytes into the queue, drive the

@@ -5,6 +5,7 @@
 //! window writes. A queued command goes before the next poll.
 
 use iai_protocol_b::axis::AxisPattern;
+use iai_protocol_b::axis::MAX_AXES;
 use iai_protocol_b::clock::reached;
 use iai_protocol_b::engine::{feed, Engine, Step};
 use iai_protocol_b::line::Line;
@@ -14,7 +15,7 @@ use iai_protocol_b::message::{
     OutputPortQuery, PositionNumberMove2, ProgramStatusQuery, Repeated, ServoOnOff,
     SystemStatusQuery,
 };
-use iai_protocol_b::transfer::{Guarantee, RecordQueue};
+use iai_protocol_b::transfer::{packed_len, Guarantee, RecordBuffer};
 use iai_protocol_b::{
     Client, Error, Failure, Profile, ReadBack, ReadBackConfig, Transfer, TransferConfig,
 };
@@ -40,6 +41,9 @@ pub const WINDOW_FRAME: usize = 432;
 /// characters does not fit, and that poll fails).
 pub type Poller = Client<96, 160>;
 
+/// The window write's records, packed (five 8-axis records, 215 bytes).
+pub const WINDOW_BYTES: usize = WINDOW_RECORDS * packed_len(MAX_AXES);
+
 /// What the gateway has on the line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Exchange {
@@ -52,7 +56,7 @@ enum Exchange {
 pub struct Engines {
     client: Poller,
     readback: ReadBack<WINDOW_FRAME>,
-    transfer: Transfer<RecordQueue<WINDOW_RECORDS>, WINDOW_FRAME>,
+    transfer: Transfer<RecordBuffer<WINDOW_BYTES>, WINDOW_FRAME>,
     exchange: Exchange,
     /// Bytes of the current transmission already written.
     tx_off: usize,
@@ -76,7 +80,7 @@ impl Engines {
         Engines {
             client: Client::new(),
             readback: ReadBack::new(window_config(0)),
-            transfer: Transfer::new(transfer_config(), RecordQueue::new()),
+            transfer: Transfer::new(transfer_config(), RecordBuffer::new()),
             exchange: Exchange::Idle,
             tx_off: 0,
             deadline: None,

@@ -28,14 +28,15 @@ use std::time::{Duration, Instant};
 
 use firmware_example::config::Config;
 use host_tests::bridge::{
-    check_table, command_26dh, reply_26dh, status_query, HostLink, SimThread,
+    check_table, command_26dh, reply_26dh, status_query, HostLink, SimThread, Throughput,
 };
-
-/// Sends of the 26DH before the demo gives up (a host's own retries).
-const MAX_SENDS: u32 = 8;
 use host_tests::qemu::{build_firmware, test_config, Board, QemuSession, READY_MARKER};
 use host_tests::sim::{Faults, Simulator};
 use host_tests::table::table;
+use iai_protocol_b::LineConfig;
+
+/// Sends of the 26DH before the demo gives up (a host's own retries).
+const MAX_SENDS: u32 = 8;
 
 struct Options {
     records: u16,
@@ -323,6 +324,16 @@ fn run() -> Result<(), String> {
         field(&fields, "chunk_error_replies")
     );
     println!("  time             {secs:.1} s");
+    let throughput = Throughput {
+        baud: o.baud,
+        host_bytes: upstream as u64,
+        seconds: secs,
+        downstream_bytes: s.bytes_in + s.bytes_out,
+        commands: s.commands,
+        per_command_ms: o.processing_ms + LineConfig::new(station).turnaround_ms,
+    };
+    // The demo's host honours XON/XOFF (the default configuration).
+    println!("{}", throughput.line("xon-xoff"));
     println!("  stack peak       {stack} bytes");
     println!("stack {} {stack}", board.bin());
     Ok(())
