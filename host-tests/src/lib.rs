@@ -8,6 +8,7 @@ pub mod link;
 pub mod modbus_model;
 pub mod naive;
 pub mod qemu;
+pub mod rtu_relay;
 pub mod table;
 
 pub use iai_cli::sim;

@@ -2,15 +2,18 @@
 //! and its host side on a TCP port of 127.0.0.1, relayed like a serial
 //! cable at the line rate with XON/XOFF (see [`host_tests::gateway`]).
 //!
-//! Prints exactly one line on stdout, `protocol-b 127.0.0.1:PORT`, once
-//! the bridge answers through the relay; everything else goes to stderr.
+//! Prints `protocol-b 127.0.0.1:PORT` on stdout once the bridge answers
+//! through the relay and, on a board with the gateway's Modbus RTU port
+//! (`lm3s6965`), `modbus-rtu 127.0.0.1:PORT` after it; nothing else goes
+//! to stdout.
 //! Runs until SIGINT, SIGTERM or SIGHUP (Ctrl-C), then stops QEMU and the
 //! simulator. Exit code 0 after such a stop, 1 if anything failed (QEMU
 //! exiting on its own included), 2 for bad arguments.
 //!
 //! Run through `./tools/gateway.sh`. Options: `--port P` (default: a free
 //! port), `--baud B` (9600, 19200, 38400, 57600 or 115200, default
-//! 115200), `--board lm3s6965|mps2-an386`, `--reply-delay-ms MS` (the
+//! 115200), `--modbus-port P`, `--modbus-baud B` (the Modbus RTU port,
+//! default 115200, even parity, unit 1), `--board lm3s6965|mps2-an386`, `--reply-delay-ms MS` (the
 //! simulated controller's time per command, default 2), `--faults SPEC`
 //! (as `iai simulate --faults`), `--seed S`, `--elf PATH`.
 
@@ -20,10 +23,11 @@ use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-use host_tests::gateway::{self, Options};
+use host_tests::gateway::{self, Options, Ready};
 use host_tests::qemu::Board;
 
-const USAGE: &str = "usage: gateway [--port P] [--baud B] [--board lm3s6965|mps2-an386] \
+const USAGE: &str = "usage: gateway [--port P] [--baud B] [--modbus-port P] [--modbus-baud B] \
+                     [--board lm3s6965|mps2-an386] \
                      [--reply-delay-ms MS] [--faults SPEC] [--seed S] [--elf PATH]";
 
 fn parse_args() -> Result<Options, String> {
@@ -36,6 +40,18 @@ fn parse_args() -> Result<Options, String> {
                 o.port = value()?
                     .parse()
                     .map_err(|_| "--port takes 0..=65535 (0: a free port)".to_owned())?;
+            }
+            "--modbus-port" => {
+                o.modbus_port = value()?
+                    .parse()
+                    .map_err(|_| "--modbus-port takes 0..=65535 (0: a free port)".to_owned())?;
+            }
+            "--modbus-baud" => {
+                o.modbus_baud = value()?
+                    .parse()
+                    .ok()
+                    .filter(|b| firmware_example::config::BAUD_RATES.contains(b))
+                    .ok_or("--modbus-baud takes 9600, 19200, 38400, 57600 or 115200")?;
             }
             "--baud" => {
                 o.baud = value()?
@@ -84,9 +100,12 @@ fn main() -> ExitCode {
         eprintln!("gateway: cannot handle signals: {e}");
         return ExitCode::FAILURE;
     }
-    let ready = |addr| {
+    let ready = |at: Ready| {
         let mut out = io::stdout().lock();
-        let _ = writeln!(out, "protocol-b {addr}");
+        let _ = writeln!(out, "protocol-b {}", at.protocol_b);
+        if let Some(m) = at.modbus_rtu {
+            let _ = writeln!(out, "modbus-rtu {m}");
+        }
         let _ = out.flush();
     };
     match gateway::run(&opts, &stop, ready) {
