@@ -52,7 +52,7 @@ pub fn silence(baud: u32) -> Duration {
     if baud > 19_200 || baud == 0 {
         Duration::from_micros(1_750)
     } else {
-        Duration::from_micros(CHAR_BITS * 3_500_000 / 10 / u64::from(baud))
+        Duration::from_micros(CHAR_BITS * 3_500_000 / u64::from(baud))
     }
 }
 
