@@ -54,6 +54,10 @@ pub const XOFF_REPEAT: usize = 32;
 /// The upstream (host) line of every board: a 256-byte receive queue (255
 /// usable) and a 64-byte transmit queue.
 pub type UpstreamLine = Line<256, 64>;
+/// The Modbus RTU line of the gateway (lm3s6965): the loop moves its
+/// bytes to the RTU framer at every pass, so the ring only bridges a pass
+/// (128 bytes: 11 ms at 115,200 baud); no flow control.
+pub type ModbusLine = Line<128, 64>;
 /// The downstream (controller) line of every board.
 pub type DownstreamLine = Line<128, 64>;
 /// Bytes a host may still send after it was told to stop (XOFF arrived, or

@@ -31,7 +31,9 @@ use cortex_m::peripheral::NVIC;
 use cortex_m_rt::entry;
 use firmware_example::bridge::Bridge;
 use firmware_example::modbus::Gateway;
-use firmware_example::serial::{DownstreamLine, FlowControl, IsrEnd, Line, UpstreamLine};
+use firmware_example::serial::{
+    DownstreamLine, FlowControl, IsrEnd, Line, ModbusLine, UpstreamLine, DOWNSTREAM_MARKS,
+};
 use lm3s6965::{interrupt, Interrupt};
 use runtime::Handoff;
 
@@ -49,7 +51,7 @@ static mut DOWN_LINE: DownstreamLine = Line::new();
 /// initial image would cost as much flash as the bridge has bytes).
 static mut BRIDGE: MaybeUninit<Bridge> = MaybeUninit::uninit();
 /// The Modbus port's rings.
-static mut MODBUS_LINE: UpstreamLine = Line::new();
+static mut MODBUS_LINE: ModbusLine = Line::new();
 /// The gateway's state, written once at start.
 static mut GATEWAY: MaybeUninit<Gateway> = MaybeUninit::uninit();
 
@@ -180,14 +182,12 @@ fn pend_down() {
 
 #[interrupt]
 fn UART0() {
-    static mut END: Option<IsrEnd<'static>> = None;
-    runtime::with_end(END, &UP_END, |e| Uart(UART_BASE[0]).service(e, false));
+    runtime::in_handoff(&UP_END, |e| Uart(UART_BASE[0]).service(e, false));
 }
 
 #[interrupt]
 fn UART1() {
-    static mut END: Option<IsrEnd<'static>> = None;
-    runtime::with_end(END, &DOWN_END, |e| Uart(UART_BASE[1]).service(e, false));
+    runtime::in_handoff(&DOWN_END, |e| Uart(UART_BASE[1]).service(e, false));
 }
 
 fn pend_modbus() {
@@ -196,8 +196,7 @@ fn pend_modbus() {
 
 #[interrupt]
 fn UART2() {
-    static mut END: Option<IsrEnd<'static>> = None;
-    runtime::with_end(END, &MODBUS_END, |e| Uart(UART_BASE[2]).service(e, true));
+    runtime::in_handoff(&MODBUS_END, |e| Uart(UART_BASE[2]).service(e, true));
 }
 
 /// Clocks for the UARTs, their GPIO ports and the watchdog; UART pins to
@@ -243,18 +242,46 @@ fn setup_gateway(
     // was handed over.
     unsafe {
         let gateway = (*addr_of_mut!(GATEWAY)).write(Gateway::new(cfg.modbus, cfg.policy));
-        let (isr, thread) = (*addr_of_mut!(MODBUS_LINE)).split(
-            FlowControl::None,
-            firmware_example::serial::UPSTREAM_MARKS,
-            &pend_modbus,
-        );
+        let (isr, thread) =
+            (*addr_of_mut!(MODBUS_LINE)).split(FlowControl::None, DOWNSTREAM_MARKS, &pend_modbus);
         cortex_m::interrupt::free(|cs| MODBUS_END.borrow(cs).set(Some(isr)));
         (gateway, thread)
     }
 }
 
+/// What the loop runs on, set up by [`boot`].
+struct Booted {
+    bridge: &'static mut Bridge,
+    gateway: &'static mut Gateway,
+    up: firmware_example::serial::ThreadEnd<'static>,
+    down: firmware_example::serial::ThreadEnd<'static>,
+    modbus: firmware_example::serial::ThreadEnd<'static>,
+    rts_cts: bool,
+}
+
 #[entry]
 fn main() -> ! {
+    let Booted {
+        bridge,
+        gateway,
+        mut up,
+        mut down,
+        mut modbus,
+        rts_cts,
+    } = boot();
+    runtime::serve_gateway(bridge, gateway, &mut up, &mut down, &mut modbus, || {
+        feed_watchdog();
+        if rts_cts {
+            // CTS has no interrupt: look at it every pass.
+            pend_up();
+        }
+    })
+}
+
+/// Everything before the loop. Not inlined, so that its frame (the
+/// configuration, the peripherals) is gone while the loop runs.
+#[inline(never)]
+fn boot() -> Booted {
     let Some(core) = cortex_m::Peripherals::take() else {
         panic!("core peripherals already taken");
     };
@@ -282,8 +309,8 @@ fn main() -> ! {
             down_end: &DOWN_END,
         }
     };
-    let (bridge, mut up, mut down) = runtime::setup(statics, cfg, source);
-    let (gateway, mut modbus) = setup_gateway(cfg);
+    let (bridge, up, down) = runtime::setup(statics, cfg, source);
+    let (gateway, modbus) = setup_gateway(cfg);
     // SAFETY: the handlers only touch their ends, handed over above.
     unsafe {
         NVIC::unmask(Interrupt::UART0);
@@ -292,12 +319,12 @@ fn main() -> ! {
     }
     start_watchdog();
     runtime::banner(NAME, source, cfg.flow);
-    let rts_cts = cfg.flow == FlowControl::RtsCts;
-    runtime::serve_gateway(bridge, gateway, &mut up, &mut down, &mut modbus, || {
-        feed_watchdog();
-        if rts_cts {
-            // CTS has no interrupt: look at it every pass.
-            pend_up();
-        }
-    })
+    Booted {
+        bridge,
+        gateway,
+        up,
+        down,
+        modbus,
+        rts_cts: cfg.flow == FlowControl::RtsCts,
+    }
 }

@@ -307,6 +307,7 @@ impl Bridge {
     /// An idle bridge with this configuration (`source` says where it came
     /// from, for the status query). `seed` makes the downstream line's
     /// fence texts its own: give a different one at each boot.
+    #[inline(always)]
     pub fn new(cfg: Config, source: Source, seed: u32) -> Self {
         Self {
             cfg,

@@ -38,6 +38,7 @@ pub(super) struct StreamWork {
 }
 
 impl StreamWork {
+    #[inline(always)]
     pub(super) const fn new(downstream_baud: u32) -> Self {
         StreamWork {
             decoder: PositionStreamDecoder::new(BypassPolicy::CommandsOnly),

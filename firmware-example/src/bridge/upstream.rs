@@ -45,6 +45,7 @@ pub(super) struct Upstream {
 }
 
 impl Upstream {
+    #[inline(always)]
     pub(super) const fn new() -> Self {
         Upstream {
             head: [0; ENVELOPE_LEN],

@@ -43,17 +43,31 @@ pub struct Registers {
     pub schedule: Schedule,
     /// The table window's first position.
     pub head: u16,
-    /// The table window as read back or written.
+    /// The table window as read back, or as written: a write's records
+    /// wait here until the transfer takes them (no other command starts
+    /// meanwhile), so they read as written while the write is busy and
+    /// after it failed.
     pub window: [u16; WINDOW_WORDS],
-    /// Records of a table write, until the controller holds them.
-    pub staged: [u16; WINDOW_WORDS],
     /// A master has addressed the gateway: it polls from then on (a
     /// bridge with no PLC on its Modbus port leaves the line alone).
     pub active: bool,
 }
 
+/// Most registers a write outside the table window carries (INTV: 16).
+const SHORT_WRITE: usize = 16;
+
+/// Big-endian register pairs of `data` into `words` (as many as both have).
+fn be_words(words: &mut [u16], data: &[u8]) {
+    for (w, pair) in words.iter_mut().zip(data.chunks_exact(2)) {
+        if let [hi, lo] = *pair {
+            *w = u16::from_be_bytes([hi, lo]);
+        }
+    }
+}
+
 impl Registers {
     /// Fresh registers.
+    #[inline(always)]
     pub fn new(cfg: ModbusConfig, policy: Policy) -> Self {
         Registers {
             cfg,
@@ -67,7 +81,6 @@ impl Registers {
             schedule: Schedule::new(cfg.poll_period_ms),
             head: 0,
             window: [0; WINDOW_WORDS],
-            staged: [0; WINDOW_WORDS],
             active: false,
         }
     }
@@ -211,13 +224,17 @@ impl Registers {
         if at.entry.access == Access::Read {
             return Err(ErrorKind::IllegalDataAddress);
         }
-        let mut values = [0u16; WINDOW_WORDS];
-        for (v, pair) in values.iter_mut().zip(data.chunks_exact(2)) {
-            if let [hi, lo] = *pair {
-                *v = u16::from_be_bytes([hi, lo]);
-            }
+        if at.entry.item == Item::WindowRecords {
+            // Up to 105 registers: read from the frame as they are copied,
+            // not gathered on the stack first.
+            return self.write_records(at.offset, data);
         }
-        let values = values.get(..usize::from(count)).unwrap_or(&[]);
+        // The other writable entries are at most 16 registers (INTV).
+        let mut values = [0u16; SHORT_WRITE];
+        be_words(&mut values, data);
+        let values = values
+            .get(..usize::from(count))
+            .ok_or(ErrorKind::IllegalDataAddress)?;
         let first = values.first().copied().unwrap_or(0);
         let b = usize::from(at.block);
         let axis = at.block + 1;
@@ -246,7 +263,6 @@ impl Registers {
                 self.head = first;
                 Ok(())
             }
-            Item::WindowRecords => self.write_records(at.offset, values),
             _ => Err(ErrorKind::IllegalDataAddress),
         }
     }
@@ -334,16 +350,19 @@ impl Registers {
         })
     }
 
-    /// Whole window records: staged, then written by the transfer.
-    fn write_records(&mut self, offset: u16, v: &[u16]) -> Result<(), ErrorKind> {
-        let (o, n) = (usize::from(offset), v.len());
+    /// Whole window records (`data`: big-endian registers): staged in the
+    /// window, then written by the transfer.
+    fn write_records(&mut self, offset: u16, data: &[u8]) -> Result<(), ErrorKind> {
+        let (o, n) = (usize::from(offset), data.len() / 2);
         if !o.is_multiple_of(RECORD_WORDS) || !n.is_multiple_of(RECORD_WORDS) {
             return Err(ErrorKind::IllegalDataValue);
         }
-        if v.chunks_exact(RECORD_WORDS)
-            .any(|r| words_record(r).is_none())
-        {
-            return Err(ErrorKind::IllegalDataValue);
+        let mut rec = [0u16; RECORD_WORDS];
+        for bytes in data.chunks_exact(2 * RECORD_WORDS) {
+            be_words(&mut rec, bytes);
+            if words_record(&rec).is_none() {
+                return Err(ErrorKind::IllegalDataValue);
+            }
         }
         let job = Job::WriteWindow {
             first: (o / RECORD_WORDS) as u8,
@@ -353,8 +372,8 @@ impl Registers {
             // The staged records of a busy write must stay as they are.
             return self.command(job);
         }
-        if let Some(dst) = self.staged.get_mut(o..o + n) {
-            dst.copy_from_slice(v);
+        if let Some(dst) = self.window.get_mut(o..o + n) {
+            be_words(dst, data);
         }
         self.command(job)
     }

@@ -214,5 +214,5 @@ fn window_records_are_written_whole() {
     }
     assert_eq!(ask(&mut gw, &rtu(&one))[..6], [1, 16, 0x22, 0, 0, 21]);
     assert_eq!(gw.regs.hs.words()[2], 0x26D);
-    assert_eq!(gw.regs.staged[..21], words);
+    assert_eq!(gw.regs.window[..21], words);
 }
