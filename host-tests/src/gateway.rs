@@ -81,6 +81,10 @@ pub struct Options {
     pub modbus_port: u16,
     /// Line rate of the Modbus RTU port.
     pub modbus_baud: u32,
+    /// At the stop, end the firmware with the quit sequence (honoured only
+    /// then: `quit_sequence` in the configuration block) and log its
+    /// stack peak (`firmware stack peak N bytes`), for the size report.
+    pub stack_report: bool,
     /// The simulated controller's time per command, ms.
     pub reply_delay_ms: u32,
     /// Faults the simulated controller injects.
@@ -99,6 +103,7 @@ impl Default for Options {
             port: 0,
             modbus_port: 0,
             modbus_baud: firmware_example::config::ModbusConfig::DEFAULT.baud,
+            stack_report: false,
             reply_delay_ms: 2,
             faults: Faults::default(),
             seed: 1,
@@ -182,7 +187,8 @@ pub fn run(opts: &Options, stop: &AtomicBool, on_ready: impl FnOnce(Ready)) -> R
         None => build_firmware(opts.board)
             .map_err(|e| format!("building the firmware for {}: {e}", opts.board))?,
     };
-    let cfg = config(opts.baud, opts.modbus_baud);
+    let mut cfg = config(opts.baud, opts.modbus_baud);
+    cfg.quit_sequence = opts.stack_report;
     // Tied: QEMU goes with this thread even if the process is killed.
     let mut qemu = QemuSession::start_tied(
         opts.board,
@@ -248,7 +254,11 @@ pub fn run(opts: &Options, stop: &AtomicBool, on_ready: impl FnOnce(Ready)) -> R
     };
 
     // QEMU first: its end closes the lines, which ends the threads.
-    drop(qemu);
+    if opts.stack_report && result.is_ok() {
+        report_stack(qemu);
+    } else {
+        drop(qemu);
+    }
     relay_stop.store(true, Ordering::Relaxed);
     if let Some(client) = client {
         client.join_within(Duration::from_secs(5));
@@ -272,6 +282,30 @@ pub fn run(opts: &Options, stop: &AtomicBool, on_ready: impl FnOnce(Ready)) -> R
         Err(e) => log(&format!("stopped; {e}")),
     }
     result
+}
+
+/// Ends the firmware with the quit sequence and logs the stack peak it
+/// reports; QEMU is killed if it does not end within 10 s.
+fn report_stack(mut qemu: QemuSession) {
+    if let Err(e) = qemu.quit() {
+        log(&format!("no stack peak: sending the quit sequence: {e}"));
+        return;
+    }
+    match qemu.wait(Duration::from_secs(10)) {
+        Ok(out) => match out
+            .stdout
+            .lines()
+            .find_map(|l| l.strip_prefix("firmware-example: stack peak "))
+            .and_then(|l| l.split_whitespace().next())
+        {
+            Some(peak) => log(&format!("firmware stack peak {peak} bytes")),
+            None => log(&format!(
+                "no stack peak in the firmware's output:\n{}",
+                out.stdout
+            )),
+        },
+        Err(e) => log(&format!("no stack peak: {e}")),
+    }
 }
 
 /// The client served when the relay ended, and how it ended.

@@ -15,7 +15,10 @@
 //! 115200), `--modbus-port P`, `--modbus-baud B` (the Modbus RTU port,
 //! default 115200, even parity, unit 1), `--board lm3s6965|mps2-an386`, `--reply-delay-ms MS` (the
 //! simulated controller's time per command, default 2), `--faults SPEC`
-//! (as `iai simulate --faults`), `--seed S`, `--elf PATH`.
+//! (as `iai simulate --faults`), `--seed S`, `--elf PATH`,
+//! `--stack-report` (at the stop, end the firmware with the quit sequence
+//! and log its stack peak: for the size report; a client's bytes could
+//! end the firmware too).
 
 use std::io::{self, Write};
 use std::path::PathBuf;
@@ -28,7 +31,8 @@ use host_tests::qemu::Board;
 
 const USAGE: &str = "usage: gateway [--port P] [--baud B] [--modbus-port P] [--modbus-baud B] \
                      [--board lm3s6965|mps2-an386] \
-                     [--reply-delay-ms MS] [--faults SPEC] [--seed S] [--elf PATH]";
+                     [--reply-delay-ms MS] [--faults SPEC] [--seed S] [--elf PATH] \
+                     [--stack-report]";
 
 fn parse_args() -> Result<Options, String> {
     let mut o = Options::default();
@@ -41,6 +45,7 @@ fn parse_args() -> Result<Options, String> {
                     .parse()
                     .map_err(|_| "--port takes 0..=65535 (0: a free port)".to_owned())?;
             }
+            "--stack-report" => o.stack_report = true,
             "--modbus-port" => {
                 o.modbus_port = value()?
                     .parse()
