@@ -21,7 +21,7 @@
 //! - [`pipeline`]: chunk and queue sizes for the downstream rate, so that
 //!   the final reply fits the host's timeout.
 //!
-//! The downstream line is one [`Line`](iai_protocol_b::Line) for both paths: what the 26DH path
+//! The downstream line is one [`Line`] for both paths: what the 26DH path
 //! left in flight (a read-back's late reply) the pass-through knows, and the
 //! reverse; a line just booted fences its first command. The bridge is
 //! wired to the controller, so its line expects no copied replies.

@@ -8,7 +8,7 @@
 //!   cache ([`cache`]), writes stored or queued as a command behind the
 //!   handshake ([`command`]). No reply waits for the controller, so none
 //!   is late, and none says done before the controller confirmed.
-//! - the **controller line** ([`line`]): polls on a schedule ([`poll`])
+//! - the **controller line** ([`mod@line`]): polls on a schedule ([`poll`])
 //!   and the queued command, one exchange at a time, on the bridge's one
 //!   line while the bridge grants it ([`Guest`]); the protocol-B host goes
 //!   first (a poll in its way is abandoned, a command finishes).
