@@ -13,8 +13,8 @@ step() { printf '\n==> %s\n' "$*"; }
 step "formatting"
 cargo fmt --all --check
 
-step "clippy (core, host tests, iai) -D warnings"
-cargo clippy -p iai-protocol-b -p host-tests -p iai-cli --all-targets -- -D warnings
+step "clippy (core, host tests, iai, simulator) -D warnings"
+cargo clippy -p iai-protocol-b -p host-tests -p iai-cli -p iai-simulator --all-targets -- -D warnings
 cargo clippy -p iai-protocol-b --features defmt -- -D warnings
 
 step "core builds for thumbv6m / thumbv7m / thumbv7em (no std, no alloc)"
@@ -58,7 +58,8 @@ step "docs (no warnings) and doctests"
 RUSTDOCFLAGS="-D warnings" cargo doc -q -p iai-protocol-b --no-deps
 RUSTDOCFLAGS="-D warnings" cargo doc -q -p firmware-example --no-deps --no-default-features
 RUSTDOCFLAGS="-D warnings" cargo doc -q -p iai-cli --no-deps
-cargo test -q -p iai-protocol-b --doc
+RUSTDOCFLAGS="-D warnings" cargo doc -q -p iai-simulator --no-deps
+cargo test -q -p iai-protocol-b -p iai-simulator --doc
 
 step "size report (flash, static RAM, stack measured under QEMU) and instruction counts (figures, not assertions)"
 ./tools/size-report.sh
@@ -68,4 +69,4 @@ step "fuzzing smoke run: 30 s per cargo-fuzz target (installs nightly and cargo-
 ./fuzz/smoke.sh 30
 
 step "tests"
-cargo nextest run -p iai-protocol-b -p host-tests -p firmware-example -p iai-cli --no-default-features --no-fail-fast
+cargo nextest run -p iai-protocol-b -p host-tests -p firmware-example -p iai-cli -p iai-simulator --no-default-features --no-fail-fast

@@ -1,9 +1,11 @@
 //! `iai`, a host tool for IAI protocol B controllers, as a library: the
-//! capture inspector, the message encoder, CSV position tables, the
-//! links (serial port, TCP) and the controller simulator.
+//! capture inspector, the message encoder, CSV position tables and the
+//! links (serial port, TCP).
 //!
 //! The protocol facts (message layouts, limits, engines) all come from the
-//! core crate `iai-protocol-b`; this crate only drives them.
+//! core crate `iai-protocol-b`; this crate only drives them. The
+//! controller simulator is the crate `iai-simulator`, here as [`sim`] and,
+//! with the `iai simulate` frame log, [`simulate`].
 
 pub mod bridge;
 pub mod codes;
@@ -16,7 +18,9 @@ pub mod meaning;
 pub mod probe;
 pub mod resume;
 pub mod send;
-pub mod sim;
 pub mod simulate;
 pub mod table;
 pub mod text;
+
+/// The controller simulator (the crate `iai-simulator`).
+pub use iai_simulator as sim;

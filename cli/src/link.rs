@@ -1,9 +1,11 @@
 //! The line to a controller: a serial port or a TCP connection (a
-//! serial-to-Ethernet adapter, or `iai simulate --tcp`), with reads that
-//! wait at most a given time, a millisecond clock, and the core's [`Line`]:
-//! what one command of this process left in flight on it, the next one
-//! knows. [`Link::turn`] moves bytes and time between one of the core's
-//! engines and the line.
+//! serial-to-Ethernet adapter, or `iai simulate --tcp`) run by the core's
+//! [`StdLink`]: its millisecond clock, its [`Line`] (what one command of
+//! this process left in flight on it, the next one knows) and its turns
+//! ([`Link::turn`]) that move bytes and time between one of the core's
+//! engines and the line. What is the tool's own is the stream under it,
+//! a [`Port`]: the serial port opened with the user's settings, XON/XOFF
+//! over TCP, and the witness of what came back.
 //!
 //! Flow control: on a serial port the driver does it (`--flow xonxoff`:
 //! IXON/IXOFF; `rtscts`: the modem lines). Over TCP (a serial server
@@ -20,7 +22,8 @@ use std::io::{self, Read, Write};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
-use iai_protocol_b::engine::{feed, Engine, Step};
+use iai_protocol_b::engine::Engine;
+use iai_protocol_b::hosted::{StdLink, WaitRead};
 use iai_protocol_b::{Failure, Line, LineConfig};
 
 /// XON (resume), as the bridge and serial drivers send it.
@@ -85,47 +88,21 @@ impl Default for SerialSettings {
 }
 
 /// Reads from a TCP stream what arrives within `wait`: `None` when nothing
-/// did, `Some(0)` when the peer closed. A socket read timeout overshoots a
-/// few milliseconds by several; short waits (the 1 ms turnaround, the
-/// controller's α) are kept by polling instead.
+/// did, `Some(0)` when the peer closed. The core's [`WaitRead`] for a TCP
+/// stream, which keeps short waits by polling (a socket read timeout
+/// overshoots a few milliseconds by several); a signal (Ctrl-C)
+/// interrupting the read counts as nothing read.
 pub fn tcp_read_for(
     s: &mut TcpStream,
     buf: &mut [u8],
     wait: Duration,
 ) -> io::Result<Option<usize>> {
-    // A signal (Ctrl-C) interrupting the read counts as nothing read: the
-    // caller looks at its stop flag.
-    let timed_out = |e: &io::Error| {
-        matches!(
-            e.kind(),
-            io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut | io::ErrorKind::Interrupted
-        )
-    };
-    if wait > Duration::from_millis(20) {
-        s.set_read_timeout(Some(wait))?;
-        return match s.read(buf) {
-            Ok(n) => Ok(Some(n)),
-            Err(e) if timed_out(&e) => Ok(None),
-            Err(e) => Err(e),
-        };
+    match s.read_within(buf, wait) {
+        Ok(0) => Ok(None),
+        Ok(n) => Ok(Some(n)),
+        Err(e) if e.kind() == io::ErrorKind::UnexpectedEof => Ok(Some(0)),
+        Err(e) => Err(e),
     }
-    let end = Instant::now() + wait;
-    s.set_nonblocking(true)?;
-    let r = loop {
-        match s.read(buf) {
-            Ok(n) => break Ok(Some(n)),
-            Err(e) if timed_out(&e) => {
-                let now = Instant::now();
-                if now >= end {
-                    break Ok(None);
-                }
-                std::thread::sleep((end - now).min(Duration::from_micros(200)));
-            }
-            Err(e) => break Err(e),
-        }
-    };
-    s.set_nonblocking(false)?;
-    r
 }
 
 /// Where the controller is.
@@ -163,28 +140,95 @@ enum Inner {
     Tcp(TcpStream),
 }
 
-/// An open line.
-pub struct Link {
+/// The stream of a [`Link`]: a serial port or a TCP connection, with
+/// XON/XOFF done here over TCP and a [`Witness`] of every byte that went
+/// by. Its reads wait a bounded time ([`WaitRead`]), so the core's
+/// [`StdLink`] runs the engines over it.
+pub struct Port {
     inner: Inner,
-    t0: Instant,
-    line: Line,
-    /// Bytes received that the engine of the moment did not take yet (it
-    /// held a reply): they go to the next one.
-    pending: Vec<u8>,
     /// XON/XOFF done here (TCP).
     soft_flow: bool,
     /// An XOFF came and no XON yet.
     stopped: bool,
+    /// Data that came in while a write looked for XOFF or waited for XON:
+    /// the next read returns it first.
+    held: Vec<u8>,
     witness: Witness,
-    target: Target,
 }
 
-/// A seed for the line's fence texts: different at each start.
-fn seed() -> u32 {
-    let t = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64);
-    (t ^ (t >> 32) ^ u64::from(std::process::id()).rotate_left(16)) as u32
+impl Port {
+    /// Sends all of `bytes`, honouring XON/XOFF done here; `progress` is
+    /// told the bytes written so far. Bytes that arrive meanwhile are held
+    /// for the next read.
+    fn send(&mut self, bytes: &[u8], progress: &mut dyn FnMut(usize)) -> io::Result<()> {
+        self.witness.sent(bytes);
+        send(
+            &mut self.inner,
+            self.soft_flow,
+            &mut self.stopped,
+            &mut self.held,
+            &mut self.witness,
+            bytes,
+            progress,
+        )
+    }
+}
+
+impl WaitRead for Port {
+    /// What was held from a write first; otherwise what arrives within
+    /// `wait` (at least 1 ms), XON/XOFF done here taken out (and obeyed).
+    fn read_within(&mut self, buf: &mut [u8], wait: Duration) -> io::Result<usize> {
+        if !self.held.is_empty() {
+            let n = self.held.len().min(buf.len());
+            if let (Some(dst), Some(src)) = (buf.get_mut(..n), self.held.get(..n)) {
+                dst.copy_from_slice(src);
+            }
+            self.held.drain(..n);
+            return Ok(n);
+        }
+        let n = raw_read(&mut self.inner, buf, wait)?;
+        let got = buf.get_mut(..n).unwrap_or(&mut []);
+        let n = if self.soft_flow {
+            strip_flow(got, &mut self.stopped)
+        } else {
+            n
+        };
+        self.witness.received(buf.get(..n).unwrap_or(&[]));
+        Ok(n)
+    }
+}
+
+impl Read for Port {
+    /// Waits until something arrives (a closed TCP connection is an
+    /// error, not the end of the stream).
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        loop {
+            let n = self.read_within(buf, Duration::from_secs(1))?;
+            if n > 0 || buf.is_empty() {
+                return Ok(n);
+            }
+        }
+    }
+}
+
+impl Write for Port {
+    /// Writes all of `bytes` (see [`Link::write_all`]).
+    fn write(&mut self, bytes: &[u8]) -> io::Result<usize> {
+        self.send(bytes, &mut |_| {})?;
+        Ok(bytes.len())
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        match &mut self.inner {
+            Inner::Serial(p) => p.flush(),
+            Inner::Tcp(s) => s.flush(),
+        }
+    }
+}
+
+/// An open line.
+pub struct Link {
+    link: StdLink<Port>,
+    target: Target,
 }
 
 /// Baud rates the controllers offer (TTA p. 7).
@@ -246,14 +290,15 @@ impl Link {
                 Inner::Tcp(s)
             }
         };
-        Ok(Link {
+        let port = Port {
             inner,
-            t0: Instant::now(),
-            line: Line::new(cfg, seed()),
-            pending: Vec::new(),
             soft_flow,
             stopped: false,
+            held: Vec::new(),
             witness: Witness::new(cfg.station.0),
+        };
+        Ok(Link {
+            link: StdLink::new(port, cfg),
             target: target.clone(),
         })
     }
@@ -265,116 +310,69 @@ impl Link {
 
     /// What came back on this line so far.
     pub fn witness(&self) -> &Witness {
-        &self.witness
+        &self.link.stream_ref().witness
     }
 
     /// The likely cause of a line that gave no valid reply, from what came
     /// back (see [`Witness::hint`]).
     pub fn hint(&self) -> Option<String> {
-        self.witness.hint()
+        self.witness().hint()
     }
 
     /// The core's memory of this line.
     pub fn line(&self) -> &Line {
-        &self.line
+        self.link.line()
     }
 
     /// The core's memory of this line, to start a command on it.
     pub fn line_mut(&mut self) -> &mut Line {
-        &mut self.line
+        self.link.line_mut()
     }
 
-    /// One turn of `engine` on this line: the bytes held back from the
-    /// last turn first, then what is due (a transmission, or a wait of at
-    /// most `cap` reading what arrives). `Some` with the engine's result
-    /// once it has one.
+    /// One turn of `engine` on this line ([`StdLink::turn`]): the bytes
+    /// held back from the last turn first, then what is due (a
+    /// transmission, or a wait of at most `cap` reading what arrives).
+    /// `Some` with the engine's result once it has one.
     pub fn turn<G: Engine>(
         &mut self,
         engine: &mut G,
         cap: Duration,
     ) -> io::Result<Option<Result<G::Output, Failure>>> {
-        self.feed_pending(engine);
-        let now = self.now();
-        match engine.poll(&mut self.line, now) {
-            Step::Transmit(bytes) => {
-                self.witness.sent(bytes);
-                send(
-                    &mut self.inner,
-                    self.soft_flow,
-                    &mut self.stopped,
-                    &mut self.pending,
-                    &mut self.witness,
-                    bytes,
-                    &mut |_| {},
-                )?;
-                let end = self.now();
-                engine.sent(&mut self.line, end);
-            }
-            Step::WaitUntil(until) => {
-                let left = Duration::from_millis(u64::from(until.saturating_sub(now)));
-                let mut buf = [0u8; 4096];
-                let n = self.read_for(&mut buf, left.min(cap))?;
-                self.pending.extend_from_slice(buf.get(..n).unwrap_or(&[]));
-                self.feed_pending(engine);
-            }
-            Step::Idle => std::thread::sleep(Duration::from_millis(1)),
-            Step::Done(r) => return Ok(Some(r)),
-        }
-        Ok(None)
-    }
-
-    fn feed_pending<G: Engine>(&mut self, engine: &mut G) {
-        if !self.pending.is_empty() {
-            let now = self.now();
-            let used = feed(engine, &mut self.line, &self.pending, now);
-            self.pending.drain(..used.min(self.pending.len()));
-        }
+        self.link.turn(engine, cap)
     }
 
     /// Milliseconds since the link was opened (the engines' clock).
     pub fn now(&self) -> u32 {
-        u32::try_from(self.t0.elapsed().as_millis()).unwrap_or(u32::MAX)
+        self.link.now()
     }
 
     /// Reads what arrives within `wait` (at least 1 ms); `Ok(0)` when
     /// nothing did. A closed TCP connection is an error. XON/XOFF done
-    /// here are taken out (and obeyed).
+    /// here are taken out (and obeyed). Bytes an engine left are not
+    /// read again: [`Link::take_pending`] has them.
     pub fn read_for(&mut self, buf: &mut [u8], wait: Duration) -> io::Result<usize> {
-        let n = raw_read(&mut self.inner, buf, wait)?;
-        let got = buf.get_mut(..n).unwrap_or(&mut []);
-        let n = if self.soft_flow {
-            strip_flow(got, &mut self.stopped)
-        } else {
-            n
-        };
-        self.witness.received(buf.get(..n).unwrap_or(&[]));
-        Ok(n)
+        self.link.stream().read_within(buf, wait)
     }
 
-    /// Sends all of `bytes`, honouring XON/XOFF done here; `progress` is
-    /// told the bytes written so far. Bytes that arrive meanwhile are kept
-    /// for the next engine (or [`Link::take_pending`]).
+    /// Sends all of `bytes`, honouring XON/XOFF done here. Bytes that
+    /// arrive meanwhile are kept for the next engine (or
+    /// [`Link::take_pending`]).
     pub fn write_all(&mut self, bytes: &[u8]) -> io::Result<()> {
         self.write_with(bytes, &mut |_| {})
     }
 
-    /// [`Link::write_all`] with progress.
+    /// [`Link::write_all`] with progress: `progress` is told the bytes
+    /// written so far.
     pub fn write_with(&mut self, bytes: &[u8], progress: &mut dyn FnMut(usize)) -> io::Result<()> {
-        self.witness.sent(bytes);
-        send(
-            &mut self.inner,
-            self.soft_flow,
-            &mut self.stopped,
-            &mut self.pending,
-            &mut self.witness,
-            bytes,
-            progress,
-        )
+        self.link.stream().send(bytes, progress)
     }
 
-    /// The bytes received and not given to an engine yet.
+    /// The bytes received and not given to an engine yet: what the last
+    /// engine left, then what came in during a write.
     pub fn take_pending(&mut self) -> Vec<u8> {
-        std::mem::take(&mut self.pending)
+        let mut got = self.link.take_pending();
+        got.append(&mut self.link.stream().held);
+        got
     }
 }
 
@@ -387,14 +385,7 @@ fn raw_read(inner: &mut Inner, buf: &mut [u8], wait: Duration) -> io::Result<usi
             p.set_timeout(wait)?;
             p.read(buf)
         }
-        Inner::Tcp(s) => match tcp_read_for(s, buf, wait)? {
-            None => Ok(0),
-            Some(0) => Err(io::Error::new(
-                io::ErrorKind::UnexpectedEof,
-                "the connection was closed by the other side",
-            )),
-            Some(n) => Ok(n),
-        },
+        Inner::Tcp(s) => s.read_within(buf, wait),
     };
     match r {
         // A signal (Ctrl-C) interrupts a read: the caller looks at its stop flag.
@@ -432,12 +423,12 @@ fn strip_flow(bytes: &mut [u8], stopped: &mut bool) -> usize {
 
 /// Writes `bytes`; with `soft_flow`, in chunks, looking at the input for
 /// XOFF between them and waiting for XON (received data goes to
-/// `pending`).
+/// `held`).
 fn send(
     inner: &mut Inner,
     soft_flow: bool,
     stopped: &mut bool,
-    pending: &mut Vec<u8>,
+    held: &mut Vec<u8>,
     witness: &mut Witness,
     bytes: &[u8],
     progress: &mut dyn FnMut(usize),
@@ -464,7 +455,7 @@ fn send(
                 let k = strip_flow(got, stopped);
                 let data = buf.get(..k).unwrap_or(&[]);
                 witness.received(data);
-                pending.extend_from_slice(data);
+                held.extend_from_slice(data);
                 if was && !*stopped {
                     since = Instant::now();
                 }

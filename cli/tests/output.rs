@@ -296,3 +296,71 @@ fn every_help_has_examples_and_flags_mean_one_thing() {
     let out = iai(&["encode", "212", "--json-file", fields.to_str().unwrap()]);
     assert_eq!(stdout(&out), "!992120189\\r\\n\n", "{}", stderr(&out));
 }
+
+/// `monitor --save` on a serial port: a pseudo-terminal stands for it, the
+/// test writes the controller's side (the master) once `iai` has the port
+/// open, and the file holds the bytes as they came.
+#[cfg(target_os = "linux")]
+#[test]
+fn monitor_saves_what_a_serial_port_brings() {
+    use std::ffi::CStr;
+    use std::fs::File;
+    use std::os::fd::FromRawFd;
+
+    // SAFETY: plain libc calls on a descriptor this test owns; the name
+    // buffer outlives the call that fills it.
+    let (mut master, slave) = unsafe {
+        let fd = libc::posix_openpt(libc::O_RDWR | libc::O_NOCTTY);
+        assert!(fd >= 0, "posix_openpt");
+        assert_eq!(libc::grantpt(fd), 0);
+        assert_eq!(libc::unlockpt(fd), 0);
+        let mut name = [0 as libc::c_char; 128];
+        assert_eq!(libc::ptsname_r(fd, name.as_mut_ptr(), name.len()), 0);
+        let slave = CStr::from_ptr(name.as_ptr()).to_str().unwrap().to_owned();
+        (File::from_raw_fd(fd), slave)
+    };
+    let save = temp("monitor-pty-save.bin", b"");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_iai"))
+        .args([
+            "monitor",
+            "--port",
+            &slave,
+            "--baud",
+            "38400",
+            "--timestamps",
+            "--save",
+        ])
+        .arg(&save)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Write only once iai holds the port (its settings, raw mode, are made
+    // when it opens it): then no line discipline touches the bytes.
+    let fds = format!("/proc/{}/fd", child.id());
+    let opened = (0..100).any(|_| {
+        std::thread::sleep(Duration::from_millis(50));
+        std::fs::read_dir(&fds)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .any(|e| std::fs::read_link(e.path()).is_ok_and(|p| p.to_str() == Some(slave.as_str())))
+    });
+    assert!(opened, "iai never opened {slave}");
+    std::thread::sleep(Duration::from_millis(200));
+    let sent = b"#992322C\r\nxx!99212038B\r\n";
+    master.write_all(sent).unwrap();
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let first = lines.next().unwrap().unwrap();
+    assert!(
+        first.starts_with("[+") && first.contains(" s] 0x00000000  response st 99  232H"),
+        "{first}"
+    );
+    let second = lines.next().unwrap().unwrap();
+    assert!(second.contains("0x0000000A"), "{second}");
+    std::thread::sleep(Duration::from_millis(300));
+    // SAFETY: signalling our own child.
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    assert_eq!(child.wait().unwrap().code(), Some(130));
+    assert_eq!(std::fs::read(&save).unwrap(), sent);
+}

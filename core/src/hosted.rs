@@ -56,10 +56,41 @@ fn nothing_came(e: &io::Error) -> bool {
     )
 }
 
+/// Waits longer than this are one read with a socket timeout; shorter
+/// ones poll, as a socket timeout overshoots a few milliseconds by several
+/// (a timer tick) and the short waits are the ones that must be kept (the
+/// 1 ms turnaround, a controller's reply delay).
+const POLLED_WAIT: Duration = Duration::from_millis(20);
+
 impl WaitRead for TcpStream {
     fn read_within(&mut self, buf: &mut [u8], wait: Duration) -> io::Result<usize> {
-        self.set_read_timeout(Some(wait.max(Duration::from_millis(1))))?;
-        match self.read(buf) {
+        let wait = wait.max(Duration::from_millis(1));
+        let got = if wait > POLLED_WAIT {
+            self.set_read_timeout(Some(wait))?;
+            self.read(buf)
+        } else {
+            let end = Instant::now() + wait;
+            self.set_nonblocking(true)?;
+            let r = loop {
+                match self.read(buf) {
+                    Err(e) if nothing_came(&e) => {
+                        let now = Instant::now();
+                        if now >= end {
+                            break Ok(None);
+                        }
+                        std::thread::sleep((end - now).min(Duration::from_micros(200)));
+                    }
+                    r => break r.map(Some),
+                }
+            };
+            self.set_nonblocking(false)?;
+            match r {
+                Ok(None) => return Ok(0),
+                Ok(Some(n)) => Ok(n),
+                Err(e) => Err(e),
+            }
+        };
+        match got {
             Ok(0) if !buf.is_empty() => Err(io::Error::new(
                 io::ErrorKind::UnexpectedEof,
                 "the connection was closed by the other side",
@@ -149,6 +180,17 @@ impl<S: WaitRead> StdLink<S> {
     /// The stream.
     pub fn stream(&mut self) -> &mut S {
         &mut self.stream
+    }
+
+    /// The stream, to look at.
+    pub fn stream_ref(&self) -> &S {
+        &self.stream
+    }
+
+    /// Takes the bytes received that no engine took yet (what came after
+    /// the last engine's reply), for a caller reading the stream itself.
+    pub fn take_pending(&mut self) -> Vec<u8> {
+        core::mem::take(&mut self.pending)
     }
 
     /// The link's clock, ms: the `now` to start engines with.

@@ -600,7 +600,8 @@ pub struct Throughput {
     pub host_bytes: u64,
     /// From the host's first byte to the bridge's reply, seconds.
     pub seconds: f64,
-    /// Bytes on the downstream line, both directions.
+    /// Bytes that take line time on the downstream line (both directions
+    /// in the host model; under QEMU only the simulator's paced replies).
     pub downstream_bytes: u64,
     /// Commands the controller answered.
     pub commands: u32,

@@ -13,7 +13,7 @@
 //!   as a PC's serial port with IXON does. XON and XOFF from the bridge are
 //!   flow control, not data: they never reach the client; the bridge's
 //!   other bytes go to the client as they come.
-//! - **Controller side**: the simulator (`iai_cli::sim`, the controller
+//! - **Controller side**: the simulator (`iai_simulator`, the controller
 //!   `iai simulate` runs) serves the second UART in this process
 //!   ([`SimThread`]), its replies paced to the line rate the same way.
 //!

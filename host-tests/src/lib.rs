@@ -1,7 +1,8 @@
 //! Host-side tools and test support for `iai-protocol-b`: generated
 //! position tables, the QEMU runner, the bridge test harness, the gateway
 //! (the bridge under QEMU on a TCP port). The
-//! controller simulator lives in `iai-cli` and is re-exported here.
+//! controller simulator is the crate `iai-simulator`, re-exported here as
+//! [`sim`].
 pub mod bridge;
 pub mod gateway;
 pub mod link;
@@ -11,4 +12,4 @@ pub mod qemu;
 pub mod rtu_relay;
 pub mod table;
 
-pub use iai_cli::sim;
+pub use iai_simulator as sim;

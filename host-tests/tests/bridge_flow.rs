@@ -74,6 +74,12 @@ fn full_table(baud: u32, flow: FlowControl) {
         FlowControl::None => "none",
     };
     println!("{}", throughput.line(flow_name));
+    let of_limit = throughput.percent() / throughput.limit_percent() * 100.0;
+    eprintln!(
+        "{:.1}% of the line rate against a limit of {:.1}%: {of_limit:.1}% of the limit",
+        throughput.percent(),
+        throughput.limit_percent()
+    );
     assert_eq!(r.overruns, 0);
     assert_eq!(r.stale_waits, 0);
     assert_eq!(r.replies, vec![Some(reply_26dh(station, 20_000))]);
@@ -85,6 +91,13 @@ fn full_table(baud: u32, flow: FlowControl) {
     // The host times out 3 s after its last byte (2003 p. 62): the
     // bridge's last chunks, their read-back and the reply must fit. Virtual
     // time, so this is the protocol's deadline, not a machine's speed.
+    // Virtual time again: the bridge keeps the downstream line busy. The
+    // host's bytes hide under the controller's, so the rate comes within
+    // 10 % of what the downstream bytes and the controller's time allow.
+    assert!(
+        of_limit >= 90.0,
+        "{of_limit:.1}% of the downstream line's limit"
+    );
     assert!(
         reply_after_ms <= 3_000.0,
         "the reply came {reply_after_ms:.0} ms after the host's last byte"
@@ -94,6 +107,11 @@ fn full_table(baud: u32, flow: FlowControl) {
 #[test]
 fn table_20000x8_at_9600_xon_xoff_no_overrun() {
     full_table(9_600, FlowControl::XonXoff);
+}
+
+#[test]
+fn table_20000x8_at_9600_rts_cts_no_overrun() {
+    full_table(9_600, FlowControl::RtsCts);
 }
 
 #[test]

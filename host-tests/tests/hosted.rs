@@ -6,12 +6,12 @@ use std::net::{TcpListener, TcpStream};
 use std::time::Instant;
 
 use host_tests::table::table;
-use iai_cli::sim::{Controller, Faults};
-use iai_cli::simulate::{serve_tcp, ServeOptions, Shared};
 use iai_protocol_b::hosted::StdLink;
 use iai_protocol_b::message::{AxisStatusQuery, Homing, ServoOnOff};
 use iai_protocol_b::transfer::Guarantee;
 use iai_protocol_b::{Client, LineConfig, Profile, Station, Transfer, TransferConfig};
+use iai_simulator::server::{serve_tcp, ServeOptions, Shared};
+use iai_simulator::{Controller, Faults};
 
 /// A simulated TTA on a free port, with `faults`.
 fn simulator(faults: Faults) -> (String, Shared) {
@@ -50,7 +50,8 @@ fn a_typed_call_over_a_tcp_stream() {
 
 #[test]
 fn a_verified_table_write_on_a_faulty_line() {
-    let faults = iai_cli::simulate::parse_faults("drop=0.05,late=0.05:3500,dup=0.05:200").unwrap();
+    let faults =
+        iai_simulator::server::parse_faults("drop=0.05,late=0.05:3500,dup=0.05:200").unwrap();
     let (at, shared) = simulator(faults);
     let mut link = StdLink::new(
         TcpStream::connect(&at).unwrap(),

@@ -16,143 +16,20 @@
 //! Nothing asserts timing. Needs `qemu-system-arm` and the
 //! `thumbv7m-none-eabi` rustup target.
 
-use std::io::{BufRead, BufReader, Read};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
-use std::sync::mpsc::{channel, Receiver};
-use std::time::Duration;
+mod gateway_proc;
 
-use host_tests::qemu::{build_firmware, workspace_root, Board};
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+use gateway_proc::{err, iai_binary, text, Gateway};
+use host_tests::qemu::{build_firmware, Board};
 use host_tests::table::table;
 
-/// Builds the `iai` binary in this test's profile; its path.
-fn iai_binary() -> PathBuf {
-    let exe = std::env::current_exe().expect("test executable");
-    let dir = exe
-        .parent()
-        .and_then(Path::parent)
-        .expect("target/<profile>")
-        .to_path_buf();
-    let profile = match dir.file_name().and_then(|n| n.to_str()) {
-        Some("debug") => "dev".to_owned(),
-        Some(other) => other.to_owned(),
-        None => panic!("no profile directory in {}", exe.display()),
-    };
-    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let out = Command::new(cargo)
-        .current_dir(workspace_root())
-        .args([
-            "build",
-            "--quiet",
-            "-p",
-            "iai-cli",
-            "--bin",
-            "iai",
-            "--profile",
-        ])
-        .arg(&profile)
-        .stdin(Stdio::null())
-        .output()
-        .expect("run cargo");
-    assert!(
-        out.status.success(),
-        "building iai failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let iai = dir.join("iai");
-    assert!(iai.is_file(), "{} missing", iai.display());
-    iai
-}
-
-/// The gateway; SIGTERM (then SIGKILL) when dropped.
-struct Gateway {
-    child: Child,
-    addr: String,
-    log: Receiver<String>,
-}
-
-impl Gateway {
-    fn start(elf: &Path) -> Gateway {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_gateway"))
-            .arg("--elf")
-            .arg(elf)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("start the gateway");
-        let lines = |pipe: Box<dyn Read + Send>| {
-            let (tx, rx) = channel();
-            std::thread::spawn(move || {
-                for l in BufReader::new(pipe).lines() {
-                    let Ok(l) = l else { break };
-                    if tx.send(l).is_err() {
-                        break;
-                    }
-                }
-            });
-            rx
-        };
-        let stdout = lines(Box::new(child.stdout.take().expect("stdout")));
-        let log = lines(Box::new(child.stderr.take().expect("stderr")));
-        let first = stdout
-            .recv_timeout(Duration::from_secs(60))
-            .unwrap_or_else(|_| {
-                panic!(
-                    "no ready line: {}",
-                    log.try_iter().collect::<Vec<_>>().join("\n")
-                )
-            });
-        let addr = first
-            .strip_prefix("protocol-b ")
-            .unwrap_or_else(|| panic!("first line {first:?}"))
-            .to_owned();
-        Gateway { child, addr, log }
-    }
-
-    /// `iai ARGS --tcp ADDR`, which must succeed.
-    fn iai(&self, iai: &Path, args: &[&str]) -> Output {
-        let out = Command::new(iai)
-            .args(args)
-            .args(["--tcp", &self.addr])
-            .stdin(Stdio::null())
-            .output()
-            .expect("run iai");
-        assert!(
-            out.status.success(),
-            "iai {args:?}: {}\n{}\n{}\ngateway:\n{}",
-            out.status,
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr),
-            self.log.try_iter().collect::<Vec<_>>().join("\n")
-        );
-        out
-    }
-}
-
-impl Drop for Gateway {
-    fn drop(&mut self) {
-        let _ = Command::new("kill")
-            .arg("-TERM")
-            .arg(self.child.id().to_string())
-            .status();
-        for _ in 0..100 {
-            if let Ok(Some(_)) = self.child.try_wait() {
-                return;
-            }
-            std::thread::sleep(Duration::from_millis(50));
-        }
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-fn text(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn err(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
+/// `iai ARGS --tcp ADDR` against `gw`, which must succeed.
+fn iai_tcp(gw: &Gateway, iai: &Path, args: &[&str]) -> Output {
+    let mut all = args.to_vec();
+    all.extend(["--tcp", &gw.addr]);
+    gw.run(iai, &all, Path::new("."))
 }
 
 /// The value of `name = N` in `iai bridge status`'s listing.
@@ -179,10 +56,10 @@ fn csv_of(records: u32, seed: u32) -> Vec<u8> {
 fn iai_sends_whole_tables_through_the_bridge_and_reads_its_status() {
     let elf = build_firmware(Board::Lm3s6965).expect("build lm3s6965 firmware");
     let iai = iai_binary();
-    let gw = Gateway::start(&elf);
+    let gw = Gateway::start(&elf, &[]);
 
     // 1. The status, decoded.
-    let status = text(&gw.iai(&iai, &["bridge", "status"]));
+    let status = text(&iai_tcp(&gw, &iai, &["bridge", "status"]));
     assert!(status.starts_with("bridge at station BB:"), "{status}");
     assert!(
         status.contains("controller_station = 153 -> 99"),
@@ -193,7 +70,7 @@ fn iai_sends_whole_tables_through_the_bridge_and_reads_its_status() {
     let (ok_before, records_before) = (counter(&status, "streams_ok"), counter(&status, "records"));
 
     // 2. probe: the bridge, and station 99 behind it.
-    let probe = text(&gw.iai(&iai, &["probe", "--timeout", "1000"]));
+    let probe = text(&iai_tcp(&gw, &iai, &["probe", "--timeout", "1000"]));
     assert!(
         probe.contains("bridge BB: a bridge answers its status query: controller station 99"),
         "{probe}"
@@ -206,7 +83,7 @@ fn iai_sends_whole_tables_through_the_bridge_and_reads_its_status() {
     let path = dir.join(format!("bridge-{}.csv", std::process::id()));
     std::fs::write(&path, &csv).unwrap();
     let file = path.to_str().expect("UTF-8 path");
-    let out = gw.iai(&iai, &["table", "write", file, "--bridge"]);
+    let out = iai_tcp(&gw, &iai, &["table", "write", file, "--bridge"]);
     assert!(
         text(&out).starts_with(
             "verified by the bridge: the controller holds all 600 records (1 26DH message(s) of "
@@ -220,9 +97,13 @@ fn iai_sends_whole_tables_through_the_bridge_and_reads_its_status() {
         "{}",
         err(&out)
     );
-    let back = gw.iai(&iai, &["table", "read", "--first", "1", "--count", "600"]);
+    let back = iai_tcp(
+        &gw,
+        &iai,
+        &["table", "read", "--first", "1", "--count", "600"],
+    );
     assert!(back.stdout == csv, "read back:\n{}", text(&back));
-    let status = text(&gw.iai(&iai, &["bridge", "status"]));
+    let status = text(&iai_tcp(&gw, &iai, &["bridge", "status"]));
     assert!(counter(&status, "streams_ok") > ok_before, "{status}");
     assert!(
         counter(&status, "records") >= records_before + 600,
@@ -234,7 +115,8 @@ fn iai_sends_whole_tables_through_the_bridge_and_reads_its_status() {
     let csv = csv_of(100, 92);
     let small = dir.join(format!("bridge-small-{}.csv", std::process::id()));
     std::fs::write(&small, &csv).unwrap();
-    let out = gw.iai(
+    let out = iai_tcp(
+        &gw,
         &iai,
         &[
             "table",
@@ -252,7 +134,7 @@ fn iai_sends_whole_tables_through_the_bridge_and_reads_its_status() {
         text(&out),
         err(&out)
     );
-    let back = gw.iai(&iai, &["table", "read", "--all"]);
+    let back = iai_tcp(&gw, &iai, &["table", "read", "--all"]);
     assert!(back.stdout == csv, "read back:\n{}", text(&back));
     let _ = std::fs::remove_file(&path);
     let _ = std::fs::remove_file(&small);

@@ -20,7 +20,7 @@ pub(crate) fn simulate_cmd(args: &SimArgs) -> Run {
     };
     ctl.response_delay_ms = args.reply_delay_ms;
     ctl.refuse = !args.accept_all;
-    let shared = Shared::new(ctl);
+    let shared = Shared::new(ctl).with_frame_log(simulate::inspector_log());
     let opts = ServeOptions {
         faults: args.faults.clone().unwrap_or_default(),
         seed: args.seed,

@@ -77,7 +77,7 @@ fn parse_args() -> Result<Options, String> {
                     .parse()
                     .map_err(|_| "--reply-delay-ms takes milliseconds".to_owned())?;
             }
-            "--faults" => o.faults = iai_cli::simulate::parse_faults(&value()?)?,
+            "--faults" => o.faults = iai_simulator::server::parse_faults(&value()?)?,
             "--seed" => {
                 o.seed = value()?
                     .parse()

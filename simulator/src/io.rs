@@ -48,7 +48,7 @@ fn pack(count: u16, on: impl Fn(u16) -> bool, start: u16) -> Vec<u8> {
 
 impl Io {
     /// 20BH: the input ports (see the module docs); `None` if more than
-    /// [`MAX_QUERY`] are asked.
+    /// `MAX_QUERY` are asked.
     pub fn inputs(
         &self,
         q: &InputPortQuery,

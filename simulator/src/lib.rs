@@ -4,6 +4,10 @@
 //! axes, status, I/O and integer variables: see [`Controller::execute`]);
 //! every other message is refused.
 //!
+//! This is the simulator `iai simulate` runs, as a library of its own so
+//! that a test can put a controller on a port without the `iai` tool and
+//! its dependencies: it needs only the core.
+//!
 //! Two parts:
 //! - [`Controller`]: what a controller remembers (position table, axes,
 //!   counters) and how it answers a command ([`Controller::execute`]). It
@@ -17,8 +21,27 @@
 //! Time is a millisecond tick supplied by the caller, so tests can run a
 //! 1.6 MB transfer with 3-second timeouts in a fraction of a second of real
 //! time, and watch a move take the time its distance and speed imply.
-//! [`serve_tcp`] puts a simulator on a socket; [`crate::simulate`] serves
-//! many connections on one shared controller.
+//! [`serve_tcp`] puts a simulator on a socket; [`server`] serves many
+//! connections on one shared controller (TCP, a pseudo-terminal, or one
+//! connection it makes itself), as `iai simulate` does:
+//!
+//! ```no_run
+//! use std::net::TcpListener;
+//! use iai_protocol_b::frame::Station;
+//! use iai_simulator::server::{parse_faults, serve_tcp, ServeOptions, Shared};
+//! use iai_simulator::Controller;
+//!
+//! let listener = TcpListener::bind("127.0.0.1:0")?;
+//! println!("controller at {}", listener.local_addr()?);
+//! let shared = Shared::new(Controller::tta(Station(0x99)));
+//! let opts = ServeOptions {
+//!     faults: parse_faults("drop=0.01")?,
+//!     seed: 1,
+//!     log_frames: false,
+//! };
+//! serve_tcp(listener, shared, opts)?;
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 //!
 //! Like the controller (manual p. 9), it does not answer a command it could
 //! not receive: bad checksum, broken frame, or longer than its buffer.
@@ -39,6 +62,7 @@
 mod axis;
 mod controller;
 mod io;
+pub mod server;
 
 pub use axis::{Axis, Home};
 pub use controller::Controller;
