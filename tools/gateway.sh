@@ -3,11 +3,16 @@
 # controller simulator behind it and its host side on a TCP port: prints
 # `protocol-b 127.0.0.1:PORT` once it is ready, then point any client at
 # it, for instance `iai send 212 query_axis_pattern=1 --tcp 127.0.0.1:PORT`.
+# On lm3s6965 it then prints `modbus-rtu 127.0.0.1:PORT`: the gateway's
+# Modbus RTU port (unit 1, even parity), RTU frames over TCP, for instance
+# pymodbus's RTU framer on a TCP client, or mbpoll -m rtu on a pty that
+# `socat pty,link=/tmp/plc,raw,echo=0 tcp:127.0.0.1:PORT` makes.
 # The port behaves like a serial cable to the bridge: bytes go at the line
 # rate and the bridge's XON/XOFF are honoured (QEMU models neither). One
 # client at a time. Ctrl-C stops QEMU and the simulator.
 # Arguments go to the gateway binary: --port P (default: a free port),
-# --baud B (default 115200), --board lm3s6965|mps2-an386,
+# --baud B (default 115200), --modbus-port P, --modbus-baud B (default
+# 115200), --board lm3s6965|mps2-an386,
 # --reply-delay-ms MS, --faults SPEC (as iai simulate), --seed S.
 # --ethernet: protocol B over TCP instead. The Ethernet build
 # (lm3s6965-eth: smoltcp on the Stellaris MAC, lm3s6965 only) boots with

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Installs what a fresh machine lacks: the thumb targets, rustfmt/clippy,
-# QEMU for Cortex-M and the ARM binutils used for size reports, and the
-# Windows target with mingw-w64 for the iai tool's cross-build.
+# QEMU for Cortex-M and the ARM binutils used for size reports, the
+# Windows target with mingw-w64 for the iai tool's cross-build, and the
+# Modbus clients the gateway's end-to-end test runs: mbpoll and socat
+# (Debian) and pymodbus (PyPI, pinned) in the venv .venv of the checkout.
 # Idempotent: does nothing that is already done.
 set -euo pipefail
 
@@ -18,10 +20,22 @@ need=()
 command -v qemu-system-arm >/dev/null || need+=(qemu-system-arm)
 command -v arm-none-eabi-size >/dev/null || need+=(binutils-arm-none-eabi)
 command -v x86_64-w64-mingw32-gcc >/dev/null || need+=(gcc-mingw-w64-x86-64)
+command -v mbpoll >/dev/null || need+=(mbpoll)
+command -v socat >/dev/null || need+=(socat)
+command -v python3 >/dev/null || need+=(python3)
+# Debian's python3 makes venvs only with python3-venv (ensurepip).
+python3 -c 'import ensurepip, venv' 2>/dev/null || need+=(python3-venv)
 if ((${#need[@]})); then
   SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO=sudo
   $SUDO apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${need[@]}" >/dev/null
+fi
+# pymodbus for the gateway's end-to-end test (host-tests/tests/qemu_modbus.rs).
+PYMODBUS=3.16.1
+venv="$(cd "$(dirname "$0")/.." && pwd)/.venv"
+if ! "$venv/bin/python" -c "import pymodbus, sys; sys.exit(pymodbus.__version__ != '$PYMODBUS')" 2>/dev/null; then
+  python3 -m venv "$venv"
+  "$venv/bin/python" -m pip install -q --disable-pip-version-check "pymodbus==$PYMODBUS"
 fi
 if ! command -v cargo-nextest >/dev/null; then
   cargo install --locked cargo-nextest

@@ -122,6 +122,25 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
         Ok(())
     }
 
+    /// [`Client::start`], sent at most `max_sends` times (0 is read as 1)
+    /// whatever the line's setting: a poll that the next round asks again
+    /// anyway need not hold the line for three timeouts.
+    pub fn start_with_sends<'a, R: Request<'a>>(
+        &mut self,
+        line: &mut Line,
+        req: &R,
+        max_sends: u8,
+        now: u32,
+    ) -> Result<(), Error> {
+        let cfg = line.config();
+        self.phase = Phase::Idle;
+        self.command_len = req.emit_with(cfg.station, cfg.checksum, &mut self.command)?;
+        line.start_raw(R::ID, max_sends, now);
+        self.id = R::ID;
+        self.phase = Phase::Running { detail_for: None };
+        Ok(())
+    }
+
     /// Starts a command given as a complete frame (a tool sending what a
     /// user typed). The frame is checked; its ID's catalogue entry decides
     /// resend safety and reply kind; an ID outside the catalogue is sent

@@ -9,7 +9,7 @@
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 4 | magic `IAIB` |
-//! | 4 | 1 | layout version, 1 |
+//! | 4 | 1 | layout version, 2 (version 1 blocks are still read: their Modbus fields take the defaults) |
 //! | 5 | 1 | upstream flow control: 0 none, 1 XON/XOFF, 2 RTS/CTS |
 //! | 6 | 1 | controller station (I/O parameter No. 91 of the controller) |
 //! | 7 | 1 | the bridge's own station (must differ) |
@@ -17,10 +17,17 @@
 //! | 12 | 4 | downstream baud rate |
 //! | 16 | 1 | policy: 0 forward all, 1 read-only preset, 2 allow-list |
 //! | 17 | 1 | flags: bit 0 = honour the quit sequence (QEMU test runs only) |
-//! | 18 | 2 | 0 |
+//! | 18 | 1 | Modbus unit ID, 1..=247 (version 2; 0 in version 1) |
+//! | 19 | 1 | Modbus: bits 0-1 parity (0 none, 1 even, 2 odd); bit 2 = the upstream port speaks Modbus RTU instead of protocol B (two-UART boards) |
 //! | 20 | 32 | allow-list: bit `id - 200H` (byte `(id - 200H) / 8`, bit `id % 8`) for IDs 200H..2FFH |
-//! | 52 | 8 | 0 |
+//! | 52 | 4 | Modbus baud rate (version 2) |
+//! | 56 | 2 | Modbus: polling period, ms, 10..=60,000 (version 2) |
+//! | 58 | 1 | Modbus: axes polled and mapped, 1..=8 (version 2) |
+//! | 59 | 1 | 0 |
 //! | 60 | 4 | CRC-32 (IEEE 802.3, as zlib's `crc32`) of bytes 0..60 |
+//!
+//! The command policy applies to both upstreams: a Modbus write whose
+//! protocol-B command the policy refuses is answered with exception 01.
 //!
 //! Baud rates must be one a TTA offers (9,600, 19,200, 38,400, 57,600,
 //! 115,200; TTA p. 7). A board that cannot set a rate (QEMU ignores them)
@@ -35,10 +42,61 @@ use crate::serial::FlowControl;
 pub const BLOCK_LEN: usize = 64;
 /// First bytes of a configuration block.
 pub const MAGIC: [u8; 4] = *b"IAIB";
-/// Layout version this firmware reads.
-pub const VERSION: u8 = 1;
+/// Layout version this firmware writes (it reads 1 and 2).
+pub const VERSION: u8 = 2;
 /// Baud rates the TTA offers (TTA p. 7).
 pub const BAUD_RATES: [u32; 5] = [9_600, 19_200, 38_400, 57_600, 115_200];
+
+/// Parity of the Modbus line (8 data bits; 1 stop bit with parity, 2
+/// without, as the Modbus serial-line specification asks).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Parity {
+    /// No parity, 2 stop bits.
+    None,
+    /// Even parity (the Modbus default).
+    Even,
+    /// Odd parity.
+    Odd,
+}
+
+/// What the upstream port speaks on a board with one upstream port.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum UpstreamProtocol {
+    /// Protocol B (the bridge).
+    ProtocolB,
+    /// Modbus RTU (the PLC gateway).
+    ModbusRtu,
+}
+
+/// The Modbus RTU gateway's settings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ModbusConfig {
+    /// The gateway's unit ID (1..=247).
+    pub unit: u8,
+    /// Line rate.
+    pub baud: u32,
+    /// Parity.
+    pub parity: Parity,
+    /// How often the gateway polls the controller for its cache, ms.
+    pub poll_period_ms: u16,
+    /// Axes polled and mapped (1..=8): axis blocks beyond them answer
+    /// exception 02.
+    pub axes: u8,
+}
+
+impl ModbusConfig {
+    /// Unit 1, 115,200 baud, even parity, polled every 100 ms, 8 axes.
+    pub const DEFAULT: ModbusConfig = ModbusConfig {
+        unit: 1,
+        baud: 115_200,
+        parity: Parity::Even,
+        poll_period_ms: 100,
+        axes: 8,
+    };
+}
 
 /// Which commands the bridge forwards to the controller.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -197,11 +255,17 @@ pub struct Config {
     /// Whether the quit sequence ([`crate::codes::QUIT`]) ends the run
     /// (QEMU tests; off on hardware).
     pub quit_sequence: bool,
+    /// The Modbus RTU gateway.
+    pub modbus: ModbusConfig,
+    /// What the upstream port speaks on a two-UART board (a board with a
+    /// port of its own for Modbus ignores it).
+    pub upstream: UpstreamProtocol,
 }
 
 impl Config {
     /// Station 99 (the spec's examples), bridge on station BB, 115,200
-    /// baud both sides, XON/XOFF upstream, forward all, no quit sequence.
+    /// baud both sides, XON/XOFF upstream, forward all, no quit sequence;
+    /// Modbus as [`ModbusConfig::DEFAULT`], protocol B upstream.
     pub const DEFAULT: Config = Config {
         upstream_baud: 115_200,
         downstream_baud: 115_200,
@@ -210,6 +274,8 @@ impl Config {
         flow: FlowControl::XonXoff,
         policy: Policy::ForwardAll,
         quit_sequence: false,
+        modbus: ModbusConfig::DEFAULT,
+        upstream: UpstreamProtocol::ProtocolB,
     };
 
     /// Reads a configuration block: the configuration and where it came
@@ -237,7 +303,8 @@ impl Config {
         if body.get(..4) != Some(&MAGIC[..]) {
             return Err(BlockError::Field(0));
         }
-        if body.get(4) != Some(&VERSION) {
+        let version = body.get(4).copied().unwrap_or(0);
+        if version != 1 && version != VERSION {
             return Err(BlockError::Version);
         }
         let byte = |i: usize| body.get(i).copied().unwrap_or(0);
@@ -270,6 +337,12 @@ impl Config {
         if flags & !1 != 0 {
             return Err(BlockError::Field(17));
         }
+        let (modbus, upstream) = if version == 1 {
+            // Before the gateway: its defaults.
+            (ModbusConfig::DEFAULT, UpstreamProtocol::ProtocolB)
+        } else {
+            Self::parse_modbus(&byte, &word)?
+        };
         Ok(Config {
             upstream_baud,
             downstream_baud,
@@ -278,7 +351,55 @@ impl Config {
             flow,
             policy,
             quit_sequence: flags & 1 != 0,
+            modbus,
+            upstream,
         })
+    }
+
+    /// The Modbus fields of a version 2 block.
+    fn parse_modbus(
+        byte: &dyn Fn(usize) -> u8,
+        word: &dyn Fn(usize) -> u32,
+    ) -> Result<(ModbusConfig, UpstreamProtocol), BlockError> {
+        let unit = byte(18);
+        if !(1..=247).contains(&unit) {
+            return Err(BlockError::Field(18));
+        }
+        let bits = byte(19);
+        let parity = match bits & 0b11 {
+            0 => Parity::None,
+            1 => Parity::Even,
+            2 => Parity::Odd,
+            _ => return Err(BlockError::Field(19)),
+        };
+        if bits & !0b111 != 0 {
+            return Err(BlockError::Field(19));
+        }
+        let upstream = if bits & 0b100 != 0 {
+            UpstreamProtocol::ModbusRtu
+        } else {
+            UpstreamProtocol::ProtocolB
+        };
+        let baud = word(52);
+        if !BAUD_RATES.contains(&baud) {
+            return Err(BlockError::Field(52));
+        }
+        let poll_period_ms = u16::from_le_bytes([byte(56), byte(57)]);
+        if !(10..=60_000).contains(&poll_period_ms) {
+            return Err(BlockError::Field(56));
+        }
+        let axes = byte(58);
+        if !(1..=8).contains(&axes) {
+            return Err(BlockError::Field(58));
+        }
+        let modbus = ModbusConfig {
+            unit,
+            baud,
+            parity,
+            poll_period_ms,
+            axes,
+        };
+        Ok((modbus, upstream))
     }
 
     /// The configuration block holding this configuration.
@@ -303,9 +424,20 @@ impl Config {
             16,
             &[self.policy.code(), u8::from(self.quit_sequence)],
         );
+        let m = &self.modbus;
+        let parity = match m.parity {
+            Parity::None => 0,
+            Parity::Even => 1,
+            Parity::Odd => 2,
+        };
+        let speaks_modbus = self.upstream == UpstreamProtocol::ModbusRtu;
+        put(&mut b, 18, &[m.unit, parity | u8::from(speaks_modbus) << 2]);
         if let Policy::Allow(list) = self.policy {
             put(&mut b, 20, &list.bytes());
         }
+        put(&mut b, 52, &m.baud.to_le_bytes());
+        put(&mut b, 56, &m.poll_period_ms.to_le_bytes());
+        put(&mut b, 58, &[m.axes]);
         let crc = crc32(b.get(..60).unwrap_or(&[]));
         put(&mut b, 60, &crc.to_le_bytes());
         b
@@ -351,6 +483,14 @@ mod tests {
             flow: FlowControl::RtsCts,
             policy: Policy::Allow(AllowList::of(&[0x212, 0x26D])),
             quit_sequence: true,
+            modbus: ModbusConfig {
+                unit: 17,
+                baud: 19_200,
+                parity: Parity::Odd,
+                poll_period_ms: 250,
+                axes: 2,
+            },
+            upstream: UpstreamProtocol::ModbusRtu,
         };
         let block = cfg.to_block();
         assert_eq!(Config::from_block(&block), (cfg, Source::Block));
@@ -368,6 +508,31 @@ mod tests {
         baud.upstream_baud = 1_200;
         assert_eq!(Config::parse(&baud.to_block()), Err(BlockError::Field(8)));
         assert_eq!(Config::parse(&block[..10]), Err(BlockError::TooShort));
+        let mut unit = cfg;
+        unit.modbus.unit = 0;
+        assert_eq!(Config::parse(&unit.to_block()), Err(BlockError::Field(18)));
+    }
+
+    #[test]
+    fn a_version_1_block_reads_with_the_modbus_defaults() {
+        // A block written by the firmware before the gateway: 9,600 baud
+        // upstream, 38,400 downstream, RTS/CTS, read-only, stations 01/FE.
+        let mut v1 = [0u8; BLOCK_LEN];
+        v1[..4].copy_from_slice(b"IAIB");
+        v1[4..8].copy_from_slice(&[1, 2, 0x01, 0xFE]);
+        v1[8..12].copy_from_slice(&9_600u32.to_le_bytes());
+        v1[12..16].copy_from_slice(&38_400u32.to_le_bytes());
+        v1[16] = 1;
+        let crc = crc32(&v1[..60]);
+        v1[60..].copy_from_slice(&crc.to_le_bytes());
+        let (cfg, source) = Config::from_block(&v1);
+        assert_eq!(source, Source::Block);
+        assert_eq!(cfg.modbus, ModbusConfig::DEFAULT);
+        assert_eq!(cfg.upstream, UpstreamProtocol::ProtocolB);
+        assert_eq!((cfg.upstream_baud, cfg.policy), (9_600, Policy::ReadOnly));
+        // Written back, it is a version 2 block with the same settings.
+        assert_eq!(cfg.to_block()[4], 2);
+        assert_eq!(Config::from_block(&cfg.to_block()), (cfg, Source::Block));
     }
 
     #[test]

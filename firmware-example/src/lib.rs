@@ -9,6 +9,8 @@
 //! - [`config`]: the run-time configuration block and the command policy;
 //! - [`status`]: the status query the bridge answers on its own station;
 //! - [`codes`]: the bridge's own `&` codes and message IDs (B00..BFF);
+//! - [`modbus`]: the PLC gateway, a Modbus RTU server in front of protocol
+//!   B sharing the bridge's controller line.
 //! - `net` (feature `ethernet`): the bridge's host side on TCP (smoltcp,
 //!   the Stellaris Ethernet MAC).
 //!
@@ -37,6 +39,7 @@ mod log;
 pub mod bridge;
 pub mod codes;
 pub mod config;
+pub mod modbus;
 #[cfg(feature = "ethernet")]
 pub mod net;
 pub mod serial;

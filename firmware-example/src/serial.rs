@@ -54,6 +54,10 @@ pub const XOFF_REPEAT: usize = 32;
 /// The upstream (host) line of every board: a 256-byte receive queue (255
 /// usable) and a 64-byte transmit queue.
 pub type UpstreamLine = Line<256, 64>;
+/// The Modbus RTU line of the gateway (lm3s6965): the loop moves its
+/// bytes to the RTU framer at every pass, so the ring only bridges a pass
+/// (128 bytes: 11 ms at 115,200 baud); no flow control.
+pub type ModbusLine = Line<128, 64>;
 /// The downstream (controller) line of every board.
 pub type DownstreamLine = Line<128, 64>;
 /// Bytes a host may still send after it was told to stop (XOFF arrived, or
@@ -139,6 +143,11 @@ struct Shared {
     paused: AtomicBool,
     /// Times the sender was asked to stop (interrupt side).
     pauses: AtomicU32,
+    /// When the last byte arrived, in the board's microseconds, if the
+    /// interrupt side stamps them ([`IsrEnd::on_receive_at`]).
+    last_rx_us: AtomicU32,
+    /// Whether `last_rx_us` was ever stamped (interrupt side).
+    stamped: AtomicBool,
 }
 
 impl Shared {
@@ -148,6 +157,8 @@ impl Shared {
             overruns_seen: AtomicU32::new(0),
             paused: AtomicBool::new(false),
             pauses: AtomicU32::new(0),
+            last_rx_us: AtomicU32::new(0),
+            stamped: AtomicBool::new(false),
         }
     }
 }
@@ -262,6 +273,16 @@ impl IsrEnd<'_> {
                 self.queue_xoff();
             }
         }
+    }
+
+    /// One byte the UART received at `at_us` (the board's microsecond
+    /// clock): what a Modbus RTU line needs to find the silence between
+    /// frames even when the thread reads the ring late.
+    pub fn on_receive_at(&mut self, byte: u8, at_us: u32) {
+        // Stamped first: a reader that sees the byte sees its time.
+        self.shared.last_rx_us.store(at_us, Ordering::Relaxed);
+        self.shared.stamped.store(true, Ordering::Release);
+        self.on_receive(byte);
     }
 
     /// The UART flagged `lost` bytes it could not keep (hardware overrun).
@@ -444,6 +465,12 @@ pub trait Port:
     fn take_overruns(&mut self) -> u32 {
         0
     }
+
+    /// When the last byte arrived (microseconds, the board's clock), if the
+    /// port knows; `None`: the reader takes the time it reads a byte.
+    fn last_rx_us(&mut self) -> Option<u32> {
+        None
+    }
 }
 
 impl Port for ThreadEnd<'_> {
@@ -452,6 +479,13 @@ impl Port for ThreadEnd<'_> {
         let seen = self.shared.overruns_seen.load(Ordering::Relaxed);
         self.shared.overruns_seen.store(total, Ordering::Relaxed);
         total.wrapping_sub(seen)
+    }
+
+    fn last_rx_us(&mut self) -> Option<u32> {
+        self.shared
+            .stamped
+            .load(Ordering::Acquire)
+            .then(|| self.shared.last_rx_us.load(Ordering::Relaxed))
     }
 }
 

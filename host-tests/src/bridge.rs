@@ -145,6 +145,12 @@ fn write_all_nonblocking(stream: &mut UnixStream, mut bytes: &[u8]) -> io::Resul
     Ok(())
 }
 
+/// Bytes written to the Unix socket `fd` that its peer (QEMU) has not
+/// read yet.
+pub(crate) fn unsent(fd: &impl AsRawFd) -> io::Result<i32> {
+    unread(fd, SIOCOUTQ)
+}
+
 /// `ioctl` count `request` of the socket `fd` (see [`SIOCOUTQ`],
 /// [`FIONREAD`]).
 fn unread(fd: &impl AsRawFd, request: u64) -> io::Result<i32> {

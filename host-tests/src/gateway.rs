@@ -43,6 +43,11 @@
 //! both sides; the quit sequence stays off, since a client's bytes could
 //! hold it. The gateway stops when asked (`stop`), or fails when QEMU
 //! exits on its own.
+//!
+//! On a board with the Modbus RTU port (`lm3s6965evb`, its third UART),
+//! that port is on a second TCP port, relayed as an RTU line
+//! ([`crate::rtu_relay`]): the configuration block keeps the gateway's
+//! defaults (unit 1, even parity) at the Modbus baud rate chosen.
 
 use std::collections::VecDeque;
 use std::io::{self, Read, Write};
@@ -63,6 +68,7 @@ use crate::qemu::{
     build_ethernet_firmware, build_firmware, symbol_address, target_dir, Board, ExitOutcome,
     QemuSession, QUIT_GUARD, QUIT_SEQUENCE, READY_MARKER,
 };
+use crate::rtu_relay::RtuRelay;
 use crate::sim::{Faults, Simulator};
 use firmware_example::net::config::{NetConfig, BLOCK_OFFSET, DEFAULT_PORT};
 
@@ -75,6 +81,15 @@ pub struct Options {
     pub baud: u32,
     /// TCP port on 127.0.0.1 for the host side (0: a free one).
     pub port: u16,
+    /// TCP port on 127.0.0.1 for the Modbus RTU port, on a board that has
+    /// one (0: a free one).
+    pub modbus_port: u16,
+    /// Line rate of the Modbus RTU port.
+    pub modbus_baud: u32,
+    /// At the stop, end the firmware with the quit sequence (honoured only
+    /// then: `quit_sequence` in the configuration block) and log its
+    /// stack peak (`firmware stack peak N bytes`), for the size report.
+    pub stack_report: bool,
     /// The simulated controller's time per command, ms.
     pub reply_delay_ms: u32,
     /// Faults the simulated controller injects.
@@ -103,6 +118,9 @@ impl Default for Options {
             board: Board::Lm3s6965,
             baud: 115_200,
             port: 0,
+            modbus_port: 0,
+            modbus_baud: firmware_example::config::ModbusConfig::DEFAULT.baud,
+            stack_report: false,
             reply_delay_ms: 2,
             faults: Faults::default(),
             seed: 1,
@@ -125,13 +143,30 @@ const CLIENT_WRITE_TIMEOUT: Duration = Duration::from_secs(10);
 /// How often the loops look at their stop flags.
 const POLL: Duration = Duration::from_millis(20);
 
-/// The configuration block the gateway boots the bridge with.
-pub fn config(baud: u32) -> Config {
-    Config {
+/// The configuration block the gateway boots the bridge with: the
+/// defaults at `baud` on both protocol-B sides, the Modbus port's defaults
+/// at `modbus_baud`.
+pub fn config(baud: u32, modbus_baud: u32) -> Config {
+    let mut cfg = Config {
         upstream_baud: baud,
         downstream_baud: baud,
         ..Config::DEFAULT
-    }
+    };
+    cfg.modbus.baud = modbus_baud;
+    cfg
+}
+
+/// Where the gateway listens, once it is ready.
+#[derive(Debug, Clone, Copy)]
+pub struct Ready {
+    /// The protocol-B host side: the relay's port, or with `--ethernet`
+    /// the port QEMU forwards to the firmware's own TCP stack.
+    pub protocol_b: SocketAddr,
+    /// Protocol B over TCP straight to the firmware (the Ethernet build),
+    /// not through the serial relay.
+    pub over_ethernet: bool,
+    /// The Modbus RTU port, on a board that has one.
+    pub modbus_rtu: Option<SocketAddr>,
 }
 
 fn log(line: &str) {
@@ -140,21 +175,19 @@ fn log(line: &str) {
 }
 
 /// Boots the bridge, puts the simulator behind it, listens on
-/// 127.0.0.1:`port`, calls `on_ready` with that address once the bridge
-/// has answered through the relay, and relays clients until `stop` is set.
-/// An error if anything fails to start or QEMU exits on its own; QEMU is
-/// stopped in every case.
-pub fn run(
-    opts: &Options,
-    stop: &AtomicBool,
-    on_ready: impl FnOnce(SocketAddr),
-) -> Result<(), String> {
-    if !firmware_example::config::BAUD_RATES.contains(&opts.baud) {
-        return Err(format!(
-            "baud rate {} is not one the bridge runs at ({:?})",
-            opts.baud,
-            firmware_example::config::BAUD_RATES
-        ));
+/// 127.0.0.1:`port` (and `modbus_port` on a board with the Modbus port),
+/// calls `on_ready` with those addresses once the bridge has answered
+/// through the relay, and relays clients until `stop` is set. An error if
+/// anything fails to start or QEMU exits on its own; QEMU is stopped in
+/// every case.
+pub fn run(opts: &Options, stop: &AtomicBool, on_ready: impl FnOnce(Ready)) -> Result<(), String> {
+    for b in [opts.baud, opts.modbus_baud] {
+        if !firmware_example::config::BAUD_RATES.contains(&b) {
+            return Err(format!(
+                "baud rate {b} is not one the bridge runs at ({:?})",
+                firmware_example::config::BAUD_RATES
+            ));
+        }
     }
     if opts.ethernet {
         return run_ethernet(opts, stop, on_ready);
@@ -165,12 +198,24 @@ pub fn run(
     listener
         .set_nonblocking(true)
         .map_err(|e| format!("listener: {e}"))?;
+    let modbus_listener = if opts.board.has_modbus() {
+        let l = TcpListener::bind(("127.0.0.1", opts.modbus_port))
+            .map_err(|e| format!("cannot listen on 127.0.0.1:{}: {e}", opts.modbus_port))?;
+        Some(l)
+    } else {
+        None
+    };
+    let modbus_addr = match &modbus_listener {
+        Some(l) => Some(l.local_addr().map_err(|e| e.to_string())?),
+        None => None,
+    };
     let elf = match &opts.elf {
         Some(p) => p.clone(),
         None => build_firmware(opts.board)
             .map_err(|e| format!("building the firmware for {}: {e}", opts.board))?,
     };
-    let cfg = config(opts.baud);
+    let mut cfg = config(opts.baud, opts.modbus_baud);
+    cfg.quit_sequence = opts.stack_report;
     // Tied: QEMU goes with this thread even if the process is killed.
     let mut qemu = QemuSession::start_tied(
         opts.board,
@@ -179,6 +224,7 @@ pub fn run(
         Some(READY_MARKER),
         &[],
         Some(&cfg),
+        modbus_listener.is_some(),
     )
     .map_err(|e| format!("starting QEMU: {e}"))?;
 
@@ -194,6 +240,16 @@ pub fn run(
     let link = HostLink::new(&qemu.upstream, Some(opts.baud), true)
         .map_err(|e| format!("host side: {e}"))?;
     let link = Arc::new(link);
+    // The relay's own flag: set when the gateway stops, whatever stopped it.
+    let relay_stop = Arc::new(AtomicBool::new(false));
+    let relay = match (modbus_listener, &qemu.modbus) {
+        (Some(l), Some(uart)) => {
+            let r = RtuRelay::spawn(l, uart, opts.modbus_baud, Arc::clone(&relay_stop))
+                .map_err(|e| format!("Modbus side: {e}"))?;
+            Some(r)
+        }
+        _ => None,
+    };
 
     let (client, result): Served = match status_query(&link, cfg.bridge_station, FENCE_TIMEOUT) {
         Err(e) => (
@@ -210,15 +266,37 @@ pub fn run(
                 opts.baud,
                 cfg.controller_station.0
             ));
-            on_ready(addr);
+            if let Some(at) = modbus_addr {
+                log(&format!(
+                    "Modbus RTU port (unit {}, {} baud) relayed on {at}",
+                    cfg.modbus.unit, cfg.modbus.baud
+                ));
+            }
+            on_ready(Ready {
+                protocol_b: addr,
+                over_ethernet: false,
+                modbus_rtu: modbus_addr,
+            });
             serve(&listener, &link, &mut qemu, stop, cfg.bridge_station)
         }
     };
 
-    // QEMU first: its end closes both lines, which ends the threads.
-    drop(qemu);
+    // QEMU first: its end closes the lines, which ends the threads.
+    if opts.stack_report && result.is_ok() {
+        report_stack(qemu);
+    } else {
+        drop(qemu);
+    }
+    relay_stop.store(true, Ordering::Relaxed);
     if let Some(client) = client {
         client.join_within(Duration::from_secs(5));
+    }
+    if let Some(r) = relay {
+        let s = r.join();
+        log(&format!(
+            "Modbus RTU port: {} client(s), {} frame(s) in ({} bytes), {} byte(s) of replies",
+            s.clients, s.frames, s.bytes_in, s.bytes_out
+        ));
     }
     match sim.join() {
         Ok(sim) => {
@@ -232,6 +310,30 @@ pub fn run(
         Err(e) => log(&format!("stopped; {e}")),
     }
     result
+}
+
+/// Ends the firmware with the quit sequence and logs the stack peak it
+/// reports; QEMU is killed if it does not end within 10 s.
+fn report_stack(mut qemu: QemuSession) {
+    if let Err(e) = qemu.quit() {
+        log(&format!("no stack peak: sending the quit sequence: {e}"));
+        return;
+    }
+    match qemu.wait(Duration::from_secs(10)) {
+        Ok(out) => match out
+            .stdout
+            .lines()
+            .find_map(|l| l.strip_prefix("firmware-example: stack peak "))
+            .and_then(|l| l.split_whitespace().next())
+        {
+            Some(peak) => log(&format!("firmware stack peak {peak} bytes")),
+            None => log(&format!(
+                "no stack peak in the firmware's output:\n{}",
+                out.stdout
+            )),
+        },
+        Err(e) => log(&format!("no stack peak: {e}")),
+    }
 }
 
 /// The client served when the relay ended, and how it ended.
@@ -602,7 +704,7 @@ impl EthernetGateway {
         };
         let cfg = Config {
             quit_sequence: opts.quit_sequence,
-            ..config(opts.baud)
+            ..config(opts.baud, opts.modbus_baud)
         };
         let guest_port = opts.network.map_or(DEFAULT_PORT, |n| n.port);
         let nic =
@@ -620,6 +722,7 @@ impl EthernetGateway {
             Some(READY_MARKER),
             &args,
             Some(&cfg),
+            false,
         )
         .map_err(|e| format!("starting QEMU: {e}"))?;
         let mut sim = Simulator::tta(cfg.controller_station);
@@ -710,7 +813,7 @@ impl EthernetGateway {
 pub fn run_ethernet(
     opts: &Options,
     stop: &AtomicBool,
-    on_ready: impl FnOnce(SocketAddr),
+    on_ready: impl FnOnce(Ready),
 ) -> Result<(), String> {
     let mut gw = EthernetGateway::start(opts)?;
     log(&format!(
@@ -719,10 +822,14 @@ pub fn run_ethernet(
         gw.qemu.pid(),
         gw.listening,
         gw.addr,
-        config(opts.baud).controller_station.0,
+        config(opts.baud, opts.modbus_baud).controller_station.0,
         opts.baud
     ));
-    on_ready(gw.addr);
+    on_ready(Ready {
+        protocol_b: gw.addr,
+        over_ethernet: true,
+        modbus_rtu: None,
+    });
     let result = watch(&mut gw.qemu, stop);
     match gw.stop() {
         Ok(sim) => {

@@ -6,8 +6,10 @@
 pub mod bridge;
 pub mod gateway;
 pub mod link;
+pub mod modbus_model;
 pub mod naive;
 pub mod qemu;
+pub mod rtu_relay;
 pub mod table;
 
 pub use iai_simulator as sim;

@@ -95,6 +95,12 @@ impl Board {
         }
     }
 
+    /// Whether the board's firmware has the gateway's Modbus RTU port (a
+    /// third UART).
+    pub fn has_modbus(self) -> bool {
+        self == Board::Lm3s6965
+    }
+
     /// Cargo feature of `firmware-example` that selects this board.
     pub fn feature(self) -> &'static str {
         match self {
@@ -256,6 +262,9 @@ pub struct QemuSession {
     pub upstream: UnixStream,
     /// Second serial port: the controller side of the bridge.
     pub downstream: UnixStream,
+    /// Third serial port, when asked for ([`QemuSession::start_tied`]):
+    /// the Modbus RTU port of the gateway on `lm3s6965evb` (UART2).
+    pub modbus: Option<UnixStream>,
     board: Board,
     child: Child,
     stdout: Capture,
@@ -408,14 +417,27 @@ impl QemuSession {
         extra_args: &[&str],
         config: Option<&Config>,
     ) -> io::Result<Self> {
-        Self::start_inner(board, elf, timeout, ready_marker, extra_args, config, false)
+        Self::start_inner(
+            board,
+            elf,
+            timeout,
+            ready_marker,
+            extra_args,
+            config,
+            false,
+            false,
+        )
     }
 
     /// Like [`QemuSession::start_configured`], and QEMU is also killed
     /// when the thread that calls this ends, even if this process is
     /// killed with SIGKILL (Linux `PR_SET_PDEATHSIG`): for a long-running
     /// program whose main thread starts QEMU, such as the gateway. Not for
-    /// tests, whose sessions may outlive the thread that started them.
+    /// tests, whose sessions may outlive the thread that started them
+    /// (a test that runs the gateway runs it in a thread that lives as long
+    /// as the session). With `modbus`, a third serial port is connected
+    /// too ([`QemuSession::modbus`]).
+    #[allow(clippy::too_many_arguments)]
     pub fn start_tied(
         board: Board,
         elf: &Path,
@@ -423,10 +445,21 @@ impl QemuSession {
         ready_marker: Option<&str>,
         extra_args: &[&str],
         config: Option<&Config>,
+        modbus: bool,
     ) -> io::Result<Self> {
-        Self::start_inner(board, elf, timeout, ready_marker, extra_args, config, true)
+        Self::start_inner(
+            board,
+            elf,
+            timeout,
+            ready_marker,
+            extra_args,
+            config,
+            true,
+            modbus,
+        )
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn start_inner(
         board: Board,
         elf: &Path,
@@ -435,6 +468,7 @@ impl QemuSession {
         extra_args: &[&str],
         config: Option<&Config>,
         tied: bool,
+        modbus: bool,
     ) -> io::Result<Self> {
         let loader = match config {
             Some(cfg) => Some(config_loader_arg(elf, cfg)?),
@@ -452,6 +486,13 @@ impl QemuSession {
         let _ = std::fs::remove_file(&down_sock);
         let upstream_listener = UnixListener::bind(&sock)?;
         let downstream_listener = UnixListener::bind(&down_sock)?;
+        let modbus_sock = sock_dir.join(format!("modbus-{}-{n}.sock", std::process::id()));
+        let modbus_listener = if modbus {
+            let _ = std::fs::remove_file(&modbus_sock);
+            Some(UnixListener::bind(&modbus_sock)?)
+        } else {
+            None
+        };
 
         let mut command = Command::new(QEMU);
         command
@@ -463,8 +504,14 @@ impl QemuSession {
             .args(["-serial", "chardev:u0"])
             .arg("-chardev")
             .arg(format!("socket,id=u1,path={}", down_sock.display()))
-            .args(["-serial", "chardev:u1"])
-            .args(extra_args);
+            .args(["-serial", "chardev:u1"]);
+        if modbus {
+            command
+                .arg("-chardev")
+                .arg(format!("socket,id=u2,path={}", modbus_sock.display()))
+                .args(["-serial", "chardev:u2"]);
+        }
+        command.args(extra_args);
         if let Some(loader) = &loader {
             command.arg("-device").arg(loader);
         }
@@ -502,7 +549,11 @@ impl QemuSession {
         let accepted = accept_unix_until(&upstream_listener, &mut child, deadline)
             .and_then(|up| {
                 let down = accept_unix_until(&downstream_listener, &mut child, deadline)?;
-                Ok((up, down))
+                let third = match &modbus_listener {
+                    Some(l) => Some(accept_unix_until(l, &mut child, deadline)?),
+                    None => None,
+                };
+                Ok((up, down, third))
             })
             .and_then(|streams| match ready_marker {
                 Some(marker) if !stdout.wait_for(marker, deadline) => Err(io::Error::new(
@@ -513,7 +564,10 @@ impl QemuSession {
             });
         let _ = std::fs::remove_file(&sock);
         let _ = std::fs::remove_file(&down_sock);
-        let (upstream, downstream) = match accepted {
+        if modbus {
+            let _ = std::fs::remove_file(&modbus_sock);
+        }
+        let (upstream, downstream, modbus) = match accepted {
             Ok(streams) => streams,
             Err(e) => {
                 if let Ok(None) = child.try_wait() {
@@ -535,6 +589,7 @@ impl QemuSession {
         let session = Self {
             upstream,
             downstream,
+            modbus,
             board,
             child,
             stdout,
@@ -547,6 +602,11 @@ impl QemuSession {
         down.set_nonblocking(false)?;
         down.set_read_timeout(Some(timeout))?;
         down.set_write_timeout(Some(timeout))?;
+        if let Some(m) = &session.modbus {
+            m.set_nonblocking(false)?;
+            m.set_read_timeout(Some(timeout))?;
+            m.set_write_timeout(Some(timeout))?;
+        }
         Ok(session)
     }
 

@@ -52,7 +52,10 @@ use firmware_example::codes;
 /// The bridge's and the controller's stations in the gateway's
 /// configuration.
 fn stations() -> (Station, Station) {
-    let cfg = host_tests::gateway::config(115_200);
+    let cfg = host_tests::gateway::config(
+        115_200,
+        firmware_example::config::ModbusConfig::DEFAULT.baud,
+    );
     (cfg.bridge_station, cfg.controller_station)
 }
 

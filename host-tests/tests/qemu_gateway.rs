@@ -2,7 +2,8 @@
 //! firmware under QEMU `lm3s6965evb` with the simulator behind it, and the
 //! real `iai` tool on its TCP port as a user runs it.
 //!
-//! 1. the gateway prints `protocol-b 127.0.0.1:PORT` once it is ready;
+//! 1. the gateway prints `protocol-b 127.0.0.1:PORT` then
+//!    `modbus-rtu 127.0.0.1:PORT` once it is ready;
 //! 2. `iai send 212` gets the typed axis status;
 //! 3. a second connection while one is open is closed at once; a client
 //!    that sends noise, leaves the bridge stopped with an XOFF and
@@ -112,7 +113,14 @@ impl Gateway {
             .filter(|a| a.starts_with("127.0.0.1:"))
             .unwrap_or_else(|| panic!("first line {first:?}"))
             .to_owned();
-        // Exactly one line on stdout.
+        // Then the Modbus RTU port (lm3s6965 has one), and nothing more.
+        let second = stdout.recv_timeout(Duration::from_secs(5));
+        gw.drain_log();
+        let second = second.unwrap_or_else(|_| panic!("no modbus-rtu line; stderr:\n{}", gw.log()));
+        assert!(
+            second.starts_with("modbus-rtu 127.0.0.1:"),
+            "second line {second:?}"
+        );
         assert!(stdout.recv_timeout(Duration::from_millis(200)).is_err());
         gw
     }

@@ -12,6 +12,8 @@
 //! | 246H | `number_of_clear_positions` positions from `clear_start_position_number` (3-digit numbering) removed from the table, then acknowledged |
 //! | 212H, 232H to 238H, 26BH | the axis model (`axis`) |
 //! | 215H | AUTO mode, no system error, "operating in AUTO", "system ready" |
+//! | 20BH, 20CH, 20DH, 20EH, 24AH, 24BH, 24CH, 213H | the I/O model (`io`): ports, flags, integer variables, an idle program |
+//! | 252H | acknowledged (the simulator models no alarms) |
 //! | 216H | illustrative details (error C74H, step 5, axis 2, point -3) |
 //!
 //! # Refusals
@@ -36,17 +38,20 @@ use iai_protocol_b::axis::{AxisPattern, PerAxis, MAX_AXES};
 use iai_protocol_b::field::{FieldSpec, Writer};
 use iai_protocol_b::frame::{emit_envelope, emit_trailer, Frame, Header, Station};
 use iai_protocol_b::message::{
-    AbsoluteMoveResponse, AxisStatus, AxisStatusResponse, ClearPositionDataResponse, Command,
-    EffectivePositionCountResponse, ErrorDetailResponse, ErrorResponse, HomeReturnResponse,
-    JogInchResponse, Message, OperationStopResponse, PositionNumberMove2Response,
-    PositionNumberMoveResponse, PositionRecords, RelativeMoveResponse, ServoOnOffResponse,
-    SystemStatusResponse, TestCallResponse,
+    AbsoluteMoveResponse, AlarmResetResponse, AxisStatus, AxisStatusResponse,
+    ClearPositionDataResponse, Command, EffectivePositionCountResponse, ErrorDetailResponse,
+    ErrorResponse, FlagChangeResponse, HomeReturnResponse, IntegerVariableChangeResponse,
+    JogInchResponse, Message, OperationStopResponse, OutputPortChangeResponse,
+    PositionNumberMove2Response, PositionNumberMoveResponse, PositionRecords,
+    ProgramStatusResponse, RelativeMoveResponse, ServoOnOffResponse, SystemStatusResponse,
+    TestCallResponse,
 };
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::position::PositionStream;
 use iai_protocol_b::profile::Profile;
 
 use super::axis::{Axis, Home, Kind};
+use super::io::Io;
 use super::{
     Rng, AXIS_BUSY_CODE, DEFAULT_ACC, DEFAULT_SPEED, NOT_HOMED_CODE, NOT_MODELLED_CODE,
     NO_POSITION_CODE, SERVO_OFF_CODE, SOFT_LIMIT, UNSUPPORTED_ERROR_CODE,
@@ -74,6 +79,8 @@ pub struct Controller {
     pub axes: [Axis; MAX_AXES],
     /// Position records written, over all connections.
     pub records_written: u64,
+    /// Ports, flags and integer variables.
+    pub io: Io,
     /// Refuse moves as described in the module docs (servo off, not
     /// homed, busy, undefined position). Off in the constructors, so that
     /// protocol tests get a normal response to every well-formed command
@@ -99,6 +106,7 @@ impl Controller {
             table: BTreeMap::new(),
             axes: [Axis::default(); MAX_AXES],
             records_written: 0,
+            io: Io::default(),
             refuse: false,
         }
     }
@@ -313,11 +321,49 @@ impl Controller {
                 q.query_head_position_number,
                 q.number_of_query_records,
             ),
+            Command::InputPortQuery(q) => self.or_refused(self.io.inputs(&q, |r| self.emit(r))),
+            Command::OutputPortQuery(q) => self.or_refused(self.io.outputs(&q, |r| self.emit(r))),
+            Command::FlagQuery(q) => self.or_refused(self.io.flags(&q, |r| self.emit(r))),
+            Command::IntegerVariableQuery(q) => self.io.integers(&q, |r| self.emit(r)),
+            Command::OutputPortChange(c) => {
+                self.io
+                    .set_output(c.output_port_number, c.change_type & 1 == 1);
+                self.emit(&OutputPortChangeResponse {})
+            }
+            Command::FlagChange(c) => {
+                self.io
+                    .set_flag(c.program_number, c.flag_number, c.change_type & 1 == 1);
+                self.emit(&FlagChangeResponse {})
+            }
+            Command::IntegerVariableChange(c) => {
+                let n = self.io.set_integers(
+                    c.program_number,
+                    c.change_start_variable_number,
+                    c.integer_variable_data.iter(),
+                );
+                self.emit(&IntegerVariableChangeResponse {
+                    program_number: c.program_number,
+                    change_start_variable_number: c.change_start_variable_number,
+                    number_of_changed_variables: n,
+                })
+            }
+            // Not running, step 0, no error.
+            Command::ProgramStatusQuery(q) => self.emit(&ProgramStatusResponse {
+                program_number: q.program_number,
+                ..ProgramStatusResponse::default()
+            }),
+            Command::AlarmReset(_) => self.emit(&AlarmResetResponse {}),
             // Every other message: refused rather than answered with made-up
             // fields (see "Refusals" in the module docs).
             _ => self.error_frame(NOT_MODELLED_CODE),
         };
         Some(reply)
+    }
+
+    /// A modelled reply, or the refusal of a query larger than the model
+    /// answers ([`NOT_MODELLED_CODE`]).
+    fn or_refused(&self, reply: Option<Vec<u8>>) -> Vec<u8> {
+        reply.unwrap_or_else(|| self.error_frame(NOT_MODELLED_CODE))
     }
 
     fn axis_pos(&self, n: u8, now: u32) -> i32 {
@@ -659,12 +705,33 @@ mod tests {
     }
 
     #[test]
+    fn output_300_drives_input_0_and_variables_keep_what_is_written() {
+        let mut ctl = Controller::tta(ST);
+        // 24AH: output port 300 (012CH) on.
+        assert_eq!(exec(&mut ctl, "!9924A012C141\r\n", 0), "#9924A3C\r\n");
+        // 20BH, 16 ports from 0: input 0 reads output 300.
+        assert_eq!(
+            exec(&mut ctl, "!9920B00000010B8\r\n", 0),
+            "#9920B0000001001007B\r\n"
+        );
+        // 24CH: global variables 200 (0C8H) and 201 := 100 and -1.
+        assert_eq!(
+            exec(&mut ctl, "!9924C000C80200000064FFFFFFFF63\r\n", 0),
+            "#9924C000C802AB\r\n"
+        );
+        assert_eq!(
+            exec(&mut ctl, "!9920E000C802A7\r\n", 0),
+            "#9920E000C80200000064FFFFFFFF63\r\n"
+        );
+    }
+
+    #[test]
     fn a_message_the_simulator_does_not_model_is_refused() {
         let mut ctl = Controller::tta(ST);
         ctl.table
             .insert(1, PositionRecord::new(1, 1, 1, 1, &[(1, 5)]).unwrap());
-        // 201H version, 252H alarm reset, 25BH software reset.
-        for cmd in ["!99201000B6\r\n", "!992522C\r\n", "!9925B3C\r\n"] {
+        // 201H version, 25BH software reset.
+        for cmd in ["!99201000B6\r\n", "!9925B3C\r\n"] {
             assert_eq!(exec(&mut ctl, cmd, 0), "&990E340\r\n", "{cmd}");
         }
         // An ID outside the catalogue, a body that does not fit (212H without
@@ -700,6 +767,15 @@ mod tests {
             &catalogue::POSITION_NUMBER_MOVE_2,
             &catalogue::SYSTEM_STATUS_QUERY,
             &catalogue::ERROR_DETAIL_QUERY,
+            &catalogue::INPUT_PORT_QUERY,
+            &catalogue::OUTPUT_PORT_QUERY,
+            &catalogue::FLAG_QUERY,
+            &catalogue::INTEGER_VARIABLE_QUERY,
+            &catalogue::OUTPUT_PORT_CHANGE,
+            &catalogue::FLAG_CHANGE,
+            &catalogue::INTEGER_VARIABLE_CHANGE,
+            &catalogue::PROGRAM_STATUS_QUERY,
+            &catalogue::ALARM_RESET,
         ]
         .map(|m| m.id);
         let mut ctl = Controller::tta(ST);

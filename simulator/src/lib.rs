@@ -1,7 +1,8 @@
 //! A controller simulator: the controller's side of protocol B, built on
 //! the core, with a position table, a model of each axis and faults
 //! injected on demand. It answers only what it models (200H, positions,
-//! axes, status: see [`Controller::execute`]); every other message is refused.
+//! axes, status, I/O and integer variables: see [`Controller::execute`]);
+//! every other message is refused.
 //!
 //! This is the simulator `iai simulate` runs, as a library of its own so
 //! that a test can put a controller on a port without the `iai` tool and
@@ -60,10 +61,12 @@
 
 mod axis;
 mod controller;
+mod io;
 pub mod server;
 
 pub use axis::{Axis, Home};
 pub use controller::Controller;
+pub use io::Io;
 
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameDecoder};

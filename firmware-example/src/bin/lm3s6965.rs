@@ -1,8 +1,10 @@
 //! The bridge on a TI Stellaris LM3S6965 (QEMU `lm3s6965evb`, Cortex-M3).
 //!
-//! UART0 (PA0/PA1) faces the host, UART1 (PD2/PD3) the controller; both
-//! PL011s with 16-byte FIFOs, interrupt-driven through the `lm3s6965`
-//! device crate. The watchdog resets the MCU if the loop stops feeding it
+//! UART0 (PA0/PA1) faces the host, UART1 (PD2/PD3) the controller, UART2
+//! (PG0/PG1) is the Modbus RTU port of the gateway (`firmware_example::modbus`),
+//! all PL011s with 16-byte FIFOs, interrupt-driven through the `lm3s6965`
+//! device crate; the Modbus port stamps each byte with the microsecond
+//! clock for the silence between frames. The watchdog resets the MCU if the loop stops feeding it
 //! for two periods of [`WATCHDOG_MS`]. The configuration comes from the
 //! block at `_bridge_config` (last flash page, see `memory.x`).
 //!
@@ -28,7 +30,10 @@ use core::ptr::{addr_of_mut, read_volatile, write_volatile};
 use cortex_m::peripheral::NVIC;
 use cortex_m_rt::entry;
 use firmware_example::bridge::Bridge;
-use firmware_example::serial::{DownstreamLine, FlowControl, IsrEnd, Line, UpstreamLine};
+use firmware_example::modbus::Gateway;
+use firmware_example::serial::{
+    DownstreamLine, FlowControl, IsrEnd, Line, ModbusLine, UpstreamLine, DOWNSTREAM_MARKS,
+};
 use lm3s6965::{interrupt, Interrupt};
 use runtime::Handoff;
 
@@ -45,10 +50,15 @@ static mut DOWN_LINE: DownstreamLine = Line::new();
 /// The bridge's state, written once at start (kept out of `.data`, whose
 /// initial image would cost as much flash as the bridge has bytes).
 static mut BRIDGE: MaybeUninit<Bridge> = MaybeUninit::uninit();
+/// The Modbus port's rings.
+static mut MODBUS_LINE: ModbusLine = Line::new();
+/// The gateway's state, written once at start.
+static mut GATEWAY: MaybeUninit<Gateway> = MaybeUninit::uninit();
 
 /// The interrupt ends, handed from `main` to the handlers.
 static UP_END: Handoff = runtime::handoff();
 static DOWN_END: Handoff = runtime::handoff();
+static MODBUS_END: Handoff = runtime::handoff();
 
 // System control (clock gating) and GPIO.
 const SYSCTL_RCGC0: usize = 0x400F_E100;
@@ -57,6 +67,7 @@ const SYSCTL_RCGC2: usize = 0x400F_E108;
 const GPIO_A: usize = 0x4000_4000;
 const GPIO_B: usize = 0x4000_5000;
 const GPIO_D: usize = 0x4000_7000;
+const GPIO_G: usize = 0x4002_6000;
 const GPIO_DIR: usize = 0x400;
 const GPIO_AFSEL: usize = 0x420;
 const GPIO_DEN: usize = 0x51C;
@@ -73,7 +84,7 @@ const WDT_CTL: usize = 0x4000_0008;
 const WDT_ICR: usize = 0x4000_000C;
 
 // PL011 register offsets and bits.
-const UART_BASE: [usize; 2] = [0x4000_C000, 0x4000_D000];
+const UART_BASE: [usize; 3] = [0x4000_C000, 0x4000_D000, 0x4000_E000];
 const DR: usize = 0x00;
 const FR: usize = 0x18;
 const IBRD: usize = 0x24;
@@ -126,7 +137,7 @@ impl Uart {
 
     /// The interrupt handler body: drain the receive FIFO into the ring,
     /// fill the transmit FIFO from it.
-    fn service(self, end: &mut IsrEnd<'_>) {
+    fn service(self, end: &mut IsrEnd<'_>, stamped: bool) {
         write(self.0 + ICR, INT_RX | INT_RT);
         end.service();
         while read(self.0 + FR) & FR_RXFE == 0 {
@@ -135,7 +146,11 @@ impl Uart {
                 // The FIFO was full and the byte after it was lost.
                 end.on_hw_overrun(1);
             }
-            end.on_receive(dr as u8);
+            if stamped {
+                end.on_receive_at(dr as u8, runtime::now_us());
+            } else {
+                end.on_receive(dr as u8);
+            }
         }
         let flow = end.flow();
         if flow == FlowControl::RtsCts {
@@ -167,22 +182,31 @@ fn pend_down() {
 
 #[interrupt]
 fn UART0() {
-    static mut END: Option<IsrEnd<'static>> = None;
-    runtime::with_end(END, &UP_END, |e| Uart(UART_BASE[0]).service(e));
+    runtime::in_handoff(&UP_END, |e| Uart(UART_BASE[0]).service(e, false));
 }
 
 #[interrupt]
 fn UART1() {
-    static mut END: Option<IsrEnd<'static>> = None;
-    runtime::with_end(END, &DOWN_END, |e| Uart(UART_BASE[1]).service(e));
+    runtime::in_handoff(&DOWN_END, |e| Uart(UART_BASE[1]).service(e, false));
+}
+
+fn pend_modbus() {
+    NVIC::pend(Interrupt::UART2);
+}
+
+#[interrupt]
+fn UART2() {
+    runtime::in_handoff(&MODBUS_END, |e| Uart(UART_BASE[2]).service(e, true));
 }
 
 /// Clocks for the UARTs, their GPIO ports and the watchdog; UART pins to
 /// their alternate function; RTS (PB0) an output, CTS (PB1) an input.
 fn init_pins() {
     write(SYSCTL_RCGC0, read(SYSCTL_RCGC0) | (1 << 3));
-    write(SYSCTL_RCGC1, read(SYSCTL_RCGC1) | 0b11);
-    write(SYSCTL_RCGC2, read(SYSCTL_RCGC2) | 0b1011);
+    write(SYSCTL_RCGC1, read(SYSCTL_RCGC1) | 0b111);
+    write(SYSCTL_RCGC2, read(SYSCTL_RCGC2) | 0b100_1011);
+    write(GPIO_G + GPIO_AFSEL, read(GPIO_G + GPIO_AFSEL) | 0b11);
+    write(GPIO_G + GPIO_DEN, read(GPIO_G + GPIO_DEN) | 0b11);
     write(GPIO_A + GPIO_AFSEL, read(GPIO_A + GPIO_AFSEL) | 0b11);
     write(GPIO_A + GPIO_DEN, read(GPIO_A + GPIO_DEN) | 0b11);
     write(GPIO_D + GPIO_AFSEL, read(GPIO_D + GPIO_AFSEL) | 0b1100);
@@ -203,8 +227,61 @@ fn feed_watchdog() {
     write(WDT_ICR, 1);
 }
 
+/// Builds the gateway in its static and hands the Modbus port's interrupt
+/// end over. Not inlined, so that its stack frame (the gateway may be
+/// built on the way into its static) is gone before the loop runs.
+#[inline(never)]
+fn setup_gateway(
+    cfg: firmware_example::config::Config,
+) -> (
+    &'static mut Gateway,
+    firmware_example::serial::ThreadEnd<'static>,
+) {
+    // SAFETY: called once from `main`; these are the only references to
+    // these statics, and UART2's interrupt is unmasked only after its end
+    // was handed over.
+    unsafe {
+        let gateway = (*addr_of_mut!(GATEWAY)).write(Gateway::new(cfg.modbus, cfg.policy));
+        let (isr, thread) =
+            (*addr_of_mut!(MODBUS_LINE)).split(FlowControl::None, DOWNSTREAM_MARKS, &pend_modbus);
+        cortex_m::interrupt::free(|cs| MODBUS_END.borrow(cs).set(Some(isr)));
+        (gateway, thread)
+    }
+}
+
+/// What the loop runs on, set up by [`boot`].
+struct Booted {
+    bridge: &'static mut Bridge,
+    gateway: &'static mut Gateway,
+    up: firmware_example::serial::ThreadEnd<'static>,
+    down: firmware_example::serial::ThreadEnd<'static>,
+    modbus: firmware_example::serial::ThreadEnd<'static>,
+    rts_cts: bool,
+}
+
 #[entry]
 fn main() -> ! {
+    let Booted {
+        bridge,
+        gateway,
+        mut up,
+        mut down,
+        mut modbus,
+        rts_cts,
+    } = boot();
+    runtime::serve_gateway(bridge, gateway, &mut up, &mut down, &mut modbus, || {
+        feed_watchdog();
+        if rts_cts {
+            // CTS has no interrupt: look at it every pass.
+            pend_up();
+        }
+    })
+}
+
+/// Everything before the loop. Not inlined, so that its frame (the
+/// configuration, the peripherals) is gone while the loop runs.
+#[inline(never)]
+fn boot() -> Booted {
     let Some(core) = cortex_m::Peripherals::take() else {
         panic!("core peripherals already taken");
     };
@@ -215,6 +292,8 @@ fn main() -> ! {
     let down_hw = Uart(UART_BASE[1]);
     up_hw.init(cfg.upstream_baud);
     down_hw.init(cfg.downstream_baud);
+    // Parity is not set: QEMU's PL011 ignores it, and the line is 8N1.
+    Uart(UART_BASE[2]).init(cfg.modbus.baud);
 
     // SAFETY: `main` runs once; these are the only references to these
     // statics, and the interrupts that use the ends are unmasked only
@@ -230,20 +309,22 @@ fn main() -> ! {
             down_end: &DOWN_END,
         }
     };
-    let (bridge, mut up, mut down) = runtime::setup(statics, cfg, source);
+    let (bridge, up, down) = runtime::setup(statics, cfg, source);
+    let (gateway, modbus) = setup_gateway(cfg);
     // SAFETY: the handlers only touch their ends, handed over above.
     unsafe {
         NVIC::unmask(Interrupt::UART0);
         NVIC::unmask(Interrupt::UART1);
+        NVIC::unmask(Interrupt::UART2);
     }
     start_watchdog();
     runtime::banner(NAME, source, cfg.flow);
-    let rts_cts = cfg.flow == FlowControl::RtsCts;
-    runtime::serve(bridge, &mut up, &mut down, || {
-        feed_watchdog();
-        if rts_cts {
-            // CTS has no interrupt: look at it every pass.
-            pend_up();
-        }
-    })
+    Booted {
+        bridge,
+        gateway,
+        up,
+        down,
+        modbus,
+        rts_cts: cfg.flow == FlowControl::RtsCts,
+    }
 }

@@ -16,8 +16,10 @@
 //! raw command frame passed through the client), the
 //! encoders (`RecordLayout::put_record`, the whole-field record paths, and
 //! `PositionStreamEncoder` for every position stream) on a record made of
-//! those bytes, and the bridge library (`Bridge::poll`, the configuration
-//! block, the serial line) fed arbitrary bytes on both ports. With the
+//! those bytes, the bridge library (`Bridge::poll`, the configuration
+//! block, the serial line) fed arbitrary bytes on both ports, and the
+//! Modbus gateway (its frame handler on arbitrary frames, its polls and
+//! commands on the bridge's line answered with arbitrary bytes). With the
 //! `ethernet` feature too: the network block, the Stellaris MAC driver
 //! reading arbitrary register values, and smoltcp with the protocol-B
 //! hosts and the bridge on top of it (`Net::poll`, the host port,
@@ -48,6 +50,7 @@ use iai_protocol_b::{
 
 use firmware_example::bridge::{Bridge, Port};
 use firmware_example::config::Config;
+use firmware_example::modbus::Gateway;
 use firmware_example::serial::{self, FlowControl, Watermarks};
 
 extern "C" {
@@ -303,6 +306,20 @@ fn main() -> ! {
         let _ = black_box(bridge.poll(&mut up, &mut down, black_box(tick)));
     }
     black_box(bridge.stats());
+
+    // The gateway: arbitrary frames on its port (split where the input
+    // says), its exchanges on the bridge's line answered with the same
+    // bytes.
+    let mut gateway = Gateway::new(black_box(cfg.modbus), black_box(cfg.policy));
+    let mut mb = Wire(input);
+    let mut down = Wire(input.get(half..).unwrap_or(&[]));
+    let mut up = Wire(&[]);
+    for tick in 0..black_box(64u32) {
+        let us = black_box(tick.wrapping_mul(black_box(4_000)));
+        let _ = black_box(gateway.serve(&mut mb, tick, us));
+        let _ = black_box(bridge.poll_with(&mut up, &mut down, &mut gateway, black_box(tick)));
+    }
+    black_box(gateway.stats());
 
     // The serial line's interrupt end, fed the same bytes.
     let mut line: serial::Line<256, 64> = serial::Line::new();

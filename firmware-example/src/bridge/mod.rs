@@ -21,7 +21,7 @@
 //! - [`pipeline`]: chunk and queue sizes for the downstream rate, so that
 //!   the final reply fits the host's timeout.
 //!
-//! The downstream line is one [`Line`](iai_protocol_b::Line) for both paths: what the 26DH path
+//! The downstream line is one [`Line`] for both paths: what the 26DH path
 //! left in flight (a read-back's late reply) the pass-through knows, and the
 //! reverse; a line just booted fences its first command. The bridge is
 //! wired to the controller, so its line expects no copied replies.
@@ -43,6 +43,7 @@ use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::FrameDecoder;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::line::Line as ControllerLine;
+pub use iai_protocol_b::line::Line;
 use iai_protocol_b::position::PositionStream;
 use iai_protocol_b::transfer::{packed_len, RecordBuffer, Transfer};
 use iai_protocol_b::{LineConfig, Profile, TransferConfig};
@@ -141,6 +142,92 @@ pub struct Interest {
     pub down_write: bool,
 }
 
+/// A second user of the controller line (the Modbus gateway): it runs its
+/// own exchanges, one at a time, when the bridge grants it the line. The
+/// protocol-B host goes first: while the host has a command waiting, the
+/// bridge asks the guest to give up an exchange it may abandon (a poll),
+/// and otherwise waits for it to end before it starts the host's command;
+/// the guest starts nothing while a host command or a 26DH runs.
+pub trait Guest {
+    /// Whether an exchange of the guest's is under way.
+    fn holds_line(&self) -> bool;
+    /// Whether it has an exchange to start at `now`.
+    fn wants_line(&self, now: u32) -> bool;
+    /// Whether its exchange may be abandoned now.
+    fn may_yield(&self) -> bool;
+    /// Abandons its exchange (the line owes the reply and fences).
+    fn yield_line(&mut self, line: &mut Line, now: u32);
+    /// Starts or drives its exchange: reads from and writes to `down`;
+    /// `Ok(moved)`.
+    fn run<D: Port>(&mut self, line: &mut Line, down: &mut D, now: u32) -> Result<bool, D::Error>;
+    /// What it waits for.
+    fn wait(&self, now: u32) -> GuestWait;
+}
+
+/// What a [`Guest`] waits for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct GuestWait {
+    /// Poll again by this tick.
+    pub deadline: Option<u32>,
+    /// Its transmission waits for room downstream.
+    pub down_write: bool,
+}
+
+/// No guest: the bridge alone.
+pub struct NoGuest;
+
+impl Guest for NoGuest {
+    fn holds_line(&self) -> bool {
+        false
+    }
+    fn wants_line(&self, _now: u32) -> bool {
+        false
+    }
+    fn may_yield(&self) -> bool {
+        true
+    }
+    fn yield_line(&mut self, _line: &mut Line, _now: u32) {}
+    fn run<D: Port>(&mut self, _l: &mut Line, _d: &mut D, _now: u32) -> Result<bool, D::Error> {
+        Ok(false)
+    }
+    fn wait(&self, _now: u32) -> GuestWait {
+        GuestWait::default()
+    }
+}
+
+/// A port with nothing attached: reads nothing, takes every byte (the
+/// protocol-B upstream of a two-UART board whose one upstream port speaks
+/// Modbus).
+pub struct NoPort;
+
+impl embedded_io::ErrorType for NoPort {
+    type Error = core::convert::Infallible;
+}
+impl embedded_io::ReadReady for NoPort {
+    fn read_ready(&mut self) -> Result<bool, Self::Error> {
+        Ok(false)
+    }
+}
+impl embedded_io::Read for NoPort {
+    fn read(&mut self, _buf: &mut [u8]) -> Result<usize, Self::Error> {
+        Ok(0)
+    }
+}
+impl embedded_io::WriteReady for NoPort {
+    fn write_ready(&mut self) -> Result<bool, Self::Error> {
+        Ok(true)
+    }
+}
+impl embedded_io::Write for NoPort {
+    fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}
+impl Port for NoPort {}
+
 /// The 26DH transfer: records from the upstream decoder through a bounded
 /// queue to controller-sized commands.
 type Job = Transfer<RecordBuffer<QUEUE_BYTES>>;
@@ -204,6 +291,12 @@ pub struct Bridge {
     resp_len: usize,
     stats: Stats,
     last_error: Option<LastError>,
+    /// A host command decoded and waiting for the line (the guest still
+    /// holds it): its ID.
+    forward_pending: Option<u16>,
+    /// The guest holds the line in this poll: the bridge's own paths
+    /// leave the downstream alone.
+    guest_holds: bool,
 }
 
 /// The line to the controller for `cfg`.
@@ -215,6 +308,7 @@ impl Bridge {
     /// An idle bridge with this configuration (`source` says where it came
     /// from, for the status query). `seed` makes the downstream line's
     /// fence texts its own: give a different one at each boot.
+    #[inline(always)]
     pub fn new(cfg: Config, source: Source, seed: u32) -> Self {
         Self {
             cfg,
@@ -232,6 +326,8 @@ impl Bridge {
             resp_len: 0,
             stats: Stats::default(),
             last_error: None,
+            forward_pending: None,
+            guest_holds: false,
         }
     }
 
@@ -280,6 +376,34 @@ impl Bridge {
         down: &mut D,
         now: u32,
     ) -> Result<Poll, Error<U::Error, D::Error>> {
+        self.poll_with(up, down, &mut NoGuest, now)
+    }
+
+    /// [`Bridge::poll`] with a second user of the controller line, granted
+    /// the line as [`Guest`] says.
+    pub fn poll_with<U: Port, D: Port, G: Guest>(
+        &mut self,
+        up: &mut U,
+        down: &mut D,
+        guest: &mut G,
+        now: u32,
+    ) -> Result<Poll, Error<U::Error, D::Error>> {
+        let mut guest_moved = false;
+        let host_waits = self.forward_pending.is_some() || matches!(self.mode, Mode::Stream { .. });
+        if host_waits && guest.holds_line() && guest.may_yield() {
+            guest.yield_line(&mut self.line, now);
+            guest_moved = true;
+        }
+        let host_busy = matches!(
+            self.mode,
+            Mode::SendCommand | Mode::AwaitReply | Mode::Stream { .. }
+        );
+        if guest.holds_line() || (!host_busy && guest.wants_line(now)) {
+            guest_moved |= guest
+                .run(&mut self.line, down, now)
+                .map_err(Error::Downstream)?;
+        }
+        self.guest_holds = guest.holds_line();
         let lost = down.take_overruns();
         if lost > 0 {
             self.stats.downstream_overruns = self.stats.downstream_overruns.wrapping_add(lost);
@@ -301,10 +425,19 @@ impl Bridge {
             Mode::Stream { .. } => self.poll_stream(up, down, now)?,
             Mode::Respond => self.poll_respond(up).map_err(Error::Upstream)?,
         };
-        Ok(if moved {
+        Ok(if moved || guest_moved {
             Poll::Busy
         } else {
-            Poll::Wait(self.wait(now))
+            let mut w = self.wait(now);
+            let g = guest.wait(now);
+            if self.guest_holds {
+                w.interest.down_read = true;
+                w.interest.down_write |= g.down_write;
+                w.deadline = earliest(now, w.deadline, g.deadline);
+            } else if !host_busy {
+                w.deadline = earliest(now, w.deadline, g.deadline);
+            }
+            Poll::Wait(w)
         })
     }
 
@@ -317,6 +450,14 @@ impl Bridge {
                 Reason::Host,
                 Interest {
                     up_read: true,
+                    down_read: true,
+                    ..Interest::default()
+                },
+            ),
+            Mode::SendCommand if self.forward_pending.is_some() => (
+                None,
+                Reason::Controller,
+                Interest {
                     down_read: true,
                     ..Interest::default()
                 },
@@ -397,6 +538,7 @@ impl Bridge {
     /// Back to hunting for a frame upstream.
     fn go_idle(&mut self) {
         self.mode = Mode::Idle;
+        self.forward_pending = None;
         self.out_off = 0;
         self.up.head_len = 0;
         self.stream_deadline = None;
@@ -413,6 +555,10 @@ impl Bridge {
     /// noise) while no command is on the line: the line already counts
     /// them as owed until its next fence.
     fn drain_downstream<D: Port>(&mut self, down: &mut D) -> Result<bool, D::Error> {
+        if self.guest_holds {
+            // The bytes are the guest's.
+            return Ok(false);
+        }
         let mut buf = [0u8; 16];
         let mut moved = false;
         while down.read_ready()? {
@@ -441,7 +587,7 @@ fn earliest(now: u32, a: Option<u32>, b: Option<u32>) -> Option<u32> {
 
 /// Writes what `port` takes right now of `bytes[*off..]`, never waiting;
 /// advances `*off` and `*counter` by the bytes written and returns them.
-fn write_some<W: Write + WriteReady>(
+pub(crate) fn write_some<W: Write + WriteReady>(
     port: &mut W,
     bytes: &[u8],
     off: &mut usize,

@@ -28,7 +28,13 @@ impl Bridge {
         now: u32,
     ) -> Result<bool, Error<U::Error, D::Error>> {
         match self.mode {
-            Mode::SendCommand => self.send_command(down, now).map_err(Error::Downstream),
+            Mode::SendCommand if self.guest_holds => Ok(false),
+            Mode::SendCommand => {
+                if let Some(id) = self.forward_pending.take() {
+                    super::upstream::start_forward(&mut self.line, id, now);
+                }
+                self.send_command(down, now).map_err(Error::Downstream)
+            }
             Mode::AwaitReply => self.await_reply(down, now).map_err(Error::Downstream),
             Mode::RelayReply => {
                 let bytes = self

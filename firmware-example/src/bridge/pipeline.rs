@@ -51,7 +51,8 @@ const RING_BYTES: usize = UPSTREAM_MARKS.pause_at + serial::HOST_LATENCY;
 
 /// Records the host may still have to send when the end phase begins:
 /// one more than the shortest records (no axes) that fit `RING_BYTES`
-/// (the receive ring's pause mark plus what a host sends after being told).
+/// (the host ring up to its pause mark, plus what the host sends after
+/// the pause).
 pub const END_PHASE_RECORDS: u16 = (RING_BYTES / STREAM.layout.record_len(0) + 1) as u16;
 
 /// Fewest records per chunk, whatever the rate: below it the two commands

@@ -38,6 +38,7 @@ pub(super) struct StreamWork {
 }
 
 impl StreamWork {
+    #[inline(always)]
     pub(super) const fn new(downstream_baud: u32) -> Self {
         StreamWork {
             decoder: PositionStreamDecoder::new(BypassPolicy::CommandsOnly),
@@ -198,7 +199,9 @@ impl Bridge {
         self.tx_blocked = false;
         self.stream_deadline = None;
         let was_full = self.queue_full();
-        if self.stream.started {
+        if self.guest_holds {
+            // The guest finishes its exchange first.
+        } else if self.stream.started {
             let (job, line) = (&mut self.job, &mut self.line);
             let mut buf = [0u8; 16];
             while down.read_ready().map_err(Error::Downstream)? {

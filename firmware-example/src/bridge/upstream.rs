@@ -50,6 +50,7 @@ impl Upstream {
         self.in_len.saturating_sub(self.in_pos)
     }
 
+    #[inline(always)]
     pub(super) const fn new() -> Self {
         Upstream {
             head: [0; ENVELOPE_LEN],
@@ -272,8 +273,9 @@ impl Bridge {
                 self.respond_error(station, codes::REFUSED, now);
             }
             Next::Forward(id) => {
-                // Sent once: the host resends after its own timeout.
-                start_forward(&mut self.line, id, now);
+                // Started on the line once the guest (if any) let go of
+                // it; sent once: the host resends after its own timeout.
+                self.forward_pending = Some(id);
                 self.mode = Mode::SendCommand;
                 self.out_off = 0;
             }
@@ -364,7 +366,7 @@ enum Next {
 
 /// Starts forwarding command `id` on the line: one send (the host resends
 /// after its own timeout).
-fn start_forward(line: &mut ControllerLine, id: u16, now: u32) {
+pub(super) fn start_forward(line: &mut ControllerLine, id: u16, now: u32) {
     line.start_raw(id, 1, now);
 }
 

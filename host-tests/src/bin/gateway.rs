@@ -2,21 +2,26 @@
 //! and its host side on a TCP port of 127.0.0.1, relayed like a serial
 //! cable at the line rate with XON/XOFF (see [`host_tests::gateway`]).
 //!
-//! Prints exactly one line on stdout, `protocol-b 127.0.0.1:PORT`, once
-//! the bridge answers through the relay (with `--ethernet`:
+//! Prints `protocol-b 127.0.0.1:PORT` on stdout once the bridge answers
+//! through the relay and, on a board with the gateway's Modbus RTU port
+//! (`lm3s6965`), `modbus-rtu 127.0.0.1:PORT` after it (with `--ethernet`:
 //! `protocol-b-tcp 127.0.0.1:PORT` once the Ethernet build answers over
 //! TCP, QEMU's user network forwarding that port to the firmware's);
-//! everything else goes to stderr.
+//! nothing else goes to stdout.
 //! Runs until SIGINT, SIGTERM or SIGHUP (Ctrl-C), then stops QEMU and the
 //! simulator. Exit code 0 after such a stop, 1 if anything failed (QEMU
 //! exiting on its own included), 2 for bad arguments.
 //!
 //! Run through `./tools/gateway.sh`. Options: `--port P` (default: a free
 //! port), `--baud B` (9600, 19200, 38400, 57600 or 115200, default
-//! 115200), `--board lm3s6965|mps2-an386`, `--reply-delay-ms MS` (the
+//! 115200), `--modbus-port P`, `--modbus-baud B` (the Modbus RTU port,
+//! default 115200, even parity, unit 1), `--board lm3s6965|mps2-an386`, `--reply-delay-ms MS` (the
 //! simulated controller's time per command, default 2), `--faults SPEC`
-//! (as `iai simulate --faults`), `--seed S`, `--elf PATH`, `--ethernet`
-//! (protocol B over TCP: the `lm3s6965-eth` build, lm3s6965 only).
+//! (as `iai simulate --faults`), `--seed S`, `--elf PATH`,
+//! `--stack-report` (at the stop, end the firmware with the quit sequence
+//! and log its stack peak: for the size report; a client's bytes could
+//! end the firmware too), `--ethernet` (protocol B over TCP: the
+//! `lm3s6965-eth` build, lm3s6965 only).
 
 use std::io::{self, Write};
 use std::path::PathBuf;
@@ -24,12 +29,13 @@ use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-use host_tests::gateway::{self, Options};
+use host_tests::gateway::{self, Options, Ready};
 use host_tests::qemu::Board;
 
-const USAGE: &str = "usage: gateway [--port P] [--baud B] [--board lm3s6965|mps2-an386] \
+const USAGE: &str = "usage: gateway [--port P] [--baud B] [--modbus-port P] [--modbus-baud B] \
+                     [--board lm3s6965|mps2-an386] \
                      [--reply-delay-ms MS] [--faults SPEC] [--seed S] [--elf PATH] \
-                     [--ethernet]";
+                     [--stack-report] [--ethernet]";
 
 fn parse_args() -> Result<Options, String> {
     let mut o = Options::default();
@@ -41,6 +47,19 @@ fn parse_args() -> Result<Options, String> {
                 o.port = value()?
                     .parse()
                     .map_err(|_| "--port takes 0..=65535 (0: a free port)".to_owned())?;
+            }
+            "--stack-report" => o.stack_report = true,
+            "--modbus-port" => {
+                o.modbus_port = value()?
+                    .parse()
+                    .map_err(|_| "--modbus-port takes 0..=65535 (0: a free port)".to_owned())?;
+            }
+            "--modbus-baud" => {
+                o.modbus_baud = value()?
+                    .parse()
+                    .ok()
+                    .filter(|b| firmware_example::config::BAUD_RATES.contains(b))
+                    .ok_or("--modbus-baud takes 9600, 19200, 38400, 57600 or 115200")?;
             }
             "--baud" => {
                 o.baud = value()?
@@ -90,14 +109,17 @@ fn main() -> ExitCode {
         eprintln!("gateway: cannot handle signals: {e}");
         return ExitCode::FAILURE;
     }
-    let prefix = if opts.ethernet {
-        "protocol-b-tcp"
-    } else {
-        "protocol-b"
-    };
-    let ready = |addr| {
+    let ready = |at: Ready| {
         let mut out = io::stdout().lock();
-        let _ = writeln!(out, "{prefix} {addr}");
+        let prefix = if at.over_ethernet {
+            "protocol-b-tcp"
+        } else {
+            "protocol-b"
+        };
+        let _ = writeln!(out, "{prefix} {}", at.protocol_b);
+        if let Some(m) = at.modbus_rtu {
+            let _ = writeln!(out, "modbus-rtu {m}");
+        }
         let _ = out.flush();
     };
     match gateway::run(&opts, &stop, ready) {

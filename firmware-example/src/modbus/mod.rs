@@ -1,0 +1,341 @@
+//! The PLC gateway: a Modbus RTU server in front of protocol B, on the
+//! bridge MCU.
+//!
+//! Two sides, never blocking:
+//! - the **Modbus port** ([`Gateway::serve`]): frames found by silence
+//!   ([`rtu`]), checked (CRC, length), parsed by rmodbus and answered at
+//!   once from the gateway's registers ([`registers`]): reads from the
+//!   cache ([`cache`]), writes stored or queued as a command behind the
+//!   handshake ([`command`]). No reply waits for the controller, so none
+//!   is late, and none says done before the controller confirmed.
+//! - the **controller line** ([`mod@line`]): polls on a schedule ([`poll`])
+//!   and the queued command, one exchange at a time, on the bridge's one
+//!   line while the bridge grants it ([`Guest`]); the protocol-B host goes
+//!   first (a poll in its way is abandoned, a command finishes).
+//!
+//! The gateway polls once a master has addressed it (a bridge without a
+//! PLC leaves the line to its host). The register map is one table
+//! ([`map::MAP`]). Broadcasts (unit 0) are
+//! executed if they are writes and never answered; frames for other
+//! units, with a wrong CRC or a length that does not fit their function,
+//! are not answered.
+//!
+//! rmodbus's own context trait (`ModbusContext`) answers every failed
+//! write with exception 02; the gateway needs 01, 03 and 06 too, so it
+//! serves through rmodbus's external read and write calls, with
+//! [`Registers`] as its context.
+
+pub mod cache;
+pub mod command;
+pub mod line;
+pub mod map;
+pub mod poll;
+pub mod registers;
+pub mod rtu;
+
+use iai_protocol_b::line::Line;
+use rmodbus::consts::ModbusFunction;
+use rmodbus::server::{ModbusFrame, Read};
+use rmodbus::{ErrorKind, ModbusProto};
+
+use crate::bridge::{write_some, Bridge, Error, Guest, GuestWait, Poll, Port};
+use crate::config::{ModbusConfig, Policy};
+use crate::status::Stats;
+use line::Engines;
+pub use registers::Registers;
+use rtu::Framer;
+
+/// A Modbus response (at most 256 bytes).
+type Response = heapless::Vec<u8, { rtu::MAX_FRAME }>;
+
+/// What the Modbus side counted.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ModbusStats {
+    /// Requests answered (exceptions included).
+    pub answered: u32,
+    /// Exception responses among them.
+    pub exceptions: u32,
+    /// Frames dropped: wrong CRC or length, too long.
+    pub dropped: u32,
+    /// Frames for another unit, and broadcasts (not answered).
+    pub unanswered: u32,
+    /// Bytes written to the Modbus port.
+    pub bytes_out: u64,
+}
+
+/// The gateway's state. Keep it in a static (about 3 KiB).
+pub struct Gateway {
+    /// The registers (settings, cache, handshake, window).
+    pub regs: Registers,
+    engines: Engines,
+    framer: Framer,
+    resp: Response,
+    resp_off: usize,
+    stats: ModbusStats,
+}
+
+impl Gateway {
+    /// A gateway with these settings and the bridge's command policy.
+    #[inline(always)]
+    pub fn new(cfg: ModbusConfig, policy: Policy) -> Self {
+        Gateway {
+            regs: Registers::new(cfg, policy),
+            engines: Engines::new(),
+            framer: Framer::new(cfg.baud),
+            resp: Response::new(),
+            resp_off: 0,
+            stats: ModbusStats::default(),
+        }
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> ModbusStats {
+        self.stats
+    }
+
+    /// The Modbus side at `now` (ms) and `now_us` (the board's microsecond
+    /// clock, for the silence between frames): sends the pending response,
+    /// reads what arrived, answers a frame whose silence has passed.
+    /// `Ok(moved)`.
+    pub fn serve<P: Port>(
+        &mut self,
+        port: &mut P,
+        now: u32,
+        now_us: u32,
+    ) -> Result<bool, P::Error> {
+        let mut moved = false;
+        if self.resp_off < self.resp.len() {
+            let out = &mut self.stats.bytes_out;
+            moved |= write_some(port, &self.resp, &mut self.resp_off, out)? > 0;
+        }
+        let mut buf = [0u8; 16];
+        while port.read_ready()? {
+            let n = port.read(&mut buf)?;
+            if n == 0 {
+                break;
+            }
+            let at = port.last_rx_us().unwrap_or(now_us);
+            for &b in buf.get(..n).unwrap_or(&[]) {
+                self.framer.push(b, at);
+            }
+            moved = true;
+        }
+        if port.take_overruns() > 0 {
+            // A byte was lost: whatever frame it was in fails its CRC.
+            self.stats.dropped = self.stats.dropped.wrapping_add(1);
+        }
+        if self.resp_off < self.resp.len() {
+            return Ok(moved);
+        }
+        let Gateway {
+            framer,
+            regs,
+            resp,
+            stats,
+            ..
+        } = self;
+        match framer.take(now_us) {
+            None => {}
+            Some(Err(_)) => {
+                stats.dropped = stats.dropped.wrapping_add(1);
+                moved = true;
+            }
+            Some(Ok(frame)) => {
+                answer(frame, regs, resp, stats, now);
+                self.resp_off = 0;
+                let out = &mut self.stats.bytes_out;
+                write_some(port, &self.resp, &mut self.resp_off, out)?;
+                moved = true;
+            }
+        }
+        Ok(moved)
+    }
+
+    /// When the Modbus side must look again (µs): the end of the frame
+    /// being received.
+    pub fn serve_deadline_us(&self) -> Option<u32> {
+        self.framer.ends_at()
+    }
+
+    /// Whether a response is still going out.
+    pub fn sending(&self) -> bool {
+        self.resp_off < self.resp.len()
+    }
+}
+
+/// Answers one checked frame into `resp` (left empty: no answer).
+fn answer(
+    frame: &[u8],
+    regs: &mut Registers,
+    resp: &mut Response,
+    stats: &mut ModbusStats,
+    now: u32,
+) {
+    let unit = regs.cfg.unit;
+    let mut f = ModbusFrame::new(unit, frame, ModbusProto::Rtu, resp);
+    if f.parse().is_err() {
+        f.response.clear();
+        stats.dropped = stats.dropped.wrapping_add(1);
+        return;
+    }
+    if f.processing_required || f.response_required {
+        // Addressed (its unit or a broadcast): polling starts.
+        regs.active = true;
+    }
+    if f.processing_required {
+        let done = if f.readonly {
+            let inputs = f.func == ModbusFunction::GetInputs;
+            let discretes = f.func == ModbusFunction::GetDiscretes;
+            match f.get_external_read() {
+                Ok(Read::Words(r)) => {
+                    let res = regs.read_words(r.address, r.count, inputs, r.buf, now);
+                    f.process_external_read(res)
+                }
+                Ok(Read::Bits(r)) => {
+                    let space = if discretes {
+                        map::Space::Discretes
+                    } else {
+                        map::Space::Coils
+                    };
+                    r.buf.fill(0);
+                    let res = regs.read_bits(space, r.address, r.count, r.buf);
+                    f.process_external_read(res)
+                }
+                Err(e) => Err(e),
+            }
+        } else {
+            // The write is read from the frame here (checked by
+            // `rtu::check`): rmodbus's own write helpers index the frame
+            // where the optimiser cannot see its length checks.
+            let field = |at: usize| {
+                let hi = frame.get(at).copied().unwrap_or(0);
+                u16::from_be_bytes([hi, frame.get(at + 1).copied().unwrap_or(0)])
+            };
+            let data = frame.get(7..frame.len().saturating_sub(2)).unwrap_or(&[]);
+            let value = frame.get(4..6).unwrap_or(&[]);
+            let res = match f.func {
+                ModbusFunction::SetHolding => regs.write_words(f.reg, 1, value),
+                ModbusFunction::SetHoldingsBulk => regs.write_words(f.reg, f.count, data),
+                ModbusFunction::SetCoil => match field(4) {
+                    0xFF00 => regs.write_bits(f.reg, 1, &[1]),
+                    0x0000 => regs.write_bits(f.reg, 1, &[0]),
+                    _ => Err(ErrorKind::IllegalDataValue),
+                },
+                ModbusFunction::SetCoilsBulk => regs.write_bits(f.reg, f.count, data),
+                _ => Err(ErrorKind::IllegalFunction),
+            };
+            match res {
+                Ok(()) => f
+                    .response
+                    .extend_from_slice(frame.get(..6).unwrap_or(&[]))
+                    .map_err(|_| ErrorKind::OOB),
+                Err(e) => f.set_modbus_error_if_unset(&e),
+            }
+        };
+        if done.is_err() {
+            f.response.clear();
+            stats.dropped = stats.dropped.wrapping_add(1);
+            return;
+        }
+    }
+    if !f.response_required {
+        f.response.clear();
+        stats.unanswered = stats.unanswered.wrapping_add(1);
+        return;
+    }
+    if f.error.is_some() {
+        stats.exceptions = stats.exceptions.wrapping_add(1);
+    }
+    if f.finalize_response().is_err() {
+        f.response.clear();
+        return;
+    }
+    stats.answered = stats.answered.wrapping_add(1);
+}
+
+impl Guest for Gateway {
+    fn holds_line(&self) -> bool {
+        self.engines.holds_line()
+    }
+
+    fn wants_line(&self, now: u32) -> bool {
+        Engines::wants_line(&self.regs, now)
+    }
+
+    fn may_yield(&self) -> bool {
+        self.engines.may_yield()
+    }
+
+    fn yield_line(&mut self, line: &mut Line, now: u32) {
+        self.engines.yield_line(line, now);
+    }
+
+    fn run<D: Port>(&mut self, line: &mut Line, down: &mut D, now: u32) -> Result<bool, D::Error> {
+        self.engines.run(&mut self.regs, line, down, now)
+    }
+
+    fn wait(&self, now: u32) -> GuestWait {
+        let (deadline, down_write) = self.engines.wait();
+        let deadline = if self.engines.holds_line() {
+            deadline
+        } else if self.wants_line(now) {
+            Some(now)
+        } else if self.regs.active {
+            // The next poll round.
+            self.regs.schedule.due_at()
+        } else {
+            None
+        };
+        GuestWait {
+            deadline,
+            down_write,
+        }
+    }
+}
+
+/// Runs the bridge and the gateway over their three ports until the quit
+/// sequence (on the protocol-B upstream) or a port error, as
+/// [`crate::bridge::run`] does for the bridge alone; `now_us` is the
+/// board's microsecond clock (the silence between Modbus frames). The
+/// Modbus port's errors are reported as the upstream's.
+#[allow(clippy::too_many_arguments)]
+pub fn run<U: Port, D: Port, M: Port<Error = U::Error>>(
+    bridge: &mut Bridge,
+    gateway: &mut Gateway,
+    upstream: &mut U,
+    downstream: &mut D,
+    modbus: &mut M,
+    now_ms: impl Fn() -> u32,
+    now_us: impl Fn() -> u32,
+    mut sleep: impl FnMut(&mut dyn FnMut() -> bool),
+    mut feed: impl FnMut(),
+) -> Result<Stats, Error<U::Error, D::Error>> {
+    loop {
+        feed();
+        let served = gateway
+            .serve(modbus, now_ms(), now_us())
+            .map_err(Error::Upstream)?;
+        match bridge.poll_with(upstream, downstream, gateway, now_ms())? {
+            Poll::Quit => return Ok(bridge.stats()),
+            Poll::Busy => {}
+            Poll::Wait(_) if served => {}
+            Poll::Wait(w) => {
+                let i = w.interest;
+                let start = now_ms();
+                let sending = gateway.sending();
+                sleep(&mut || {
+                    now_ms() != start
+                        || modbus.read_ready().unwrap_or(true)
+                        || (sending && modbus.write_ready().unwrap_or(true))
+                        || (i.up_read && upstream.read_ready().unwrap_or(true))
+                        || (i.down_read && downstream.read_ready().unwrap_or(true))
+                        || (i.up_write && upstream.write_ready().unwrap_or(true))
+                        || (i.down_write && downstream.write_ready().unwrap_or(true))
+                });
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

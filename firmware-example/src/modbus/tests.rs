@@ -1,0 +1,218 @@
+//! The Modbus side, frame by frame: recorded requests (with their CRC)
+//! and what the gateway answers.
+
+extern crate std;
+use std::vec::Vec;
+
+use super::*;
+use crate::config::ModbusConfig;
+use crate::modbus::map::{CMD_BUSY, HEND, PEND, PWR, SV};
+
+/// A Modbus port over byte vectors.
+#[derive(Default)]
+struct Fake {
+    input: Vec<u8>,
+    output: Vec<u8>,
+}
+
+impl embedded_io::ErrorType for Fake {
+    type Error = core::convert::Infallible;
+}
+impl embedded_io::ReadReady for Fake {
+    fn read_ready(&mut self) -> Result<bool, Self::Error> {
+        Ok(!self.input.is_empty())
+    }
+}
+impl embedded_io::Read for Fake {
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
+        let n = buf.len().min(self.input.len());
+        buf[..n].copy_from_slice(&self.input[..n]);
+        self.input.drain(..n);
+        Ok(n)
+    }
+}
+impl embedded_io::WriteReady for Fake {
+    fn write_ready(&mut self) -> Result<bool, Self::Error> {
+        Ok(true)
+    }
+}
+impl embedded_io::Write for Fake {
+    fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+        self.output.extend_from_slice(buf);
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}
+impl Port for Fake {}
+
+fn gateway(policy: Policy) -> Gateway {
+    Gateway::new(ModbusConfig::DEFAULT, policy)
+}
+
+/// `request` arrives at once; the answer after the silence.
+fn ask(gw: &mut Gateway, request: &[u8]) -> Vec<u8> {
+    let mut port = Fake {
+        input: request.to_vec(),
+        ..Fake::default()
+    };
+    gw.serve(&mut port, 0, 1_000).unwrap();
+    gw.serve(&mut port, 2, 2_750).unwrap();
+    port.output
+}
+
+/// `body` with its CRC (for requests built in the test).
+fn rtu(body: &[u8]) -> Vec<u8> {
+    let mut v = body.to_vec();
+    v.extend_from_slice(&rtu::crc16(body).to_le_bytes());
+    v
+}
+
+const READ_PNOW_1: [u8; 8] = [0x01, 0x03, 0x90, 0x00, 0x00, 0x02, 0xE9, 0x0B];
+/// -25.500 mm.
+const PNOW_1: [u8; 9] = [0x01, 0x03, 0x04, 0xFF, 0xFF, 0x9C, 0x64, 0x92, 0xFC];
+const READ_9006: [u8; 8] = [0x01, 0x03, 0x90, 0x06, 0x00, 0x01, 0x49, 0x0B];
+const EXCEPTION_03_02: [u8; 5] = [0x01, 0x83, 0x02, 0xC0, 0xF1];
+/// Function 2BH (read device identification): not served.
+const FUNCTION_2B: [u8; 7] = [0x01, 0x2B, 0x0E, 0x01, 0x00, 0x70, 0x77];
+const EXCEPTION_2B_01: [u8; 5] = [0x01, 0xAB, 0x01, 0x9E, 0xF0];
+/// DRG1 of axis 1 := SON.
+const SERVO_ON_1: [u8; 8] = [0x01, 0x06, 0x0D, 0x00, 0x10, 0x00, 0x86, 0xA6];
+/// DRG1 of axis 1 := SON | HOME.
+const HOME_1: [u8; 8] = [0x01, 0x06, 0x0D, 0x00, 0x10, 0x10, 0x87, 0x6A];
+const EXCEPTION_06_06: [u8; 5] = [0x01, 0x86, 0x06, 0xC2, 0x62];
+const EXCEPTION_06_01: [u8; 5] = [0x01, 0x86, 0x01, 0x83, 0xA0];
+/// CMDST, function 04.
+const READ_CMDST: [u8; 8] = [0x01, 0x04, 0xB1, 0x00, 0x00, 0x03, 0x97, 0x37];
+
+#[test]
+fn a_read_is_answered_from_the_cache() {
+    let mut gw = gateway(Policy::ForwardAll);
+    gw.regs.cache.axes[0].current_position = -25_500;
+    assert_eq!(ask(&mut gw, &READ_PNOW_1), PNOW_1);
+    // Function 04 reads the same read-only registers.
+    let mut fc4 = READ_PNOW_1;
+    fc4[1] = 4;
+    let fc4 = rtu(&fc4[..6]);
+    let answer = ask(&mut gw, &fc4);
+    assert_eq!(answer[..7], [1, 4, 4, 0xFF, 0xFF, 0x9C, 0x64]);
+}
+
+#[test]
+fn dss1_waits_for_a_poll_after_a_confirmed_motion_command() {
+    let mut gw = gateway(Policy::ForwardAll);
+    let c = &mut gw.regs.cache;
+    c.link_up = true;
+    // Servo on, homed, last operation completed, at rest.
+    c.axes[0].axis_status = 0b1_1100;
+    assert_eq!(c.dss1(0), PWR | SV | HEND | PEND);
+    // A push error is not a completion (the core's MoveOutcome).
+    c.axes[0].axis_status = 0b11_1100;
+    assert_eq!(c.dss1(0), PWR | SV | HEND);
+    c.axes[0].axis_status = 0b1_1100;
+    c.stale = 1;
+    assert_eq!(c.dss1(0), PWR | SV);
+}
+
+#[test]
+fn refusals_by_exception_code() {
+    let mut gw = gateway(Policy::ForwardAll);
+    // An address outside the map: 02.
+    assert_eq!(ask(&mut gw, &READ_9006), EXCEPTION_03_02);
+    // A function the gateway does not serve: 01.
+    assert_eq!(ask(&mut gw, &FUNCTION_2B), EXCEPTION_2B_01);
+    // A read of no registers: 03.
+    assert_eq!(
+        ask(&mut gw, &rtu(&[1, 3, 0x90, 0, 0, 0]))[..3],
+        [1, 0x83, 3]
+    );
+    // A writable register through function 04: 02.
+    assert_eq!(
+        ask(&mut gw, &rtu(&[1, 4, 0x0D, 0, 0, 1]))[..3],
+        [1, 0x84, 2]
+    );
+    // A write to a read-only register: 02.
+    assert_eq!(
+        ask(&mut gw, &rtu(&[1, 6, 0x90, 0, 0, 1]))[..3],
+        [1, 0x86, 2]
+    );
+    // Two commands in one DRG1 write: 03.
+    assert_eq!(ask(&mut gw, &HOME_1)[..3], [1, 0x86, 3]);
+    // A numeric move that asks for a push: 03.
+    let push = rtu(&[
+        1, 16, 0x99, 0, 0, 9, 18, 0, 0, 0x27, 0x10, 0, 0, 0, 0, 0, 0, 0, 100, 0, 30, 0, 1, 0, 0,
+    ]);
+    assert_eq!(ask(&mut gw, &push)[..3], [1, 0x90, 3]);
+}
+
+#[test]
+fn a_command_is_accepted_at_once_and_the_next_one_is_busy() {
+    let mut gw = gateway(Policy::ForwardAll);
+    assert_eq!(ask(&mut gw, &SERVO_ON_1), SERVO_ON_1, "echoed: accepted");
+    let cmdst = ask(&mut gw, &READ_CMDST);
+    assert_eq!(
+        cmdst[3..9],
+        [0x40, 0x01, 0, 0, 0x02, 0x32],
+        "busy, seq 1, 232H"
+    );
+    assert_eq!(gw.regs.hs.words()[0], CMD_BUSY | 1);
+    // HOME's rising edge while the servo command is busy: 06, not kept.
+    assert_eq!(ask(&mut gw, &HOME_1), EXCEPTION_06_06);
+    assert_eq!(gw.regs.drg1[0], 0x1000);
+}
+
+#[test]
+fn a_write_the_policy_refuses_is_exception_01_and_counted() {
+    let mut gw = gateway(Policy::ReadOnly);
+    assert_eq!(ask(&mut gw, &SERVO_ON_1), EXCEPTION_06_01);
+    assert_eq!(gw.regs.cache.refused, 1);
+    assert_eq!(gw.regs.drg1[0], 0);
+    // The health block counts it (register 8).
+    let health = ask(&mut gw, &rtu(&[1, 4, 0xB0, 8, 0, 1]));
+    assert_eq!(health[3..5], [0, 1]);
+}
+
+#[test]
+fn silence_for_broadcasts_other_units_and_broken_frames() {
+    let mut gw = gateway(Policy::ForwardAll);
+    // Broadcast: POSR of axis 1 := 7 is done, not answered.
+    assert_eq!(ask(&mut gw, &rtu(&[0, 6, 0x0D, 3, 0, 7])), []);
+    assert_eq!(gw.regs.posr[0], 7);
+    // A broadcast read: not answered.
+    assert_eq!(ask(&mut gw, &rtu(&[0, 3, 0x90, 0, 0, 2])), []);
+    // Another unit.
+    assert_eq!(ask(&mut gw, &rtu(&[2, 3, 0x90, 0, 0, 2])), []);
+    // A wrong CRC, even with a function the gateway would refuse.
+    let mut bad = FUNCTION_2B;
+    bad[6] ^= 0x80;
+    assert_eq!(ask(&mut gw, &bad), []);
+    // Function 16 whose byte count disagrees with its length.
+    assert_eq!(ask(&mut gw, &rtu(&[1, 16, 0x0D, 3, 0, 1, 4, 0, 9])), []);
+    // Noise longer than a frame.
+    assert_eq!(ask(&mut gw, &[0x55; 300]), []);
+    assert_eq!(gw.stats().dropped, 3);
+    // The bus goes on.
+    gw.regs.cache.axes[0].current_position = -25_500;
+    assert_eq!(ask(&mut gw, &READ_PNOW_1), PNOW_1);
+}
+
+#[test]
+fn window_records_are_written_whole() {
+    let mut gw = gateway(Policy::ForwardAll);
+    // Half a record: 03.
+    let mut half = std::vec![1, 16, 0x22, 0x00, 0, 10, 20];
+    half.extend([0u8; 20]);
+    assert_eq!(ask(&mut gw, &rtu(&half))[..3], [1, 0x90, 3]);
+    // One record: position 3, axis 1 at 1.000 mm, 100 mm/s.
+    let mut one = std::vec![1, 16, 0x22, 0x00, 0, 21, 42];
+    let words: [u16; 21] = [
+        3, 1, 30, 30, 100, 0, 1000, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+    ];
+    for w in words {
+        one.extend(w.to_be_bytes());
+    }
+    assert_eq!(ask(&mut gw, &rtu(&one))[..6], [1, 16, 0x22, 0, 0, 21]);
+    assert_eq!(gw.regs.hs.words()[2], 0x26D);
+    assert_eq!(gw.regs.window[..21], words);
+}
