@@ -25,8 +25,8 @@ command -v socat >/dev/null || need+=(socat)
 command -v python3 >/dev/null || need+=(python3)
 # Debian's python3 makes venvs only with python3-venv (ensurepip).
 python3 -c 'import ensurepip, venv' 2>/dev/null || need+=(python3-venv)
+SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO=sudo
 if ((${#need[@]})); then
-  SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO=sudo
   $SUDO apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${need[@]}" >/dev/null
 fi
@@ -34,7 +34,12 @@ fi
 PYMODBUS=3.16.1
 venv="$(cd "$(dirname "$0")/.." && pwd)/.venv"
 if ! "$venv/bin/python" -c "import pymodbus, sys; sys.exit(pymodbus.__version__ != '$PYMODBUS')" 2>/dev/null; then
-  python3 -m venv "$venv"
+  if ! python3 -m venv --clear "$venv"; then
+    # A python3 whose ensurepip is split off (Debian without python3-venv).
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq python3-venv >/dev/null
+    python3 -m venv --clear "$venv"
+  fi
   "$venv/bin/python" -m pip install -q --disable-pip-version-check "pymodbus==$PYMODBUS"
 fi
 if ! command -v cargo-nextest >/dev/null; then
