@@ -29,6 +29,15 @@
 //! 4. `static_address_and_port_from_the_network_block`: a network block
 //!    in the configuration page gives a static address and port 6020; the
 //!    firmware says so and answers there.
+//! 5. `a_thousand_connects_and_disconnects`: connections made one after
+//!    another and dropped: at once, after part of a 212H, after part of
+//!    a 26DH's first record (positions 901..), after a whole 212H or
+//!    status query whose reply is never read; then a new client gets the
+//!    212H reply the controller gives, byte for byte, and a 26DH of 20
+//!    records is answered `#`; the simulator holds exactly those 20
+//!    records. 150 connections by default (about 55 s: each keeps one of
+//!    the bridge's three sockets for about a second);
+//!    `IAI_ETH_CONNECTIONS=1000` for the full count (about 330 s).
 //!
 //! Needs `qemu-system-arm` and the `thumbv7m-none-eabi` rustup target.
 
@@ -44,7 +53,7 @@ use host_tests::gateway::{tcp_status_query, EthernetGateway, Options};
 use host_tests::qemu::{build_ethernet_firmware, workspace_root};
 use host_tests::table::table;
 use iai_protocol_b::frame::{Frame, Header, Station};
-use iai_protocol_b::position::PositionRecord;
+use iai_protocol_b::position::{PositionRecord, PositionStream};
 use iai_protocol_b::LineConfig;
 
 use firmware_example::codes;
@@ -104,6 +113,12 @@ impl Frames {
     /// The next frame (from its `#`, `&` or `!` on), `None` at the end of
     /// the connection; panics after `limit`.
     fn next(&mut self, limit: Duration) -> Option<Vec<u8>> {
+        self.try_next(limit)
+            .unwrap_or_else(|| panic!("no frame within {limit:?}"))
+    }
+
+    /// As [`Frames::next`], `None` after `limit` instead of a panic.
+    fn try_next(&mut self, limit: Duration) -> Option<Option<Vec<u8>>> {
         let end = Instant::now() + limit;
         loop {
             if let Some(at) = self.pending.windows(2).position(|w| w == b"\r\n") {
@@ -112,20 +127,23 @@ impl Frames {
                     .iter()
                     .position(|b| matches!(b, b'#' | b'&' | b'!'))
                     .unwrap_or(line.len());
-                return Some(line[start..].to_vec());
+                return Some(Some(line[start..].to_vec()));
             }
             let left = end.saturating_duration_since(Instant::now());
-            assert!(!left.is_zero(), "no frame within {limit:?}");
+            if left.is_zero() {
+                return None;
+            }
             self.conn.set_read_timeout(Some(left)).unwrap();
             let mut buf = [0u8; 4096];
             match self.conn.read(&mut buf) {
-                Ok(0) => return None,
+                Ok(0) => return Some(None),
                 Ok(n) => self.pending.extend_from_slice(&buf[..n]),
                 Err(e)
                     if matches!(
                         e.kind(),
                         std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
                     ) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => return Some(None),
                 Err(e) => panic!("read: {e}"),
             }
         }
@@ -551,4 +569,179 @@ fn static_address_and_port_from_the_network_block() {
     let fields = tcp_status_query(gw.addr, bridge, Duration::from_secs(15)).unwrap();
     assert_eq!(field(&fields, "own_queries"), 2, "{fields:?}");
     gw.stop().expect("simulator");
+}
+
+/// The 212H axis status query of axis 1 to `controller`.
+fn axis_status_query(controller: Station) -> Vec<u8> {
+    use iai_protocol_b::axis::AxisPattern;
+    use iai_protocol_b::message::{AxisStatusQuery, Message};
+    let mut buf = [0u8; 64];
+    let n = AxisStatusQuery {
+        query_axis_pattern: AxisPattern::first(1),
+    }
+    .emit(controller, &mut buf)
+    .expect("212H");
+    buf[..n].to_vec()
+}
+
+/// Sends `command` on a new connection and returns the first frame from
+/// `from`; a connection answered `&` B0B (a host still being let go) or
+/// closed unanswered is tried again until `limit`.
+fn exchange_when_served(
+    addr: std::net::SocketAddr,
+    bridge: Station,
+    from: Station,
+    command: &[u8],
+    limit: Duration,
+) -> Vec<u8> {
+    let end = Instant::now() + limit;
+    loop {
+        assert!(Instant::now() < end, "not served within {limit:?}");
+        let Ok(conn) = TcpStream::connect(addr) else {
+            std::thread::sleep(Duration::from_millis(100));
+            continue;
+        };
+        conn.set_nodelay(true).unwrap();
+        let mut frames = Frames::new(conn);
+        if frames.conn.write_all(command).is_err() {
+            continue;
+        }
+        // A connection that waits for the bridge to finish a departed
+        // host's work is served once it is idle, a held one is refused
+        // within 1 s: 10 s without a frame is a fault, not a wait.
+        let left = end.saturating_duration_since(Instant::now());
+        let limit = left.min(Duration::from_secs(10));
+        while let Some(frame) = frames
+            .try_next(limit)
+            .unwrap_or_else(|| panic!("no frame within {limit:?}"))
+        {
+            let Ok(f) = Frame::new_checked(&frame, Default::default()) else {
+                continue;
+            };
+            if f.header() == Header::Error && f.station() == bridge && f.code() == codes::HOST_BUSY
+            {
+                break;
+            }
+            if f.station() == from {
+                return frame;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+#[test]
+fn a_thousand_connects_and_disconnects() {
+    use host_tests::sim::Simulator;
+    let started = Instant::now();
+    let elf = build_ethernet_firmware().expect("build lm3s6965-eth");
+    let opts = Options {
+        elf: Some(elf),
+        ethernet: true,
+        ..Options::default()
+    };
+    let gw = EthernetGateway::start(&opts).unwrap_or_else(|e| panic!("{e}"));
+    let (bridge, controller) = stations();
+    let q212 = axis_status_query(controller);
+    let status = status_query_frame(bridge);
+    // A 26DH for positions 901.. cut inside its first record: no record of
+    // it is whole, so none may reach the controller.
+    let cut_26dh: Vec<PositionRecord> = table(5, 8, 21)
+        .enumerate()
+        .map(|(i, mut r)| {
+            r.number = 901 + u16::try_from(i).unwrap();
+            r
+        })
+        .collect();
+    let cut_26dh = command_26dh(controller, &cut_26dh);
+    // Envelope and prefix, one record; four more records and the trailer
+    // (SC, CR, LF: 4 bytes) after it.
+    let record_len = (cut_26dh.len() - PositionStream::CHANGE_2.overhead()) / 5;
+    let first_record_ends = cut_26dh.len() - 4 * record_len - 4;
+
+    // 150 by default (about 50 s: each connection keeps one of the
+    // bridge's three sockets for about a second); IAI_ETH_CONNECTIONS=1000
+    // for the full run.
+    let connections: u32 = std::env::var("IAI_ETH_CONNECTIONS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(150);
+    let churn_started = Instant::now();
+    let (mut at_once, mut partial, mut unread, mut failed) = (0u32, 0u32, 0u32, 0u32);
+    for i in 0..connections {
+        let Ok(mut conn) = TcpStream::connect(gw.addr) else {
+            failed += 1;
+            continue;
+        };
+        let _ = conn.set_nodelay(true);
+        // Write errors are expected: a connection the bridge could not take
+        // (all its sockets busy) is reset.
+        let sent = match i % 5 {
+            0 => {
+                at_once += 1;
+                Ok(())
+            }
+            1 => {
+                partial += 1;
+                let cut = 1 + (i as usize * 7) % (q212.len() - 2);
+                conn.write_all(&q212[..cut])
+            }
+            2 => {
+                partial += 1;
+                let cut = 1 + (i as usize * 13) % (first_record_ends - 1);
+                conn.write_all(&cut_26dh[..cut])
+            }
+            3 => {
+                unread += 1;
+                conn.write_all(&q212)
+            }
+            _ => {
+                unread += 1;
+                conn.write_all(&status)
+            }
+        };
+        if sent.is_err() {
+            failed += 1;
+        }
+        drop(conn);
+    }
+    let churn = churn_started.elapsed();
+    eprintln!(
+        "{connections} connections in {:.1} s: {at_once} closed at once, {partial} after part of a \
+         frame, {unread} after a whole command unread; {failed} refused or reset by the stack",
+        churn.as_secs_f64()
+    );
+
+    // A normal client: the 212H reply the controller gives, byte for byte.
+    let mut oracle = Simulator::tta(controller);
+    oracle.receive(&q212, 0);
+    let want = oracle.take_output(1_000);
+    let got = exchange_when_served(gw.addr, bridge, controller, &q212, Duration::from_secs(30));
+    assert_eq!(
+        String::from_utf8_lossy(&got),
+        String::from_utf8_lossy(&want)
+    );
+    let fields = tcp_status_query(gw.addr, bridge, Duration::from_secs(15)).unwrap();
+    assert_eq!(field(&fields, "streams_ok"), 0, "{fields:?}");
+    assert_eq!(field(&fields, "records"), 0, "{fields:?}");
+    assert!(field(&fields, "forwarded") >= 1, "{fields:?}");
+
+    // A small table, verified by the bridge.
+    let records: Vec<PositionRecord> = table(20, 8, 22).collect();
+    let (reply, _) = send_26dh(
+        gw.addr,
+        command_26dh(controller, &records),
+        Duration::from_secs(30),
+    );
+    assert_eq!(
+        String::from_utf8_lossy(&reply),
+        String::from_utf8_lossy(&reply_26dh(controller, 20))
+    );
+    let sim = gw.stop().expect("simulator");
+    // Exactly the verified records: nothing of the cut messages.
+    check_table(&sim.table, &records).unwrap_or_else(|e| panic!("{e}"));
+    eprintln!(
+        "a_thousand_connects_and_disconnects: {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
 }
