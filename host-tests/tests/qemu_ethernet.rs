@@ -38,6 +38,14 @@
 //!    records. 150 connections by default (about 55 s: each keeps one of
 //!    the bridge's three sockets for about a second);
 //!    `IAI_ETH_CONNECTIONS=1000` for the full count (about 330 s).
+//! 6. `a_host_that_stops_reading_is_reset`: a host whose socket offers
+//!    the smallest window the kernel allows sends 20,000 status queries
+//!    and reads nothing; QEMU's user network buffers what it can (about
+//!    1.6 MB), then the bridge's transmit buffer stays full, it stops
+//!    answering, and 10 s later resets the host: a client refused
+//!    meanwhile is served no sooner than 10 s after the slow host began,
+//!    fewer queries were answered than sent, and the slow host's
+//!    connection ends.
 //!
 //! Needs `qemu-system-arm` and the `thumbv7m-none-eabi` rustup target.
 
@@ -742,6 +750,126 @@ fn a_thousand_connects_and_disconnects() {
     check_table(&sim.table, &records).unwrap_or_else(|e| panic!("{e}"));
     eprintln!(
         "a_thousand_connects_and_disconnects: {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
+}
+
+/// A connection to `addr` whose receive buffer is set to `rcvbuf` bytes
+/// before it connects (so that the window it offers stays that small).
+fn connect_small_window(addr: std::net::SocketAddrV4, rcvbuf: i32) -> TcpStream {
+    use std::os::fd::FromRawFd;
+    #[repr(C)]
+    struct SockaddrIn {
+        family: u16,
+        port: u16,
+        addr: u32,
+        zero: [u8; 8],
+    }
+    extern "C" {
+        fn socket(domain: i32, kind: i32, protocol: i32) -> i32;
+        fn setsockopt(fd: i32, level: i32, name: i32, value: *const i32, len: u32) -> i32;
+        fn connect(fd: i32, addr: *const SockaddrIn, len: u32) -> i32;
+        fn close(fd: i32) -> i32;
+    }
+    const AF_INET: i32 = 2;
+    const SOCK_STREAM: i32 = 1;
+    const SOL_SOCKET: i32 = 1;
+    const SO_RCVBUF: i32 = 8;
+    let sa = SockaddrIn {
+        family: AF_INET as u16,
+        port: addr.port().to_be(),
+        addr: u32::from(*addr.ip()).to_be(),
+        zero: [0; 8],
+    };
+    // SAFETY: plain socket calls on a descriptor this function owns; the
+    // pointers are to live locals of the sizes given.
+    unsafe {
+        let fd = socket(AF_INET, SOCK_STREAM, 0);
+        assert!(fd >= 0, "socket: {}", std::io::Error::last_os_error());
+        let rc = setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, 4);
+        assert_eq!(rc, 0, "SO_RCVBUF: {}", std::io::Error::last_os_error());
+        let len = std::mem::size_of::<SockaddrIn>() as u32;
+        if connect(fd, &sa, len) != 0 {
+            let e = std::io::Error::last_os_error();
+            close(fd);
+            panic!("connect: {e}");
+        }
+        TcpStream::from_raw_fd(fd)
+    }
+}
+
+#[test]
+fn a_host_that_stops_reading_is_reset() {
+    let started = Instant::now();
+    let elf = build_ethernet_firmware().expect("build lm3s6965-eth");
+    let opts = Options {
+        elf: Some(elf),
+        ethernet: true,
+        ..Options::default()
+    };
+    let gw = EthernetGateway::start(&opts).unwrap_or_else(|e| panic!("{e}"));
+    let (bridge, _) = stations();
+    let std::net::SocketAddr::V4(addr) = gw.addr else {
+        panic!("{} is not IPv4", gw.addr)
+    };
+    // A host that sends status queries and reads nothing, its window as
+    // small as the kernel allows: what QEMU's user network takes for it
+    // (its own buffer and its socket's) fills up, then the bridge's
+    // transmit buffer, and the bridge stops taking its queries.
+    let mut slow = connect_small_window(addr, 1);
+    slow.set_nodelay(true).unwrap();
+    let query = status_query_frame(bridge);
+    let queries = 20_000;
+    let mut writer = slow.try_clone().unwrap();
+    let sender = std::thread::spawn(move || {
+        let mut sent = 0u32;
+        for _ in 0..queries {
+            if writer.write_all(&query).is_err() {
+                break;
+            }
+            sent += 1;
+        }
+        sent
+    });
+    let stopped_reading = Instant::now();
+    // Meanwhile others are refused; once the bridge reset the slow host
+    // (10 s after it last took a byte) the next one is served.
+    let fields = tcp_status_query(gw.addr, bridge, Duration::from_secs(90))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let served_after = stopped_reading.elapsed();
+    let own = field(&fields, "own_queries");
+    // The slow host's connection is gone: what was buffered for it, then
+    // its end.
+    slow.set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
+    let mut got = 0usize;
+    let mut buf = vec![0u8; 65536];
+    let ended = loop {
+        match slow.read(&mut buf) {
+            Ok(0) => break "closed",
+            Ok(n) => got += n,
+            Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => break "reset",
+            Err(e) => panic!("the slow host's connection is still open: {e} after {got} bytes"),
+        }
+    };
+    let sent = sender.join().unwrap();
+    eprintln!(
+        "slow host: {sent} status queries sent, {own} answered by the bridge in all, \
+         {got} bytes of answers read afterwards, connection {ended}; the next host served \
+         {:.1} s after the slow one began",
+        served_after.as_secs_f64()
+    );
+    assert!(
+        served_after >= Duration::from_secs(10),
+        "served after {served_after:?}: the slow host was not holding the bridge"
+    );
+    assert!(
+        u64::from(sent) > own,
+        "every query was answered: the slow host never stalled the bridge"
+    );
+    gw.stop().expect("simulator");
+    eprintln!(
+        "a_host_that_stops_reading_is_reset: {:.1} s",
         started.elapsed().as_secs_f64()
     );
 }
