@@ -37,7 +37,8 @@
 //!    reply the controller gives, byte for byte, and a 26DH of 20 records
 //!    is answered `#`; the simulator holds exactly those 20 records; the
 //!    firmware's counters (after the quit sequence) show every connection
-//!    served or refused and none reset for not reading. About 21 s;
+//!    that sent bytes served or refused (all of them on an idle machine)
+//!    and none reset for not reading. About 21 s;
 //!    `IAI_ETH_CONNECTIONS` sets the count.
 //! 6. `a_host_that_stops_reading_is_reset`: a host whose socket offers
 //!    the smallest window the kernel allows sends 20,000 status queries
@@ -773,15 +774,20 @@ fn a_thousand_connects_and_disconnects() {
     assert!(exit.success(), "{}\n{}", exit.stdout, exit.stderr);
     // Exactly the verified records: nothing of the cut messages.
     check_table(&sim.table, &records).unwrap_or_else(|e| panic!("{e}"));
-    // Every connection reached the bridge: served as the host or refused
-    // (besides the churn: the start-up query, the 212H, the status query,
-    // the 26DH and the quit sequence); none had to be reset for not
-    // reading.
+    // Every connection that sent something reached the bridge: served as
+    // the host or refused (besides the churn: the start-up query, the
+    // 212H, the status query, the 26DH and the quit sequence). One closed
+    // at once may not: QEMU's user network drops a client that left
+    // before its own connection to the bridge was up (seen on a loaded
+    // machine; on an idle one all 1,005 were served). None had to be
+    // reset for not reading.
     let [hosts, refused, cut_short, stalled] = tcp_counters(&exit.stdout);
     eprintln!("bridge: {hosts} hosts, {refused} refused, {cut_short} cut short, {stalled} stalled");
+    let with_bytes = u64::from(connections - at_once - failed) + 5;
     assert!(
-        hosts + refused >= u64::from(connections - failed) + 5,
-        "{hosts} hosts and {refused} refused for {connections} connections"
+        hosts + refused >= with_bytes && hosts + refused <= u64::from(connections) + 5,
+        "{hosts} hosts and {refused} refused for {connections} connections, \
+         {with_bytes} with bytes"
     );
     assert_eq!(stalled, 0);
     eprintln!(
