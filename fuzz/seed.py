@@ -281,6 +281,16 @@ def main():
         write("bridge_policy", f"fixtures-mode{mode:02x}", bytes([mode, 4]) + stream)
     write("bridge_policy", "fixtures-allow", bytes([0x02]) + bytes(allow) + bytes([4]) + stream)
     write("bridge_policy", "status-query", bytes([0x01, 1]) + b"!BBB0047\r\n" + stream)
+    # tcp_hosts: connection events (see its header). A host and a second
+    # connection refused after the hold; a host that leaves and the next
+    # one served; a host that stops reading and is reset after 10 s; a
+    # 26DH cut by a reset; a host that half-closes after a command.
+    write("tcp_hosts", "refused", bytes([0x00, 0x02, 0x00, 0x10, 0x06, 0x14]))
+    write("tcp_hosts", "next-host", bytes([0x00, 0x02, 0x01, 0x04, 0x10, 0x06, 0x14, 0x00, 0x02, 0x01]))
+    write("tcp_hosts", "stops-reading",
+          bytes([0x00, 0x05]) + bytes([0x02, 0x01]) * 30 + bytes([0x06, 120, 0x10, 0x12, 0x01, 0x06, 0x05]))
+    write("tcp_hosts", "cut-26dh", bytes([0x00, 0x02, 0x03, 0x04, 0x06, 0x40, 0x10, 0x12, 0x01]))
+    write("tcp_hosts", "half-close", bytes([0x00, 0x02, 0x00, 0x03, 0x06, 0x40, 0x10, 0x12, 0x01]))
     # hex: any bytes; the fixture frames hold digits of both cases and
     # every kind of non-digit next to them.
     for name, frame in frames[:8]:

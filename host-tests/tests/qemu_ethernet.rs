@@ -29,6 +29,25 @@
 //! 4. `static_address_and_port_from_the_network_block`: a network block
 //!    in the configuration page gives a static address and port 6020; the
 //!    firmware says so and answers there.
+//! 5. `a_thousand_connects_and_disconnects`: 1,000 connections made one
+//!    after another, 20 ms apart (QEMU's user network accepts one at a
+//!    time), and dropped: at once, after part of a 212H, after part of a
+//!    26DH's first record (positions 901..), after a whole 212H or status
+//!    query whose reply is never read; then a new client gets the 212H
+//!    reply the controller gives, byte for byte, and a 26DH of 20 records
+//!    is answered `#`; the simulator holds exactly those 20 records; the
+//!    firmware's counters (after the quit sequence) show every connection
+//!    that sent bytes served or refused (all of them on an idle machine)
+//!    and none reset for not reading. About 21 s;
+//!    `IAI_ETH_CONNECTIONS` sets the count.
+//! 6. `a_host_that_stops_reading_is_reset`: a host whose socket offers
+//!    the smallest window the kernel allows sends 20,000 status queries
+//!    and reads nothing; QEMU's user network buffers what it can (about
+//!    1.6 MB), then the bridge's transmit buffer stays full, it stops
+//!    answering, and 10 s later resets the host: a client refused
+//!    meanwhile is served no sooner than 10 s after the slow host began,
+//!    fewer queries were answered than sent, the slow host's connection
+//!    ends, and the firmware counts one host reset for it. About 12 s.
 //!
 //! Needs `qemu-system-arm` and the `thumbv7m-none-eabi` rustup target.
 
@@ -44,7 +63,7 @@ use host_tests::gateway::{tcp_status_query, EthernetGateway, Options};
 use host_tests::qemu::{build_ethernet_firmware, workspace_root};
 use host_tests::table::table;
 use iai_protocol_b::frame::{Frame, Header, Station};
-use iai_protocol_b::position::PositionRecord;
+use iai_protocol_b::position::{PositionRecord, PositionStream};
 use iai_protocol_b::LineConfig;
 
 use firmware_example::codes;
@@ -107,6 +126,12 @@ impl Frames {
     /// The next frame (from its `#`, `&` or `!` on), `None` at the end of
     /// the connection; panics after `limit`.
     fn next(&mut self, limit: Duration) -> Option<Vec<u8>> {
+        self.try_next(limit)
+            .unwrap_or_else(|| panic!("no frame within {limit:?}"))
+    }
+
+    /// As [`Frames::next`], `None` after `limit` instead of a panic.
+    fn try_next(&mut self, limit: Duration) -> Option<Option<Vec<u8>>> {
         let end = Instant::now() + limit;
         loop {
             if let Some(at) = self.pending.windows(2).position(|w| w == b"\r\n") {
@@ -115,20 +140,23 @@ impl Frames {
                     .iter()
                     .position(|b| matches!(b, b'#' | b'&' | b'!'))
                     .unwrap_or(line.len());
-                return Some(line[start..].to_vec());
+                return Some(Some(line[start..].to_vec()));
             }
             let left = end.saturating_duration_since(Instant::now());
-            assert!(!left.is_zero(), "no frame within {limit:?}");
+            if left.is_zero() {
+                return None;
+            }
             self.conn.set_read_timeout(Some(left)).unwrap();
             let mut buf = [0u8; 4096];
             match self.conn.read(&mut buf) {
-                Ok(0) => return None,
+                Ok(0) => return Some(None),
                 Ok(n) => self.pending.extend_from_slice(&buf[..n]),
                 Err(e)
                     if matches!(
                         e.kind(),
                         std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
                     ) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => return Some(None),
                 Err(e) => panic!("read: {e}"),
             }
         }
@@ -554,4 +582,347 @@ fn static_address_and_port_from_the_network_block() {
     let fields = tcp_status_query(gw.addr, bridge, Duration::from_secs(15)).unwrap();
     assert_eq!(field(&fields, "own_queries"), 2, "{fields:?}");
     gw.stop().expect("simulator");
+}
+
+/// The firmware's TCP counters from its last words (`tcp hosts N refused
+/// N cut short N stalled N`): hosts, refused, cut short, stalled.
+fn tcp_counters(stdout: &str) -> [u64; 4] {
+    let line = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("firmware-example: tcp hosts "))
+        .unwrap_or_else(|| panic!("no tcp counters in:\n{stdout}"));
+    let words: Vec<&str> = line.split([' ', ';']).collect();
+    let at = |i: usize| -> u64 {
+        words
+            .get(i)
+            .and_then(|w| w.parse().ok())
+            .unwrap_or_else(|| panic!("tcp counters {line:?}"))
+    };
+    // "N refused N cut short N stalled N; frames ..."
+    [at(0), at(2), at(5), at(7)]
+}
+
+/// The 212H axis status query of axis 1 to `controller`.
+fn axis_status_query(controller: Station) -> Vec<u8> {
+    use iai_protocol_b::axis::AxisPattern;
+    use iai_protocol_b::message::{AxisStatusQuery, Message};
+    let mut buf = [0u8; 64];
+    let n = AxisStatusQuery {
+        query_axis_pattern: AxisPattern::first(1),
+    }
+    .emit(controller, &mut buf)
+    .expect("212H");
+    buf[..n].to_vec()
+}
+
+/// Sends `command` on a new connection and returns the first frame from
+/// `from`; a connection answered `&` B0B (a host still being let go) or
+/// closed unanswered is tried again until `limit`.
+fn exchange_when_served(
+    addr: std::net::SocketAddr,
+    bridge: Station,
+    from: Station,
+    command: &[u8],
+    limit: Duration,
+) -> Vec<u8> {
+    let end = Instant::now() + limit;
+    loop {
+        assert!(Instant::now() < end, "not served within {limit:?}");
+        let Ok(conn) = TcpStream::connect(addr) else {
+            std::thread::sleep(Duration::from_millis(100));
+            continue;
+        };
+        conn.set_nodelay(true).unwrap();
+        let mut frames = Frames::new(conn);
+        if frames.conn.write_all(command).is_err() {
+            continue;
+        }
+        // A connection that waits for the bridge to finish a departed
+        // host's work is served once it is idle, a held one is refused
+        // within 1 s: 10 s without a frame is a fault, not a wait.
+        let left = end.saturating_duration_since(Instant::now());
+        let limit = left.min(Duration::from_secs(10));
+        while let Some(frame) = frames
+            .try_next(limit)
+            .unwrap_or_else(|| panic!("no frame within {limit:?}"))
+        {
+            let Ok(f) = Frame::new_checked(&frame, Default::default()) else {
+                continue;
+            };
+            if f.header() == Header::Error && f.station() == bridge && f.code() == codes::HOST_BUSY
+            {
+                break;
+            }
+            if f.station() == from {
+                return frame;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+#[test]
+fn a_thousand_connects_and_disconnects() {
+    use host_tests::sim::Simulator;
+    let started = Instant::now();
+    let elf = build_ethernet_firmware().expect("build lm3s6965-eth");
+    let opts = Options {
+        elf: Some(elf),
+        ethernet: true,
+        quit_sequence: true,
+        ..Options::default()
+    };
+    let gw = EthernetGateway::start(&opts).unwrap_or_else(|e| panic!("{e}"));
+    let (bridge, controller) = stations();
+    let q212 = axis_status_query(controller);
+    let status = status_query_frame(bridge);
+    // A 26DH for positions 901.. cut inside its first record: no record of
+    // it is whole, so none may reach the controller.
+    let cut_26dh: Vec<PositionRecord> = table(5, 8, 21)
+        .enumerate()
+        .map(|(i, mut r)| {
+            r.number = 901 + u16::try_from(i).unwrap();
+            r
+        })
+        .collect();
+    let cut_26dh = command_26dh(controller, &cut_26dh);
+    // Envelope and prefix, one record; four more records and the trailer
+    // (SC, CR, LF: 4 bytes) after it.
+    let record_len = (cut_26dh.len() - PositionStream::CHANGE_2.overhead()) / 5;
+    let first_record_ends = cut_26dh.len() - 4 * record_len - 4;
+
+    // IAI_ETH_CONNECTIONS sets the count (default 1000).
+    let connections: u32 = std::env::var("IAI_ETH_CONNECTIONS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1000);
+    let churn_started = Instant::now();
+    let (mut at_once, mut partial, mut unread, mut failed) = (0u32, 0u32, 0u32, 0u32);
+    for i in 0..connections {
+        let Ok(mut conn) = TcpStream::connect(gw.addr) else {
+            failed += 1;
+            continue;
+        };
+        let _ = conn.set_nodelay(true);
+        // Write errors are expected: a connection the bridge could not take
+        // (all its sockets busy) is reset.
+        let sent = match i % 5 {
+            0 => {
+                at_once += 1;
+                Ok(())
+            }
+            1 => {
+                partial += 1;
+                let cut = 1 + (i as usize * 7) % (q212.len() - 2);
+                conn.write_all(&q212[..cut])
+            }
+            2 => {
+                partial += 1;
+                let cut = 1 + (i as usize * 13) % (first_record_ends - 1);
+                conn.write_all(&cut_26dh[..cut])
+            }
+            3 => {
+                unread += 1;
+                conn.write_all(&q212)
+            }
+            _ => {
+                unread += 1;
+                conn.write_all(&status)
+            }
+        };
+        if sent.is_err() {
+            failed += 1;
+        }
+        drop(conn);
+        // QEMU's user network takes one connection at a time from its
+        // listening socket (backlog 1): without a pause the kernel drops
+        // the next SYN and the client sends it again a second later.
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let churn = churn_started.elapsed();
+    eprintln!(
+        "{connections} connections in {:.1} s: {at_once} closed at once, {partial} after part of a \
+         frame, {unread} after a whole command unread; {failed} refused or reset by the stack",
+        churn.as_secs_f64()
+    );
+
+    // A normal client: the 212H reply the controller gives, byte for byte.
+    let mut oracle = Simulator::tta(controller);
+    oracle.receive(&q212, 0);
+    let want = oracle.take_output(1_000);
+    let got = exchange_when_served(gw.addr, bridge, controller, &q212, Duration::from_secs(30));
+    assert_eq!(
+        String::from_utf8_lossy(&got),
+        String::from_utf8_lossy(&want)
+    );
+    let fields = tcp_status_query(gw.addr, bridge, Duration::from_secs(15)).unwrap();
+    assert_eq!(field(&fields, "streams_ok"), 0, "{fields:?}");
+    assert_eq!(field(&fields, "records"), 0, "{fields:?}");
+    assert!(field(&fields, "forwarded") >= 1, "{fields:?}");
+
+    // A small table, verified by the bridge.
+    let records: Vec<PositionRecord> = table(20, 8, 22).collect();
+    let (reply, _) = send_26dh(
+        gw.addr,
+        command_26dh(controller, &records),
+        Duration::from_secs(30),
+    );
+    assert_eq!(
+        String::from_utf8_lossy(&reply),
+        String::from_utf8_lossy(&reply_26dh(controller, 20))
+    );
+    let (exit, sim) = gw
+        .quit(Duration::from_secs(20))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(exit.success(), "{}\n{}", exit.stdout, exit.stderr);
+    // Exactly the verified records: nothing of the cut messages.
+    check_table(&sim.table, &records).unwrap_or_else(|e| panic!("{e}"));
+    // Every connection that sent something reached the bridge: served as
+    // the host or refused (besides the churn: the start-up query, the
+    // 212H, the status query, the 26DH and the quit sequence). One closed
+    // at once may not: QEMU's user network drops a client that left
+    // before its own connection to the bridge was up (seen on a loaded
+    // machine; on an idle one all 1,005 were served). None had to be
+    // reset for not reading.
+    let [hosts, refused, cut_short, stalled] = tcp_counters(&exit.stdout);
+    eprintln!("bridge: {hosts} hosts, {refused} refused, {cut_short} cut short, {stalled} stalled");
+    let with_bytes = u64::from(connections - at_once - failed) + 5;
+    assert!(
+        hosts + refused >= with_bytes && hosts + refused <= u64::from(connections) + 5,
+        "{hosts} hosts and {refused} refused for {connections} connections, \
+         {with_bytes} with bytes"
+    );
+    assert_eq!(stalled, 0);
+    eprintln!(
+        "a_thousand_connects_and_disconnects: {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
+}
+
+/// A connection to `addr` whose receive buffer is set to `rcvbuf` bytes
+/// before it connects (so that the window it offers stays that small).
+fn connect_small_window(addr: std::net::SocketAddrV4, rcvbuf: i32) -> TcpStream {
+    use std::os::fd::FromRawFd;
+    #[repr(C)]
+    struct SockaddrIn {
+        family: u16,
+        port: u16,
+        addr: u32,
+        zero: [u8; 8],
+    }
+    extern "C" {
+        fn socket(domain: i32, kind: i32, protocol: i32) -> i32;
+        fn setsockopt(fd: i32, level: i32, name: i32, value: *const i32, len: u32) -> i32;
+        fn connect(fd: i32, addr: *const SockaddrIn, len: u32) -> i32;
+        fn close(fd: i32) -> i32;
+    }
+    const AF_INET: i32 = 2;
+    const SOCK_STREAM: i32 = 1;
+    const SOL_SOCKET: i32 = 1;
+    const SO_RCVBUF: i32 = 8;
+    let sa = SockaddrIn {
+        family: AF_INET as u16,
+        port: addr.port().to_be(),
+        addr: u32::from(*addr.ip()).to_be(),
+        zero: [0; 8],
+    };
+    // SAFETY: plain socket calls on a descriptor this function owns; the
+    // pointers are to live locals of the sizes given.
+    unsafe {
+        let fd = socket(AF_INET, SOCK_STREAM, 0);
+        assert!(fd >= 0, "socket: {}", std::io::Error::last_os_error());
+        let rc = setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, 4);
+        assert_eq!(rc, 0, "SO_RCVBUF: {}", std::io::Error::last_os_error());
+        let len = std::mem::size_of::<SockaddrIn>() as u32;
+        if connect(fd, &sa, len) != 0 {
+            let e = std::io::Error::last_os_error();
+            close(fd);
+            panic!("connect: {e}");
+        }
+        TcpStream::from_raw_fd(fd)
+    }
+}
+
+#[test]
+fn a_host_that_stops_reading_is_reset() {
+    let started = Instant::now();
+    let elf = build_ethernet_firmware().expect("build lm3s6965-eth");
+    let opts = Options {
+        elf: Some(elf),
+        ethernet: true,
+        quit_sequence: true,
+        ..Options::default()
+    };
+    let gw = EthernetGateway::start(&opts).unwrap_or_else(|e| panic!("{e}"));
+    let (bridge, _) = stations();
+    let std::net::SocketAddr::V4(addr) = gw.addr else {
+        panic!("{} is not IPv4", gw.addr)
+    };
+    // A host that sends status queries and reads nothing, its window as
+    // small as the kernel allows: what QEMU's user network takes for it
+    // (its own buffer and its socket's) fills up, then the bridge's
+    // transmit buffer, and the bridge stops taking its queries.
+    let mut slow = connect_small_window(addr, 1);
+    slow.set_nodelay(true).unwrap();
+    let query = status_query_frame(bridge);
+    let queries = 20_000;
+    let mut writer = slow.try_clone().unwrap();
+    let sender = std::thread::spawn(move || {
+        let mut sent = 0u32;
+        for _ in 0..queries {
+            if writer.write_all(&query).is_err() {
+                break;
+            }
+            sent += 1;
+        }
+        sent
+    });
+    let stopped_reading = Instant::now();
+    // Meanwhile others are refused; once the bridge reset the slow host
+    // (10 s after it last took a byte) the next one is served.
+    let fields = tcp_status_query(gw.addr, bridge, Duration::from_secs(90))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let served_after = stopped_reading.elapsed();
+    let own = field(&fields, "own_queries");
+    // The slow host's connection is gone: what was buffered for it, then
+    // its end.
+    slow.set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
+    let mut got = 0usize;
+    let mut buf = vec![0u8; 65536];
+    let ended = loop {
+        match slow.read(&mut buf) {
+            Ok(0) => break "closed",
+            Ok(n) => got += n,
+            Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => break "reset",
+            Err(e) => panic!("the slow host's connection is still open: {e} after {got} bytes"),
+        }
+    };
+    let sent = sender.join().unwrap();
+    eprintln!(
+        "slow host: {sent} status queries sent, {own} answered by the bridge in all, \
+         {got} bytes of answers read afterwards, connection {ended}; the next host served \
+         {:.1} s after the slow one began",
+        served_after.as_secs_f64()
+    );
+    assert!(
+        served_after >= Duration::from_secs(10),
+        "served after {served_after:?}: the slow host was not holding the bridge"
+    );
+    assert!(
+        u64::from(sent) > own,
+        "every query was answered: the slow host never stalled the bridge"
+    );
+    let (exit, _) = gw
+        .quit(Duration::from_secs(20))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(exit.success(), "{}\n{}", exit.stdout, exit.stderr);
+    // The bridge's own count: one host reset for taking nothing.
+    let [hosts, refused, cut_short, stalled] = tcp_counters(&exit.stdout);
+    eprintln!("bridge: {hosts} hosts, {refused} refused, {cut_short} cut short, {stalled} stalled");
+    assert_eq!(stalled, 1);
+    eprintln!(
+        "a_host_that_stops_reading_is_reset: {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
 }
