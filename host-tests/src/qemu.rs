@@ -166,6 +166,49 @@ pub fn build_firmware_with(
     build_bin(board, board.bin(), profile, features, target_dir_override)
 }
 
+/// Builds the `iai` tool in the calling test's cargo profile (a no-op when
+/// the test command built it) and returns its path, beside the test
+/// executable's `target/<profile>/`.
+pub fn iai_binary() -> io::Result<PathBuf> {
+    let exe = std::env::current_exe()?;
+    let dir = exe
+        .parent()
+        .and_then(Path::parent)
+        .ok_or_else(|| io::Error::other(format!("no target/<profile> above {}", exe.display())))?
+        .to_path_buf();
+    let profile = match dir.file_name().and_then(|n| n.to_str()) {
+        Some("debug") => "dev".to_owned(),
+        Some(other) => other.to_owned(),
+        None => return Err(io::Error::other(format!("no profile in {}", dir.display()))),
+    };
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let out = Command::new(cargo)
+        .current_dir(workspace_root())
+        .args([
+            "build",
+            "--quiet",
+            "-p",
+            "iai-cli",
+            "--bin",
+            "iai",
+            "--profile",
+        ])
+        .arg(&profile)
+        .stdin(Stdio::null())
+        .output()?;
+    if !out.status.success() {
+        return Err(io::Error::other(format!(
+            "building iai failed:\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        )));
+    }
+    let iai = dir.join("iai");
+    if !iai.is_file() {
+        return Err(io::Error::other(format!("{} missing", iai.display())));
+    }
+    Ok(iai)
+}
+
 /// The Ethernet board's binary (protocol B over TCP on `lm3s6965evb`).
 pub const ETHERNET_BIN: &str = "lm3s6965-eth";
 

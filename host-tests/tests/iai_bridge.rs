@@ -55,7 +55,7 @@ fn csv_of(records: u32, seed: u32) -> Vec<u8> {
 #[test]
 fn iai_sends_whole_tables_through_the_bridge_and_reads_its_status() {
     let elf = build_firmware(Board::Lm3s6965).expect("build lm3s6965 firmware");
-    let iai = iai_binary();
+    let iai = iai_binary().expect("the iai binary");
     let gw = Gateway::start(&elf, &[]);
 
     // 1. The status, decoded.

@@ -60,7 +60,7 @@ use std::time::{Duration, Instant};
 
 use host_tests::bridge::{check_table, command_26dh, reply_26dh, status_query_frame, Throughput};
 use host_tests::gateway::{tcp_status_query, EthernetGateway, Options};
-use host_tests::qemu::{build_ethernet_firmware, workspace_root};
+use host_tests::qemu::build_ethernet_firmware;
 use host_tests::table::table;
 use iai_protocol_b::frame::{Frame, Header, Station};
 use iai_protocol_b::position::{PositionRecord, PositionStream};
@@ -76,37 +76,6 @@ fn stations() -> (Station, Station) {
         firmware_example::config::ModbusConfig::DEFAULT.baud,
     );
     (cfg.bridge_station, cfg.controller_station)
-}
-
-/// Builds the `iai` binary in this test's profile; its path.
-fn iai_binary() -> PathBuf {
-    let exe = std::env::current_exe().expect("test executable");
-    let dir = exe
-        .parent()
-        .and_then(Path::parent)
-        .expect("target/<profile>")
-        .to_path_buf();
-    let profile = match dir.file_name().and_then(|n| n.to_str()) {
-        Some("debug") => "dev".to_owned(),
-        Some(other) => other.to_owned(),
-        None => panic!("no profile directory in {}", exe.display()),
-    };
-    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let out = Command::new(cargo)
-        .current_dir(workspace_root())
-        .args(["build", "--quiet", "-p", "iai-cli", "--bin", "iai"])
-        .args(["--profile", &profile])
-        .stdin(Stdio::null())
-        .output()
-        .expect("run cargo");
-    assert!(
-        out.status.success(),
-        "building iai failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let iai = dir.join("iai");
-    assert!(iai.is_file(), "{} missing", iai.display());
-    iai
 }
 
 /// Frames read from a TCP connection, CR LF ended.
@@ -321,7 +290,7 @@ fn csv_of(records: u32, seed: u32) -> Vec<u8> {
 #[test]
 fn iai_over_tcp() {
     let elf = build_ethernet_firmware().expect("build lm3s6965-eth");
-    let iai = iai_binary();
+    let iai = host_tests::qemu::iai_binary().expect("the iai binary");
     let mut gw = GatewayProcess::start(&elf);
     let (bridge, _) = stations();
     let addr: std::net::SocketAddr = gw.addr.parse().unwrap();

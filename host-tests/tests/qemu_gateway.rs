@@ -24,48 +24,8 @@ use std::process::{Child, Command, Output, Stdio};
 use std::sync::mpsc::{channel, Receiver};
 use std::time::{Duration, Instant};
 
-use host_tests::qemu::{build_firmware, workspace_root, Board};
+use host_tests::qemu::{build_firmware, Board};
 use host_tests::table::table;
-
-/// Builds the `iai` binary in this test's profile; its path.
-fn iai_binary() -> PathBuf {
-    // target/<profile>/deps/qemu_gateway-<hash>
-    let exe = std::env::current_exe().expect("test executable");
-    let dir = exe
-        .parent()
-        .and_then(Path::parent)
-        .expect("target/<profile>")
-        .to_path_buf();
-    let profile = match dir.file_name().and_then(|n| n.to_str()) {
-        Some("debug") => "dev".to_owned(),
-        Some(other) => other.to_owned(),
-        None => panic!("no profile directory in {}", exe.display()),
-    };
-    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let out = Command::new(cargo)
-        .current_dir(workspace_root())
-        .args([
-            "build",
-            "--quiet",
-            "-p",
-            "iai-cli",
-            "--bin",
-            "iai",
-            "--profile",
-        ])
-        .arg(&profile)
-        .stdin(Stdio::null())
-        .output()
-        .expect("run cargo");
-    assert!(
-        out.status.success(),
-        "building iai failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let iai = dir.join("iai");
-    assert!(iai.is_file(), "{} missing", iai.display());
-    iai
-}
 
 /// The gateway process; stopped (SIGTERM, then SIGKILL) when dropped.
 struct Gateway {
@@ -223,7 +183,7 @@ fn qemu_running(pid: u32) -> bool {
 #[test]
 fn iai_through_the_gateway_sends_writes_and_reads_a_table() {
     let elf = build_firmware(Board::Lm3s6965).expect("build lm3s6965 firmware");
-    let iai = iai_binary();
+    let iai = host_tests::qemu::iai_binary().expect("the iai binary");
     let mut gw = Gateway::start(&elf);
     let qemu = gw.qemu_pid();
     assert!(qemu_running(qemu));

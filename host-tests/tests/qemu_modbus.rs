@@ -51,37 +51,6 @@ const SV: u16 = 1 << 12;
 const HEND: u16 = 1 << 4;
 const PEND: u16 = 1 << 3;
 
-/// Builds the `iai` binary in this test's profile; its path.
-fn iai_binary() -> PathBuf {
-    let exe = std::env::current_exe().expect("test executable");
-    // target/<profile>/deps/qemu_modbus-<hash>
-    let dir = exe
-        .parent()
-        .and_then(Path::parent)
-        .expect("target/<profile>")
-        .to_path_buf();
-    let profile = match dir.file_name().and_then(|n| n.to_str()) {
-        Some("debug") => "dev".to_owned(),
-        Some(other) => other.to_owned(),
-        None => panic!("no profile directory in {}", exe.display()),
-    };
-    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let out = Command::new(cargo)
-        .current_dir(workspace_root())
-        .args(["build", "--quiet", "-p", "iai-cli", "--bin", "iai"])
-        .arg("--profile")
-        .arg(&profile)
-        .stdin(Stdio::null())
-        .output()
-        .expect("run cargo");
-    assert!(
-        out.status.success(),
-        "building iai failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    dir.join("iai")
-}
-
 /// Whether `tool` is on the PATH.
 fn on_path(tool: &str) -> bool {
     Command::new("sh")
@@ -434,7 +403,7 @@ fn pymodbus_and_mbpoll_run_a_plcs_sequence_through_the_gateway() {
     );
 
     let elf = build_firmware(Board::Lm3s6965).expect("build lm3s6965 firmware");
-    let iai = iai_binary();
+    let iai = host_tests::qemu::iai_binary().expect("the iai binary");
     let mut gw = Gateway::start(&elf);
     let tmp = PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
     let records: Vec<PositionRecord> = table(POSITIONS, 8, 2026).collect();

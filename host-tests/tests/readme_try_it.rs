@@ -125,7 +125,7 @@ fn the_readme_try_it_commands_work_as_written() {
     assert!(rest.len() >= 3, "Try it has {} iai commands", rest.len());
 
     let elf = build_firmware(Board::Lm3s6965).expect("build lm3s6965 firmware");
-    let iai = iai_binary();
+    let iai = iai_binary().expect("the iai binary");
     let gw = Gateway::start(&elf, &args);
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("try-it-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();

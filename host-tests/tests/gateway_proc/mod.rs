@@ -2,53 +2,13 @@
 //! `iai` tool run against it, for the end-to-end tests that use both
 //! (`iai_bridge.rs`, `readme_try_it.rs`).
 
+pub use host_tests::qemu::iai_binary;
+
 use std::io::{BufRead, BufReader, Read};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
 use std::sync::mpsc::{channel, Receiver};
 use std::time::Duration;
-
-use host_tests::qemu::workspace_root;
-
-/// Builds the `iai` binary in this test's profile (a no-op when the test
-/// command built it); its path.
-pub fn iai_binary() -> PathBuf {
-    let exe = std::env::current_exe().expect("test executable");
-    let dir = exe
-        .parent()
-        .and_then(Path::parent)
-        .expect("target/<profile>")
-        .to_path_buf();
-    let profile = match dir.file_name().and_then(|n| n.to_str()) {
-        Some("debug") => "dev".to_owned(),
-        Some(other) => other.to_owned(),
-        None => panic!("no profile directory in {}", exe.display()),
-    };
-    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let out = Command::new(cargo)
-        .current_dir(workspace_root())
-        .args([
-            "build",
-            "--quiet",
-            "-p",
-            "iai-cli",
-            "--bin",
-            "iai",
-            "--profile",
-        ])
-        .arg(&profile)
-        .stdin(Stdio::null())
-        .output()
-        .expect("run cargo");
-    assert!(
-        out.status.success(),
-        "building iai failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let iai = dir.join("iai");
-    assert!(iai.is_file(), "{} missing", iai.display());
-    iai
-}
 
 /// The gateway; SIGTERM (then SIGKILL) when dropped.
 pub struct Gateway {
