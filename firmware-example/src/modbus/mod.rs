@@ -166,7 +166,7 @@ impl Gateway {
     }
 
     /// One Modbus TCP request `adu` (MBAP header and PDU, as
-    /// [`tcp::Reader`] cut it from a connection) at `now` (ms): answered
+    /// [`tcp::adu_len`] cut it from a connection) at `now` (ms): answered
     /// into `resp` by the same handler, map, cache and handshake as an RTU
     /// frame. `resp` is left empty when nothing is to be sent: an ADU that
     /// fails [`tcp::check`] (a protocol ID other than 0, a length that does
