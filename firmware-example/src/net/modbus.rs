@@ -279,3 +279,6 @@ fn settle(socket: &mut tcp::Socket<'_>, since: u32, now: u32) -> Slot {
         _ => Slot::Closing { since },
     }
 }
+
+#[cfg(test)]
+mod tests;
