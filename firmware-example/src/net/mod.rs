@@ -25,8 +25,8 @@
 //! Memory: everything lives in statics the board hands over: the two
 //! frame buffers of the driver ([`stellaris::FRAME_CAP`] bytes each), the
 //! socket buffers ([`Buffers`]: [`SOCKET_BUFFER`] bytes per direction
-//! and socket) and the socket slots ([`SocketSlots`]). Nothing is
-//! allocated.
+//! and socket; [`modbus::ModbusBuffers`]: [`modbus::CLIENT_BUFFER`]) and
+//! the socket slots ([`SocketSlots`]). Nothing is allocated.
 //!
 //! Modbus TCP ([`modbus`]): [`modbus::CLIENTS`] more sockets on port
 //! [`modbus::MODBUS_PORT`] (502), added by [`Net::add_modbus`] and served
