@@ -18,8 +18,11 @@
 # (lm3s6965-eth: smoltcp on the Stellaris MAC, lm3s6965 only) boots with
 # QEMU's user network forwarding 127.0.0.1:PORT to the bridge's port 5020,
 # the simulator on the controller UART; prints `protocol-b-tcp
-# 127.0.0.1:PORT` once the bridge answers over TCP. No relay: clients
-# talk to the firmware's TCP stack, one at a time (others get & B0B).
+# 127.0.0.1:PORT` once the bridge answers over TCP, then `modbus-tcp
+# 127.0.0.1:PORT` (forwarded to the firmware's Modbus TCP port 502; set
+# with --modbus-port). No relay: clients talk to the firmware's TCP
+# stack, one protocol-B host at a time (others get & B0B), two Modbus TCP
+# clients at once.
 # Also builds the iai tool (target/release/iai).
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -113,10 +113,12 @@ done
 echo "goal (Cortex-M3/M4 boards): total RAM <= 12288 with the gateway (lm3s6965), <= 8192 without; flash <= 32768"
 
 # The Ethernet build (lm3s6965-eth: the bridge with its host on TCP,
-# smoltcp on the Stellaris MAC). Static RAM and flash as above, the
-# network's share of the static RAM by symbol (smoltcp's socket buffers,
-# the driver's two frame buffers, the socket slots with smoltcp's socket
-# state, the interface with the protocol-B hosts, the driver), and the
+# smoltcp on the Stellaris MAC, and the Modbus gateway on Modbus TCP).
+# Static RAM and flash as above, the network's share of the static RAM by
+# symbol (smoltcp's socket buffers, protocol B's and Modbus TCP's, the
+# driver's two frame buffers, the socket slots with smoltcp's socket
+# state, the interface with the protocol-B hosts and the Modbus clients,
+# the driver), the Modbus gateway's state, and the
 # stack measured by the QEMU test that streams a 26DH over TCP and ends
 # the run with the quit sequence (it prints `stack lm3s6965-eth N`).
 # Not held to the 8 KiB goal: the LM3S6965 has 64 KiB of RAM.
@@ -133,11 +135,12 @@ sym() { # size in bytes of the board's static NAME (decimal)
   hex=$($nm -S "$eth_elf" | awk -v n="$1" '$4 ~ ("^_ZN12lm3s6965_eth" length(n) n "17h") {print $2}')
   echo $((16#${hex:-0}))
 }
-buffers=$(sym BUFFERS); frames=$(( $(sym RX_FRAME) + $(sym TX_FRAME) ))
+buffers=$(( $(sym BUFFERS) + $(sym MODBUS_BUFFERS) )); frames=$(( $(sym RX_FRAME) + $(sym TX_FRAME) ))
+gateway=$(sym GATEWAY)
 slots=$(sym SLOTS); iface=$(sym NET); driver=$(sym ETH)
 eth_stack=$(cargo test -q -p host-tests --test qemu_ethernet a_26dh_over_tcp -- --nocapture 2>/dev/null |
   awk '$1=="stack" && $2=="lm3s6965-eth" {print $3}')
 [ -n "$eth_stack" ] || { echo "size-report: the Ethernet stack run failed" >&2; exit 1; }
 echo "ram lm3s6965-eth static $static stack $eth_stack total $((static + eth_stack))"
-echo "ram lm3s6965-eth network $((buffers + frames + slots + iface + driver)): socket buffers $buffers, frame buffers $frames, socket slots $slots, interface and hosts $iface, driver $driver"
+echo "ram lm3s6965-eth network $((buffers + frames + slots + iface + driver)): socket buffers $buffers, frame buffers $frames, socket slots $slots, interface and hosts $iface, driver $driver; modbus gateway $gateway"
 echo "flash lm3s6965-eth $flash"

@@ -1,16 +1,18 @@
 #!/usr/bin/env python3
 """A PLC's session with the gateway's Modbus RTU port, through pymodbus.
 
-Usage: pymodbus_plc.py HOST PORT TABLE
+Usage: pymodbus_plc.py [--tcp] HOST PORT [TABLE]
 
 RTU frames over the TCP port that ./tools/gateway.sh prints as
-`modbus-rtu 127.0.0.1:PORT` (pymodbus's RTU framer on a TCP client).
+`modbus-rtu 127.0.0.1:PORT` (pymodbus's RTU framer on a TCP client); with
+--tcp, Modbus TCP (MBAP framing) to the port that
+`./tools/gateway.sh --ethernet` prints as `modbus-tcp 127.0.0.1:PORT`.
 The sequence a PLC runs: servo on (DRG1 SON), home (DRG1 HOME), wait for
 HEND, a numeric move (9900H), wait for PEND, read PNOW; then the position
 table: TABLE has one record a line, its 21 window registers in decimal;
 they are written five at a time (2200H), each write waited for through the
 handshake (CMDST), then read back through the window (21F0H, 2200H) and
-compared.
+compared. Without TABLE the session ends after PNOW.
 
 Prints `pnow VALUE` and `table N written, read back equal`, and timings
 (`time ...`), on stdout; exits 1 with `FAIL: ...` on stderr on the first
@@ -50,9 +52,9 @@ class Lost(Exception):
 
 
 class Plc:
-    def __init__(self, host, port):
+    def __init__(self, host, port, framer):
         self.client = ModbusTcpClient(
-            host, port=port, framer=FramerType.RTU, timeout=1.0, retries=0
+            host, port=port, framer=framer, timeout=1.0, retries=0
         )
         if not self.client.connect():
             raise Fail(f"cannot connect to {host}:{port}")
@@ -137,9 +139,9 @@ def ms(s):
     return f"{s * 1000:.0f} ms"
 
 
-def main(host, port, table):
-    rows = load(table)
-    plc = Plc(host, int(port))
+def main(host, port, table=None, framer=FramerType.RTU):
+    rows = load(table) if table is not None else None
+    plc = Plc(host, int(port), framer)
     t0 = time.monotonic()
     for _ in range(20):
         plc.read(PNOW, 6, inputs=True)
@@ -158,6 +160,10 @@ def main(host, port, table):
     if pnow != target:
         raise Fail(f"PNOW {pnow}, not {target}")
     print(f"pnow {pnow}")
+    if rows is None:
+        print(f"requests {plc.requests}, replies lost {plc.lost}")
+        plc.client.close()
+        return
 
     t0 = time.monotonic()
     for i in range(0, len(rows), WINDOW):
@@ -182,11 +188,16 @@ def main(host, port, table):
 
 
 if __name__ == "__main__":
-    if len(sys.argv) != 4:
+    args = sys.argv[1:]
+    framer = FramerType.RTU
+    if args[:1] == ["--tcp"]:
+        framer = FramerType.SOCKET
+        args = args[1:]
+    if len(args) not in (2, 3):
         print(__doc__.splitlines()[2], file=sys.stderr)
         sys.exit(2)
     try:
-        main(*sys.argv[1:])
+        main(*args, framer=framer)
     except Fail as e:
         print(f"FAIL: {e}", file=sys.stderr)
         sys.exit(1)

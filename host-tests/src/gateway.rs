@@ -71,6 +71,7 @@ use crate::qemu::{
 use crate::rtu_relay::RtuRelay;
 use crate::sim::{Faults, Simulator};
 use firmware_example::net::config::{NetConfig, BLOCK_OFFSET, DEFAULT_PORT};
+use firmware_example::net::modbus::MODBUS_PORT;
 
 /// What the gateway runs.
 #[derive(Debug, Clone)]
@@ -100,7 +101,8 @@ pub struct Options {
     pub elf: Option<PathBuf>,
     /// Protocol B over TCP: the Ethernet build (`lm3s6965-eth`) with
     /// QEMU's user network forwarding 127.0.0.1:`port` to the bridge's
-    /// protocol-B port (see [`run_ethernet`]).
+    /// protocol-B port and 127.0.0.1:`modbus_port` to its Modbus TCP port
+    /// (see [`run_ethernet`]).
     pub ethernet: bool,
     /// Ethernet only: the bridge honours the quit sequence (for test runs
     /// that end with [`EthernetGateway::quit`]).
@@ -167,6 +169,8 @@ pub struct Ready {
     pub over_ethernet: bool,
     /// The Modbus RTU port, on a board that has one.
     pub modbus_rtu: Option<SocketAddr>,
+    /// Modbus TCP straight to the firmware (the Ethernet build).
+    pub modbus_tcp: Option<SocketAddr>,
 }
 
 fn log(line: &str) {
@@ -275,6 +279,7 @@ pub fn run(opts: &Options, stop: &AtomicBool, on_ready: impl FnOnce(Ready)) -> R
             on_ready(Ready {
                 protocol_b: addr,
                 over_ethernet: false,
+                modbus_tcp: None,
                 modbus_rtu: modbus_addr,
             });
             serve(&listener, &link, &mut qemu, stop, cfg.bridge_station)
@@ -662,6 +667,9 @@ fn forward_down(mut conn: TcpStream, link: &HostLink, done: &AtomicBool, sent: &
 /// What the Ethernet firmware prints once protocol B listens on TCP
 /// (followed by `A.B.C.D:PORT (dhcp|static|fallback)`).
 pub const TCP_LISTENING: &str = "protocol-b-tcp listening on ";
+/// What the Ethernet firmware prints once Modbus TCP listens (followed by
+/// `A.B.C.D:502`), right after [`TCP_LISTENING`]'s line.
+pub const MODBUS_TCP_LISTENING: &str = "modbus-tcp listening on ";
 /// How long the Ethernet firmware may take to get an address (DHCP, or
 /// its fallback address after `DHCP_FALLBACK_MS`).
 const ADDRESS_TIMEOUT: Duration = Duration::from_secs(30);
@@ -669,13 +677,17 @@ const ADDRESS_TIMEOUT: Duration = Duration::from_secs(30);
 /// The Ethernet build under QEMU with the simulator on its controller
 /// UART: `lm3s6965-eth` with QEMU's user network
 /// (`-nic user,model=stellaris,restrict=on`) forwarding [`Self::addr`]
-/// to the bridge's protocol-B port. Nothing relays the host's bytes: a
-/// client talks to the firmware's TCP stack. Dropping it stops QEMU.
+/// to the bridge's protocol-B port and [`Self::modbus_addr`] to its
+/// Modbus TCP port (502). Nothing relays the host's bytes: a client talks
+/// to the firmware's TCP stack. Dropping it stops QEMU.
 pub struct EthernetGateway {
     /// The QEMU session (its upstream UART is not used).
     pub qemu: QemuSession,
     /// Where protocol B is reached (127.0.0.1, forwarded by QEMU).
     pub addr: SocketAddr,
+    /// Where Modbus TCP is reached (127.0.0.1, forwarded by QEMU to the
+    /// firmware's port 502).
+    pub modbus_addr: SocketAddr,
     /// The firmware's [`TCP_LISTENING`] line.
     pub listening: String,
     sim: SimThread,
@@ -684,7 +696,8 @@ pub struct EthernetGateway {
 impl EthernetGateway {
     /// Boots the firmware (built unless `opts.elf` names one), puts the
     /// simulator behind it, waits for [`TCP_LISTENING`] and for the bridge
-    /// to answer its status query over TCP. `opts.port` 0: a free port.
+    /// to answer its status query over TCP. `opts.port` and
+    /// `opts.modbus_port` 0: a free port.
     pub fn start(opts: &Options) -> Result<EthernetGateway, String> {
         if opts.board != Board::Lm3s6965 {
             return Err(format!(
@@ -697,6 +710,11 @@ impl EthernetGateway {
             p => p,
         };
         let addr = SocketAddr::from(([127, 0, 0, 1], port));
+        let modbus_port = match opts.modbus_port {
+            0 => free_port()?,
+            p => p,
+        };
+        let modbus_addr = SocketAddr::from(([127, 0, 0, 1], modbus_port));
         let elf = match &opts.elf {
             Some(p) => p.clone(),
             None => build_ethernet_firmware()
@@ -707,8 +725,10 @@ impl EthernetGateway {
             ..config(opts.baud, opts.modbus_baud)
         };
         let guest_port = opts.network.map_or(DEFAULT_PORT, |n| n.port);
-        let nic =
-            format!("user,model=stellaris,restrict=on,hostfwd=tcp:127.0.0.1:{port}-:{guest_port}");
+        let nic = format!(
+            "user,model=stellaris,restrict=on,hostfwd=tcp:127.0.0.1:{port}-:{guest_port},\
+             hostfwd=tcp:127.0.0.1:{modbus_port}-:{MODBUS_PORT}"
+        );
         let mut args = vec!["-nic".to_owned(), nic];
         if let Some(net) = &opts.network {
             args.push("-device".to_owned());
@@ -737,6 +757,7 @@ impl EthernetGateway {
         let mut gw = EthernetGateway {
             qemu,
             addr,
+            modbus_addr,
             listening: String::new(),
             sim,
         };
@@ -762,6 +783,15 @@ impl EthernetGateway {
             }
             thread::sleep(Duration::from_millis(10));
         };
+        if !gw
+            .qemu
+            .wait_for_stdout(MODBUS_TCP_LISTENING, Instant::now() + BOOT_TIMEOUT)
+        {
+            return Err(format!(
+                "the firmware did not print {MODBUS_TCP_LISTENING:?}\n{}",
+                gw.qemu.stdout_so_far()
+            ));
+        }
         tcp_status_query(addr, cfg.bridge_station, FENCE_TIMEOUT)
             .map_err(|e| format!("the bridge did not answer over TCP: {e}"))?;
         Ok(gw)
@@ -808,8 +838,9 @@ impl EthernetGateway {
 /// The Ethernet gateway ([`EthernetGateway`]) for `tools/gateway.sh
 /// --ethernet`: calls `on_ready` with the forwarded address once the
 /// bridge answered over TCP, and runs until `stop` (or fails when QEMU
-/// exits on its own). One client at a time: the firmware answers others
-/// `&` B0B and closes them.
+/// exits on its own). One protocol-B client at a time: the firmware
+/// answers others `&` B0B and closes them; Modbus TCP clients (two at
+/// once) on the forwarded Modbus address.
 pub fn run_ethernet(
     opts: &Options,
     stop: &AtomicBool,
@@ -817,11 +848,13 @@ pub fn run_ethernet(
 ) -> Result<(), String> {
     let mut gw = EthernetGateway::start(opts)?;
     log(&format!(
-        "lm3s6965evb-eth (QEMU pid {}) up; {} forwarded from {}; simulated controller \
-         (station {:02X}) behind it at {} baud; Ctrl-C stops",
+        "lm3s6965evb-eth (QEMU pid {}) up; {} forwarded from {}, Modbus TCP (port \
+         {MODBUS_PORT}) from {}; simulated controller (station {:02X}) behind it at {} \
+         baud; Ctrl-C stops",
         gw.qemu.pid(),
         gw.listening,
         gw.addr,
+        gw.modbus_addr,
         config(opts.baud, opts.modbus_baud).controller_station.0,
         opts.baud
     ));
@@ -829,6 +862,7 @@ pub fn run_ethernet(
         protocol_b: gw.addr,
         over_ethernet: true,
         modbus_rtu: None,
+        modbus_tcp: Some(gw.modbus_addr),
     });
     let result = watch(&mut gw.qemu, stop);
     match gw.stop() {

@@ -226,6 +226,16 @@ impl GatewayProcess {
             .filter(|a| a.starts_with("127.0.0.1:"))
             .unwrap_or_else(|| panic!("first line {first:?}"))
             .to_owned();
+        // Then Modbus TCP's forwarded address, and nothing else.
+        let second = stdout
+            .recv_timeout(Duration::from_secs(5))
+            .unwrap_or_else(|_| panic!("no modbus-tcp line after {first:?}"));
+        assert!(
+            second
+                .strip_prefix("modbus-tcp 127.0.0.1:")
+                .is_some_and(|p| p.parse::<u16>().is_ok()),
+            "second line {second:?}"
+        );
         assert!(stdout.recv_timeout(Duration::from_millis(200)).is_err());
         GatewayProcess { child, addr, log }
     }

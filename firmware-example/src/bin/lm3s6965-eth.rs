@@ -11,10 +11,17 @@
 //! further on (see `net/config.rs`); the bridge's flow control setting
 //! does not apply (TCP's window holds the host back).
 //!
+//! The Modbus gateway ([`firmware_example::modbus`]) serves Modbus TCP on
+//! port 502 ([`firmware_example::net::modbus`]) and shares the controller
+//! line with the bridge, as the serial board's gateway does; its settings
+//! (unit ID, poll period, axes) come from the bridge's block.
+//!
 //! Under QEMU: `-nic user,model=stellaris,hostfwd=tcp:127.0.0.1:HOSTPORT-:5020`
-//! (`restrict=on` keeps the guest from reaching anything else). Once the
-//! interface has an address the firmware prints
-//! `firmware-example: protocol-b-tcp listening on A.B.C.D:PORT (SOURCE)`.
+//! (and `hostfwd=tcp:127.0.0.1:MBPORT-:502` for Modbus TCP; `restrict=on`
+//! keeps the guest from reaching anything else). Once the interface has an
+//! address the firmware prints
+//! `firmware-example: protocol-b-tcp listening on A.B.C.D:PORT (SOURCE)`
+//! and `firmware-example: modbus-tcp listening on A.B.C.D:502`.
 #![no_std]
 #![no_main]
 
@@ -29,7 +36,9 @@ use core::ptr::{addr_of, addr_of_mut, read_volatile, write_volatile};
 use cortex_m::peripheral::NVIC;
 use cortex_m_rt::entry;
 use firmware_example::bridge::Bridge;
+use firmware_example::modbus::Gateway;
 use firmware_example::net::config::{NetConfig, NetSource, BLOCK_LEN, BLOCK_OFFSET};
+use firmware_example::net::modbus::{ModbusBuffers, MODBUS_PORT};
 use firmware_example::net::stellaris::{self, Mmio, Regs, Stellaris, FRAME_CAP};
 use firmware_example::net::{self, AddressSource, Buffers, Net, NetEvent, SocketSlots};
 use firmware_example::serial::{DownstreamLine, FlowControl, IsrEnd, Line, DOWNSTREAM_MARKS};
@@ -47,11 +56,13 @@ static mut DOWN_LINE: DownstreamLine = Line::new();
 /// The bridge and the network side, written once at start (kept out of
 /// `.data`).
 static mut BRIDGE: MaybeUninit<Bridge> = MaybeUninit::uninit();
+static mut GATEWAY: MaybeUninit<Gateway> = MaybeUninit::uninit();
 static mut NET: MaybeUninit<Net<'static>> = MaybeUninit::uninit();
 static mut ETH: MaybeUninit<Stellaris<Mmio>> = MaybeUninit::uninit();
 static mut SLOTS: MaybeUninit<SocketSlots<'static>> = MaybeUninit::uninit();
 /// Zeroed: `.bss`.
 static mut BUFFERS: Buffers = Buffers::new();
+static mut MODBUS_BUFFERS: ModbusBuffers = ModbusBuffers::new();
 static mut RX_FRAME: [u8; FRAME_CAP] = [0; FRAME_CAP];
 static mut TX_FRAME: [u8; FRAME_CAP] = [0; FRAME_CAP];
 
@@ -191,6 +202,7 @@ fn load_net_config() -> (NetConfig, NetSource) {
 /// What `main` sets up.
 struct Parts {
     bridge: &'static mut Bridge,
+    gateway: &'static mut Gateway,
     net: &'static mut Net<'static>,
     eth: &'static mut Stellaris<Mmio>,
     down: firmware_example::serial::ThreadEnd<'static>,
@@ -209,8 +221,9 @@ fn setup(now: u32) -> Parts {
     // SAFETY: `setup` runs once, from `main`; these are the only references
     // to these statics, and UART1's interrupt is unmasked only after its
     // end was handed over.
-    let (bridge, net, eth, down) = unsafe {
+    let (bridge, gateway, net, eth, down) = unsafe {
         let bridge = (*addr_of_mut!(BRIDGE)).write(Bridge::new(cfg, source, seed));
+        let gateway = (*addr_of_mut!(GATEWAY)).write(Gateway::new(cfg.modbus, cfg.policy));
         let eth = (*addr_of_mut!(ETH)).write(Stellaris::new(
             Mmio,
             &mut *addr_of_mut!(RX_FRAME),
@@ -228,10 +241,11 @@ fn setup(now: u32) -> Parts {
             &mut *addr_of_mut!(BUFFERS),
             now,
         ));
+        net.add_modbus(&mut *addr_of_mut!(MODBUS_BUFFERS), MODBUS_PORT);
         let line = &mut *addr_of_mut!(DOWN_LINE);
         let (down_isr, down) = line.split(FlowControl::None, DOWNSTREAM_MARKS, &pend_down);
         cortex_m::interrupt::free(|cs| DOWN_END.borrow(cs).set(Some(down_isr)));
-        (bridge, net, eth, down)
+        (bridge, gateway, net, eth, down)
     };
     runtime::banner(NAME, source, FlowControl::None);
     let mut out = Out::new();
@@ -251,6 +265,7 @@ fn setup(now: u32) -> Parts {
     out.str("\n");
     Parts {
         bridge,
+        gateway,
         net,
         eth,
         down,
@@ -275,14 +290,10 @@ fn report(event: NetEvent) {
             address,
             source,
             port,
+            modbus_port,
         } => {
             out.str("firmware-example: protocol-b-tcp listening on ");
-            for (i, b) in address.address.iter().enumerate() {
-                if i > 0 {
-                    out.str(".");
-                }
-                out.dec(u64::from(*b));
-            }
+            dotted(&mut out, address.address);
             out.str(":").dec(u64::from(port)).str(" (");
             out.str(match source {
                 AddressSource::Dhcp => "dhcp",
@@ -290,10 +301,25 @@ fn report(event: NetEvent) {
                 AddressSource::Fallback => "fallback",
             });
             out.str(")\n");
+            if let Some(mb) = modbus_port {
+                out.str("firmware-example: modbus-tcp listening on ");
+                dotted(&mut out, address.address);
+                out.str(":").dec(u64::from(mb)).str("\n");
+            }
         }
         NetEvent::AddressLost => {
             out.str("firmware-example: DHCP lease lost\n");
         }
+    }
+}
+
+/// An IPv4 address, dotted.
+fn dotted(out: &mut Out, address: [u8; 4]) {
+    for (i, b) in address.iter().enumerate() {
+        if i > 0 {
+            out.str(".");
+        }
+        out.dec(u64::from(*b));
     }
 }
 
@@ -313,6 +339,7 @@ fn main() -> ! {
     init_clocks_and_pins();
     let Parts {
         bridge,
+        gateway,
         net,
         eth,
         mut down,
@@ -322,6 +349,7 @@ fn main() -> ! {
             address,
             source,
             port: net.config().port,
+            modbus_port: net.modbus().map(|m| m.port()),
         });
     }
     // SAFETY: the handlers only touch their own state, handed over above.
@@ -337,6 +365,7 @@ fn main() -> ! {
     }
     let result = net::run(
         bridge,
+        gateway,
         net,
         eth,
         &mut down,
@@ -356,7 +385,23 @@ fn main() -> ! {
         .str(" cut short ")
         .dec(u64::from(h.cut_short))
         .str(" stalled ")
-        .dec(u64::from(h.stalled))
+        .dec(u64::from(h.stalled));
+    if let Some(m) = net.modbus() {
+        let m = m.stats();
+        let g = gateway.stats();
+        Out::new()
+            .str("; modbus-tcp connections ")
+            .dec(u64::from(m.connections))
+            .str(" requests ")
+            .dec(u64::from(m.requests))
+            .str(" answered ")
+            .dec(u64::from(g.answered))
+            .str(" dropped ")
+            .dec(u64::from(g.dropped))
+            .str(" idle closed ")
+            .dec(u64::from(m.idle_closed));
+    }
+    Out::new()
         .str("; frames in ")
         .dec(u64::from(d.rx_frames))
         .str(" out ")

@@ -18,8 +18,9 @@
 //! `PositionStreamEncoder` for every position stream) on a record made of
 //! those bytes, the bridge library (`Bridge::poll`, the configuration
 //! block, the serial line) fed arbitrary bytes on both ports, and the
-//! Modbus gateway (its frame handler on arbitrary frames, its polls and
-//! commands on the bridge's line answered with arbitrary bytes). With the
+//! Modbus gateway (its frame handler on arbitrary frames, RTU and Modbus
+//! TCP ADUs cut by `modbus::tcp::adu_len`, its polls and commands on the
+//! bridge's line answered with arbitrary bytes). With the
 //! `ethernet` feature too: the network block, the Stellaris MAC driver
 //! reading arbitrary register values, and smoltcp with the protocol-B
 //! hosts and the bridge on top of it (`Net::poll`, the host port,
@@ -318,6 +319,20 @@ fn main() -> ! {
         let us = black_box(tick.wrapping_mul(black_box(4_000)));
         let _ = black_box(gateway.serve(&mut mb, tick, us));
         let _ = black_box(bridge.poll_with(&mut up, &mut down, &mut gateway, black_box(tick)));
+    }
+    // Its Modbus TCP side: ADUs cut from the input where their length
+    // fields say, each answered by the same handler.
+    let mut resp = firmware_example::modbus::tcp::Response::new();
+    let mut rest = input;
+    for tick in 0..black_box(64u32) {
+        let len = match firmware_example::modbus::tcp::adu_len(rest) {
+            Some(Ok(n)) => n,
+            _ => rest.len(),
+        };
+        let (adu, tail) = rest.split_at(len.min(rest.len()));
+        gateway.serve_tcp(black_box(adu), &mut resp, black_box(tick));
+        black_box(resp.as_slice());
+        rest = tail;
     }
     black_box(gateway.stats());
 

@@ -1,5 +1,7 @@
 //! The PLC gateway: a Modbus RTU server in front of protocol B, on the
-//! bridge MCU.
+//! bridge MCU; on the Ethernet build also a Modbus TCP server
+//! ([`Gateway::serve_tcp`], framing in [`tcp`]) with the same map, cache
+//! and handshake: one request handler, two transports.
 //!
 //! Two sides, never blocking:
 //! - the **Modbus port** ([`Gateway::serve`]): frames found by silence
@@ -32,6 +34,7 @@ pub mod map;
 pub mod poll;
 pub mod registers;
 pub mod rtu;
+pub mod tcp;
 
 use iai_protocol_b::line::Line;
 use rmodbus::consts::ModbusFunction;
@@ -141,7 +144,7 @@ impl Gateway {
                 moved = true;
             }
             Some(Ok(frame)) => {
-                answer(frame, regs, resp, stats, now);
+                answer(frame, ModbusProto::Rtu, regs, resp, stats, now);
                 self.resp_off = 0;
                 let out = &mut self.stats.bytes_out;
                 write_some(port, &self.resp, &mut self.resp_off, out)?;
@@ -161,18 +164,46 @@ impl Gateway {
     pub fn sending(&self) -> bool {
         self.resp_off < self.resp.len()
     }
+
+    /// One Modbus TCP request `adu` (MBAP header and PDU, as
+    /// [`tcp::adu_len`] cut it from a connection) at `now` (ms): answered
+    /// into `resp` by the same handler, map, cache and handshake as an RTU
+    /// frame. `resp` is left empty when nothing is to be sent: an ADU that
+    /// fails [`tcp::check`] (a protocol ID other than 0, a length that does
+    /// not fit its function), another unit, or a broadcast.
+    pub fn serve_tcp(&mut self, adu: &[u8], resp: &mut tcp::Response, now: u32) {
+        resp.clear();
+        let Gateway { regs, stats, .. } = self;
+        match tcp::check(adu) {
+            Ok(()) => answer(adu, ModbusProto::TcpUdp, regs, resp, stats, now),
+            Err(_) => stats.dropped = stats.dropped.wrapping_add(1),
+        }
+        if let Ok(n) = u64::try_from(resp.len()) {
+            stats.bytes_out = stats.bytes_out.wrapping_add(n);
+        }
+    }
 }
 
-/// Answers one checked frame into `resp` (left empty: no answer).
-fn answer(
+/// Answers one checked frame into `resp` (left empty: no answer): an RTU
+/// frame (checked by [`rtu::check`], its CRC at the end) or a Modbus TCP
+/// ADU (checked by [`tcp::check`], its MBAP header in front). The one
+/// request handler of both transports: the same map, cache and handshake.
+fn answer<const N: usize>(
     frame: &[u8],
+    proto: ModbusProto,
     regs: &mut Registers,
-    resp: &mut Response,
+    resp: &mut heapless::Vec<u8, N>,
     stats: &mut ModbusStats,
     now: u32,
 ) {
     let unit = regs.cfg.unit;
-    let mut f = ModbusFrame::new(unit, frame, ModbusProto::Rtu, resp);
+    // Where the unit ID is (after the MBAP header's first six bytes), and
+    // what follows the PDU (the RTU CRC).
+    let (start, tail) = match proto {
+        ModbusProto::TcpUdp => (tcp::UNIT_AT, 0),
+        _ => (0, 2),
+    };
+    let mut f = ModbusFrame::new(unit, frame, proto, resp);
     if f.parse().is_err() {
         f.response.clear();
         stats.dropped = stats.dropped.wrapping_add(1);
@@ -205,18 +236,21 @@ fn answer(
             }
         } else {
             // The write is read from the frame here (checked by
-            // `rtu::check`): rmodbus's own write helpers index the frame
-            // where the optimiser cannot see its length checks.
+            // `rtu::check` or `tcp::check`): rmodbus's own write helpers
+            // index the frame where the optimiser cannot see its length
+            // checks.
             let field = |at: usize| {
                 let hi = frame.get(at).copied().unwrap_or(0);
                 u16::from_be_bytes([hi, frame.get(at + 1).copied().unwrap_or(0)])
             };
-            let data = frame.get(7..frame.len().saturating_sub(2)).unwrap_or(&[]);
-            let value = frame.get(4..6).unwrap_or(&[]);
+            let data = frame
+                .get(start + 7..frame.len().saturating_sub(tail))
+                .unwrap_or(&[]);
+            let value = frame.get(start + 4..start + 6).unwrap_or(&[]);
             let res = match f.func {
                 ModbusFunction::SetHolding => regs.write_words(f.reg, 1, value),
                 ModbusFunction::SetHoldingsBulk => regs.write_words(f.reg, f.count, data),
-                ModbusFunction::SetCoil => match field(4) {
+                ModbusFunction::SetCoil => match field(start + 4) {
                     0xFF00 => regs.write_bits(f.reg, 1, &[1]),
                     0x0000 => regs.write_bits(f.reg, 1, &[0]),
                     _ => Err(ErrorKind::IllegalDataValue),
@@ -224,10 +258,19 @@ fn answer(
                 ModbusFunction::SetCoilsBulk => regs.write_bits(f.reg, f.count, data),
                 _ => Err(ErrorKind::IllegalFunction),
             };
+            // The echo: unit, function, address and value or count (after
+            // the transaction and protocol IDs rmodbus copied and the
+            // length, 6, for TCP).
+            let echo = frame.get(start..start + 6).unwrap_or(&[]);
+            let length: &[u8] = match proto {
+                ModbusProto::TcpUdp => &[0, 6],
+                _ => &[],
+            };
             match res {
                 Ok(()) => f
                     .response
-                    .extend_from_slice(frame.get(..6).unwrap_or(&[]))
+                    .extend_from_slice(length)
+                    .and_then(|()| f.response.extend_from_slice(echo))
                     .map_err(|_| ErrorKind::OOB),
                 Err(e) => f.set_modbus_error_if_unset(&e),
             }

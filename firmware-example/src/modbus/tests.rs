@@ -216,3 +216,124 @@ fn window_records_are_written_whole() {
     assert_eq!(gw.regs.hs.words()[2], 0x26D);
     assert_eq!(gw.regs.window[..21], words);
 }
+
+/// `pdu` (unit ID first) behind an MBAP header with transaction ID `tid`.
+fn mbap(tid: u16, pdu: &[u8]) -> Vec<u8> {
+    let mut v = tid.to_be_bytes().to_vec();
+    v.extend_from_slice(&[0, 0]);
+    v.extend_from_slice(&(pdu.len() as u16).to_be_bytes());
+    v.extend_from_slice(pdu);
+    v
+}
+
+fn ask_tcp(gw: &mut Gateway, adu: &[u8]) -> Vec<u8> {
+    let mut resp = tcp::Response::new();
+    gw.serve_tcp(adu, &mut resp, 0);
+    resp.to_vec()
+}
+
+#[test]
+fn tcp_reads_the_same_cache_and_echoes_the_transaction_id() {
+    let mut gw = gateway(Policy::ForwardAll);
+    gw.regs.cache.axes[0].current_position = -25_500;
+    let read = mbap(0xBEEF, &READ_PNOW_1[..6]);
+    assert_eq!(tcp::adu_len(&read[..5]), None);
+    assert_eq!(tcp::adu_len(&read), Some(Ok(12)));
+    // Transaction ID, protocol 0, length 7, unit, function, 4 bytes.
+    assert_eq!(
+        ask_tcp(&mut gw, &read),
+        [0xBE, 0xEF, 0, 0, 0, 7, 1, 3, 4, 0xFF, 0xFF, 0x9C, 0x64]
+    );
+    // Another transaction ID, the same registers and the same answer.
+    let answer = ask_tcp(&mut gw, &mbap(7, &READ_PNOW_1[..6]));
+    assert_eq!(answer[..2], [0, 7]);
+    assert_eq!(answer[2..], [0, 0, 0, 7, 1, 3, 4, 0xFF, 0xFF, 0x9C, 0x64]);
+    assert_eq!(gw.stats().answered, 2);
+    // A refusal is an exception, as on RTU: 9006H is not mapped.
+    assert_eq!(
+        ask_tcp(&mut gw, &mbap(9, &READ_9006[..6])),
+        [0, 9, 0, 0, 0, 3, 1, 0x83, 2]
+    );
+    assert_eq!(gw.stats().exceptions, 1);
+}
+
+#[test]
+fn tcp_writes_go_through_the_same_handshake() {
+    let mut gw = gateway(Policy::ForwardAll);
+    gw.regs.cache.link_up = true;
+    let servo = mbap(0x0102, &SERVO_ON_1[..6]);
+    // The echo of a write: header with length 6, then the request's PDU.
+    assert_eq!(ask_tcp(&mut gw, &servo), servo);
+    // The RTU side sees the same command queued: a second write waits for
+    // it (exception 06, server busy), on either transport.
+    assert_eq!(ask(&mut gw, &HOME_1), EXCEPTION_06_06);
+    assert_eq!(
+        ask_tcp(&mut gw, &mbap(3, &HOME_1[..6])),
+        [0, 3, 0, 0, 0, 3, 1, 0x86, 6]
+    );
+    let cmdst = ask_tcp(&mut gw, &mbap(4, &READ_CMDST[..6]));
+    assert_eq!(cmdst[..9], [0, 4, 0, 0, 0, 9, 1, 4, 6]);
+    assert_eq!(
+        u16::from_be_bytes([cmdst[9], cmdst[10]]) & CMD_BUSY,
+        CMD_BUSY
+    );
+}
+
+#[test]
+fn malformed_tcp_requests_are_dropped_or_end_the_connection() {
+    let mut gw = gateway(Policy::ForwardAll);
+    let good = mbap(1, &READ_PNOW_1[..6]);
+    // A protocol ID other than 0: not Modbus, dropped unanswered.
+    let mut other = good.clone();
+    other[3] = 1;
+    assert_eq!(tcp::check(&other), Err(tcp::Dropped::Protocol));
+    assert_eq!(ask_tcp(&mut gw, &other), []);
+    // A length field that disagrees with the ADU, or with the function.
+    let mut long = good.clone();
+    long[5] = 7;
+    assert_eq!(tcp::check(&long), Err(tcp::Dropped::Length));
+    assert_eq!(ask_tcp(&mut gw, &long), []);
+    let short = mbap(1, &READ_PNOW_1[..5]);
+    assert_eq!(tcp::check(&short), Err(tcp::Dropped::Length));
+    assert_eq!(ask_tcp(&mut gw, &short), []);
+    let bulk = mbap(1, &[1, 16, 0, 0, 0, 1, 2, 0, 5, 0]);
+    assert_eq!(ask_tcp(&mut gw, &bulk), []);
+    assert_eq!(gw.stats().dropped, 4);
+    // A length field no ADU has: the stream cannot be followed.
+    assert_eq!(
+        tcp::adu_len(&[0, 1, 0, 0, 0, 1]),
+        Some(Err(tcp::Dropped::Framing))
+    );
+    assert_eq!(
+        tcp::adu_len(&[0, 1, 0, 0, 1, 0]),
+        Some(Err(tcp::Dropped::Framing))
+    );
+    assert_eq!(tcp::adu_len(&[0, 1, 0, 0, 0, 254]), Some(Ok(260)));
+    // Another unit: not answered; unit 0 (broadcast) reads: not answered.
+    let mut unit2 = good.clone();
+    unit2[6] = 2;
+    assert_eq!(ask_tcp(&mut gw, &unit2), []);
+    let mut unit0 = good.clone();
+    unit0[6] = 0;
+    assert_eq!(ask_tcp(&mut gw, &unit0), []);
+    // An unknown function: exception 01, with the transaction ID.
+    assert_eq!(
+        ask_tcp(&mut gw, &mbap(0x55AA, &[1, 0x2B, 0x0E, 0x01, 0x00, 0x00])),
+        [0x55, 0xAA, 0, 0, 0, 3, 1, 0xAB, 1]
+    );
+    // rmodbus parses no Modbus TCP ADU shorter than 6 bytes after the
+    // length field: dropped unanswered.
+    let dropped = gw.stats().dropped;
+    assert_eq!(ask_tcp(&mut gw, &mbap(0x55AA, &FUNCTION_2B[..5])), []);
+    assert_eq!(gw.stats().dropped, dropped + 1);
+    // The good request still answers.
+    assert_eq!(ask_tcp(&mut gw, &good)[..9], [0, 1, 0, 0, 0, 7, 1, 3, 4]);
+    // Every byte pattern of a short ADU is handled without a panic.
+    for a in 0..=255u8 {
+        for len in 0..12 {
+            let adu: Vec<u8> = (0..len).map(|i| a.wrapping_mul(i as u8 + 1)).collect();
+            let _ = ask_tcp(&mut gw, &adu);
+            let _ = tcp::adu_len(&adu);
+        }
+    }
+}

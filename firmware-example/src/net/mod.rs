@@ -25,14 +25,17 @@
 //! Memory: everything lives in statics the board hands over: the two
 //! frame buffers of the driver ([`stellaris::FRAME_CAP`] bytes each), the
 //! socket buffers ([`Buffers`]: [`SOCKET_BUFFER`] bytes per direction
-//! and socket) and the socket slots ([`SocketSlots`]). Nothing is
-//! allocated.
+//! and socket; [`modbus::ModbusBuffers`]: [`modbus::CLIENT_BUFFER`]) and
+//! the socket slots ([`SocketSlots`]). Nothing is allocated.
 //!
-//! Modbus TCP would be one more listening socket and a handler beside
-//! [`host`] in [`Net::poll`]; it is not part of this module.
+//! Modbus TCP ([`modbus`]): [`modbus::CLIENTS`] more sockets on port
+//! [`modbus::MODBUS_PORT`] (502), added by [`Net::add_modbus`] and served
+//! in [`Net::poll_with`] by the gateway ([`crate::modbus`]) that shares the
+//! controller line with the bridge.
 
 pub mod config;
 pub mod host;
+pub mod modbus;
 pub mod stellaris;
 
 use core::convert::Infallible;
@@ -45,10 +48,12 @@ use smoltcp::time::Instant;
 use smoltcp::wire::{EthernetAddress, IpAddress, IpCidr, Ipv4Address};
 
 use crate::bridge::{Bridge, Error, Poll};
+use crate::modbus::Gateway;
 use crate::serial::Port;
 use crate::status::Stats;
 use config::{Addressing, Ipv4Setting, NetConfig, DHCP_FALLBACK_MS};
 use host::{HostPort, Hosts, SOCKETS};
+use modbus::{ModbusBuffers, ModbusClients, CLIENTS};
 
 /// Bytes of each socket buffer (receive and transmit, per socket). The
 /// receive buffer is the TCP window: the most a host can send ahead of
@@ -81,11 +86,12 @@ impl Default for Buffers {
     }
 }
 
-/// The slots of the socket set: the protocol-B sockets and DHCP.
-pub type SocketSlots<'a> = [SocketStorage<'a>; SOCKETS + 1];
+/// The slots of the socket set: the protocol-B sockets, DHCP and the
+/// Modbus TCP sockets.
+pub type SocketSlots<'a> = [SocketStorage<'a>; SOCKETS + 1 + CLIENTS];
 
 /// Empty socket slots.
-pub const EMPTY_SLOTS: SocketSlots<'static> = [SocketStorage::EMPTY; SOCKETS + 1];
+pub const EMPTY_SLOTS: SocketSlots<'static> = [SocketStorage::EMPTY; SOCKETS + 1 + CLIENTS];
 
 /// Where the interface's address came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -109,6 +115,8 @@ pub enum NetEvent {
         source: AddressSource,
         /// The TCP port.
         port: u16,
+        /// The Modbus TCP port, if Modbus TCP is served.
+        modbus_port: Option<u16>,
     },
     /// The DHCP lease was lost; no address until the next.
     AddressLost,
@@ -138,6 +146,7 @@ pub struct Net<'a> {
     sockets: SocketSet<'a>,
     dhcp: Option<SocketHandle>,
     hosts: Hosts,
+    modbus: Option<ModbusClients>,
     cfg: NetConfig,
     clock: Clock,
     address: Option<(Ipv4Setting, AddressSource)>,
@@ -184,6 +193,7 @@ impl<'a> Net<'a> {
             sockets,
             dhcp,
             hosts: Hosts::new(handles, cfg.port),
+            modbus: None,
             cfg,
             clock,
             address: None,
@@ -206,6 +216,22 @@ impl<'a> Net<'a> {
         &self.hosts
     }
 
+    /// Serves Modbus TCP on `port` (see [`modbus`]) on sockets over
+    /// `buffers`; they listen from the next [`Net::poll_with`] with a
+    /// gateway. Once only: a second call changes nothing.
+    pub fn add_modbus(&mut self, buffers: &'a mut ModbusBuffers, port: u16) {
+        if self.modbus.is_some() {
+            return;
+        }
+        let handles = buffers.sockets().map(|s| self.sockets.add(s));
+        self.modbus = Some(ModbusClients::new(handles, port));
+    }
+
+    /// The Modbus TCP clients, if Modbus TCP is served.
+    pub fn modbus(&self) -> Option<&ModbusClients> {
+        self.modbus.as_ref()
+    }
+
     /// The settings in force.
     pub fn config(&self) -> &NetConfig {
         &self.cfg
@@ -223,6 +249,18 @@ impl<'a> Net<'a> {
         &mut self,
         device: &mut D,
         bridge: &mut Bridge,
+        now: u32,
+    ) -> Option<NetEvent> {
+        self.poll_with(device, bridge, None, now)
+    }
+
+    /// [`Net::poll`], and then the Modbus TCP clients, answered by
+    /// `gateway` (if Modbus TCP was added and a gateway is given).
+    pub fn poll_with<D: Device>(
+        &mut self,
+        device: &mut D,
+        bridge: &mut Bridge,
+        gateway: Option<&mut Gateway>,
         now: u32,
     ) -> Option<NetEvent> {
         let t = self.clock.at(now);
@@ -243,6 +281,9 @@ impl<'a> Net<'a> {
         let event = self.poll_address(now);
         self.hosts
             .service(&mut self.sockets, bridge, self.station, now);
+        if let (Some(clients), Some(gateway)) = (self.modbus.as_mut(), gateway) {
+            clients.service(&mut self.sockets, gateway, now);
+        }
         event
     }
 
@@ -295,6 +336,7 @@ impl<'a> Net<'a> {
                 address,
                 source,
                 port: self.cfg.port,
+                modbus_port: self.modbus.as_ref().map(ModbusClients::port),
             },
             None => NetEvent::AddressLost,
         }
@@ -303,17 +345,22 @@ impl<'a> Net<'a> {
 
 /// Bridges between the TCP host and the controller's port `down` until the
 /// quit sequence (`Ok` with the counters) or a downstream error, as
-/// [`crate::bridge::run`] does for a serial host.
+/// [`crate::bridge::run`] does for a serial host; `gateway` answers the
+/// Modbus TCP clients (if [`Net::add_modbus`] was called) and shares the
+/// controller line with the bridge as its guest, as on the serial board.
 ///
-/// Each pass: [`Net::poll`] (frames in and out, the hosts), then
-/// [`Bridge::poll`] with the host's socket as its upstream. When neither
-/// can move, `sleep` is called with a readiness check (a new tick, a frame
-/// waiting according to `rx_pending`, the controller's port); the tick
-/// wakes it at least once a millisecond, which also serves smoltcp's
-/// timers. `report` hears about address changes; `feed` runs once a pass.
+/// Each pass: [`Net::poll_with`] (frames in and out, the hosts, the Modbus
+/// clients), then [`Bridge::poll_with`] with the host's socket as its
+/// upstream and the gateway as its guest. When neither can move, `sleep`
+/// is called with a readiness check (a new tick, a frame waiting according
+/// to `rx_pending`, the controller's port); the tick wakes it at least
+/// once a millisecond, which also serves smoltcp's timers and the
+/// gateway's polls. `report` hears about address changes; `feed` runs
+/// once a pass.
 #[allow(clippy::too_many_arguments)]
 pub fn run<D: Device, P: Port>(
     bridge: &mut Bridge,
+    gateway: &mut Gateway,
     net: &mut Net<'_>,
     device: &mut D,
     down: &mut P,
@@ -326,11 +373,11 @@ pub fn run<D: Device, P: Port>(
     loop {
         feed();
         let now = now_ms();
-        if let Some(event) = net.poll(device, bridge, now) {
+        if let Some(event) = net.poll_with(device, bridge, Some(&mut *gateway), now) {
             report(event);
         }
         let mut up = net.host_port();
-        match bridge.poll(&mut up, down, now)? {
+        match bridge.poll_with(&mut up, down, &mut *gateway, now)? {
             Poll::Quit => return Ok(bridge.stats()),
             Poll::Busy => {}
             Poll::Wait(w) => {

@@ -6,7 +6,9 @@
 //! through the relay and, on a board with the gateway's Modbus RTU port
 //! (`lm3s6965`), `modbus-rtu 127.0.0.1:PORT` after it (with `--ethernet`:
 //! `protocol-b-tcp 127.0.0.1:PORT` once the Ethernet build answers over
-//! TCP, QEMU's user network forwarding that port to the firmware's);
+//! TCP, QEMU's user network forwarding that port to the firmware's, then
+//! `modbus-tcp 127.0.0.1:PORT`, forwarded to the firmware's Modbus TCP
+//! port 502);
 //! nothing else goes to stdout.
 //! Runs until SIGINT, SIGTERM or SIGHUP (Ctrl-C), then stops QEMU and the
 //! simulator. Exit code 0 after such a stop, 1 if anything failed (QEMU
@@ -15,7 +17,8 @@
 //! Run through `./tools/gateway.sh`. Options: `--port P` (default: a free
 //! port), `--baud B` (9600, 19200, 38400, 57600 or 115200, default
 //! 115200), `--modbus-port P`, `--modbus-baud B` (the Modbus RTU port,
-//! default 115200, even parity, unit 1), `--board lm3s6965|mps2-an386`, `--reply-delay-ms MS` (the
+//! default 115200, even parity, unit 1; with `--ethernet`, `--modbus-port`
+//! is the host port forwarded to Modbus TCP), `--board lm3s6965|mps2-an386`, `--reply-delay-ms MS` (the
 //! simulated controller's time per command, default 2), `--faults SPEC`
 //! (as `iai simulate --faults`), `--seed S`, `--elf PATH`,
 //! `--stack-report` (at the stop, end the firmware with the quit sequence
@@ -119,6 +122,9 @@ fn main() -> ExitCode {
         let _ = writeln!(out, "{prefix} {}", at.protocol_b);
         if let Some(m) = at.modbus_rtu {
             let _ = writeln!(out, "modbus-rtu {m}");
+        }
+        if let Some(m) = at.modbus_tcp {
+            let _ = writeln!(out, "modbus-tcp {m}");
         }
         let _ = out.flush();
     };
