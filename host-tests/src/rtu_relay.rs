@@ -9,9 +9,12 @@
 //! 1.75 ms above 19,200 baud), so the relay keeps the framing of what the
 //! client sent:
 //!
-//! - **A frame is a burst.** Bytes the client sends with gaps shorter than
-//!   the silence are one frame, written to QEMU in one piece, so that no
-//!   gap opens inside it.
+//! - **A frame is a request.** A request whose function gives its length
+//!   (1 to 6, 15, 16) is one frame however TCP or a pty bridged to it
+//!   delivers it (in pieces, or with the next request behind it); other
+//!   bytes the client sends with gaps shorter than the silence are one
+//!   frame. Each is written to QEMU in one piece, so that no gap opens
+//!   inside it.
 //! - **Silence between frames.** The next frame goes only once QEMU has
 //!   taken the previous one (the Unix socket's `SIOCOUTQ` is 0), the
 //!   previous frame's time on the wire at the line rate has passed, and
@@ -141,6 +144,8 @@ fn serve(
 ) -> RelayStats {
     let mut stats = RelayStats::default();
     let mut reader: Option<TcpStream> = None;
+    // Bytes of the next frame that came with the previous one.
+    let mut pending = Vec::new();
     let mut pacer = Pacer::new(baud);
     while !stop.load(Ordering::Relaxed) {
         // The next client is taken only once the current one has left:
@@ -164,7 +169,7 @@ fn serve(
             thread::sleep(POLL);
             continue;
         };
-        let (frame, open) = read_frame(r, silence(baud));
+        let (frame, open) = read_frame(r, &mut pending, silence(baud));
         if !frame.is_empty() {
             if let Err(e) = pacer.forward(&mut uart, &frame, stop) {
                 log(&format!("the board's Modbus UART took no more: {e}"));
@@ -178,6 +183,7 @@ fn serve(
                 let _ = conn.shutdown(Shutdown::Both);
             }
             reader = None;
+            pending.clear();
             log("client left");
         }
     }
@@ -195,14 +201,49 @@ fn admit(conn: &TcpStream) -> io::Result<TcpStream> {
     conn.try_clone()
 }
 
+/// How long the rest of a request whose length is known may take to come:
+/// TCP (and a pty bridged to it) may deliver one frame in pieces with gaps
+/// longer than the line's silence, which no RTU line would show.
+const PIECES_PATIENCE: Duration = Duration::from_millis(100);
+
+/// The length of the RTU request that `frame` starts, from its function
+/// code (unit, function, fields, CRC), when the function has a fixed
+/// layout and enough of it is there to tell: 8 bytes for functions 1 to 6,
+/// 9 plus the byte count for 15 and 16. `None`: not known (yet).
+pub fn request_len(frame: &[u8]) -> Option<usize> {
+    match frame.get(1)? {
+        1..=6 => Some(8),
+        15 | 16 => frame.get(6).map(|&count| 9 + usize::from(count)),
+        _ => None,
+    }
+}
+
 /// One frame from the client: waits up to [`POLL`] for its first byte,
-/// then takes bytes until the client is silent for `gap`. `(bytes, open)`:
-/// `open` is false once the client closed its side (or failed).
-fn read_frame(conn: &mut TcpStream, gap: Duration) -> (Vec<u8>, bool) {
-    let mut frame = Vec::new();
+/// then takes bytes until the request is complete by its length
+/// ([`request_len`]; the rest may take up to [`PIECES_PATIENCE`]) or, when
+/// that is not known, until the client is silent for `gap`. Bytes past the
+/// end of a request stay in `pending`, the start of the next frame.
+/// `(bytes, open)`: `open` is false once the client closed its side (or
+/// failed).
+fn read_frame(conn: &mut TcpStream, pending: &mut Vec<u8>, gap: Duration) -> (Vec<u8>, bool) {
+    let mut frame = std::mem::take(pending);
     let mut buf = [0u8; 512];
-    let mut wait = POLL;
     loop {
+        let known = request_len(&frame);
+        if let Some(n) = known.filter(|&n| frame.len() >= n) {
+            *pending = frame.split_off(n);
+            return (frame, true);
+        }
+        let wait = match (frame.is_empty(), known) {
+            (true, _) => POLL,
+            (false, Some(_)) => PIECES_PATIENCE,
+            (false, None)
+                if frame.len() < 2 || frame.get(1).is_some_and(|f| *f == 15 || *f == 16) =>
+            {
+                PIECES_PATIENCE
+            }
+            (false, None) => gap,
+        };
         if conn.set_read_timeout(Some(wait)).is_err() {
             return (frame, false);
         }
@@ -213,7 +254,6 @@ fn read_frame(conn: &mut TcpStream, gap: Duration) -> (Vec<u8>, bool) {
                 if frame.len() >= MAX_BURST {
                     return (frame, true);
                 }
-                wait = gap;
             }
             Err(e)
                 if matches!(
@@ -315,5 +355,46 @@ mod tests {
         assert_eq!(silence(115_200), Duration::from_micros(1_750));
         assert_eq!(silence(9_600), Duration::from_micros(4_010));
         assert_eq!(wire_time(8, 115_200), Duration::from_micros(763));
+    }
+
+    #[test]
+    fn a_request_is_as_long_as_its_function_says() {
+        // 03: read 6 registers from 9000H, unit 1.
+        assert_eq!(request_len(&[0x01, 0x03, 0x90, 0x00, 0x00, 0x06]), Some(8));
+        // 16: write 2 registers (4 bytes) at 0D00H: 9 + 4.
+        assert_eq!(
+            request_len(&[0x01, 0x10, 0x0D, 0x00, 0x00, 0x02, 0x04]),
+            Some(13)
+        );
+        // 16 before its byte count, an unknown function, a lone unit byte.
+        assert_eq!(request_len(&[0x01, 0x10, 0x0D, 0x00]), None);
+        assert_eq!(request_len(&[0x01, 0x2B, 0x0E]), None);
+        assert_eq!(request_len(&[0x01]), None);
+    }
+
+    #[test]
+    fn a_frame_in_pieces_is_one_frame_and_the_next_stays_apart() {
+        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+        let mut client = TcpStream::connect(listener.local_addr().unwrap()).unwrap();
+        let (mut conn, _) = listener.accept().unwrap();
+        let write = [
+            0x01, 0x10, 0x0D, 0x00, 0x00, 0x01, 0x02, 0x10, 0x00, 0xAA, 0xBB,
+        ];
+        let read = [0x01, 0x03, 0x90, 0x00, 0x00, 0x06, 0xCC, 0xDD];
+        // The write in two pieces 20 ms apart (far more than the 1.75 ms
+        // silence), then the read right behind it.
+        client.write_all(&write[..5]).unwrap();
+        thread::sleep(Duration::from_millis(20));
+        let mut rest = write[5..].to_vec();
+        rest.extend_from_slice(&read);
+        client.write_all(&rest).unwrap();
+        let mut pending = Vec::new();
+        let (first, open) = read_frame(&mut conn, &mut pending, silence(115_200));
+        assert!(open);
+        assert_eq!(first, write);
+        let (second, open) = read_frame(&mut conn, &mut pending, silence(115_200));
+        assert!(open);
+        assert_eq!(second, read);
+        assert!(pending.is_empty());
     }
 }
