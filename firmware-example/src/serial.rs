@@ -55,9 +55,11 @@ pub const XOFF_REPEAT: usize = 32;
 /// usable) and a 64-byte transmit queue.
 pub type UpstreamLine = Line<256, 64>;
 /// The Modbus RTU line of the gateway (lm3s6965): the loop moves its
-/// bytes to the RTU framer at every pass, so the ring only bridges a pass
-/// (128 bytes: 11 ms at 115,200 baud); no flow control.
-pub type ModbusLine = Line<128, 64>;
+/// bytes to the RTU framer at every pass, so at the line rate the ring
+/// only bridges a pass; its 255 usable bytes hold nearly the longest
+/// request (256), so that a frame delivered faster than its line rate (a
+/// pass that takes long, QEMU's bursts) is not cut; no flow control.
+pub type ModbusLine = Line<256, 64>;
 /// The downstream (controller) line of every board.
 pub type DownstreamLine = Line<128, 64>;
 /// Bytes a host may still send after it was told to stop (XOFF arrived, or
