@@ -21,15 +21,16 @@
 //! and socat from Debian packages it installs. A client that is absent is
 //! skipped with its reason printed; the test fails if both are.
 
-use std::io::{BufRead, BufReader, Read};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
-use std::sync::mpsc::{channel, Receiver};
+mod plc_gateway;
+
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use host_tests::qemu::{build_firmware, workspace_root, Board};
 use host_tests::table::table;
 use iai_protocol_b::position::PositionRecord;
+use plc_gateway::{on_path, pymodbus_python, run_within, Gateway};
 
 /// Positions pymodbus writes and reads back.
 const POSITIONS: u32 = 500;
@@ -50,189 +51,6 @@ const CMD_DONE: u16 = 1 << 13;
 const SV: u16 = 1 << 12;
 const HEND: u16 = 1 << 4;
 const PEND: u16 = 1 << 3;
-
-/// Whether `tool` is on the PATH.
-fn on_path(tool: &str) -> bool {
-    Command::new("sh")
-        .args(["-c", &format!("command -v {tool}")])
-        .stdout(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success())
-}
-
-/// The venv's python if it has pymodbus, else why not.
-fn pymodbus_python() -> Result<PathBuf, String> {
-    let py = workspace_root().join(".venv/bin/python");
-    if !py.is_file() {
-        return Err(format!("{} is absent", py.display()));
-    }
-    let ok = Command::new(&py)
-        .args(["-c", "import pymodbus"])
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if ok {
-        Ok(py)
-    } else {
-        Err(format!("{} has no pymodbus", py.display()))
-    }
-}
-
-/// Runs `cmd` to its end, killed after `limit`.
-fn run_within(cmd: &mut Command, limit: Duration) -> Output {
-    let mut child = cmd
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn");
-    let pipe = |p: Option<Box<dyn Read + Send>>| {
-        let mut p = p.expect("piped");
-        std::thread::spawn(move || {
-            let mut v = Vec::new();
-            let _ = p.read_to_end(&mut v);
-            v
-        })
-    };
-    let out = pipe(child.stdout.take().map(|p| Box::new(p) as _));
-    let err = pipe(child.stderr.take().map(|p| Box::new(p) as _));
-    let end = Instant::now() + limit;
-    let status = loop {
-        if let Some(s) = child.try_wait().expect("wait") {
-            break s;
-        }
-        if Instant::now() > end {
-            let _ = child.kill();
-            break child.wait().expect("wait");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    };
-    Output {
-        status,
-        stdout: out.join().unwrap_or_default(),
-        stderr: err.join().unwrap_or_default(),
-    }
-}
-
-/// The gateway process; stopped (SIGTERM, then SIGKILL) when dropped.
-struct Gateway {
-    child: Child,
-    protocol_b: String,
-    modbus: String,
-    stderr: Receiver<String>,
-    log: Vec<String>,
-}
-
-impl Gateway {
-    fn start(elf: &Path) -> Gateway {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_gateway"))
-            .arg("--elf")
-            .arg(elf)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("start the gateway");
-        let lines = |pipe: Box<dyn Read + Send>| {
-            let (tx, rx) = channel();
-            std::thread::spawn(move || {
-                for l in BufReader::new(pipe).lines() {
-                    let Ok(l) = l else { break };
-                    if tx.send(l).is_err() {
-                        break;
-                    }
-                }
-            });
-            rx
-        };
-        let stdout = lines(Box::new(child.stdout.take().expect("stdout")));
-        let stderr = lines(Box::new(child.stderr.take().expect("stderr")));
-        let mut gw = Gateway {
-            child,
-            protocol_b: String::new(),
-            modbus: String::new(),
-            stderr,
-            log: Vec::new(),
-        };
-        let next = |what: &str, gw: &mut Gateway| {
-            let l = stdout.recv_timeout(Duration::from_secs(60));
-            let l = l.unwrap_or_else(|_| panic!("no {what} line; stderr:\n{}", gw.log()));
-            l.strip_prefix(what)
-                .and_then(|a| a.strip_prefix(' '))
-                .filter(|a| a.starts_with("127.0.0.1:"))
-                .unwrap_or_else(|| panic!("{l:?} where {what} was due"))
-                .to_owned()
-        };
-        gw.protocol_b = next("protocol-b", &mut gw);
-        gw.modbus = next("modbus-rtu", &mut gw);
-        gw
-    }
-
-    fn modbus_port(&self) -> &str {
-        self.modbus.trim_start_matches("127.0.0.1:")
-    }
-
-    fn log(&mut self) -> String {
-        while let Ok(l) = self.stderr.try_recv() {
-            self.log.push(l);
-        }
-        self.log.join("\n")
-    }
-
-    /// The simulator's current position of axis 1, from its 212H reply
-    /// through the bridge (asked by `iai`).
-    fn axis1_position(&mut self, iai: &Path) -> i64 {
-        let out = run_within(
-            Command::new(iai).args([
-                "send",
-                "212",
-                "query_axis_pattern=1",
-                "--tcp",
-                &self.protocol_b,
-            ]),
-            Duration::from_secs(30),
-        );
-        let text = String::from_utf8_lossy(&out.stdout).into_owned();
-        assert!(out.status.success(), "iai send 212: {text}\n{}", self.log());
-        text.lines()
-            .find_map(|l| l.trim().strip_prefix("axes[0].current_position = "))
-            .and_then(|v| v.split_whitespace().next())
-            .and_then(|v| v.parse().ok())
-            .unwrap_or_else(|| panic!("no position in:\n{text}"))
-    }
-
-    /// SIGTERM, then the exit status.
-    fn stop(&mut self) -> std::process::ExitStatus {
-        signal(self.child.id(), "TERM");
-        let end = Instant::now() + Duration::from_secs(10);
-        loop {
-            if let Some(status) = self.child.try_wait().expect("wait") {
-                return status;
-            }
-            assert!(Instant::now() < end, "the gateway did not stop");
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-}
-
-impl Drop for Gateway {
-    fn drop(&mut self) {
-        if let Ok(None) = self.child.try_wait() {
-            signal(self.child.id(), "TERM");
-            std::thread::sleep(Duration::from_secs(2));
-            let _ = self.child.kill();
-        }
-        let _ = self.child.wait();
-    }
-}
-
-/// Sends SIGname to our own child `pid`.
-fn signal(pid: u32, name: &str) {
-    let _ = Command::new("kill")
-        .arg(format!("-{name}"))
-        .arg(pid.to_string())
-        .status();
-}
 
 /// A record as its 21 window registers: number, axis pattern,
 /// acceleration, deceleration, speed, axes 1 to 8 (high word first).
@@ -404,7 +222,7 @@ fn pymodbus_and_mbpoll_run_a_plcs_sequence_through_the_gateway() {
 
     let elf = build_firmware(Board::Lm3s6965).expect("build lm3s6965 firmware");
     let iai = host_tests::qemu::iai_binary().expect("the iai binary");
-    let mut gw = Gateway::start(&elf);
+    let mut gw = Gateway::start(&elf, false);
     let tmp = PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
     let records: Vec<PositionRecord> = table(POSITIONS, 8, 2026).collect();
 

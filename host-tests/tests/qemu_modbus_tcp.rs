@@ -19,235 +19,21 @@
 //! from the Debian package it installs. A client that is absent is
 //! skipped with its reason printed; the test fails if both are.
 
-use std::io::{BufRead, BufReader, Read, Write};
+mod plc_gateway;
+
+use std::io::{Read, Write};
 use std::net::TcpStream;
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
-use std::sync::mpsc::{channel, Receiver};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use host_tests::qemu::{build_ethernet_firmware, workspace_root};
+use plc_gateway::{on_path, pymodbus_python, run_within, Gateway};
 
 const PNOW: u16 = 0x9000;
 const DSS1: u16 = 0x9005;
 const SV: u16 = 1 << 12;
 const HEND: u16 = 1 << 4;
 const PEND: u16 = 1 << 3;
-
-/// Builds the `iai` binary in this test's profile; its path.
-fn iai_binary() -> PathBuf {
-    let exe = std::env::current_exe().expect("test executable");
-    let dir = exe
-        .parent()
-        .and_then(Path::parent)
-        .expect("target/<profile>")
-        .to_path_buf();
-    let profile = match dir.file_name().and_then(|n| n.to_str()) {
-        Some("debug") => "dev".to_owned(),
-        Some(other) => other.to_owned(),
-        None => panic!("no profile directory in {}", exe.display()),
-    };
-    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let out = Command::new(cargo)
-        .current_dir(workspace_root())
-        .args(["build", "--quiet", "-p", "iai-cli", "--bin", "iai"])
-        .arg("--profile")
-        .arg(&profile)
-        .stdin(Stdio::null())
-        .output()
-        .expect("run cargo");
-    assert!(
-        out.status.success(),
-        "building iai failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    dir.join("iai")
-}
-
-/// Whether `tool` is on the PATH.
-fn on_path(tool: &str) -> bool {
-    Command::new("sh")
-        .args(["-c", &format!("command -v {tool}")])
-        .stdout(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success())
-}
-
-/// The venv's python if it has pymodbus, else why not.
-fn pymodbus_python() -> Result<PathBuf, String> {
-    let py = workspace_root().join(".venv/bin/python");
-    if !py.is_file() {
-        return Err(format!("{} is absent", py.display()));
-    }
-    let ok = Command::new(&py)
-        .args(["-c", "import pymodbus"])
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if ok {
-        Ok(py)
-    } else {
-        Err(format!("{} has no pymodbus", py.display()))
-    }
-}
-
-/// Runs `cmd` to its end, killed after `limit`.
-fn run_within(cmd: &mut Command, limit: Duration) -> Output {
-    let mut child = cmd
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn");
-    let pipe = |p: Option<Box<dyn Read + Send>>| {
-        let mut p = p.expect("piped");
-        std::thread::spawn(move || {
-            let mut v = Vec::new();
-            let _ = p.read_to_end(&mut v);
-            v
-        })
-    };
-    let out = pipe(child.stdout.take().map(|p| Box::new(p) as _));
-    let err = pipe(child.stderr.take().map(|p| Box::new(p) as _));
-    let end = Instant::now() + limit;
-    let status = loop {
-        if let Some(s) = child.try_wait().expect("wait") {
-            break s;
-        }
-        if Instant::now() > end {
-            let _ = child.kill();
-            break child.wait().expect("wait");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    };
-    Output {
-        status,
-        stdout: out.join().unwrap_or_default(),
-        stderr: err.join().unwrap_or_default(),
-    }
-}
-
-/// The gateway process with `--ethernet`; stopped (SIGTERM, then SIGKILL)
-/// when dropped.
-struct Gateway {
-    child: Child,
-    protocol_b: String,
-    modbus: String,
-    stderr: Receiver<String>,
-    log: Vec<String>,
-}
-
-impl Gateway {
-    fn start(elf: &Path) -> Gateway {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_gateway"))
-            .arg("--ethernet")
-            .arg("--elf")
-            .arg(elf)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("start the gateway");
-        let lines = |pipe: Box<dyn Read + Send>| {
-            let (tx, rx) = channel();
-            std::thread::spawn(move || {
-                for l in BufReader::new(pipe).lines() {
-                    let Ok(l) = l else { break };
-                    if tx.send(l).is_err() {
-                        break;
-                    }
-                }
-            });
-            rx
-        };
-        let stdout = lines(Box::new(child.stdout.take().expect("stdout")));
-        let stderr = lines(Box::new(child.stderr.take().expect("stderr")));
-        let mut gw = Gateway {
-            child,
-            protocol_b: String::new(),
-            modbus: String::new(),
-            stderr,
-            log: Vec::new(),
-        };
-        let next = |what: &str, gw: &mut Gateway| {
-            let l = stdout.recv_timeout(Duration::from_secs(60));
-            let l = l.unwrap_or_else(|_| panic!("no {what} line; stderr:\n{}", gw.log()));
-            l.strip_prefix(what)
-                .and_then(|a| a.strip_prefix(' '))
-                .filter(|a| a.starts_with("127.0.0.1:"))
-                .unwrap_or_else(|| panic!("{l:?} where {what} was due"))
-                .to_owned()
-        };
-        gw.protocol_b = next("protocol-b-tcp", &mut gw);
-        gw.modbus = next("modbus-tcp", &mut gw);
-        gw
-    }
-
-    fn modbus_port(&self) -> &str {
-        self.modbus.trim_start_matches("127.0.0.1:")
-    }
-
-    fn log(&mut self) -> String {
-        while let Ok(l) = self.stderr.try_recv() {
-            self.log.push(l);
-        }
-        self.log.join("\n")
-    }
-
-    /// The simulator's current position of axis 1, from its 212H reply
-    /// through the bridge over TCP (asked by `iai`).
-    fn axis1_position(&mut self, iai: &Path) -> i64 {
-        let out = run_within(
-            Command::new(iai).args([
-                "send",
-                "212",
-                "query_axis_pattern=1",
-                "--tcp",
-                &self.protocol_b,
-            ]),
-            Duration::from_secs(30),
-        );
-        let text = String::from_utf8_lossy(&out.stdout).into_owned();
-        assert!(out.status.success(), "iai send 212: {text}\n{}", self.log());
-        text.lines()
-            .find_map(|l| l.trim().strip_prefix("axes[0].current_position = "))
-            .and_then(|v| v.split_whitespace().next())
-            .and_then(|v| v.parse().ok())
-            .unwrap_or_else(|| panic!("no position in:\n{text}"))
-    }
-
-    /// SIGTERM, then the exit status.
-    fn stop(&mut self) -> std::process::ExitStatus {
-        signal(self.child.id(), "TERM");
-        let end = Instant::now() + Duration::from_secs(10);
-        loop {
-            if let Some(status) = self.child.try_wait().expect("wait") {
-                return status;
-            }
-            assert!(Instant::now() < end, "the gateway did not stop");
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-}
-
-impl Drop for Gateway {
-    fn drop(&mut self) {
-        if let Ok(None) = self.child.try_wait() {
-            signal(self.child.id(), "TERM");
-            std::thread::sleep(Duration::from_secs(2));
-            let _ = self.child.kill();
-        }
-        let _ = self.child.wait();
-    }
-}
-
-/// Sends SIGname to our own child `pid`.
-fn signal(pid: u32, name: &str) {
-    let _ = Command::new("kill")
-        .arg(format!("-{name}"))
-        .arg(pid.to_string())
-        .status();
-}
 
 /// mbpoll over Modbus TCP: `count` values from `addr` of data type `kind`
 /// (`3:hex`, `3:int`), unit 1, PDU addresses, once.
@@ -372,8 +158,8 @@ fn pymodbus_and_mbpoll_over_modbus_tcp_on_the_ethernet_build() {
     );
 
     let elf = build_ethernet_firmware().expect("build the Ethernet firmware");
-    let iai = iai_binary();
-    let mut gw = Gateway::start(&elf);
+    let iai = host_tests::qemu::iai_binary().expect("the iai binary");
+    let mut gw = Gateway::start(&elf, true);
     let booted = t0.elapsed();
 
     let mut pnow = None;
