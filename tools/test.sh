@@ -55,6 +55,12 @@ cargo build -q -p firmware-example --release --features no-panic-proof,ethernet 
   --target thumbv7m-none-eabi
 echo "ok: no panic path survives in the decoders, the bridge or the Ethernet driver (see firmware-example/src/bin/no_panic_proof.rs)"
 
+step "panic audit: the Ethernet build with smoltcp's interface and sockets, every panic call by where it comes from"
+cargo rustc -q -p firmware-example --release --no-default-features --features no-panic-audit \
+  --bin no_panic_proof --target thumbv7m-none-eabi -- -C llvm-args=-enable-tail-merge=false
+python3 tools/panic-audit.py target/thumbv7m-none-eabi/release/no_panic_proof \
+  firmware-example/no-panic-smoltcp.txt
+
 step "iai builds for Windows (x86_64-pc-windows-gnu, mingw-w64)"
 cargo build -q -p iai-cli --target x86_64-pc-windows-gnu
 echo "ok: iai.exe builds"

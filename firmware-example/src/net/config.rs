@@ -204,7 +204,7 @@ impl Default for NetConfig {
 
 /// Whether `a` can be a host's unicast address (not 0.0.0.0/8, loopback,
 /// multicast or reserved).
-fn is_host_address(a: [u8; 4]) -> bool {
+pub(crate) fn is_host_address(a: [u8; 4]) -> bool {
     !matches!(a[0], 0 | 127 | 224..=255)
 }
 

@@ -318,6 +318,12 @@ impl<'a> Net<'a> {
 
     /// Puts `setting` (or no address) on the interface.
     fn set_address(&mut self, setting: Option<Ipv4Setting>, source: AddressSource) -> NetEvent {
+        // The block's address and prefix are checked, and DHCP's come from
+        // a valid CIDR and a unicast address; a setting that is neither
+        // counts as no address all the same, which keeps smoltcp's two
+        // assertions (a prefix of at most 32, a unicast address) out of
+        // the image.
+        let setting = setting.filter(|s| s.prefix <= 32 && config::is_host_address(s.address));
         self.address = setting.map(|s| (s, source));
         self.iface.update_ip_addrs(|addrs| {
             addrs.clear();
