@@ -38,7 +38,7 @@ fn main() {
         !manifest_dir.join("memory.x").exists(),
         "firmware-example/memory.x would shadow the shared ../memory.x; remove it"
     );
-    let boards = ["LM3S6965", "MPS2_AN386", "STM32G030"]
+    let boards = ["LM3S6965", "MPS2_AN386", "STM32G030", "STM32G070"]
         .iter()
         .filter(|b| env::var_os(format!("CARGO_FEATURE_BOARD_{b}")).is_some())
         .count();
@@ -49,6 +49,8 @@ fn main() {
 
     let map = if env::var_os("CARGO_FEATURE_BOARD_STM32G030").is_some() {
         "memory-stm32g030.x"
+    } else if env::var_os("CARGO_FEATURE_BOARD_STM32G070").is_some() {
+        "memory-stm32g070.x"
     } else {
         "memory-qemu.x"
     };

@@ -39,6 +39,8 @@ cargo clippy -q -p firmware-example --target thumbv7em-none-eabihf \
   --no-default-features --features board-mps2-an386 -- -D warnings
 cargo clippy -q -p firmware-example --target thumbv6m-none-eabi \
   --no-default-features --features board-stm32g030 -- -D warnings
+cargo clippy -q -p firmware-example --target thumbv6m-none-eabi \
+  --no-default-features --features board-stm32g070 -- -D warnings
 cargo clippy -q -p mps2-an386 --target thumbv7em-none-eabihf --features rt -- -D warnings
 cargo clippy -q -p firmware-example --target thumbv7m-none-eabi --features defmt -- -D warnings
 cargo clippy -q -p firmware-example --target thumbv7em-none-eabihf \

@@ -287,8 +287,11 @@ impl Out {
 /// `firmware-example: bridge up on <board> (config <source>, flow <flow>)`,
 /// the configuration's source and the flow control spelled as their
 /// `Debug` forms.
-// The stm32g030 prints no banner: it runs without a semihosting host.
-#[cfg_attr(feature = "board-stm32g030", allow(dead_code))]
+// The STM32G0 boards print no banner: they run without a semihosting host.
+#[cfg_attr(
+    any(feature = "board-stm32g030", feature = "board-stm32g070"),
+    allow(dead_code)
+)]
 pub fn banner(board: &str, source: Source, flow: FlowControl) {
     let mut out = Out::new();
     out.str("firmware-example: bridge up on ")
@@ -330,7 +333,10 @@ pub fn exit(status: debug::ExitStatus) -> ! {
 /// sequence, calling `idle` on every pass (feed the watchdog there), then
 /// prints the end-of-run report ([`finish`]). With the `stall` feature the
 /// loop never starts, so that the watchdog must reset the board.
-#[cfg_attr(feature = "board-lm3s6965", allow(dead_code))]
+#[cfg_attr(
+    any(feature = "board-lm3s6965", feature = "board-stm32g070"),
+    allow(dead_code)
+)]
 pub fn serve(
     bridge: &mut Bridge,
     up: &mut ThreadEnd<'static>,

@@ -36,13 +36,15 @@ pub mod registers;
 pub mod rtu;
 pub mod tcp;
 
+use core::convert::Infallible;
+
 use iai_protocol_b::line::Line;
 use rmodbus::consts::ModbusFunction;
 use rmodbus::server::{ModbusFrame, Read};
 use rmodbus::{ErrorKind, ModbusProto};
 
-use crate::bridge::{write_some, Bridge, Error, Guest, GuestWait, Poll, Port};
-use crate::config::{ModbusConfig, Policy};
+use crate::bridge::{write_some, Bridge, Error, Guest, GuestWait, NoPort, Poll, Port};
+use crate::config::{ModbusConfig, Policy, UpstreamProtocol};
 use crate::status::Stats;
 use line::Engines;
 pub use registers::Registers;
@@ -377,6 +379,44 @@ pub fn run<U: Port, D: Port, M: Port<Error = U::Error>>(
                 });
             }
         }
+    }
+}
+
+/// The loop of a board with one upstream port (two UARTs: the port and
+/// the controller's), which speaks what the configuration block chooses
+/// (`speaks`, [`crate::config::Config::upstream`]): protocol B through the
+/// bridge alone ([`crate::bridge::run`]), or Modbus RTU through the
+/// gateway ([`run`]), the bridge then keeping the controller line with no
+/// protocol-B host on it ([`NoPort`](crate::bridge::NoPort)). The board
+/// sets the port up for what it speaks: the Modbus line without flow
+/// control, at [`ModbusConfig::baud`], each byte stamped with `now_us`.
+#[allow(clippy::too_many_arguments)]
+pub fn run_one_upstream<U: Port<Error = Infallible>, D: Port>(
+    speaks: UpstreamProtocol,
+    bridge: &mut Bridge,
+    gateway: &mut Gateway,
+    upstream: &mut U,
+    downstream: &mut D,
+    now_ms: impl Fn() -> u32,
+    now_us: impl Fn() -> u32,
+    sleep: impl FnMut(&mut dyn FnMut() -> bool),
+    feed: impl FnMut(),
+) -> Result<Stats, Error<Infallible, D::Error>> {
+    match speaks {
+        UpstreamProtocol::ProtocolB => {
+            crate::bridge::run(bridge, upstream, downstream, now_ms, sleep, feed)
+        }
+        UpstreamProtocol::ModbusRtu => run(
+            bridge,
+            gateway,
+            &mut NoPort,
+            downstream,
+            upstream,
+            now_ms,
+            now_us,
+            sleep,
+            feed,
+        ),
     }
 }
 

@@ -337,3 +337,101 @@ fn malformed_tcp_requests_are_dropped_or_end_the_connection() {
         }
     }
 }
+
+/// The controller's port of [`one_upstream`]: takes what is written and
+/// is unplugged after `reads_left` readiness checks, which ends the loop.
+struct Unplugging {
+    reads_left: u32,
+}
+
+/// The error of an unplugged port.
+const UNPLUGGED: embedded_io::ErrorKind = embedded_io::ErrorKind::BrokenPipe;
+
+impl embedded_io::ErrorType for Unplugging {
+    type Error = embedded_io::ErrorKind;
+}
+impl embedded_io::ReadReady for Unplugging {
+    fn read_ready(&mut self) -> Result<bool, Self::Error> {
+        self.reads_left = self.reads_left.checked_sub(1).ok_or(UNPLUGGED)?;
+        Ok(false)
+    }
+}
+impl embedded_io::Read for Unplugging {
+    fn read(&mut self, _buf: &mut [u8]) -> Result<usize, Self::Error> {
+        Ok(0)
+    }
+}
+impl embedded_io::WriteReady for Unplugging {
+    fn write_ready(&mut self) -> Result<bool, Self::Error> {
+        Ok(true)
+    }
+}
+impl embedded_io::Write for Unplugging {
+    fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}
+impl Port for Unplugging {}
+
+/// A two-UART board's loop with `input` on its one upstream port, which
+/// speaks `speaks`, until the controller's port is unplugged (each sleep
+/// is a millisecond): what the upstream port was sent.
+fn one_upstream(speaks: UpstreamProtocol, input: &[u8]) -> Vec<u8> {
+    let cfg = crate::config::Config::DEFAULT;
+    let mut bridge = Bridge::new(cfg, crate::config::Source::Default, 0);
+    let mut gw = gateway(Policy::ForwardAll);
+    let mut up = Fake {
+        input: input.to_vec(),
+        ..Fake::default()
+    };
+    let mut down = Unplugging { reads_left: 2_000 };
+    let ms = core::cell::Cell::new(0u32);
+    let result = run_one_upstream(
+        speaks,
+        &mut bridge,
+        &mut gw,
+        &mut up,
+        &mut down,
+        || ms.get(),
+        || ms.get() * 1_000,
+        |_| ms.set(ms.get() + 1),
+        || {},
+    );
+    assert!(matches!(result, Err(Error::Downstream(UNPLUGGED))));
+    up.output
+}
+
+#[test]
+fn one_upstream_port_speaks_what_the_block_chooses() {
+    use iai_protocol_b::checksum::ChecksumMode;
+    use iai_protocol_b::frame::{emit_frame, Header, Station};
+    // The bridge's status query (B00H to its own station BB).
+    let mut status = [0u8; 16];
+    let n = emit_frame(
+        &mut status,
+        Header::Command,
+        Station(0xBB),
+        crate::codes::STATUS_QUERY,
+        ChecksumMode::Compute,
+        |_| Ok(()),
+    )
+    .unwrap();
+    let status = &status[..n];
+
+    // Modbus RTU: the request answered (an address outside the map),
+    // a protocol-B frame met with silence.
+    assert_eq!(
+        one_upstream(UpstreamProtocol::ModbusRtu, &READ_9006),
+        EXCEPTION_03_02
+    );
+    assert!(one_upstream(UpstreamProtocol::ModbusRtu, status).is_empty());
+
+    // Protocol B: the bridge answers its status query with `#`; the Modbus
+    // request gets no Modbus answer.
+    let reply = one_upstream(UpstreamProtocol::ProtocolB, status);
+    assert!(reply.starts_with(b"#BBB00"), "{reply:?}");
+    assert!(!one_upstream(UpstreamProtocol::ProtocolB, &READ_9006).starts_with(&[0x01, 0x83]));
+}
