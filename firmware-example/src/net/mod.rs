@@ -37,6 +37,8 @@ pub mod config;
 pub mod host;
 pub mod modbus;
 pub mod stellaris;
+#[cfg(test)]
+mod testkit;
 
 use core::convert::Infallible;
 
