@@ -39,6 +39,8 @@ pub mod modbus;
 pub mod stellaris;
 #[cfg(test)]
 mod testkit;
+#[cfg(test)]
+mod tests;
 
 use core::convert::Infallible;
 
