@@ -48,6 +48,12 @@
 //!    meanwhile is served no sooner than 10 s after the slow host began,
 //!    fewer queries were answered than sent, the slow host's connection
 //!    ends, and the firmware counts one host reset for it. About 12 s.
+//! 7. `iai_writes_the_full_table_through_the_bridge`: `iai table write
+//!    --bridge --tcp` of 20,000 records x 8 axes (1,640,014 bytes, one
+//!    26DH): iai reports it verified by the bridge, the bridge counts one
+//!    stream of 20,000 records, and the simulator's table equals the
+//!    source; prints the time and the throughput (about 170 s on an idle
+//!    machine; no bound on speed, only a 20-minute limit on the run).
 //!
 //! Needs `qemu-system-arm` and the `thumbv7m-none-eabi` rustup target.
 
@@ -902,6 +908,100 @@ fn a_host_that_stops_reading_is_reset() {
     assert_eq!(stalled, 1);
     eprintln!(
         "a_host_that_stops_reading_is_reset: {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
+}
+
+#[test]
+fn iai_writes_the_full_table_through_the_bridge() {
+    const RECORDS: u32 = 20_000;
+    const LIMIT: Duration = Duration::from_secs(20 * 60);
+    let started = Instant::now();
+    let elf = build_ethernet_firmware().expect("build lm3s6965-eth");
+    let iai = host_tests::qemu::iai_binary().expect("the iai binary");
+    let opts = Options {
+        elf: Some(elf),
+        ethernet: true,
+        quit_sequence: true,
+        ..Options::default()
+    };
+    let gw = EthernetGateway::start(&opts).unwrap_or_else(|e| panic!("{e}"));
+    let (bridge, controller) = stations();
+    let records: Vec<PositionRecord> = table(RECORDS, 8, 31).collect();
+    let csv = csv_of(RECORDS, 31);
+    let path = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("eth-full-{}.csv", std::process::id()));
+    std::fs::write(&path, &csv).unwrap();
+    let host_bytes = command_26dh(controller, &records).len() as u64;
+
+    // iai on its own: its output to files, killed if it outlives LIMIT.
+    let out_path = path.with_extension("out");
+    let err_path = path.with_extension("err");
+    let t0 = Instant::now();
+    let mut child = Command::new(&iai)
+        .args(["table", "write"])
+        .arg(&path)
+        .args(["--bridge", "--tcp", &gw.addr.to_string()])
+        .stdin(Stdio::null())
+        .stdout(std::fs::File::create(&out_path).unwrap())
+        .stderr(std::fs::File::create(&err_path).unwrap())
+        .spawn()
+        .expect("run iai");
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("wait for iai") {
+            break status;
+        }
+        if t0.elapsed() > LIMIT {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("iai table write --bridge still running after {LIMIT:?}");
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    let secs = t0.elapsed().as_secs_f64();
+    let stdout = std::fs::read_to_string(&out_path).unwrap_or_default();
+    let stderr = std::fs::read_to_string(&err_path).unwrap_or_default();
+    for p in [&path, &out_path, &err_path] {
+        let _ = std::fs::remove_file(p);
+    }
+    assert!(status.success(), "iai: {status}\n{stdout}\n{stderr}");
+    assert!(
+        stdout.contains(&format!(
+            "verified by the bridge: the controller holds all {RECORDS} records (1 26DH message(s)"
+        )),
+        "{stdout}\n{stderr}"
+    );
+
+    // The bridge's own count: one stream, every record.
+    let fields = tcp_status_query(gw.addr, bridge, Duration::from_secs(15)).unwrap();
+    assert_eq!(field(&fields, "streams_ok"), 1, "{fields:?}");
+    assert_eq!(field(&fields, "streams_failed"), 0, "{fields:?}");
+    assert_eq!(field(&fields, "records"), u64::from(RECORDS), "{fields:?}");
+    let chunks = field(&fields, "chunks_sent");
+    let (exit, sim) = gw
+        .quit(Duration::from_secs(20))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(exit.success(), "{}\n{}", exit.stdout, exit.stderr);
+    check_table(&sim.table, &records).unwrap_or_else(|e| panic!("{e}"));
+    let s = sim.stats();
+    let throughput = Throughput {
+        baud: 115_200,
+        host_bytes,
+        seconds: secs,
+        downstream_bytes: s.bytes_in + s.bytes_out,
+        commands: s.commands,
+        per_command_ms: Options::default().reply_delay_ms
+            + LineConfig::new(controller).turnaround_ms,
+    };
+    println!("{}", throughput.line("iai-tcp"));
+    eprintln!(
+        "iai table write --bridge over TCP: {RECORDS} records x 8 axes, {host_bytes} bytes in \
+         {secs:.1} s ({:.0} bytes/s, {:.1} records/s), {chunks} chunks; {:.1}% of the line rate \
+         against the downstream limit of {:.1}%; the whole test {:.1} s",
+        host_bytes as f64 / secs,
+        f64::from(RECORDS) / secs,
+        throughput.percent(),
+        throughput.limit_percent(),
         started.elapsed().as_secs_f64()
     );
 }

@@ -23,7 +23,8 @@
 //! [`DHCP_FALLBACK_MS`], the block's address is used meanwhile (the
 //! default: [`FALLBACK_ADDRESS`]/[`FALLBACK_PREFIX`], no gateway) and DHCP
 //! goes on asking; a lease replaces it (a connection made on the fallback
-//! address then breaks).
+//! address then breaks: the stack resets its socket at once, without a
+//! word to the peer, and the bridge is free for the next host).
 
 use crate::config::{crc32, BlockError};
 

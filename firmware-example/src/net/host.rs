@@ -43,7 +43,11 @@
 //! [`HOST_STALL_MS`] while data waits for it, the connection is reset and
 //! the bridge ends its work as above. Keep-alives ([`KEEP_ALIVE_MS`]) find
 //! a host that vanished without closing: the connection is dropped after
-//! [`SILENCE_LIMIT_MS`] without a packet from it.
+//! [`SILENCE_LIMIT_MS`] without a packet from it (one that vanished with an
+//! answer still waiting for it is reset sooner, [`HOST_STALL_MS`] after it
+//! last took a byte, as a host that stops reading). Either way the bridge
+//! is then free: a connection still held then (made less than [`HOLD_MS`]
+//! before) becomes the host.
 
 use iai_protocol_b::frame::{emit_frame, Header, Station};
 use smoltcp::iface::{SocketHandle, SocketSet};
@@ -452,3 +456,6 @@ impl embedded_io::Write for HostPort<'_, '_> {
 
 /// TCP loses no byte: nothing to count.
 impl Port for HostPort<'_, '_> {}
+
+#[cfg(test)]
+mod tests;

@@ -37,6 +37,10 @@ pub mod config;
 pub mod host;
 pub mod modbus;
 pub mod stellaris;
+#[cfg(test)]
+mod testkit;
+#[cfg(test)]
+mod tests;
 
 use core::convert::Infallible;
 

@@ -13,7 +13,8 @@
 //!
 //! A connection without a request for [`IDLE_MS`] is closed (a client that
 //! connects and says nothing); one that hears nothing from its peer (keep-
-//! alives unanswered) is reset by the stack as on the protocol-B port.
+//! alives unanswered: a client that vanished) is reset by the stack as on
+//! the protocol-B port, after [`super::host::SILENCE_LIMIT_MS`].
 //! While all [`CLIENTS`] sockets are taken, one more connection is reset
 //! by the stack.
 

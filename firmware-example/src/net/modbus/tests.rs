@@ -1,198 +1,16 @@
 //! The Modbus TCP sockets against a second smoltcp interface over an
-//! in-memory wire, in simulated time: answers, the idle close, the third
-//! connection.
+//! in-memory wire, in simulated time ([`crate::net::testkit`]): answers,
+//! the idle close, the third connection, a client that vanishes.
 
 extern crate std;
-use std::collections::VecDeque;
-use std::vec;
 use std::vec::Vec;
 
-use smoltcp::iface::{Config as IfaceConfig, Interface, SocketHandle, SocketSet, SocketStorage};
-use smoltcp::phy::{Device, DeviceCapabilities, Medium, RxToken, TxToken};
-use smoltcp::socket::tcp;
-use smoltcp::time::Instant;
-use smoltcp::wire::{EthernetAddress, IpAddress, IpCidr};
-
 use super::*;
-use crate::bridge::Bridge;
-use crate::config::{Config, Policy, Source};
-use crate::net::config::{Addressing, Ipv4Setting, NetConfig};
-use crate::net::{Buffers, Net, EMPTY_SLOTS};
+use crate::net::config::Addressing;
+use crate::net::testkit::{net_config, Rig};
 
-/// One end of the wire: frames in, frames out.
-#[derive(Default)]
-struct Wire {
-    rx: VecDeque<Vec<u8>>,
-    tx: VecDeque<Vec<u8>>,
-}
-
-struct Rx(Vec<u8>);
-struct Tx<'a>(&'a mut VecDeque<Vec<u8>>);
-
-impl RxToken for Rx {
-    fn consume<R, F: FnOnce(&[u8]) -> R>(self, f: F) -> R {
-        f(&self.0)
-    }
-}
-
-impl TxToken for Tx<'_> {
-    fn consume<R, F: FnOnce(&mut [u8]) -> R>(self, len: usize, f: F) -> R {
-        let mut frame = vec![0u8; len];
-        let r = f(&mut frame);
-        self.0.push_back(frame);
-        r
-    }
-}
-
-impl Device for Wire {
-    type RxToken<'a> = Rx;
-    type TxToken<'a> = Tx<'a>;
-
-    fn receive(&mut self, _: Instant) -> Option<(Rx, Tx<'_>)> {
-        let frame = self.rx.pop_front()?;
-        Some((Rx(frame), Tx(&mut self.tx)))
-    }
-
-    fn transmit(&mut self, _: Instant) -> Option<Tx<'_>> {
-        Some(Tx(&mut self.tx))
-    }
-
-    fn capabilities(&self) -> DeviceCapabilities {
-        let mut caps = DeviceCapabilities::default();
-        caps.medium = Medium::Ethernet;
-        caps.max_transmission_unit = 1514;
-        caps
-    }
-}
-
-/// The clients' side: an interface at 10.0.0.2 and three sockets.
-struct Clients<'a> {
-    wire: Wire,
-    iface: Interface,
-    sockets: SocketSet<'a>,
-    handles: Vec<SocketHandle>,
-}
-
-/// `(bridge, gateway, net, its wire)` and the clients, stepped together.
-struct Rig<'a> {
-    now: u32,
-    bridge: Bridge,
-    gateway: Gateway,
-    net: Net<'a>,
-    wire: Wire,
-    clients: Clients<'a>,
-}
-
-impl<'a> Rig<'a> {
-    /// `ms` milliseconds, a round per `step` ms.
-    fn run(&mut self, ms: u32, step: u32) {
-        let end = self.now + ms;
-        while self.now < end {
-            self.now += step;
-            let t = Instant::from_millis(i64::from(self.now));
-            let c = &mut self.clients;
-            c.iface.poll(t, &mut c.wire, &mut c.sockets);
-            self.wire.rx.extend(c.wire.tx.drain(..));
-            let gw = Some(&mut self.gateway);
-            let _ = self
-                .net
-                .poll_with(&mut self.wire, &mut self.bridge, gw, self.now);
-            c.wire.rx.extend(self.wire.tx.drain(..));
-            c.iface.poll(t, &mut c.wire, &mut c.sockets);
-            self.wire.rx.extend(c.wire.tx.drain(..));
-        }
-    }
-
-    fn client(&mut self, n: usize) -> &mut tcp::Socket<'a> {
-        let h = self.clients.handles[n];
-        self.clients.sockets.get_mut::<tcp::Socket<'a>>(h)
-    }
-
-    fn connect(&mut self, n: usize, local_port: u16) {
-        let c = &mut self.clients;
-        let h = c.handles[n];
-        let s = c.sockets.get_mut::<tcp::Socket>(h);
-        s.connect(
-            c.iface.context(),
-            (IpAddress::v4(10, 0, 0, 1), MODBUS_PORT),
-            local_port,
-        )
-        .unwrap();
-    }
-
-    fn received(&mut self, n: usize) -> Vec<u8> {
-        let s = self.client(n);
-        let mut out = Vec::new();
-        while s.can_recv() {
-            s.recv(|b| (b.len(), out.extend_from_slice(b))).unwrap();
-        }
-        out
-    }
-}
-
-fn leak(n: usize) -> &'static mut [u8] {
-    std::boxed::Box::leak(vec![0u8; n].into_boxed_slice())
-}
-
-fn rig(slots: &'static mut crate::net::SocketSlots<'static>) -> Rig<'static> {
-    let buffers = std::boxed::Box::leak(std::boxed::Box::new(Buffers::new()));
-    let modbus = std::boxed::Box::leak(std::boxed::Box::new(ModbusBuffers::new()));
-    let cfg = NetConfig {
-        addressing: Addressing::Static,
-        port: 5020,
-        address: Ipv4Setting {
-            address: [10, 0, 0, 1],
-            prefix: 24,
-            gateway: None,
-        },
-    };
-    let mut wire = Wire::default();
-    let bridge_cfg = Config::DEFAULT;
-    let mut net = Net::new(
-        cfg,
-        [0x02, 0, 0, 0, 0, 1],
-        1,
-        bridge_cfg.bridge_station,
-        &mut wire,
-        slots,
-        buffers,
-        0,
-    );
-    net.add_modbus(modbus, MODBUS_PORT);
-    let mut cwire = Wire::default();
-    let mut iface = Interface::new(
-        IfaceConfig::new(EthernetAddress([0x02, 0, 0, 0, 0, 2]).into()),
-        &mut cwire,
-        Instant::from_millis(0),
-    );
-    iface.update_ip_addrs(|a| {
-        let _ = a.push(IpCidr::new(IpAddress::v4(10, 0, 0, 2), 24));
-    });
-    let storage = std::boxed::Box::leak(std::boxed::Box::new(
-        <[SocketStorage<'static>; 3]>::default(),
-    ));
-    let mut sockets = SocketSet::new(&mut storage[..]);
-    let handles = (0..3)
-        .map(|_| {
-            sockets.add(tcp::Socket::new(
-                tcp::SocketBuffer::new(leak(1024)),
-                tcp::SocketBuffer::new(leak(1024)),
-            ))
-        })
-        .collect();
-    Rig {
-        now: 0,
-        bridge: Bridge::new(bridge_cfg, Source::Default, 1),
-        gateway: Gateway::new(bridge_cfg.modbus, Policy::ForwardAll),
-        net,
-        wire,
-        clients: Clients {
-            wire: cwire,
-            iface,
-            sockets,
-            handles,
-        },
-    }
+fn rig() -> Rig<'static> {
+    Rig::new(net_config(Addressing::Static))
 }
 
 /// Read input registers 9000H..9001H (PNOW of axis 1), transaction `tid`.
@@ -202,14 +20,20 @@ fn read_pnow(tid: u16) -> Vec<u8> {
     v
 }
 
+/// The answer to [`read_pnow`] `tid` with PNOW 12,000 (2EE0H).
+fn pnow_12000(tid: u16) -> Vec<u8> {
+    let mut v = tid.to_be_bytes().to_vec();
+    v.extend_from_slice(&[0, 0, 0, 7, 1, 4, 4, 0, 0, 0x2E, 0xE0]);
+    v
+}
+
 #[test]
 fn two_clients_are_answered_a_silent_one_is_closed_after_the_idle_time() {
-    let slots = std::boxed::Box::leak(std::boxed::Box::new(EMPTY_SLOTS));
-    let mut rig = rig(slots);
+    let mut rig = rig();
     rig.gateway.regs.cache.axes[0].current_position = 12_000;
     rig.run(10, 1);
-    rig.connect(0, 40_000);
-    rig.connect(1, 40_001);
+    rig.connect(0, MODBUS_PORT, 40_000);
+    rig.connect(1, MODBUS_PORT, 40_001);
     rig.run(20, 1);
     assert!(rig.client(0).may_send() && rig.client(1).may_send());
     // Two requests back to back on one connection, one on the other.
@@ -218,17 +42,13 @@ fn two_clients_are_answered_a_silent_one_is_closed_after_the_idle_time() {
     rig.client(0).send_slice(&two).unwrap();
     rig.client(1).send_slice(&read_pnow(5)).unwrap();
     rig.run(20, 1);
-    let answer = |tid: u16| {
-        let mut v = tid.to_be_bytes().to_vec();
-        v.extend_from_slice(&[0, 0, 0, 7, 1, 4, 4, 0, 0, 0x2E, 0xE0]);
-        v
-    };
+    let answer = pnow_12000;
     let mut both = answer(0x0A0B);
     both.extend(answer(0x0C0D));
     assert_eq!(rig.received(0), both);
     assert_eq!(rig.received(1), answer(5));
     // A third connection while both are taken is reset by the stack.
-    rig.connect(2, 40_002);
+    rig.connect(2, MODBUS_PORT, 40_002);
     rig.run(20, 1);
     assert!(!rig.client(2).is_open(), "{}", rig.client(2).state());
     // Client 1 keeps asking every 10 s; client 0 says nothing more.
@@ -250,7 +70,7 @@ fn two_clients_are_answered_a_silent_one_is_closed_after_the_idle_time() {
     rig.run(3_000, 5);
     rig.client(0).abort();
     rig.run(10, 1);
-    rig.connect(0, 40_003);
+    rig.connect(0, MODBUS_PORT, 40_003);
     rig.run(20, 1);
     rig.client(0).send_slice(&read_pnow(77)).unwrap();
     rig.run(20, 1);
@@ -259,10 +79,9 @@ fn two_clients_are_answered_a_silent_one_is_closed_after_the_idle_time() {
 
 #[test]
 fn a_length_field_out_of_range_resets_the_connection() {
-    let slots = std::boxed::Box::leak(std::boxed::Box::new(EMPTY_SLOTS));
-    let mut rig = rig(slots);
+    let mut rig = rig();
     rig.run(10, 1);
-    rig.connect(0, 40_000);
+    rig.connect(0, MODBUS_PORT, 40_000);
     rig.run(20, 1);
     // Protocol ID 1: dropped, the next request answered.
     let mut bad = read_pnow(1);
@@ -281,4 +100,76 @@ fn a_length_field_out_of_range_resets_the_connection() {
     assert!(!rig.client(0).is_open(), "{}", rig.client(0).state());
     let stats = rig.net.modbus().map(ModbusClients::stats).unwrap();
     assert_eq!(stats.framing_reset, 1);
+}
+
+#[test]
+fn a_client_that_vanishes_is_reset_after_the_silence_limit() {
+    use crate::net::host::SILENCE_LIMIT_MS;
+    let silence = SILENCE_LIMIT_MS as u32;
+    let mut rig = rig();
+    rig.gateway.regs.cache.axes[0].current_position = 12_000;
+    rig.run(10, 1);
+    rig.connect(0, MODBUS_PORT, 40_000);
+    rig.connect(1, MODBUS_PORT, 40_001);
+    rig.run(20, 1);
+    rig.client(0).send_slice(&read_pnow(1)).unwrap();
+    rig.client(1).send_slice(&read_pnow(2)).unwrap();
+    rig.run(50, 1);
+    assert_eq!(rig.received(0), pnow_12000(1));
+    assert_eq!(rig.received(1), pnow_12000(2));
+    // Client 0 is unplugged: no FIN, no RST, its frames lost both ways.
+    let last = rig.vanish(0).expect("client 0's frames arrived");
+    // Client 1 asks every 5 s and stays served throughout.
+    let mut asked = 2u16;
+    let mut ask = |r: &mut Rig<'static>| {
+        if r.now.is_multiple_of(5_000) {
+            asked += 1;
+            r.client(1).send_slice(&read_pnow(asked)).unwrap();
+        }
+    };
+    // Half way, both sockets are still taken: a third client is reset by
+    // the stack.
+    rig.run_until(silence / 2, 1, |r| {
+        ask(r);
+        false
+    });
+    assert!(matches!(
+        rig.net.modbus().unwrap().slot(0),
+        Some(Slot::Open { .. })
+    ));
+    rig.connect(2, MODBUS_PORT, 40_002);
+    rig.run(20, 1);
+    assert!(!rig.client(2).is_open(), "{}", rig.client(2).state());
+    // The vanished client's socket is let go after the silence limit,
+    // well before the idle time.
+    let freed = rig.run_until(silence, 1, |r| {
+        ask(r);
+        !matches!(r.net.modbus().unwrap().slot(0), Some(Slot::Open { .. }))
+    });
+    assert!(
+        freed,
+        "still open {} ms after its last frame",
+        rig.now - last
+    );
+    let after = rig.now - last;
+    std::eprintln!(
+        "vanished Modbus client let go {after} ms after its last frame (silence limit {silence} ms, idle time {IDLE_MS} ms)"
+    );
+    assert!(
+        (silence..silence + 10).contains(&after),
+        "let go {after} ms after its last frame"
+    );
+    let stats = rig.net.modbus().map(ModbusClients::stats).unwrap();
+    assert_eq!(stats.idle_closed, 0);
+    assert_eq!(stats.connections, 2);
+    // Client 1 had every answer; a new client takes the freed socket.
+    rig.run(50, 1);
+    let want: Vec<u8> = (3..=asked).flat_map(pnow_12000).collect();
+    assert!(asked >= 5);
+    assert_eq!(rig.received(1), want);
+    rig.connect(2, MODBUS_PORT, 40_003);
+    rig.run(20, 1);
+    rig.client(2).send_slice(&read_pnow(99)).unwrap();
+    rig.run(50, 1);
+    assert_eq!(rig.received(2), pnow_12000(99));
 }
