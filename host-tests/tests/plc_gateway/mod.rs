@@ -69,7 +69,9 @@ pub fn run_within(cmd: &mut Command, limit: Duration) -> Output {
             let _ = child.kill();
             break child.wait().expect("wait");
         }
-        std::thread::sleep(Duration::from_millis(20));
+        // Short: an mbpoll call takes about 30 ms (20 of them its own
+        // sleep after connecting), and a PLC sequence makes hundreds.
+        std::thread::sleep(Duration::from_millis(2));
     };
     Output {
         status,
