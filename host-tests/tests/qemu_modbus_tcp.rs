@@ -8,8 +8,14 @@
 //!    --tcp`): servo on, home, wait for HEND, a numeric move to
 //!    25.500 mm, wait for PEND, read PNOW, compared with the simulator's
 //!    212H asked by the real `iai` tool on the protocol-B port;
-//! 2. **mbpoll** (`-m tcp`): reads PNOW and DSS1 (servo on, homed, at
-//!    rest);
+//! 2. **mbpoll** (`-m tcp`, one process per request,
+//!    `plc_gateway::mbpoll`): servo on (off first if the PLC before left
+//!    it on), home, wait for HEND, a numeric move to 12.000 mm, wait for
+//!    PEND, read PNOW, compared with the simulator's 212H; then 500
+//!    positions of 8 axes written through the table window, a whole
+//!    window per call, each write waited for through CMDST, read back
+//!    through it equal, and `iai table read` of them on the protocol-B
+//!    port equal too;
 //! 3. a raw socket: transaction IDs echoed on two requests sent back to
 //!    back, an ADU with a protocol ID other than 0 dropped unanswered
 //!    (the connection goes on), a length field out of range closes the
@@ -30,47 +36,6 @@ use host_tests::qemu::{build_ethernet_firmware, workspace_root};
 use plc_gateway::{on_path, pymodbus_python, run_within, Gateway};
 
 const PNOW: u16 = 0x9000;
-const DSS1: u16 = 0x9005;
-const SV: u16 = 1 << 12;
-const HEND: u16 = 1 << 4;
-const PEND: u16 = 1 << 3;
-
-/// mbpoll over Modbus TCP: `count` values from `addr` of data type `kind`
-/// (`3:hex`, `3:int`), unit 1, PDU addresses, once.
-fn mbpoll_read(port: &str, kind: &str, addr: u16, count: usize) -> Vec<i64> {
-    let out = run_within(
-        Command::new("mbpoll")
-            .args([
-                "-m", "tcp", "-p", port, "-a", "1", "-0", "-1", "-q", "-o", "1",
-            ])
-            .args(["-t", kind, "-B", "-r", &addr.to_string()])
-            .args(["-c", &count.to_string(), "127.0.0.1"]),
-        Duration::from_secs(10),
-    );
-    let text = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(
-        out.status.success(),
-        "mbpoll {kind} {addr:04X}: {}\n{text}\n{}",
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let values: Vec<i64> = text
-        .lines()
-        .filter_map(|l| l.trim().strip_prefix('['))
-        .filter_map(|l| l.split_once("]:"))
-        .map(|(_, v)| {
-            let v = v.trim();
-            match v.strip_prefix("0x") {
-                Some(h) => i64::from_str_radix(h, 16),
-                None => v.parse(),
-            }
-            .unwrap_or_else(|_| panic!("mbpoll value {v:?} in:\n{text}"))
-        })
-        .collect();
-    assert_eq!(values.len(), count, "mbpoll read {addr:04X}:\n{text}");
-    values
-}
-
 /// A Modbus TCP request: `tid`, protocol `proto`, unit 1, function 04,
 /// `count` registers from `addr`.
 fn read_inputs(tid: u16, proto: u16, addr: u16, count: u16) -> Vec<u8> {
@@ -186,28 +151,10 @@ fn pymodbus_and_mbpoll_over_modbus_tcp_on_the_ethernet_build() {
     }
 
     if mbpoll.is_ok() {
-        let port = gw.modbus_port().to_owned();
-        let read = mbpoll_read(&port, "3:int", PNOW, 1)[0];
-        let sim = gw.axis1_position(&iai);
-        assert_eq!(
-            read, sim,
-            "PNOW read by mbpoll against the simulator's 212H"
-        );
-        if let Some(p) = pnow {
-            assert_eq!(read, p);
-        }
-        let dss1 = mbpoll_read(&port, "3:hex", DSS1, 1)[0];
-        let dss1 = u16::try_from(dss1).expect("a 16-bit register");
-        if pnow.is_some() {
-            // pymodbus left the axis servo on, homed and at rest.
-            assert_eq!(
-                dss1 & (SV | HEND | PEND),
-                SV | HEND | PEND,
-                "DSS1 {dss1:04X}"
-            );
-        }
-        println!("mbpoll -m tcp: PNOW {read}, DSS1 {dss1:04X}");
-        pnow = Some(read);
+        use plc_gateway::mbpoll::{plc_sequence, Link};
+        let records: Vec<_> = host_tests::table::table(500, 8, 7).collect();
+        let link = Link::tcp(&gw.modbus);
+        pnow = Some(plc_sequence(&mut gw, &iai, link, &records));
     }
 
     let pnow = i32::try_from(pnow.expect("pymodbus or mbpoll ran")).expect("PNOW");

@@ -4,6 +4,8 @@
 //! TCP port). Each test uses its part.
 #![allow(dead_code)]
 
+pub mod mbpoll;
+
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
@@ -11,6 +13,7 @@ use std::sync::mpsc::{channel, Receiver};
 use std::time::{Duration, Instant};
 
 use host_tests::qemu::workspace_root;
+use iai_protocol_b::position::PositionRecord;
 
 /// Whether `tool` is on the PATH.
 pub fn on_path(tool: &str) -> bool {
@@ -66,7 +69,9 @@ pub fn run_within(cmd: &mut Command, limit: Duration) -> Output {
             let _ = child.kill();
             break child.wait().expect("wait");
         }
-        std::thread::sleep(Duration::from_millis(20));
+        // Short: an mbpoll call takes about 30 ms (20 of them its own
+        // sleep after connecting), and a PLC sequence makes hundreds.
+        std::thread::sleep(Duration::from_millis(2));
     };
     Output {
         status,
@@ -174,6 +179,32 @@ impl Gateway {
             .unwrap_or_else(|| panic!("no position in:\n{text}"))
     }
 
+    /// Positions `first`..`first + count` as `iai table read` prints them
+    /// (CSV of 8 axes), read on the protocol-B port.
+    pub fn table_csv(&mut self, iai: &Path, first: u16, count: usize) -> Vec<u8> {
+        let out = run_within(
+            Command::new(iai).args([
+                "table",
+                "read",
+                "--first",
+                &first.to_string(),
+                "--count",
+                &count.to_string(),
+                "--tcp",
+                &self.protocol_b,
+            ]),
+            Duration::from_secs(60),
+        );
+        assert!(
+            out.status.success(),
+            "iai table read: {}\n{}\n{}",
+            out.status,
+            String::from_utf8_lossy(&out.stderr),
+            self.log()
+        );
+        out.stdout
+    }
+
     /// SIGTERM, then the exit status.
     pub fn stop(&mut self) -> std::process::ExitStatus {
         signal(self.child.id(), "TERM");
@@ -205,4 +236,14 @@ pub fn signal(pid: u32, name: &str) {
         .arg(format!("-{name}"))
         .arg(pid.to_string())
         .status();
+}
+
+/// `records` as `iai table read` prints them (8 axes).
+pub fn csv_of(records: &[PositionRecord]) -> Vec<u8> {
+    let mut csv = Vec::new();
+    iai_cli::csvtable::write_header(&mut csv, 8).unwrap();
+    for r in records {
+        iai_cli::csvtable::write_row(&mut csv, r, 8).unwrap();
+    }
+    csv
 }
