@@ -1,16 +1,21 @@
 //! The Ethernet build's host side on arbitrary connection events: the
 //! bridge's network side (`net::Net`: smoltcp, the protocol-B sockets and
-//! `net::host::Hosts`) and the bridge, against a second smoltcp interface
-//! with four client sockets, joined by an in-memory wire. The controller
-//! never answers (every forwarded command times out).
+//! `net::host::Hosts`, the Modbus TCP sockets and `net::modbus`), the
+//! bridge and the Modbus gateway as its guest, against a second smoltcp
+//! interface with four client sockets, joined by an in-memory wire. The
+//! controller never answers (every forwarded command and every poll of
+//! the gateway times out).
 //!
 //! Input: a list of operations, each an op byte and its arguments; client
 //! `c` is `op >> 4 & 3`:
 //!
-//! - `0`: client `c` connects (if closed);
+//! - `0`: client `c` connects to the protocol-B port (if closed);
+//! - `7`: client `c` connects to the Modbus TCP port (if closed);
 //! - `1 n bytes..`: client `c` sends up to `n` bytes of the input;
 //! - `2 k`: client `c` sends canned frame `k` (a 212H, the bridge's status
-//!   query, a 26DH of two records, its first 40 bytes);
+//!   query, a 26DH of two records, its first 40 bytes; Modbus TCP: PNOW
+//!   read, servo on written, two reads in one segment, a read outside the
+//!   map), whichever port it is connected to;
 //! - `3`: client `c` closes its sending side (FIN);
 //! - `4`: client `c` aborts (RST);
 //! - `5`: client `c` stops or starts reading;
@@ -24,9 +29,13 @@
 //! Checked: no panic; at most one socket has the host's role, and it is
 //! the one the session names; a connection that receives `&` B0B receives
 //! that frame and nothing else; as many B0B are received as refusals
-//! counted, but for connections the client reset or stopped reading; every frame a client receives is well-formed; every
-//! byte the bridge sends downstream belongs to a checked command frame
-//! for the controller's station.
+//! counted, but for connections the client reset or stopped reading;
+//! every frame a protocol-B connection receives is well-formed; a Modbus
+//! TCP connection receives only whole ADUs (protocol ID 0, a length of
+//! 2..=254) whose function is a request's or its exception, but for a
+//! connection the client reset or stopped reading, whose last may be cut;
+//! every byte the bridge sends downstream belongs to a checked command
+//! frame for the controller's station.
 #![no_main]
 
 use std::collections::VecDeque;
@@ -35,8 +44,10 @@ use std::convert::Infallible;
 use firmware_example::bridge::{Bridge, Poll, Port};
 use firmware_example::codes;
 use firmware_example::config::{Config, Source};
+use firmware_example::modbus::Gateway;
 use firmware_example::net::config::{Addressing, Ipv4Setting, NetConfig};
 use firmware_example::net::host::{Role, Session, SOCKETS};
+use firmware_example::net::modbus::ModbusBuffers;
 use firmware_example::net::{Buffers, Net, EMPTY_SLOTS};
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameDecoder};
@@ -50,6 +61,7 @@ use smoltcp::wire::{EthernetAddress, IpAddress, IpCidr};
 
 const CLIENTS: usize = 4;
 const PORT: u16 = 5020;
+const MODBUS_PORT: u16 = 502;
 const MTU: usize = 1514;
 
 /// One end of the wire: frames in, frames out.
@@ -142,6 +154,10 @@ struct Client {
     reading: bool,
     /// Bytes of each connection this socket made (the last is current).
     received: Vec<Vec<u8>>,
+    /// The port each of those connections was made to.
+    ports: Vec<u16>,
+    /// For each, whether the client reset it or stopped reading it.
+    cut: Vec<bool>,
     /// Connections of this socket that were reset by it, or not read
     /// for a while: a refusal sent to them may be lost.
     unclean: u32,
@@ -172,6 +188,7 @@ fn round(
     now: &mut u32,
     net: &mut Net<'_>,
     bridge: &mut Bridge,
+    gateway: &mut Gateway,
     bridge_wire: &mut Wire,
     client_wire: &mut Wire,
     iface: &mut Interface,
@@ -183,17 +200,17 @@ fn round(
     let t = Instant::from_millis(i64::from(*now));
     iface.poll(t, client_wire, sockets);
     bridge_wire.rx.extend(client_wire.tx.drain(..));
-    let _ = net.poll(bridge_wire, bridge, *now);
+    let _ = net.poll_with(bridge_wire, bridge, Some(&mut *gateway), *now);
     client_wire.rx.extend(bridge_wire.tx.drain(..));
     for _ in 0..16 {
         let mut up = net.host_port();
-        match bridge.poll(&mut up, down, *now) {
+        match bridge.poll_with(&mut up, down, &mut *gateway, *now) {
             Ok(Poll::Busy) => {}
             Ok(Poll::Wait(w)) if w.deadline == Some(*now) => {}
             _ => break,
         }
     }
-    let _ = net.poll(bridge_wire, bridge, *now);
+    let _ = net.poll_with(bridge_wire, bridge, Some(&mut *gateway), *now);
     client_wire.rx.extend(bridge_wire.tx.drain(..));
     iface.poll(t, client_wire, sockets);
     bridge_wire.rx.extend(client_wire.tx.drain(..));
@@ -225,7 +242,7 @@ fuzz_target!(|data: &[u8]| {
     let cfg = Config::DEFAULT;
     let station = cfg.bridge_station;
     let controller_station = cfg.controller_station;
-    let canned: [Vec<u8>; 4] = {
+    let canned: [Vec<u8>; 8] = {
         let q212 = frame(Header::Command, controller_station.0, 0x212, b"01");
         let status = frame(Header::Command, station.0, codes::STATUS_QUERY, b"");
         let mut body = Vec::new();
@@ -235,7 +252,14 @@ fuzz_target!(|data: &[u8]| {
         }
         let d26 = frame(Header::Command, controller_station.0, 0x26D, &body);
         let cut = d26.get(..40).unwrap_or(&d26).to_vec();
-        [q212, status, d26, cut]
+        // Modbus TCP ADUs (unit 1): PNOW of axis 1; DRG1 := servo on;
+        // two reads in one segment; a read outside the map.
+        let pnow = vec![0, 1, 0, 0, 0, 6, 1, 0x03, 0x90, 0x00, 0, 2];
+        let servo = vec![0, 2, 0, 0, 0, 6, 1, 0x06, 0x0D, 0x00, 0x10, 0x00];
+        let mut two = vec![0, 3, 0, 0, 0, 6, 1, 0x03, 0x90, 0x05, 0, 1];
+        two.extend_from_slice(&[0, 4, 0, 0, 0, 6, 1, 0x04, 0x90, 0x00, 0, 2]);
+        let outside = vec![0, 5, 0, 0, 0, 6, 1, 0x03, 0xFF, 0xF0, 0, 1];
+        [q212, status, d26, cut, pnow, servo, two, outside]
     };
 
     // The bridge's side: 10.0.0.1, port 5020.
@@ -262,7 +286,10 @@ fuzz_target!(|data: &[u8]| {
         &mut buffers,
         now,
     );
+    let mut modbus_buffers = ModbusBuffers::new();
+    net.add_modbus(&mut modbus_buffers, MODBUS_PORT);
     let mut bridge = Bridge::new(cfg, Source::Default, 0x5EED);
+    let mut gateway = Box::new(Gateway::new(cfg.modbus, cfg.policy));
     let mut down = Controller::default();
 
     // The clients' side: 10.0.0.2.
@@ -287,6 +314,8 @@ fuzz_target!(|data: &[u8]| {
                 handle: sockets.add(s),
                 reading: true,
                 received: Vec::new(),
+                ports: Vec::new(),
+                cut: Vec::new(),
                 unclean: 0,
                 current_unclean: false,
             }
@@ -300,18 +329,21 @@ fuzz_target!(|data: &[u8]| {
         let c = usize::from(op >> 4) % CLIENTS;
         let handle = clients[c].handle;
         match op & 0x0F {
-            0 => {
+            op @ (0 | 7) => {
+                let port = if op == 0 { PORT } else { MODBUS_PORT };
                 let s = sockets.get_mut::<tcp::Socket>(handle);
                 if !s.is_open() {
                     local_port = local_port.wrapping_add(1).max(40_000);
                     if s.connect(
                         iface.context(),
-                        (IpAddress::v4(10, 0, 0, 1), PORT),
+                        (IpAddress::v4(10, 0, 0, 1), port),
                         local_port,
                     )
                     .is_ok()
                     {
                         clients[c].received.push(Vec::new());
+                        clients[c].ports.push(port);
+                        clients[c].cut.push(false);
                         clients[c].reading = true;
                         clients[c].current_unclean = false;
                     }
@@ -342,6 +374,9 @@ fuzz_target!(|data: &[u8]| {
                     cl.current_unclean = true;
                     cl.unclean += 1;
                 }
+                if let Some(cut) = cl.cut.last_mut() {
+                    *cut = true;
+                }
             }
             5 => {
                 let cl = &mut clients[c];
@@ -349,6 +384,11 @@ fuzz_target!(|data: &[u8]| {
                 if !cl.reading && !cl.current_unclean && !cl.received.is_empty() {
                     cl.current_unclean = true;
                     cl.unclean += 1;
+                }
+                if !cl.reading {
+                    if let Some(cut) = cl.cut.last_mut() {
+                        *cut = true;
+                    }
                 }
             }
             6 => {
@@ -363,6 +403,7 @@ fuzz_target!(|data: &[u8]| {
                         &mut now,
                         &mut net,
                         &mut bridge,
+                        &mut gateway,
                         &mut bridge_wire,
                         &mut client_wire,
                         &mut iface,
@@ -379,6 +420,7 @@ fuzz_target!(|data: &[u8]| {
                 &mut now,
                 &mut net,
                 &mut bridge,
+                &mut gateway,
                 &mut bridge_wire,
                 &mut client_wire,
                 &mut iface,
@@ -398,6 +440,7 @@ fuzz_target!(|data: &[u8]| {
             &mut now,
             &mut net,
             &mut bridge,
+            &mut gateway,
             &mut bridge_wire,
             &mut client_wire,
             &mut iface,
@@ -411,7 +454,11 @@ fuzz_target!(|data: &[u8]| {
     let refusal = frame(Header::Error, station.0, codes::HOST_BUSY, b"");
     let mut refusals = 0u32;
     for c in &clients {
-        for conn in &c.received {
+        for ((conn, &port), &cut) in c.received.iter().zip(&c.ports).zip(&c.cut) {
+            if port == MODBUS_PORT {
+                check_adus(conn, cut);
+                continue;
+            }
             if conn.windows(refusal.len()).any(|w| w == refusal.as_slice()) {
                 assert_eq!(conn, &refusal, "a refused connection got more");
                 refusals += 1;
@@ -453,3 +500,36 @@ fuzz_target!(|data: &[u8]| {
     }
     assert_eq!(in_frame, 0, "a partial frame went downstream");
 });
+
+/// A Modbus TCP connection's bytes: whole ADUs with protocol ID 0 and a
+/// length of 2..=254, each a response (a read or write function's, or its
+/// exception); the last may be cut if the client reset the connection or
+/// stopped reading it (`cut`).
+fn check_adus(mut conn: &[u8], cut: bool) {
+    while !conn.is_empty() {
+        if conn.len() < 8 {
+            assert!(
+                cut,
+                "a cut ADU on a connection read to the end: {conn:02X?}"
+            );
+            return;
+        }
+        assert_eq!(&conn[2..4], &[0, 0], "protocol ID: {conn:02X?}");
+        let len = usize::from(u16::from_be_bytes([conn[4], conn[5]]));
+        assert!((2..=254).contains(&len), "ADU length {len}: {conn:02X?}");
+        if conn.len() < 6 + len {
+            assert!(
+                cut,
+                "a cut ADU on a connection read to the end: {conn:02X?}"
+            );
+            return;
+        }
+        let function = conn[7] & 0x7F;
+        assert!(
+            matches!(function, 0x01..=0x06 | 0x0F | 0x10) || conn[7] & 0x80 != 0,
+            "function {:02X} in {conn:02X?}",
+            conn[7]
+        );
+        conn = &conn[6 + len..];
+    }
+}
