@@ -383,6 +383,45 @@ fn send_26dh(addr: std::net::SocketAddr, message: Vec<u8>, limit: Duration) -> (
     (reply, secs)
 }
 
+/// After one 26DH of `records` (`host_bytes` sent in `secs`): the
+/// bridge's own count says one stream of every record and none failed,
+/// the firmware quits cleanly and the simulator holds exactly `records`.
+/// The firmware's exit, the chunks sent and the run's throughput.
+fn one_stream_held(
+    gw: EthernetGateway,
+    bridge: Station,
+    controller: Station,
+    records: &[PositionRecord],
+    host_bytes: u64,
+    secs: f64,
+) -> (host_tests::qemu::ExitOutcome, u64, Throughput) {
+    let fields = tcp_status_query(gw.addr, bridge, Duration::from_secs(15)).unwrap();
+    assert_eq!(field(&fields, "streams_ok"), 1, "{fields:?}");
+    assert_eq!(field(&fields, "streams_failed"), 0, "{fields:?}");
+    assert_eq!(
+        field(&fields, "records"),
+        records.len() as u64,
+        "{fields:?}"
+    );
+    let chunks = field(&fields, "chunks_sent");
+    let (exit, sim) = gw
+        .quit(Duration::from_secs(20))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(exit.success(), "{}\n{}", exit.stdout, exit.stderr);
+    check_table(&sim.table, records).unwrap_or_else(|e| panic!("{e}"));
+    let s = sim.stats();
+    let throughput = Throughput {
+        baud: 115_200,
+        host_bytes,
+        seconds: secs,
+        downstream_bytes: s.bytes_in + s.bytes_out,
+        commands: s.commands,
+        per_command_ms: Options::default().reply_delay_ms
+            + LineConfig::new(controller).turnaround_ms,
+    };
+    (exit, chunks, throughput)
+}
+
 #[test]
 fn a_26dh_over_tcp_is_verified_and_timed() {
     let n: u32 = std::env::var("IAI_ETH_RECORDS")
@@ -408,15 +447,8 @@ fn a_26dh_over_tcp_is_verified_and_timed() {
         String::from_utf8_lossy(&reply),
         String::from_utf8_lossy(&reply_26dh(controller, count))
     );
-    let fields = tcp_status_query(gw.addr, bridge, Duration::from_secs(15)).unwrap();
-    assert_eq!(field(&fields, "streams_ok"), 1);
-    assert_eq!(field(&fields, "streams_failed"), 0);
-    assert_eq!(field(&fields, "records"), u64::from(n));
-    let chunks = field(&fields, "chunks_sent");
-    let (exit, sim) = gw
-        .quit(Duration::from_secs(20))
-        .unwrap_or_else(|e| panic!("{e}"));
-    assert!(exit.success(), "{}\n{}", exit.stdout, exit.stderr);
+    let (exit, chunks, throughput) =
+        one_stream_held(gw, bridge, controller, &records, host_bytes, secs);
     let stack: u64 = exit
         .stdout
         .lines()
@@ -425,17 +457,6 @@ fn a_26dh_over_tcp_is_verified_and_timed() {
         .and_then(|v| v.parse().ok())
         .unwrap_or_else(|| panic!("no stack peak in:\n{}", exit.stdout));
     println!("stack lm3s6965-eth {stack}");
-    check_table(&sim.table, &records).unwrap_or_else(|e| panic!("{e}"));
-    let s = sim.stats();
-    let throughput = Throughput {
-        baud: 115_200,
-        host_bytes,
-        seconds: secs,
-        downstream_bytes: s.bytes_in + s.bytes_out,
-        commands: s.commands,
-        per_command_ms: Options::default().reply_delay_ms
-            + LineConfig::new(controller).turnaround_ms,
-    };
     println!("{}", throughput.line("tcp"));
     eprintln!(
         "{n} records x 8 axes over TCP: {host_bytes} bytes in {secs:.1} s, {chunks} chunks; \
@@ -972,27 +993,8 @@ fn iai_writes_the_full_table_through_the_bridge() {
         "{stdout}\n{stderr}"
     );
 
-    // The bridge's own count: one stream, every record.
-    let fields = tcp_status_query(gw.addr, bridge, Duration::from_secs(15)).unwrap();
-    assert_eq!(field(&fields, "streams_ok"), 1, "{fields:?}");
-    assert_eq!(field(&fields, "streams_failed"), 0, "{fields:?}");
-    assert_eq!(field(&fields, "records"), u64::from(RECORDS), "{fields:?}");
-    let chunks = field(&fields, "chunks_sent");
-    let (exit, sim) = gw
-        .quit(Duration::from_secs(20))
-        .unwrap_or_else(|e| panic!("{e}"));
-    assert!(exit.success(), "{}\n{}", exit.stdout, exit.stderr);
-    check_table(&sim.table, &records).unwrap_or_else(|e| panic!("{e}"));
-    let s = sim.stats();
-    let throughput = Throughput {
-        baud: 115_200,
-        host_bytes,
-        seconds: secs,
-        downstream_bytes: s.bytes_in + s.bytes_out,
-        commands: s.commands,
-        per_command_ms: Options::default().reply_delay_ms
-            + LineConfig::new(controller).turnaround_ms,
-    };
+    let (_, chunks, throughput) =
+        one_stream_held(gw, bridge, controller, &records, host_bytes, secs);
     println!("{}", throughput.line("iai-tcp"));
     eprintln!(
         "iai table write --bridge over TCP: {RECORDS} records x 8 axes, {host_bytes} bytes in \
