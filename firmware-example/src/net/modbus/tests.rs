@@ -1,6 +1,6 @@
 //! The Modbus TCP sockets against a second smoltcp interface over an
-//! in-memory wire, in simulated time: answers, the idle close, the third
-//! connection.
+//! in-memory wire, in simulated time: four clients answered in order, the
+//! fifth connection reset, the idle close, a bad length.
 
 extern crate std;
 use std::collections::VecDeque;
@@ -65,7 +65,11 @@ impl Device for Wire {
     }
 }
 
-/// The clients' side: an interface at 10.0.0.2 and three sockets.
+/// Client sockets: one more than the firmware serves at once.
+const CLIENT_SOCKETS: usize = CLIENTS + 1;
+
+/// The clients' side: an interface at 10.0.0.2 and [`CLIENT_SOCKETS`]
+/// sockets.
 struct Clients<'a> {
     wire: Wire,
     iface: Interface,
@@ -168,11 +172,12 @@ fn rig(slots: &'static mut crate::net::SocketSlots<'static>) -> Rig<'static> {
     iface.update_ip_addrs(|a| {
         let _ = a.push(IpCidr::new(IpAddress::v4(10, 0, 0, 2), 24));
     });
-    let storage = std::boxed::Box::leak(std::boxed::Box::new(
-        <[SocketStorage<'static>; 3]>::default(),
-    ));
+    let storage =
+        std::boxed::Box::leak(std::boxed::Box::new(<[SocketStorage<'static>;
+            CLIENT_SOCKETS]>::default(
+        )));
     let mut sockets = SocketSet::new(&mut storage[..]);
-    let handles = (0..3)
+    let handles = (0..CLIENT_SOCKETS)
         .map(|_| {
             sockets.add(tcp::Socket::new(
                 tcp::SocketBuffer::new(leak(1024)),
@@ -202,59 +207,101 @@ fn read_pnow(tid: u16) -> Vec<u8> {
     v
 }
 
+/// The answer to [`read_pnow`] with PNOW 12,000.
+fn pnow_answer(tid: u16) -> Vec<u8> {
+    let mut v = tid.to_be_bytes().to_vec();
+    v.extend_from_slice(&[0, 0, 0, 7, 1, 4, 4, 0, 0, 0x2E, 0xE0]);
+    v
+}
+
 #[test]
-fn two_clients_are_answered_a_silent_one_is_closed_after_the_idle_time() {
+fn four_clients_are_answered_in_order_a_fifth_is_reset_a_silent_one_closed() {
+    assert_eq!(CLIENTS, 4);
     let slots = std::boxed::Box::leak(std::boxed::Box::new(EMPTY_SLOTS));
     let mut rig = rig(slots);
     rig.gateway.regs.cache.axes[0].current_position = 12_000;
     rig.run(10, 1);
-    rig.connect(0, 40_000);
-    rig.connect(1, 40_001);
+    for n in 0..CLIENTS {
+        rig.connect(n, 40_000 + n as u16);
+    }
     rig.run(20, 1);
-    assert!(rig.client(0).may_send() && rig.client(1).may_send());
-    // Two requests back to back on one connection, one on the other.
-    let mut two = read_pnow(0x0A0B);
-    two.extend(read_pnow(0x0C0D));
-    rig.client(0).send_slice(&two).unwrap();
-    rig.client(1).send_slice(&read_pnow(5)).unwrap();
+    for n in 0..CLIENTS {
+        assert!(
+            rig.client(n).may_send(),
+            "client {n}: {}",
+            rig.client(n).state()
+        );
+    }
+    // All four at once, each with three requests back to back: every
+    // client gets its own answers, in its order, their IDs echoed.
+    let tid = |n: usize, k: u16| (n as u16 + 1) << 8 | k;
+    for n in 0..CLIENTS {
+        let three: Vec<u8> = (1..=3).flat_map(|k| read_pnow(tid(n, k))).collect();
+        rig.client(n).send_slice(&three).unwrap();
+    }
     rig.run(20, 1);
-    let answer = |tid: u16| {
-        let mut v = tid.to_be_bytes().to_vec();
-        v.extend_from_slice(&[0, 0, 0, 7, 1, 4, 4, 0, 0, 0x2E, 0xE0]);
-        v
-    };
-    let mut both = answer(0x0A0B);
-    both.extend(answer(0x0C0D));
-    assert_eq!(rig.received(0), both);
-    assert_eq!(rig.received(1), answer(5));
-    // A third connection while both are taken is reset by the stack.
-    rig.connect(2, 40_002);
+    for n in 0..CLIENTS {
+        let want: Vec<u8> = (1..=3).flat_map(|k| pnow_answer(tid(n, k))).collect();
+        assert_eq!(rig.received(n), want, "client {n}");
+    }
+    // A fifth connection while all four are taken is reset by the stack;
+    // the four are still served.
+    rig.connect(CLIENTS, 40_010);
     rig.run(20, 1);
-    assert!(!rig.client(2).is_open(), "{}", rig.client(2).state());
-    // Client 1 keeps asking every 10 s; client 0 says nothing more.
+    assert!(
+        !rig.client(CLIENTS).is_open(),
+        "{}",
+        rig.client(CLIENTS).state()
+    );
+    for n in 0..CLIENTS {
+        rig.client(n).send_slice(&read_pnow(tid(n, 4))).unwrap();
+    }
+    rig.run(20, 1);
+    for n in 0..CLIENTS {
+        assert_eq!(rig.received(n), pnow_answer(tid(n, 4)), "client {n}");
+    }
+    // Client 1 keeps asking every 10 s; the others say nothing more.
     for k in 0..6u16 {
         rig.run(10_000, 5);
         rig.client(1).send_slice(&read_pnow(100 + k)).unwrap();
         rig.run(20, 1);
-        assert_eq!(rig.received(1), answer(100 + k));
+        assert_eq!(rig.received(1), pnow_answer(100 + k));
     }
-    // 60 s after its last request, client 0 was closed: it reads our FIN.
-    assert!(!rig.client(0).may_recv(), "{}", rig.client(0).state());
+    // 60 s after their last request, the silent ones were closed: they
+    // read our FIN.
+    for n in [0, 2, 3] {
+        assert!(
+            !rig.client(n).may_recv(),
+            "client {n}: {}",
+            rig.client(n).state()
+        );
+    }
     assert!(rig.client(1).may_recv(), "{}", rig.client(1).state());
     let stats = rig.net.modbus().map(ModbusClients::stats).unwrap();
-    assert_eq!(stats.connections, 2);
-    assert_eq!(stats.requests, 9);
-    assert_eq!(stats.idle_closed, 1);
-    // Its socket listens again: a new client is served.
-    rig.client(0).close();
+    assert_eq!(stats.connections, 4);
+    assert_eq!(stats.requests, 4 * 4 + 6);
+    assert_eq!(stats.idle_closed, 3);
+    // Their sockets listen again: the client reset before is served now,
+    // and so is a new one.
+    for n in [0, 2, 3] {
+        rig.client(n).close();
+    }
     rig.run(3_000, 5);
-    rig.client(0).abort();
+    for n in [0, 2, 3] {
+        rig.client(n).abort();
+    }
+    rig.client(CLIENTS).abort();
     rig.run(10, 1);
-    rig.connect(0, 40_003);
+    rig.connect(CLIENTS, 40_011);
+    rig.connect(0, 40_012);
     rig.run(20, 1);
-    rig.client(0).send_slice(&read_pnow(77)).unwrap();
+    rig.client(CLIENTS).send_slice(&read_pnow(77)).unwrap();
+    rig.client(0).send_slice(&read_pnow(78)).unwrap();
     rig.run(20, 1);
-    assert_eq!(rig.received(0), answer(77));
+    assert_eq!(rig.received(CLIENTS), pnow_answer(77));
+    assert_eq!(rig.received(0), pnow_answer(78));
+    let stats = rig.net.modbus().map(ModbusClients::stats).unwrap();
+    assert_eq!(stats.connections, 6);
 }
 
 #[test]
