@@ -69,19 +69,25 @@ impl ModbusBuffers {
         }
     }
 
-    /// The sockets on these buffers.
-    pub(super) fn sockets(&mut self) -> [tcp::Socket<'_>; CLIENTS] {
+    /// Adds a socket on each of these buffers to `set`; their handles.
+    /// One socket at a time: an array of all of them, built on the stack
+    /// and moved again by the adding, raised the Ethernet build's stack
+    /// peak from 4,512 to 5,416 bytes with four sockets.
+    pub(super) fn add_sockets<'a>(
+        &'a mut self,
+        set: &mut SocketSet<'a>,
+    ) -> [SocketHandle; CLIENTS] {
         let ModbusBuffers { rx, tx } = self;
-        let mut rx = rx.iter_mut();
-        let mut tx = tx.iter_mut();
-        core::array::from_fn(|_| {
-            let rx: &mut [u8] = rx.next().map_or(&mut [], |b| b.as_mut_slice());
-            let tx: &mut [u8] = tx.next().map_or(&mut [], |b| b.as_mut_slice());
-            let mut socket =
-                tcp::Socket::new(tcp::SocketBuffer::new(rx), tcp::SocketBuffer::new(tx));
+        let mut handles = [SocketHandle::default(); CLIENTS];
+        for ((handle, rx), tx) in handles.iter_mut().zip(rx.iter_mut()).zip(tx.iter_mut()) {
+            let mut socket = tcp::Socket::new(
+                tcp::SocketBuffer::new(rx.as_mut_slice()),
+                tcp::SocketBuffer::new(tx.as_mut_slice()),
+            );
             super::host::configure(&mut socket);
-            socket
-        })
+            *handle = set.add(socket);
+        }
+        handles
     }
 }
 
