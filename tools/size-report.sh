@@ -39,36 +39,43 @@ for b in "${boards[@]}"; do
 done
 cargo build -q -p host-tests --bin demo --bin gateway
 
-# Stack peak of the lm3s6965 image after a PLC's session on its Modbus
-# port (pymodbus, from tools/setup.sh's venv; host-tests/plc/): the
-# gateway with --stack-report, servo, home, a move and 20 positions
-# through the table window, then a stop that ends the firmware and logs
-# its peak. Prints the peak, or nothing if it could not be measured.
+# Stack peak of an image after a PLC's session on its Modbus port
+# (pymodbus, from tools/setup.sh's venv; host-tests/plc/): the gateway with
+# --stack-report, servo, home, a move and 20 positions through the table
+# window, then a stop that ends the firmware and logs its peak. `rtu`: the
+# lm3s6965 image's RTU port; `tcp`: the Ethernet image (gateway --ethernet)
+# over Modbus TCP. Prints the peak, or nothing if it could not be measured.
 modbus_stack() {
-  local elf=$1 py=.venv/bin/python dir pid port
+  local elf=$1 mode=$2 py=.venv/bin/python dir pid port ready flags=() plc=()
   "$py" -c 'import pymodbus' 2>/dev/null || {
     echo "size-report: no pymodbus in .venv (tools/setup.sh): Modbus stack not measured" >&2
     return 0
   }
+  if [ "$mode" = tcp ]; then
+    ready=modbus-tcp flags=(--ethernet) plc=(--tcp)
+  else
+    ready=modbus-rtu
+  fi
   dir=$(mktemp -d)
-  "$target/debug/gateway" --elf "$elf" --stack-report >"$dir/out" 2>"$dir/err" &
+  : >"$dir/out"
+  "$target/debug/gateway" --elf "$elf" --stack-report "${flags[@]}" >"$dir/out" 2>"$dir/err" &
   pid=$!
   for _ in $(seq 1 300); do
-    grep -q '^modbus-rtu ' "$dir/out" && break
+    grep -q "^$ready " "$dir/out" && break
     kill -0 "$pid" 2>/dev/null || break
     sleep 0.2
   done
-  port=$(awk '$1=="modbus-rtu" {sub(/.*:/, "", $2); print $2}' "$dir/out")
+  port=$(awk -v r="$ready" '$1==r {sub(/.*:/, "", $2); print $2}' "$dir/out")
   awk 'BEGIN {for (n = 1; n <= 20; n++) {
     printf "%d 255 30 30 100", n
     for (a = 1; a <= 8; a++) printf " 0 %d", n * 100 + a
     printf "\n" }}' >"$dir/table"
-  if [ -n "$port" ] && "$py" host-tests/plc/pymodbus_plc.py 127.0.0.1 "$port" "$dir/table" >"$dir/plc" 2>&1; then
+  if [ -n "$port" ] && "$py" host-tests/plc/pymodbus_plc.py "${plc[@]}" 127.0.0.1 "$port" "$dir/table" >"$dir/plc" 2>&1; then
     kill -TERM "$pid"
     wait "$pid" || true
     sed -n 's/.*firmware stack peak \([0-9]*\) bytes.*/\1/p' "$dir/err"
   else
-    echo "size-report: the PLC session on lm3s6965 failed:" >&2
+    echo "size-report: the PLC session ($ready) on $(basename "$elf") failed:" >&2
     cat "$dir/plc" "$dir/err" >&2
     kill -TERM "$pid" 2>/dev/null || true
     wait "$pid" || true
@@ -99,7 +106,7 @@ for b in "${boards[@]}"; do
       [ "$peak" -gt "$stack" ] && stack=$peak
     done
     if [ "$board" = lm3s6965 ]; then
-      peak=$(modbus_stack "$elf")
+      peak=$(modbus_stack "$elf" rtu)
       if [ -n "$peak" ]; then
         echo "stack $board after a PLC's Modbus session (pymodbus): $peak bytes"
         [ "$peak" -gt "$stack" ] && stack=$peak
@@ -128,9 +135,10 @@ echo "goal (Cortex-M3/M4 boards): total RAM <= 12288 with the gateway (lm3s6965)
 # symbol (smoltcp's socket buffers, protocol B's and Modbus TCP's, the
 # driver's two frame buffers, the socket slots with smoltcp's socket
 # state, the interface with the protocol-B hosts and the Modbus clients,
-# the driver), the Modbus gateway's state, and the
-# stack measured by the QEMU test that streams a 26DH over TCP and ends
-# the run with the quit sequence (it prints `stack lm3s6965-eth N`).
+# the driver), the Modbus gateway's state, and the stack peak: the deeper
+# of the QEMU test that streams a 26DH over TCP and ends the run with the
+# quit sequence (it prints `stack lm3s6965-eth N`) and a PLC's session
+# over Modbus TCP (modbus_stack ... tcp).
 # Not held to the 8 KiB goal: the LM3S6965 has 64 KiB of RAM.
 eth_elf=$target/thumbv7m-none-eabi/firmware/lm3s6965-eth
 cargo build -q -p firmware-example --profile firmware --target thumbv7m-none-eabi \
@@ -151,6 +159,12 @@ slots=$(sym SLOTS); iface=$(sym NET); driver=$(sym ETH)
 eth_stack=$(cargo test -q -p host-tests --test qemu_ethernet a_26dh_over_tcp -- --nocapture 2>/dev/null |
   awk '$1=="stack" && $2=="lm3s6965-eth" {print $3}')
 [ -n "$eth_stack" ] || { echo "size-report: the Ethernet stack run failed" >&2; exit 1; }
+echo "stack lm3s6965-eth after a 26DH over TCP: $eth_stack bytes"
+peak=$(modbus_stack "$eth_elf" tcp)
+if [ -n "$peak" ]; then
+  echo "stack lm3s6965-eth after a PLC's Modbus TCP session (pymodbus): $peak bytes"
+  [ "$peak" -gt "$eth_stack" ] && eth_stack=$peak
+fi
 echo "ram lm3s6965-eth static $static stack $eth_stack total $((static + eth_stack))"
 echo "ram lm3s6965-eth network $((buffers + frames + slots + iface + driver)): socket buffers $buffers, frame buffers $frames, socket slots $slots, interface and hosts $iface, driver $driver; modbus gateway $gateway"
 echo "flash lm3s6965-eth $flash"

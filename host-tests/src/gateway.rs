@@ -88,8 +88,9 @@ pub struct Options {
     /// Line rate of the Modbus RTU port.
     pub modbus_baud: u32,
     /// At the stop, end the firmware with the quit sequence (honoured only
-    /// then: `quit_sequence` in the configuration block) and log its
-    /// stack peak (`firmware stack peak N bytes`), for the size report.
+    /// then: `quit_sequence` in the configuration block; with `ethernet`
+    /// sent on a new connection to the protocol-B port) and log its stack
+    /// peak (`firmware stack peak N bytes`), for the size report.
     pub stack_report: bool,
     /// The simulated controller's time per command, ms.
     pub reply_delay_ms: u32,
@@ -325,19 +326,23 @@ fn report_stack(mut qemu: QemuSession) {
         return;
     }
     match qemu.wait(Duration::from_secs(10)) {
-        Ok(out) => match out
-            .stdout
-            .lines()
-            .find_map(|l| l.strip_prefix("firmware-example: stack peak "))
-            .and_then(|l| l.split_whitespace().next())
-        {
-            Some(peak) => log(&format!("firmware stack peak {peak} bytes")),
-            None => log(&format!(
-                "no stack peak in the firmware's output:\n{}",
-                out.stdout
-            )),
-        },
+        Ok(out) => log_stack_peak(&out.stdout),
         Err(e) => log(&format!("no stack peak: {e}")),
+    }
+}
+
+/// Logs the stack peak the firmware printed as it ended
+/// (`firmware stack peak N bytes`), or that it printed none.
+fn log_stack_peak(stdout: &str) {
+    match stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("firmware-example: stack peak "))
+        .and_then(|l| l.split_whitespace().next())
+    {
+        Some(peak) => log(&format!("firmware stack peak {peak} bytes")),
+        None => log(&format!(
+            "no stack peak in the firmware's output:\n{stdout}"
+        )),
     }
 }
 
@@ -721,7 +726,7 @@ impl EthernetGateway {
                 .map_err(|e| format!("building the Ethernet firmware: {e}"))?,
         };
         let cfg = Config {
-            quit_sequence: opts.quit_sequence,
+            quit_sequence: opts.quit_sequence || opts.stack_report,
             ..config(opts.baud, opts.modbus_baud)
         };
         let guest_port = opts.network.map_or(DEFAULT_PORT, |n| n.port);
@@ -839,8 +844,10 @@ impl EthernetGateway {
 /// --ethernet`: calls `on_ready` with the forwarded address once the
 /// bridge answered over TCP, and runs until `stop` (or fails when QEMU
 /// exits on its own). One protocol-B client at a time: the firmware
-/// answers others `&` B0B and closes them; Modbus TCP clients (two at
-/// once) on the forwarded Modbus address.
+/// answers others `&` B0B and closes them; Modbus TCP clients (four at
+/// once) on the forwarded Modbus address. With `stack_report`, the stop
+/// ends the firmware with the quit sequence on the protocol-B port
+/// ([`EthernetGateway::quit`]) and logs its stack peak, as on serial.
 pub fn run_ethernet(
     opts: &Options,
     stop: &AtomicBool,
@@ -865,7 +872,15 @@ pub fn run_ethernet(
         modbus_tcp: Some(gw.modbus_addr),
     });
     let result = watch(&mut gw.qemu, stop);
-    match gw.stop() {
+    let ended = if opts.stack_report && result.is_ok() {
+        gw.quit(Duration::from_secs(10)).map(|(out, sim)| {
+            log_stack_peak(&out.stdout);
+            sim
+        })
+    } else {
+        gw.stop().map_err(|e| e.to_string())
+    };
+    match ended {
         Ok(sim) => {
             let s = sim.stats();
             log(&format!(

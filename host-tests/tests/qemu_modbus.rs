@@ -17,8 +17,8 @@
 //!    equal.
 //!
 //! After each, PNOW is compared with the simulator's 212H, asked by the
-//! real `iai` tool on the protocol-B port, and `iai table read` of the
-//! 500 positions gives the table that PLC wrote.
+//! real `iai` tool on the protocol-B port, and `iai table read --all`
+//! gives exactly the 500 positions that PLC wrote.
 //!
 //! pymodbus comes from the venv `tools/setup.sh` makes (`.venv`), mbpoll
 //! and socat from Debian packages it installs. A client that is absent is
@@ -33,7 +33,7 @@ use std::time::{Duration, Instant};
 use host_tests::qemu::{build_firmware, workspace_root, Board};
 use host_tests::table::table;
 use iai_protocol_b::position::PositionRecord;
-use plc_gateway::mbpoll::{plc_sequence, record_words, Link};
+use plc_gateway::mbpoll::{plc_sequence, Link};
 use plc_gateway::{on_path, pymodbus_python, run_within, Gateway};
 
 /// Positions each PLC writes and reads back.
@@ -68,14 +68,7 @@ fn pymodbus_and_mbpoll_run_a_plcs_sequence_through_the_gateway() {
 
     if let Ok(py) = &python {
         let file = tmp.join(format!("modbus-table-{}.txt", std::process::id()));
-        let text: String = records
-            .iter()
-            .map(|r| {
-                let w: Vec<String> = record_words(r).iter().map(u16::to_string).collect();
-                w.join(" ") + "\n"
-            })
-            .collect();
-        std::fs::write(&file, text).unwrap();
+        plc_gateway::write_table_file(&file, &records);
         let t0 = Instant::now();
         let out = run_within(
             Command::new(py)
@@ -104,31 +97,7 @@ fn pymodbus_and_mbpoll_run_a_plcs_sequence_through_the_gateway() {
         assert_eq!(gw.axis1_position(&iai), 25_500, "the simulator's 212H");
 
         // The controller holds what the PLC wrote: iai reads it back.
-        let mut csv = Vec::new();
-        iai_cli::csvtable::write_header(&mut csv, 8).unwrap();
-        for r in &records {
-            iai_cli::csvtable::write_row(&mut csv, r, 8).unwrap();
-        }
-        let count = POSITIONS.to_string();
-        let out = run_within(
-            Command::new(&iai).args([
-                "table",
-                "read",
-                "--first",
-                "1",
-                "--count",
-                &count,
-                "--tcp",
-                &gw.protocol_b,
-            ]),
-            Duration::from_secs(60),
-        );
-        assert!(out.status.success(), "iai table read: {}", out.status);
-        assert!(
-            out.stdout == csv,
-            "iai table read after the PLC's writes:\n{}",
-            String::from_utf8_lossy(&out.stdout)
-        );
+        gw.assert_controller_holds(&iai, &records);
     }
 
     if mbpoll.is_ok() {

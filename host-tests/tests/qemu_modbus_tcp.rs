@@ -7,19 +7,27 @@
 //! 1. **pymodbus** (Modbus TCP framer, `host-tests/plc/pymodbus_plc.py
 //!    --tcp`): servo on, home, wait for HEND, a numeric move to
 //!    25.500 mm, wait for PEND, read PNOW, compared with the simulator's
-//!    212H asked by the real `iai` tool on the protocol-B port;
+//!    212H asked by the real `iai` tool on the protocol-B port; then 500
+//!    positions of 8 axes written through the table window (2200H) and
+//!    read back through it (21F0H, 2200H), equal, and `iai table read
+//!    --all` on the protocol-B port finds exactly those 500 in the
+//!    controller (the times of the write, the read-back and iai's read are
+//!    printed);
 //! 2. **mbpoll** (`-m tcp`, one process per request,
 //!    `plc_gateway::mbpoll`): servo on (off first if the PLC before left
 //!    it on), home, wait for HEND, a numeric move to 12.000 mm, wait for
-//!    PEND, read PNOW, compared with the simulator's 212H; then 500
+//!    PEND, read PNOW, compared with the simulator's 212H; then 500 other
 //!    positions of 8 axes written through the table window, a whole
 //!    window per call, each write waited for through CMDST, read back
-//!    through it equal, and `iai table read` of them on the protocol-B
-//!    port equal too;
-//! 3. a raw socket: transaction IDs echoed on two requests sent back to
-//!    back, an ADU with a protocol ID other than 0 dropped unanswered
-//!    (the connection goes on), a length field out of range closes the
-//!    connection; two clients are served at once.
+//!    through it equal, and `iai table read --all` finds exactly those;
+//! 3. raw sockets: four clients at once, each with two requests sent back
+//!    to back before any answer is read, each answered in order with its
+//!    transaction IDs; a fifth connection meanwhile is reset (by the
+//!    firmware's stack: QEMU's user network closes it), and once one of
+//!    the four has left a new client is served; an ADU with a protocol ID
+//!    other than 0 dropped unanswered (the connection goes on), a length
+//!    field out of range closes the connection while the others are still
+//!    served.
 //!
 //! pymodbus comes from the venv `tools/setup.sh` makes (`.venv`), mbpoll
 //! from the Debian package it installs. A client that is absent is
@@ -33,7 +41,17 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use host_tests::qemu::{build_ethernet_firmware, workspace_root};
-use plc_gateway::{on_path, pymodbus_python, run_within, Gateway};
+use host_tests::table::table;
+use iai_protocol_b::position::PositionRecord;
+use plc_gateway::{on_path, plc_seconds, pymodbus_python, run_within, write_table_file, Gateway};
+
+/// Positions pymodbus writes and reads back through the table window.
+const POSITIONS: u32 = 500;
+/// Modbus TCP clients the firmware must serve at once (the issue's
+/// figure; the firmware's `net::modbus::CLIENTS`, checked here from the
+/// outside: one fewer fails to connect the last, one more answers the
+/// connection that must be reset).
+const CLIENTS: usize = 4;
 
 const PNOW: u16 = 0x9000;
 /// A Modbus TCP request: `tid`, protocol `proto`, unit 1, function 04,
@@ -54,11 +72,32 @@ fn read_n(c: &mut TcpStream, n: usize) -> Vec<u8> {
     buf
 }
 
-/// MBAP framing as the firmware serves it, on raw sockets.
+/// Whether `c` was closed or reset by the other end, without a byte:
+/// what a connection the firmware refused or dropped reads.
+fn closed_unanswered(c: &mut TcpStream) -> Result<(), String> {
+    let mut rest = Vec::new();
+    match c.read_to_end(&mut rest) {
+        Ok(_) if rest.is_empty() => Ok(()),
+        Ok(_) => Err(format!("answered {rest:02X?}")),
+        Err(e)
+            if matches!(
+                e.kind(),
+                std::io::ErrorKind::ConnectionReset | std::io::ErrorKind::ConnectionAborted
+            ) =>
+        {
+            Ok(())
+        }
+        Err(e) => Err(format!("still open ({e}), received {rest:02X?}")),
+    }
+}
+
+/// MBAP framing and the clients as the firmware serves them, on raw
+/// sockets.
 fn raw_framing(addr: &str, pnow: i32) {
     let connect = || {
         let c = TcpStream::connect(addr).expect("connect to Modbus TCP");
-        c.set_read_timeout(Some(Duration::from_secs(2))).unwrap();
+        c.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+        c.set_nodelay(true).unwrap();
         c
     };
     let pnow_words = (pnow as u32).to_be_bytes();
@@ -68,18 +107,82 @@ fn raw_framing(addr: &str, pnow: i32) {
         v.extend(pnow_words);
         v
     };
-    let mut a = connect();
-    let mut b = connect();
-    // Two requests back to back: answered in order, their IDs echoed.
-    let mut two = read_inputs(0x1234, 0, PNOW, 2);
-    two.extend(read_inputs(0xABCD, 0, PNOW, 2));
-    a.write_all(&two).unwrap();
-    let got = read_n(&mut a, 26);
-    assert_eq!(got[..13], answer(0x1234), "first answer {got:02X?}");
-    assert_eq!(got[13..], answer(0xABCD), "second answer {got:02X?}");
-    // The second client is served meanwhile.
-    b.write_all(&read_inputs(7, 0, PNOW, 2)).unwrap();
-    assert_eq!(read_n(&mut b, 13), answer(7));
+    // Four clients, each answered once it is connected (QEMU's user
+    // network takes one connection at a time to the firmware), so that
+    // all four hold a socket of the firmware.
+    let mut clients: Vec<TcpStream> = (0..CLIENTS)
+        .map(|n| {
+            let mut c = connect();
+            let tid = 0x100 * (n as u16 + 1);
+            c.write_all(&read_inputs(tid, 0, PNOW, 2)).unwrap();
+            assert_eq!(read_n(&mut c, 13), answer(tid), "client {n} connected");
+            c
+        })
+        .collect();
+    // All four at once: two requests back to back on each, sent before
+    // any answer is read; each client gets its own, in order.
+    let t = Instant::now();
+    for (n, c) in clients.iter_mut().enumerate() {
+        let base = 0x100 * (n as u16 + 1);
+        let mut two = read_inputs(base + 1, 0, PNOW, 2);
+        two.extend(read_inputs(base + 2, 0, PNOW, 2));
+        c.write_all(&two).unwrap();
+    }
+    for (n, c) in clients.iter_mut().enumerate() {
+        let base = 0x100 * (n as u16 + 1);
+        let got = read_n(c, 26);
+        assert_eq!(got[..13], answer(base + 1), "client {n} first {got:02X?}");
+        assert_eq!(got[13..], answer(base + 2), "client {n} second {got:02X?}");
+    }
+    let at_once = t.elapsed();
+    // A fifth while the four are connected: the firmware's stack resets
+    // it, QEMU closes our side; no answer.
+    let mut fifth = connect();
+    // The request may find the connection already gone.
+    let _ = fifth.write_all(&read_inputs(0x0500, 0, PNOW, 2));
+    if let Err(why) = closed_unanswered(&mut fifth) {
+        panic!("a fifth connection while four are served: {why}");
+    }
+    // The four are still served.
+    for (n, c) in clients.iter_mut().enumerate() {
+        let tid = 0x100 * (n as u16 + 1) + 3;
+        c.write_all(&read_inputs(tid, 0, PNOW, 2)).unwrap();
+        assert_eq!(read_n(c, 13), answer(tid), "client {n} after the fifth");
+    }
+    // One leaves: its socket listens again and a new client is served
+    // (tried again while the firmware is still closing the old one).
+    drop(clients.pop());
+    let end = Instant::now() + Duration::from_secs(10);
+    let (mut again, tries) = (1..)
+        .find_map(|k| {
+            let mut c = connect();
+            c.set_read_timeout(Some(Duration::from_secs(2))).unwrap();
+            let asked = c.write_all(&read_inputs(0x0600, 0, PNOW, 2)).is_ok();
+            let mut got = [0u8; 13];
+            if asked && c.read_exact(&mut got).is_ok() {
+                assert_eq!(got.to_vec(), answer(0x0600), "the client after one left");
+                return Some((c, k));
+            }
+            assert!(
+                Instant::now() < end,
+                "no client served after one of four left"
+            );
+            std::thread::sleep(Duration::from_millis(200));
+            None
+        })
+        .expect("served");
+    again
+        .set_read_timeout(Some(Duration::from_secs(5)))
+        .unwrap();
+    println!(
+        "raw sockets: {CLIENTS} clients at once, 2 requests each answered in order in \
+         {:.0} ms; connection {} meanwhile reset; a new client served after one left \
+         (attempt {tries})",
+        at_once.as_secs_f64() * 1000.0,
+        CLIENTS + 1
+    );
+    let mut a = clients.remove(0);
+    let b = &mut clients[0];
     // Protocol ID 1: not Modbus, dropped; the next request is answered.
     let mut mixed = read_inputs(0x0101, 1, PNOW, 2);
     mixed.extend(read_inputs(0x0202, 0, PNOW, 2));
@@ -88,18 +191,14 @@ fn raw_framing(addr: &str, pnow: i32) {
     // A length field of 1: the stream cannot be followed, the connection
     // is closed (reset) without an answer.
     a.write_all(&[0, 9, 0, 0, 0, 1, 1]).unwrap();
-    let mut rest = Vec::new();
-    let closed = match a.read_to_end(&mut rest) {
-        Ok(_) => rest.is_empty(),
-        Err(e) => matches!(
-            e.kind(),
-            std::io::ErrorKind::ConnectionReset | std::io::ErrorKind::ConnectionAborted
-        ),
-    };
-    assert!(closed, "a length of 1 answered {rest:02X?}");
-    // The other client is still served.
+    if let Err(why) = closed_unanswered(&mut a) {
+        panic!("a length of 1: {why}");
+    }
+    // The others are still served.
     b.write_all(&read_inputs(8, 0, PNOW, 2)).unwrap();
-    assert_eq!(read_n(&mut b, 13), answer(8));
+    assert_eq!(read_n(b, 13), answer(8));
+    again.write_all(&read_inputs(9, 0, PNOW, 2)).unwrap();
+    assert_eq!(read_n(&mut again, 13), answer(9));
 }
 
 #[test]
@@ -129,13 +228,19 @@ fn pymodbus_and_mbpoll_over_modbus_tcp_on_the_ethernet_build() {
 
     let mut pnow = None;
     if let Ok(py) = &python {
+        let records: Vec<PositionRecord> = table(POSITIONS, 8, 2026).collect();
+        let file = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+            .join(format!("modbus-tcp-table-{}.txt", std::process::id()));
+        write_table_file(&file, &records);
         let t = Instant::now();
         let out = run_within(
             Command::new(py)
                 .arg(workspace_root().join("host-tests/plc/pymodbus_plc.py"))
-                .args(["--tcp", "127.0.0.1", gw.modbus_port()]),
-            Duration::from_secs(40),
+                .args(["--tcp", "127.0.0.1", gw.modbus_port()])
+                .arg(&file),
+            Duration::from_secs(180),
         );
+        let _ = std::fs::remove_file(&file);
         let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
         println!("pymodbus ({:.1} s):\n{stdout}", t.elapsed().as_secs_f64());
         assert!(
@@ -146,8 +251,25 @@ fn pymodbus_and_mbpoll_over_modbus_tcp_on_the_ethernet_build() {
             gw.log()
         );
         assert!(stdout.lines().any(|l| l == "pnow 25500"), "{stdout}");
+        assert!(
+            stdout
+                .lines()
+                .any(|l| l == format!("table {POSITIONS} written, read back equal")),
+            "{stdout}"
+        );
         assert_eq!(gw.axis1_position(&iai), 25_500, "the simulator's 212H");
         pnow = Some(25_500);
+
+        // The controller holds exactly what the PLC wrote: the real iai
+        // tool reads it back on the protocol-B port.
+        let iai_read = gw.assert_controller_holds(&iai, &records);
+        let written = plc_seconds(&stdout, "table write").expect("the write's time");
+        let read_back = plc_seconds(&stdout, "table read back").expect("the read-back's time");
+        println!(
+            "Modbus TCP table window: {POSITIONS} positions x 8 axes written in {written:.1} s, \
+             read back equal in {read_back:.1} s (pymodbus); iai table read on the \
+             protocol-B port: the same {POSITIONS}, {iai_read:.1} s"
+        );
     }
 
     if mbpoll.is_ok() {

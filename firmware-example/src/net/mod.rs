@@ -227,7 +227,7 @@ impl<'a> Net<'a> {
         if self.modbus.is_some() {
             return;
         }
-        let handles = buffers.sockets().map(|s| self.sockets.add(s));
+        let handles = buffers.add_sockets(&mut self.sockets);
         self.modbus = Some(ModbusClients::new(handles, port));
     }
 

@@ -100,7 +100,12 @@ pub fn tcp_ports(frame: &[u8]) -> Option<(u16, u16)> {
     Some((tcp.src_port(), tcp.dst_port()))
 }
 
-/// The clients' side: an interface at [`CLIENT_IP`] and three sockets.
+/// Client sockets: one more than the firmware serves Modbus TCP clients
+/// at once (and more than its protocol-B sockets).
+pub const CLIENT_SOCKETS: usize = crate::net::modbus::CLIENTS + 1;
+
+/// The clients' side: an interface at [`CLIENT_IP`] and
+/// [`CLIENT_SOCKETS`] sockets.
 pub struct Clients<'a> {
     wire: Wire,
     iface: Interface,
@@ -183,9 +188,11 @@ impl Rig<'static> {
             let [a0, a1, a2, a3] = CLIENT_IP;
             let _ = a.push(IpCidr::new(IpAddress::v4(a0, a1, a2, a3), 24));
         });
-        let storage = Box::leak(Box::new(<[SocketStorage<'static>; 3]>::default()));
+        let storage = Box::leak(Box::new(
+            <[SocketStorage<'static>; CLIENT_SOCKETS]>::default(),
+        ));
         let mut sockets = SocketSet::new(&mut storage[..]);
-        let handles = (0..3)
+        let handles = (0..CLIENT_SOCKETS)
             .map(|_| {
                 sockets.add(tcp::Socket::new(
                     tcp::SocketBuffer::new(leak(1024)),

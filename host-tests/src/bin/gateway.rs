@@ -23,7 +23,8 @@
 //! (as `iai simulate --faults`), `--seed S`, `--elf PATH`,
 //! `--stack-report` (at the stop, end the firmware with the quit sequence
 //! and log its stack peak: for the size report; a client's bytes could
-//! end the firmware too), `--ethernet` (protocol B over TCP: the
+//! end the firmware too; with `--ethernet` the sequence goes over the
+//! protocol-B port), `--ethernet` (protocol B over TCP: the
 //! `lm3s6965-eth` build, lm3s6965 only).
 
 use std::io::{self, Write};

@@ -31,10 +31,8 @@ use std::time::{Duration, Instant};
 
 use iai_protocol_b::position::PositionRecord;
 
-use super::{run_within, Gateway};
+use super::{record_words, run_within, Gateway};
 
-/// Registers of one record in the table window.
-pub const RECORD_WORDS: usize = 21;
 /// Records in the table window.
 pub const WINDOW: usize = 5;
 pub const DRG1: u16 = 0x0D00;
@@ -65,30 +63,6 @@ const SETTLE_SEEN: usize = 5;
 const SETTLE_PROBE: Duration = Duration::from_millis(5);
 /// How long a command or a DSS1 bit may take.
 const WAIT: Duration = Duration::from_secs(30);
-
-/// A record as its 21 window registers: number, axis pattern,
-/// acceleration, deceleration, speed, axes 1 to 8 (high word first).
-pub fn record_words(r: &PositionRecord) -> Vec<u16> {
-    let mut w = vec![
-        r.number,
-        u16::from(r.axes.bits()),
-        r.acceleration,
-        r.deceleration,
-        r.speed,
-    ];
-    let mut at = r.positions.iter();
-    for axis in 0..8 {
-        let v = if r.axes.bits() & (1 << axis) != 0 {
-            at.next().copied().unwrap_or(0)
-        } else {
-            0
-        };
-        let v = v as u32;
-        w.extend([(v >> 16) as u16, v as u16]);
-    }
-    assert_eq!(w.len(), RECORD_WORDS);
-    w
-}
 
 /// How mbpoll reaches the gateway.
 pub enum Link {
@@ -455,14 +429,7 @@ pub fn plc_sequence(gw: &mut Gateway, iai: &Path, link: Link, records: &[Positio
     );
 
     // The controller holds exactly that table: iai reads it back.
-    let t = Instant::now();
-    let csv = gw.table_csv(iai, first, records.len());
-    assert!(
-        csv == super::csv_of(records),
-        "iai table read after mbpoll's writes ({name}):\n{}",
-        String::from_utf8_lossy(&csv)
-    );
-    let iai_read = t.elapsed();
+    let iai_read = Duration::from_secs_f64(gw.assert_controller_holds(iai, records));
 
     let s = |d: Duration| d.as_secs_f64();
     println!(

@@ -15,6 +15,58 @@ use std::time::{Duration, Instant};
 use host_tests::qemu::workspace_root;
 use iai_protocol_b::position::PositionRecord;
 
+/// Registers of one record in the table window (PWREC, 2200H).
+pub const RECORD_WORDS: usize = 21;
+
+/// A record as its 21 window registers: number, axis pattern,
+/// acceleration, deceleration, speed, axes 1 to 8 (high word first).
+pub fn record_words(r: &PositionRecord) -> Vec<u16> {
+    let mut w = vec![
+        r.number,
+        u16::from(r.axes.bits()),
+        r.acceleration,
+        r.deceleration,
+        r.speed,
+    ];
+    let mut at = r.positions.iter();
+    for axis in 0..8 {
+        let v = if r.axes.bits() & (1 << axis) != 0 {
+            at.next().copied().unwrap_or(0)
+        } else {
+            0
+        };
+        let v = v as u32;
+        w.extend([(v >> 16) as u16, v as u16]);
+    }
+    assert_eq!(w.len(), RECORD_WORDS);
+    w
+}
+
+/// Writes `records` as `pymodbus_plc.py`'s TABLE file: one record a line,
+/// its window registers in decimal.
+pub fn write_table_file(path: &Path, records: &[PositionRecord]) {
+    let text: String = records
+        .iter()
+        .map(|r| {
+            let w: Vec<String> = record_words(r).iter().map(u16::to_string).collect();
+            w.join(" ") + "\n"
+        })
+        .collect();
+    std::fs::write(path, text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+}
+
+/// The seconds `pymodbus_plc.py` printed on its line `time LABEL...: S s`
+/// (the table write's and read-back's).
+pub fn plc_seconds(stdout: &str, label: &str) -> Option<f64> {
+    stdout
+        .lines()
+        .filter_map(|l| l.strip_prefix("time "))
+        .filter(|l| l.starts_with(label))
+        .find_map(|l| l.rsplit_once(": "))
+        .and_then(|(_, v)| v.strip_suffix(" s"))
+        .and_then(|v| v.parse().ok())
+}
+
 /// Whether `tool` is on the PATH.
 pub fn on_path(tool: &str) -> bool {
     Command::new("sh")
@@ -179,30 +231,38 @@ impl Gateway {
             .unwrap_or_else(|| panic!("no position in:\n{text}"))
     }
 
-    /// Positions `first`..`first + count` as `iai table read` prints them
-    /// (CSV of 8 axes), read on the protocol-B port.
-    pub fn table_csv(&mut self, iai: &Path, first: u16, count: usize) -> Vec<u8> {
+    /// Checks with the real `iai` tool on the protocol-B port that the
+    /// controller's table is exactly `records` (`iai table read --all`:
+    /// the positions 208H counts, compared with the records' CSV); the
+    /// seconds the read took.
+    pub fn assert_controller_holds(&mut self, iai: &Path, records: &[PositionRecord]) -> f64 {
+        let mut sorted: Vec<&PositionRecord> = records.iter().collect();
+        sorted.sort_by_key(|r| r.number);
+        let axes = iai_cli::csvtable::axes_used(sorted.iter().copied());
+        let mut csv = Vec::new();
+        iai_cli::csvtable::write_header(&mut csv, axes).unwrap();
+        for r in sorted {
+            iai_cli::csvtable::write_row(&mut csv, r, axes).unwrap();
+        }
+        let t = Instant::now();
         let out = run_within(
-            Command::new(iai).args([
-                "table",
-                "read",
-                "--first",
-                &first.to_string(),
-                "--count",
-                &count.to_string(),
-                "--tcp",
-                &self.protocol_b,
-            ]),
+            Command::new(iai).args(["table", "read", "--all", "--tcp", &self.protocol_b]),
             Duration::from_secs(60),
         );
+        let took = t.elapsed().as_secs_f64();
         assert!(
             out.status.success(),
-            "iai table read: {}\n{}\n{}",
+            "iai table read: {}\n{}\ngateway:\n{}",
             out.status,
             String::from_utf8_lossy(&out.stderr),
             self.log()
         );
-        out.stdout
+        assert!(
+            out.stdout == csv,
+            "iai table read --all after the PLC's writes:\n{}",
+            String::from_utf8_lossy(&out.stdout)
+        );
+        took
     }
 
     /// SIGTERM, then the exit status.
@@ -236,14 +296,4 @@ pub fn signal(pid: u32, name: &str) {
         .arg(format!("-{name}"))
         .arg(pid.to_string())
         .status();
-}
-
-/// `records` as `iai table read` prints them (8 axes).
-pub fn csv_of(records: &[PositionRecord]) -> Vec<u8> {
-    let mut csv = Vec::new();
-    iai_cli::csvtable::write_header(&mut csv, 8).unwrap();
-    for r in records {
-        iai_cli::csvtable::write_row(&mut csv, r, 8).unwrap();
-    }
-    csv
 }

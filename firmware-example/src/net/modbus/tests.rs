@@ -1,6 +1,7 @@
 //! The Modbus TCP sockets against a second smoltcp interface over an
-//! in-memory wire, in simulated time ([`crate::net::testkit`]): answers,
-//! the idle close, the third connection, a client that vanishes.
+//! in-memory wire, in simulated time ([`crate::net::testkit`]): four
+//! clients answered in order, the fifth connection reset, the idle close,
+//! a bad length, a client that vanishes.
 
 extern crate std;
 use std::vec::Vec;
@@ -28,53 +29,92 @@ fn pnow_12000(tid: u16) -> Vec<u8> {
 }
 
 #[test]
-fn two_clients_are_answered_a_silent_one_is_closed_after_the_idle_time() {
+fn four_clients_are_answered_in_order_a_fifth_is_reset_a_silent_one_closed() {
+    assert_eq!(CLIENTS, 4);
     let mut rig = rig();
     rig.gateway.regs.cache.axes[0].current_position = 12_000;
     rig.run(10, 1);
-    rig.connect(0, MODBUS_PORT, 40_000);
-    rig.connect(1, MODBUS_PORT, 40_001);
+    for n in 0..CLIENTS {
+        rig.connect(n, MODBUS_PORT, 40_000 + n as u16);
+    }
     rig.run(20, 1);
-    assert!(rig.client(0).may_send() && rig.client(1).may_send());
-    // Two requests back to back on one connection, one on the other.
-    let mut two = read_pnow(0x0A0B);
-    two.extend(read_pnow(0x0C0D));
-    rig.client(0).send_slice(&two).unwrap();
-    rig.client(1).send_slice(&read_pnow(5)).unwrap();
+    for n in 0..CLIENTS {
+        assert!(
+            rig.client(n).may_send(),
+            "client {n}: {}",
+            rig.client(n).state()
+        );
+    }
+    // All four at once, each with three requests back to back: every
+    // client gets its own answers, in its order, their IDs echoed.
+    let tid = |n: usize, k: u16| (n as u16 + 1) << 8 | k;
+    for n in 0..CLIENTS {
+        let three: Vec<u8> = (1..=3).flat_map(|k| read_pnow(tid(n, k))).collect();
+        rig.client(n).send_slice(&three).unwrap();
+    }
     rig.run(20, 1);
-    let answer = pnow_12000;
-    let mut both = answer(0x0A0B);
-    both.extend(answer(0x0C0D));
-    assert_eq!(rig.received(0), both);
-    assert_eq!(rig.received(1), answer(5));
-    // A third connection while both are taken is reset by the stack.
-    rig.connect(2, MODBUS_PORT, 40_002);
+    for n in 0..CLIENTS {
+        let want: Vec<u8> = (1..=3).flat_map(|k| pnow_12000(tid(n, k))).collect();
+        assert_eq!(rig.received(n), want, "client {n}");
+    }
+    // A fifth connection while all four are taken is reset by the stack;
+    // the four are still served.
+    rig.connect(CLIENTS, MODBUS_PORT, 40_010);
     rig.run(20, 1);
-    assert!(!rig.client(2).is_open(), "{}", rig.client(2).state());
-    // Client 1 keeps asking every 10 s; client 0 says nothing more.
+    assert!(
+        !rig.client(CLIENTS).is_open(),
+        "{}",
+        rig.client(CLIENTS).state()
+    );
+    for n in 0..CLIENTS {
+        rig.client(n).send_slice(&read_pnow(tid(n, 4))).unwrap();
+    }
+    rig.run(20, 1);
+    for n in 0..CLIENTS {
+        assert_eq!(rig.received(n), pnow_12000(tid(n, 4)), "client {n}");
+    }
+    // Client 1 keeps asking every 10 s; the others say nothing more.
     for k in 0..6u16 {
         rig.run(10_000, 5);
         rig.client(1).send_slice(&read_pnow(100 + k)).unwrap();
         rig.run(20, 1);
-        assert_eq!(rig.received(1), answer(100 + k));
+        assert_eq!(rig.received(1), pnow_12000(100 + k));
     }
-    // 60 s after its last request, client 0 was closed: it reads our FIN.
-    assert!(!rig.client(0).may_recv(), "{}", rig.client(0).state());
+    // 60 s after their last request, the silent ones were closed: they
+    // read our FIN.
+    for n in [0, 2, 3] {
+        assert!(
+            !rig.client(n).may_recv(),
+            "client {n}: {}",
+            rig.client(n).state()
+        );
+    }
     assert!(rig.client(1).may_recv(), "{}", rig.client(1).state());
     let stats = rig.net.modbus().map(ModbusClients::stats).unwrap();
-    assert_eq!(stats.connections, 2);
-    assert_eq!(stats.requests, 9);
-    assert_eq!(stats.idle_closed, 1);
-    // Its socket listens again: a new client is served.
-    rig.client(0).close();
+    assert_eq!(stats.connections, 4);
+    assert_eq!(stats.requests, 4 * 4 + 6);
+    assert_eq!(stats.idle_closed, 3);
+    // Their sockets listen again: the client reset before is served now,
+    // and so is a new one.
+    for n in [0, 2, 3] {
+        rig.client(n).close();
+    }
     rig.run(3_000, 5);
-    rig.client(0).abort();
+    for n in [0, 2, 3] {
+        rig.client(n).abort();
+    }
+    rig.client(CLIENTS).abort();
     rig.run(10, 1);
-    rig.connect(0, MODBUS_PORT, 40_003);
+    rig.connect(CLIENTS, MODBUS_PORT, 40_011);
+    rig.connect(0, MODBUS_PORT, 40_012);
     rig.run(20, 1);
-    rig.client(0).send_slice(&read_pnow(77)).unwrap();
+    rig.client(CLIENTS).send_slice(&read_pnow(77)).unwrap();
+    rig.client(0).send_slice(&read_pnow(78)).unwrap();
     rig.run(20, 1);
-    assert_eq!(rig.received(0), answer(77));
+    assert_eq!(rig.received(CLIENTS), pnow_12000(77));
+    assert_eq!(rig.received(0), pnow_12000(78));
+    let stats = rig.net.modbus().map(ModbusClients::stats).unwrap();
+    assert_eq!(stats.connections, 6);
 }
 
 #[test]
@@ -109,8 +149,10 @@ fn a_client_that_vanishes_is_reset_after_the_silence_limit() {
     let mut rig = rig();
     rig.gateway.regs.cache.axes[0].current_position = 12_000;
     rig.run(10, 1);
-    rig.connect(0, MODBUS_PORT, 40_000);
-    rig.connect(1, MODBUS_PORT, 40_001);
+    // All four sockets taken: clients 0 and 1 ask, 2 and 3 are connected.
+    for n in 0..CLIENTS {
+        rig.connect(n, MODBUS_PORT, 40_000 + n as u16);
+    }
     rig.run(20, 1);
     rig.client(0).send_slice(&read_pnow(1)).unwrap();
     rig.client(1).send_slice(&read_pnow(2)).unwrap();
@@ -127,8 +169,8 @@ fn a_client_that_vanishes_is_reset_after_the_silence_limit() {
             r.client(1).send_slice(&read_pnow(asked)).unwrap();
         }
     };
-    // Half way, both sockets are still taken: a third client is reset by
-    // the stack.
+    // Half way, all four sockets are still taken: a fifth client is reset
+    // by the stack.
     rig.run_until(silence / 2, 1, |r| {
         ask(r);
         false
@@ -137,9 +179,13 @@ fn a_client_that_vanishes_is_reset_after_the_silence_limit() {
         rig.net.modbus().unwrap().slot(0),
         Some(Slot::Open { .. })
     ));
-    rig.connect(2, MODBUS_PORT, 40_002);
+    rig.connect(CLIENTS, MODBUS_PORT, 40_010);
     rig.run(20, 1);
-    assert!(!rig.client(2).is_open(), "{}", rig.client(2).state());
+    assert!(
+        !rig.client(CLIENTS).is_open(),
+        "{}",
+        rig.client(CLIENTS).state()
+    );
     // The vanished client's socket is let go after the silence limit,
     // well before the idle time.
     let freed = rig.run_until(silence, 1, |r| {
@@ -161,15 +207,17 @@ fn a_client_that_vanishes_is_reset_after_the_silence_limit() {
     );
     let stats = rig.net.modbus().map(ModbusClients::stats).unwrap();
     assert_eq!(stats.idle_closed, 0);
-    assert_eq!(stats.connections, 2);
+    assert_eq!(stats.connections, 4);
     // Client 1 had every answer; a new client takes the freed socket.
     rig.run(50, 1);
     let want: Vec<u8> = (3..=asked).flat_map(pnow_12000).collect();
     assert!(asked >= 5);
     assert_eq!(rig.received(1), want);
-    rig.connect(2, MODBUS_PORT, 40_003);
+    rig.client(CLIENTS).abort();
+    rig.run(10, 1);
+    rig.connect(CLIENTS, MODBUS_PORT, 40_011);
     rig.run(20, 1);
-    rig.client(2).send_slice(&read_pnow(99)).unwrap();
+    rig.client(CLIENTS).send_slice(&read_pnow(99)).unwrap();
     rig.run(50, 1);
-    assert_eq!(rig.received(2), pnow_12000(99));
+    assert_eq!(rig.received(CLIENTS), pnow_12000(99));
 }
