@@ -29,7 +29,7 @@ cargo +1.87 build -q -p iai-protocol-b --all-features
 cargo +1.87 build -q -p iai-protocol-b --target thumbv7em-none-eabihf
 echo "ok: core builds with Rust 1.87"
 
-step "firmware: the bridge library (host), three boards, the Ethernet board, defmt feature, the icount bench, clippy -D warnings"
+step "firmware: the bridge library (host), four boards, the Ethernet board, defmt feature, the icount bench, clippy -D warnings"
 cargo clippy -q -p firmware-example --no-default-features --lib --tests -- -D warnings
 cargo clippy -q -p firmware-example --no-default-features --features ethernet --lib --tests -- -D warnings
 cargo clippy -q -p firmware-example --target thumbv7m-none-eabi \

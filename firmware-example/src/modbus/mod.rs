@@ -387,7 +387,7 @@ pub fn run<U: Port, D: Port, M: Port<Error = U::Error>>(
 /// (`speaks`, [`crate::config::Config::upstream`]): protocol B through the
 /// bridge alone ([`crate::bridge::run`]), or Modbus RTU through the
 /// gateway ([`run`]), the bridge then keeping the controller line with no
-/// protocol-B host on it ([`NoPort`](crate::bridge::NoPort)). The board
+/// protocol-B host on it ([`NoPort`]). The board
 /// sets the port up for what it speaks: the Modbus line without flow
 /// control, at [`ModbusConfig::baud`], each byte stamped with `now_us`.
 #[allow(clippy::too_many_arguments)]
