@@ -29,10 +29,11 @@ the panic comes from. A site fails the audit when that function is this
 project's, when it is in any other crate than smoltcp, or when it is a
 smoltcp function not in REVIEWED. A call the compiler kept without a line
 of its own is judged by the code that reaches it (the branches to it and
-the instruction before it); tail merging off, there are few.
+the instruction before it); tail merging off, they are fewer.
 
-Prints the sites per function, then `panic-audit: N sites, all in
-reviewed smoltcp functions (M); none in this project's code` or each
+Prints the sites per function, then `panic-audit: N sites (U without a
+line of their own, ...), all in reviewed smoltcp functions (M); none in
+this project's code` or each
 failing site with its frames, and exits 1 on a failure. Needs
 arm-none-eabi-objdump, -nm and -addr2line (binutils-arm-none-eabi).
 """
@@ -157,6 +158,12 @@ def owner(frames):
     return None
 
 
+def merged(frames):
+    """Whether a call has no line of its own (a block the compiler shares
+    between several panics)."""
+    return not frames or frames[0][1].endswith(":?") or frames[0][1].startswith("??")
+
+
 def attribute(lines, func, site, seen=None):
     """The owners of a panic call at `site` in `func`: its own frames, or,
     where the compiler merged several panics into one call and kept no
@@ -167,8 +174,7 @@ def attribute(lines, func, site, seen=None):
         return []
     seen.add(site)
     frames = lines.chain(site)
-    merged = not frames or frames[0][1].endswith(":?") or frames[0][1].startswith("??")
-    found = None if merged else owner(frames)
+    found = None if merged(frames) else owner(frames)
     if found is not None:
         return [found]
     _, calls, previous = func
@@ -198,6 +204,7 @@ def main():
     by_line = collections.Counter()
     failures = []
     sites = 0
+    unlined = 0
     for addr, func in funcs.items():
         if addr in entries:
             continue
@@ -205,6 +212,7 @@ def main():
             if target not in entries:
                 continue
             sites += 1
+            unlined += merged(lines.chain(site))
             text = "\n".join(f"      {f} {loc}" for f, loc in lines.chain(site))
             for kind, where in set(attribute(lines, func, site)):
                 if kind == "smoltcp" and where in reviewed:
@@ -220,8 +228,9 @@ def main():
         print("\n".join(failures))
         sys.exit(1)
     print(
-        f"panic-audit: {sites} sites, all in reviewed smoltcp functions ({len(by_line)}); "
-        "none in this project's code"
+        f"panic-audit: {sites} sites ({unlined} without a line of their own, judged by the code "
+        f"that reaches them), all in reviewed smoltcp functions ({len(by_line)}); none in this "
+        "project's code"
     )
 
 

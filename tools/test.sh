@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # All the checks, as CI runs them: set-up, formatting, lints, no_std builds
-# for three Cortex-M targets, the bridge firmware for its three boards, docs,
+# for three Cortex-M targets, the bridge firmware for its boards, docs,
 # doctests, size figures (which build the firmware the QEMU tests run), then
 # every test (unit, recorded frames, host model, end-to-end, QEMU).
 # Ends with the test runner's summary.
