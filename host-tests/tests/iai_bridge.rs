@@ -18,19 +18,11 @@
 
 mod gateway_proc;
 
-use std::path::{Path, PathBuf};
-use std::process::Output;
+use std::path::PathBuf;
 
-use gateway_proc::{err, iai_binary, text, Gateway};
+use gateway_proc::{csv_of, err, text, Gateway, SERIAL};
+use host_tests::qemu::iai_binary;
 use host_tests::qemu::{build_firmware, Board};
-use host_tests::table::table;
-
-/// `iai ARGS --tcp ADDR` against `gw`, which must succeed.
-fn iai_tcp(gw: &Gateway, iai: &Path, args: &[&str]) -> Output {
-    let mut all = args.to_vec();
-    all.extend(["--tcp", &gw.addr]);
-    gw.run(iai, &all, Path::new("."))
-}
 
 /// The value of `name = N` in `iai bridge status`'s listing.
 fn counter(listing: &str, name: &str) -> u64 {
@@ -43,23 +35,14 @@ fn counter(listing: &str, name: &str) -> u64 {
         .unwrap_or_else(|| panic!("no {name} in:\n{listing}"))
 }
 
-fn csv_of(records: u32, seed: u32) -> Vec<u8> {
-    let mut csv = Vec::new();
-    iai_cli::csvtable::write_header(&mut csv, 8).unwrap();
-    for r in table(records, 8, seed) {
-        iai_cli::csvtable::write_row(&mut csv, &r, 8).unwrap();
-    }
-    csv
-}
-
 #[test]
 fn iai_sends_whole_tables_through_the_bridge_and_reads_its_status() {
     let elf = build_firmware(Board::Lm3s6965).expect("build lm3s6965 firmware");
     let iai = iai_binary().expect("the iai binary");
-    let gw = Gateway::start(&elf, &[]);
+    let mut gw = Gateway::start(&elf, &[] as &[&str], &SERIAL);
 
     // 1. The status, decoded.
-    let status = text(&iai_tcp(&gw, &iai, &["bridge", "status"]));
+    let status = text(&gw.iai(&iai, &["bridge", "status"]));
     assert!(status.starts_with("bridge at station BB:"), "{status}");
     assert!(
         status.contains("controller_station = 153 -> 99"),
@@ -70,7 +53,7 @@ fn iai_sends_whole_tables_through_the_bridge_and_reads_its_status() {
     let (ok_before, records_before) = (counter(&status, "streams_ok"), counter(&status, "records"));
 
     // 2. probe: the bridge, and station 99 behind it.
-    let probe = text(&iai_tcp(&gw, &iai, &["probe", "--timeout", "1000"]));
+    let probe = text(&gw.iai(&iai, &["probe", "--timeout", "1000"]));
     assert!(
         probe.contains("bridge BB: a bridge answers its status query: controller station 99"),
         "{probe}"
@@ -83,7 +66,7 @@ fn iai_sends_whole_tables_through_the_bridge_and_reads_its_status() {
     let path = dir.join(format!("bridge-{}.csv", std::process::id()));
     std::fs::write(&path, &csv).unwrap();
     let file = path.to_str().expect("UTF-8 path");
-    let out = iai_tcp(&gw, &iai, &["table", "write", file, "--bridge"]);
+    let out = gw.iai(&iai, &["table", "write", file, "--bridge"]);
     assert!(
         text(&out).starts_with(
             "verified by the bridge: the controller holds all 600 records (1 26DH message(s) of "
@@ -97,13 +80,9 @@ fn iai_sends_whole_tables_through_the_bridge_and_reads_its_status() {
         "{}",
         err(&out)
     );
-    let back = iai_tcp(
-        &gw,
-        &iai,
-        &["table", "read", "--first", "1", "--count", "600"],
-    );
+    let back = gw.iai(&iai, &["table", "read", "--first", "1", "--count", "600"]);
     assert!(back.stdout == csv, "read back:\n{}", text(&back));
-    let status = text(&iai_tcp(&gw, &iai, &["bridge", "status"]));
+    let status = text(&gw.iai(&iai, &["bridge", "status"]));
     assert!(counter(&status, "streams_ok") > ok_before, "{status}");
     assert!(
         counter(&status, "records") >= records_before + 600,
@@ -115,8 +94,7 @@ fn iai_sends_whole_tables_through_the_bridge_and_reads_its_status() {
     let csv = csv_of(100, 92);
     let small = dir.join(format!("bridge-small-{}.csv", std::process::id()));
     std::fs::write(&small, &csv).unwrap();
-    let out = iai_tcp(
-        &gw,
+    let out = gw.iai(
         &iai,
         &[
             "table",
@@ -134,7 +112,7 @@ fn iai_sends_whole_tables_through_the_bridge_and_reads_its_status() {
         text(&out),
         err(&out)
     );
-    let back = iai_tcp(&gw, &iai, &["table", "read", "--all"]);
+    let back = gw.iai(&iai, &["table", "read", "--all"]);
     assert!(back.stdout == csv, "read back:\n{}", text(&back));
     let _ = std::fs::remove_file(&path);
     let _ = std::fs::remove_file(&small);

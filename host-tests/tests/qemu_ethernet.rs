@@ -57,12 +57,15 @@
 //!
 //! Needs `qemu-system-arm` and the `thumbv7m-none-eabi` rustup target.
 
-use std::io::{BufRead, BufReader, Read, Write};
+mod gateway_proc;
+
+use std::io::{Read, Write};
 use std::net::{Shutdown, TcpStream};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
-use std::sync::mpsc::{channel, Receiver};
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
+
+use gateway_proc::{csv_of, Gateway, ETHERNET};
 
 use host_tests::bridge::{check_table, command_26dh, reply_26dh, status_query_frame, Throughput};
 use host_tests::gateway::{tcp_status_query, EthernetGateway, Options};
@@ -186,128 +189,11 @@ fn assert_refused(conn: TcpStream, bridge: Station) {
     assert_eq!(frames.next(Duration::from_secs(5)), None, "closed after it");
 }
 
-/// The gateway binary with `--ethernet`; SIGTERM (then SIGKILL) when
-/// dropped.
-struct GatewayProcess {
-    child: Child,
-    addr: String,
-    log: Receiver<String>,
-}
-
-impl GatewayProcess {
-    fn start(elf: &Path) -> GatewayProcess {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_gateway"))
-            .arg("--ethernet")
-            .arg("--elf")
-            .arg(elf)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("start the gateway");
-        let lines = |pipe: Box<dyn Read + Send>| {
-            let (tx, rx) = channel();
-            std::thread::spawn(move || {
-                for l in BufReader::new(pipe).lines() {
-                    let Ok(l) = l else { break };
-                    if tx.send(l).is_err() {
-                        break;
-                    }
-                }
-            });
-            rx
-        };
-        let stdout = lines(Box::new(child.stdout.take().expect("stdout")));
-        let log = lines(Box::new(child.stderr.take().expect("stderr")));
-        let first = stdout
-            .recv_timeout(Duration::from_secs(90))
-            .unwrap_or_else(|_| {
-                panic!(
-                    "no ready line: {}",
-                    log.try_iter().collect::<Vec<_>>().join("\n")
-                )
-            });
-        let addr = first
-            .strip_prefix("protocol-b-tcp ")
-            .filter(|a| a.starts_with("127.0.0.1:"))
-            .unwrap_or_else(|| panic!("first line {first:?}"))
-            .to_owned();
-        // Then Modbus TCP's forwarded address, and nothing else.
-        let second = stdout
-            .recv_timeout(Duration::from_secs(5))
-            .unwrap_or_else(|_| panic!("no modbus-tcp line after {first:?}"));
-        assert!(
-            second
-                .strip_prefix("modbus-tcp 127.0.0.1:")
-                .is_some_and(|p| p.parse::<u16>().is_ok()),
-            "second line {second:?}"
-        );
-        assert!(stdout.recv_timeout(Duration::from_millis(200)).is_err());
-        GatewayProcess { child, addr, log }
-    }
-
-    fn iai(&self, iai: &Path, args: &[&str]) -> Output {
-        let out = Command::new(iai)
-            .args(args)
-            .args(["--tcp", &self.addr])
-            .stdin(Stdio::null())
-            .output()
-            .expect("run iai");
-        assert!(
-            out.status.success(),
-            "iai {args:?}: {}\n{}\n{}\ngateway:\n{}",
-            out.status,
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr),
-            self.log.try_iter().collect::<Vec<_>>().join("\n")
-        );
-        out
-    }
-
-    fn stop(&mut self) -> std::process::ExitStatus {
-        let _ = Command::new("kill")
-            .arg("-TERM")
-            .arg(self.child.id().to_string())
-            .status();
-        let end = Instant::now() + Duration::from_secs(10);
-        loop {
-            if let Some(status) = self.child.try_wait().expect("wait") {
-                return status;
-            }
-            assert!(Instant::now() < end, "the gateway did not stop");
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-}
-
-impl Drop for GatewayProcess {
-    fn drop(&mut self) {
-        if let Ok(None) = self.child.try_wait() {
-            let _ = Command::new("kill")
-                .arg("-TERM")
-                .arg(self.child.id().to_string())
-                .status();
-            std::thread::sleep(Duration::from_secs(2));
-            let _ = self.child.kill();
-        }
-        let _ = self.child.wait();
-    }
-}
-
-fn csv_of(records: u32, seed: u32) -> Vec<u8> {
-    let mut csv = Vec::new();
-    iai_cli::csvtable::write_header(&mut csv, 8).unwrap();
-    for r in table(records, 8, seed) {
-        iai_cli::csvtable::write_row(&mut csv, &r, 8).unwrap();
-    }
-    csv
-}
-
 #[test]
 fn iai_over_tcp() {
     let elf = build_ethernet_firmware().expect("build lm3s6965-eth");
     let iai = host_tests::qemu::iai_binary().expect("the iai binary");
-    let mut gw = GatewayProcess::start(&elf);
+    let mut gw = Gateway::start(&elf, &["--ethernet"], &ETHERNET);
     let (bridge, _) = stations();
     let addr: std::net::SocketAddr = gw.addr.parse().unwrap();
 
@@ -363,7 +249,7 @@ fn iai_over_tcp() {
     }
 
     let status = gw.stop();
-    let log = gw.log.try_iter().collect::<Vec<_>>().join("\n");
+    let log = gw.log();
     assert!(status.success(), "{status}\n{log}");
     assert!(log.contains("stopped;"), "{log}");
 }

@@ -24,17 +24,19 @@
 //! and socat from Debian packages it installs. A client that is absent is
 //! skipped with its reason printed; the test fails if both are.
 
+mod gateway_proc;
 mod plc_gateway;
 
 use std::path::PathBuf;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
+use gateway_proc::{Gateway, SERIAL};
 use host_tests::qemu::{build_firmware, workspace_root, Board};
 use host_tests::table::table;
 use iai_protocol_b::position::PositionRecord;
 use plc_gateway::mbpoll::{plc_sequence, Link};
-use plc_gateway::{on_path, pymodbus_python, run_within, Gateway};
+use plc_gateway::{on_path, pymodbus_python, run_within};
 
 /// Positions each PLC writes and reads back.
 const POSITIONS: u32 = 500;
@@ -62,7 +64,7 @@ fn pymodbus_and_mbpoll_run_a_plcs_sequence_through_the_gateway() {
 
     let elf = build_firmware(Board::Lm3s6965).expect("build lm3s6965 firmware");
     let iai = host_tests::qemu::iai_binary().expect("the iai binary");
-    let mut gw = Gateway::start(&elf, false);
+    let mut gw = Gateway::start(&elf, &[] as &[&str], &SERIAL);
     let tmp = PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
     let records: Vec<PositionRecord> = table(POSITIONS, 8, 2026).collect();
 

@@ -33,6 +33,7 @@
 //! from the Debian package it installs. A client that is absent is
 //! skipped with its reason printed; the test fails if both are.
 
+mod gateway_proc;
 mod plc_gateway;
 
 use std::io::{Read, Write};
@@ -40,10 +41,11 @@ use std::net::TcpStream;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
+use gateway_proc::{Gateway, ETHERNET};
 use host_tests::qemu::{build_ethernet_firmware, workspace_root};
 use host_tests::table::table;
 use iai_protocol_b::position::PositionRecord;
-use plc_gateway::{on_path, plc_seconds, pymodbus_python, run_within, write_table_file, Gateway};
+use plc_gateway::{on_path, plc_seconds, pymodbus_python, run_within, write_table_file};
 
 /// Positions pymodbus writes and reads back through the table window.
 const POSITIONS: u32 = 500;
@@ -223,7 +225,7 @@ fn pymodbus_and_mbpoll_over_modbus_tcp_on_the_ethernet_build() {
 
     let elf = build_ethernet_firmware().expect("build the Ethernet firmware");
     let iai = host_tests::qemu::iai_binary().expect("the iai binary");
-    let mut gw = Gateway::start(&elf, true);
+    let mut gw = Gateway::start(&elf, &["--ethernet"], &ETHERNET);
     let booted = t0.elapsed();
 
     let mut pnow = None;

@@ -21,7 +21,8 @@ mod gateway_proc;
 use std::path::Path;
 use std::process::Output;
 
-use gateway_proc::{err, iai_binary, text, Gateway};
+use gateway_proc::{err, text, Gateway, SERIAL};
+use host_tests::qemu::iai_binary;
 use host_tests::qemu::{build_firmware, workspace_root, Board};
 
 /// The lines of the fenced block of kind `lang` that follows the line
@@ -126,7 +127,7 @@ fn the_readme_try_it_commands_work_as_written() {
 
     let elf = build_firmware(Board::Lm3s6965).expect("build lm3s6965 firmware");
     let iai = iai_binary().expect("the iai binary");
-    let gw = Gateway::start(&elf, &args);
+    let mut gw = Gateway::start(&elf, &args, &SERIAL);
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("try-it-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let csv = table.join("\n") + "\n";
@@ -144,7 +145,8 @@ fn the_readme_try_it_commands_work_as_written() {
     }
 
     // What the writes left: the README's table, read back whole.
-    let back = gw.run(&iai, &["table", "read", "--all", "--tcp", &gw.addr], &dir);
+    let addr = gw.addr.clone();
+    let back = gw.run(&iai, &["table", "read", "--all", "--tcp", &addr], &dir);
     assert_eq!(text(&back), csv, "the table read back");
     let _ = std::fs::remove_dir_all(&dir);
 }

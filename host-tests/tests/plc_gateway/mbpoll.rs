@@ -31,7 +31,8 @@ use std::time::{Duration, Instant};
 
 use iai_protocol_b::position::PositionRecord;
 
-use super::{record_words, run_within, Gateway};
+use super::{record_words, run_within};
+use crate::gateway_proc::Gateway;
 
 /// Records in the table window.
 pub const WINDOW: usize = 5;
