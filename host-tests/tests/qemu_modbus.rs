@@ -28,15 +28,13 @@ mod gateway_proc;
 mod plc_gateway;
 
 use std::path::PathBuf;
-use std::process::Command;
-use std::time::{Duration, Instant};
 
 use gateway_proc::{Gateway, SERIAL};
-use host_tests::qemu::{build_firmware, workspace_root, Board};
+use host_tests::qemu::{build_firmware, Board};
 use host_tests::table::table;
 use iai_protocol_b::position::PositionRecord;
 use plc_gateway::mbpoll::{plc_sequence, Link};
-use plc_gateway::{on_path, pymodbus_python, run_within};
+use plc_gateway::{on_path, pymodbus_python, pymodbus_sequence};
 
 /// Positions each PLC writes and reads back.
 const POSITIONS: u32 = 500;
@@ -69,37 +67,7 @@ fn pymodbus_and_mbpoll_run_a_plcs_sequence_through_the_gateway() {
     let records: Vec<PositionRecord> = table(POSITIONS, 8, 2026).collect();
 
     if let Ok(py) = &python {
-        let file = tmp.join(format!("modbus-table-{}.txt", std::process::id()));
-        plc_gateway::write_table_file(&file, &records);
-        let t0 = Instant::now();
-        let out = run_within(
-            Command::new(py)
-                .arg(workspace_root().join("host-tests/plc/pymodbus_plc.py"))
-                .args(["127.0.0.1", gw.modbus_port()])
-                .arg(&file),
-            Duration::from_secs(150),
-        );
-        let _ = std::fs::remove_file(&file);
-        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-        println!("pymodbus ({:.1} s):\n{stdout}", t0.elapsed().as_secs_f64());
-        assert!(
-            out.status.success(),
-            "pymodbus: {}\n{stdout}\n{}\ngateway:\n{}",
-            out.status,
-            String::from_utf8_lossy(&out.stderr),
-            gw.log()
-        );
-        assert!(stdout.lines().any(|l| l == "pnow 25500"), "{stdout}");
-        assert!(
-            stdout
-                .lines()
-                .any(|l| l == format!("table {POSITIONS} written, read back equal")),
-            "{stdout}"
-        );
-        assert_eq!(gw.axis1_position(&iai), 25_500, "the simulator's 212H");
-
-        // The controller holds what the PLC wrote: iai reads it back.
-        gw.assert_controller_holds(&iai, &records);
+        pymodbus_sequence(&mut gw, py, &iai, &records, false);
     }
 
     if mbpoll.is_ok() {

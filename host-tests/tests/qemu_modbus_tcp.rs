@@ -38,14 +38,13 @@ mod plc_gateway;
 
 use std::io::{Read, Write};
 use std::net::TcpStream;
-use std::process::Command;
 use std::time::{Duration, Instant};
 
 use gateway_proc::{Gateway, ETHERNET};
-use host_tests::qemu::{build_ethernet_firmware, workspace_root};
+use host_tests::qemu::build_ethernet_firmware;
 use host_tests::table::table;
 use iai_protocol_b::position::PositionRecord;
-use plc_gateway::{on_path, plc_seconds, pymodbus_python, run_within, write_table_file};
+use plc_gateway::{on_path, pymodbus_python, pymodbus_sequence, PYMODBUS_MOVE_TO};
 
 /// Positions pymodbus writes and reads back through the table window.
 const POSITIONS: u32 = 500;
@@ -231,47 +230,8 @@ fn pymodbus_and_mbpoll_over_modbus_tcp_on_the_ethernet_build() {
     let mut pnow = None;
     if let Ok(py) = &python {
         let records: Vec<PositionRecord> = table(POSITIONS, 8, 2026).collect();
-        let file = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
-            .join(format!("modbus-tcp-table-{}.txt", std::process::id()));
-        write_table_file(&file, &records);
-        let t = Instant::now();
-        let out = run_within(
-            Command::new(py)
-                .arg(workspace_root().join("host-tests/plc/pymodbus_plc.py"))
-                .args(["--tcp", "127.0.0.1", gw.modbus_port()])
-                .arg(&file),
-            Duration::from_secs(180),
-        );
-        let _ = std::fs::remove_file(&file);
-        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-        println!("pymodbus ({:.1} s):\n{stdout}", t.elapsed().as_secs_f64());
-        assert!(
-            out.status.success(),
-            "pymodbus: {}\n{stdout}\n{}\ngateway:\n{}",
-            out.status,
-            String::from_utf8_lossy(&out.stderr),
-            gw.log()
-        );
-        assert!(stdout.lines().any(|l| l == "pnow 25500"), "{stdout}");
-        assert!(
-            stdout
-                .lines()
-                .any(|l| l == format!("table {POSITIONS} written, read back equal")),
-            "{stdout}"
-        );
-        assert_eq!(gw.axis1_position(&iai), 25_500, "the simulator's 212H");
-        pnow = Some(25_500);
-
-        // The controller holds exactly what the PLC wrote: the real iai
-        // tool reads it back on the protocol-B port.
-        let iai_read = gw.assert_controller_holds(&iai, &records);
-        let written = plc_seconds(&stdout, "table write").expect("the write's time");
-        let read_back = plc_seconds(&stdout, "table read back").expect("the read-back's time");
-        println!(
-            "Modbus TCP table window: {POSITIONS} positions x 8 axes written in {written:.1} s, \
-             read back equal in {read_back:.1} s (pymodbus); iai table read on the \
-             protocol-B port: the same {POSITIONS}, {iai_read:.1} s"
-        );
+        pymodbus_sequence(&mut gw, py, &iai, &records, true);
+        pnow = Some(PYMODBUS_MOVE_TO);
     }
 
     if mbpoll.is_ok() {

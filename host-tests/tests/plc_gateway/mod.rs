@@ -133,6 +133,77 @@ pub fn run_within(cmd: &mut Command, limit: Duration) -> Output {
     }
 }
 
+/// Where `pymodbus_plc.py`'s numeric move goes, 0.001 mm.
+pub const PYMODBUS_MOVE_TO: i64 = 25_500;
+
+/// pymodbus's PLC sequence (`host-tests/plc/pymodbus_plc.py`, RTU framing
+/// over TCP or with `tcp` Modbus TCP) against `gw`: servo on, home, HEND,
+/// the numeric move, PEND, PNOW; `records` written through the table
+/// window and read back equal. Then, with the real `iai` on the
+/// protocol-B port: the simulator's 212H at PNOW, and the controller
+/// holding exactly `records`. Prints the times.
+pub fn pymodbus_sequence(
+    gw: &mut Gateway,
+    python: &Path,
+    iai: &Path,
+    records: &[PositionRecord],
+    tcp: bool,
+) {
+    let framing = if tcp { "Modbus TCP" } else { "RTU" };
+    let file = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!(
+        "pymodbus-{}-{}.txt",
+        if tcp { "tcp" } else { "rtu" },
+        std::process::id()
+    ));
+    write_table_file(&file, records);
+    let t = Instant::now();
+    let out = run_within(
+        Command::new(python)
+            .arg(workspace_root().join("host-tests/plc/pymodbus_plc.py"))
+            .args(tcp.then_some("--tcp"))
+            .args(["127.0.0.1", gw.modbus_port()])
+            .arg(&file),
+        Duration::from_secs(180),
+    );
+    let _ = std::fs::remove_file(&file);
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    println!(
+        "pymodbus, {framing} ({:.1} s):\n{stdout}",
+        t.elapsed().as_secs_f64()
+    );
+    assert!(
+        out.status.success(),
+        "pymodbus: {}\n{stdout}\n{}\ngateway:\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr),
+        gw.log()
+    );
+    let pnow = format!("pnow {PYMODBUS_MOVE_TO}");
+    assert!(stdout.lines().any(|l| l == pnow), "{stdout}");
+    let n = records.len();
+    assert!(
+        stdout
+            .lines()
+            .any(|l| l == format!("table {n} written, read back equal")),
+        "{stdout}"
+    );
+    assert_eq!(
+        gw.axis1_position(iai),
+        PYMODBUS_MOVE_TO,
+        "the simulator's 212H"
+    );
+    // The controller holds exactly what the PLC wrote: the real iai tool
+    // reads it back on the protocol-B port.
+    let iai_read = gw.assert_controller_holds(iai, records);
+    let written = plc_seconds(&stdout, "table write").expect("the write's time");
+    let read_back = plc_seconds(&stdout, "table read back").expect("the read-back's time");
+    println!(
+        "{framing} table window: {n} positions x 8 axes written in {written:.1} s, read back \
+         equal in {read_back:.1} s (pymodbus); iai table read --all on the protocol-B port: \
+         the same {n}, {iai_read:.1} s"
+    );
+}
+
 /// The PLC tests' questions to the gateway, asked with the real `iai`
 /// tool on its protocol-B side.
 impl Gateway {
