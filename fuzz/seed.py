@@ -59,7 +59,7 @@ def write(target, name, data):
 # --- Generated frames (position streams and their replies) -----------------
 
 # (id, header, reserved, start_width, count_width, number_width, extended),
-# as PositionStream::ALL in core/src/stream.rs.
+# as PositionStream::ALL in core/src/position/kinds.rs.
 STREAMS = [
     (0x26D, "!", False, 0, 4, 4, False),
     (0x245, "!", False, 0, 3, 3, False),

@@ -25,7 +25,7 @@ use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
 use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::frame::{emit_frame, Frame, Header, Station};
 use iai_protocol_b::position::{PositionRecord, PositionStream};
-use iai_protocol_b::stream::PositionStreamEncoder;
+use iai_protocol_b::table::PositionStreamEncoder;
 
 use crate::codes;
 use crate::link::Link;

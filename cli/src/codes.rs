@@ -6,7 +6,7 @@
 
 use firmware_example::codes as bridge;
 
-use crate::sim;
+use iai_simulator as sim;
 
 /// The simulator's codes and what each means (see `cli/src/sim`). They
 /// are its own: a real controller may use the same numbers for something

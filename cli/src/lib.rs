@@ -4,8 +4,8 @@
 //!
 //! The protocol facts (message layouts, limits, engines) all come from the
 //! core crate `iai-protocol-b`; this crate only drives them. The
-//! controller simulator is the crate `iai-simulator`, here as [`sim`] and,
-//! with the `iai simulate` frame log, [`simulate`].
+//! controller simulator is the crate `iai-simulator`; [`simulate`] adds
+//! the `iai simulate` frame log.
 
 pub mod bridge;
 pub mod codes;
@@ -21,6 +21,3 @@ pub mod send;
 pub mod simulate;
 pub mod table;
 pub mod text;
-
-/// The controller simulator (the crate `iai-simulator`).
-pub use iai_simulator as sim;

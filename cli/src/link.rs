@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 
 use iai_protocol_b::engine::Engine;
 use iai_protocol_b::hosted::{StdLink, WaitRead};
-use iai_protocol_b::{Failure, Line, LineConfig};
+use iai_protocol_b::{error::Failure, line::Line, line::LineConfig};
 
 /// XON (resume), as the bridge and serial drivers send it.
 pub const XON: u8 = 0x11;

@@ -400,8 +400,8 @@ pub(crate) struct SimArgs {
     #[arg(long, default_value_t = 2)]
     reply_delay_ms: u32,
     /// Faults: corrupt=P,swap=P,drop=P,late=P:MS,dup=P:MS,error=P.
-    #[arg(long, value_parser = iai_cli::simulate::parse_faults)]
-    faults: Option<iai_cli::sim::Faults>,
+    #[arg(long, value_parser = iai_simulator::server::parse_faults)]
+    faults: Option<iai_simulator::Faults>,
     /// Seed of the fault draws.
     #[arg(long, default_value_t = 1)]
     seed: u64,

@@ -6,7 +6,7 @@
 
 use std::time::Duration;
 
-use iai_protocol_b::{Client, Failure};
+use iai_protocol_b::{client::Client, error::Failure};
 
 use crate::link::Link;
 

@@ -1,9 +1,8 @@
-//! `iai simulate`: the controller simulator (crate `iai-simulator`,
-//! module [`iai_simulator::server`], all of which is here too) on a TCP
-//! port, a pseudo-terminal or a dialled port, with its frames logged as
+//! `iai simulate`'s frame log: the frames of the controller simulator
+//! (crate `iai-simulator`, served by [`iai_simulator::server`]) logged as
 //! `iai inspect` shows them ([`inspector_log`]).
 
-pub use iai_simulator::server::*;
+use iai_simulator::server::{Direction, FrameLog, FrameLogMaker};
 
 use std::sync::Arc;
 

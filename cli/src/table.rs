@@ -25,8 +25,8 @@ use iai_protocol_b::profile::Profile;
 use iai_protocol_b::readback::{ReadBackStats, ReplyRecords};
 use iai_protocol_b::transfer::{Guarantee, TransferStats};
 use iai_protocol_b::{
-    Client, Failure, LineConfig, ReadBack, ReadBackConfig, Station, Transfer, TransferConfig,
-    Verify,
+    client::Client, error::Failure, frame::Station, line::LineConfig, readback::ReadBack,
+    readback::ReadBackConfig, transfer::Transfer, transfer::TransferConfig, transfer::Verify,
 };
 
 use crate::link::Link;

@@ -11,7 +11,7 @@ use std::io::Write;
 
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionStream;
-use iai_protocol_b::stream::PositionStreamEncoder;
+use iai_protocol_b::table::PositionStreamEncoder;
 
 /// The value of `"key":` in a JSON line (strings without quotes).
 fn get<'a>(line: &'a str, key: &str) -> Option<&'a str> {

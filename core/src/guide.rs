@@ -102,7 +102,7 @@
 //! plays the controller:
 //!
 //! ```
-//! use iai_protocol_b::{Client, Failure, Line, LineConfig, Station};
+//! use iai_protocol_b::{client::Client, error::Failure, line::Line, line::LineConfig, frame::Station};
 //! use iai_protocol_b::message::{AbsoluteMove, AxisStatusQuery};
 //! # let mut uart = iai_protocol_b::io::Loopback::default();
 //! # let mut ms = 0u32;
@@ -156,7 +156,7 @@
 //!   stopped (a failed transfer can be resumed).
 //!
 //! The controller of this example is a map in memory: it reads each 26DH
-//! record by record with the [`PositionStreamDecoder`](crate::stream::PositionStreamDecoder)
+//! record by record with the [`PositionStreamDecoder`](crate::table::PositionStreamDecoder)
 //! and stores the records; it answers 21FH from the map and echoes 200H.
 //!
 //! ```
@@ -166,9 +166,9 @@
 //! use iai_protocol_b::engine::{feed, Step};
 //! use iai_protocol_b::message::*;
 //! use iai_protocol_b::position::PositionRecord;
-//! use iai_protocol_b::stream::{PositionStreamDecoder, StreamEvent};
+//! use iai_protocol_b::table::{PositionStreamDecoder, StreamEvent};
 //! use iai_protocol_b::transfer::Guarantee;
-//! use iai_protocol_b::{Line, LineConfig, Profile, Station, Transfer, TransferConfig};
+//! use iai_protocol_b::{line::Line, line::LineConfig, profile::Profile, frame::Station, transfer::Transfer, transfer::TransferConfig};
 //!
 //! let station = Station(0x99);
 //! // 500 records of 3 axes: more than one 2,051-byte frame holds.
@@ -249,5 +249,5 @@
 //! (`embedded-io`), [`Transfer::poll_nb`](crate::transfer::Transfer::poll_nb)
 //! (a non-blocking main loop) and, with the `async` feature, the async
 //! flavour run the same loop. To write the table by hand instead,
-//! [`PositionStreamEncoder`](crate::stream::PositionStreamEncoder) produces
+//! [`PositionStreamEncoder`](crate::table::PositionStreamEncoder) produces
 //! one frame of any size chunk by chunk.

@@ -12,7 +12,7 @@
 //! use std::net::TcpStream;
 //! use iai_protocol_b::hosted::StdLink;
 //! use iai_protocol_b::message::AxisStatusQuery;
-//! use iai_protocol_b::{Client, LineConfig, Station};
+//! use iai_protocol_b::{client::Client, line::LineConfig, frame::Station};
 //!
 //! let stream = TcpStream::connect("127.0.0.1:5021")?;
 //! let mut link = StdLink::new(stream, LineConfig::new(Station(0x99)));

@@ -17,7 +17,7 @@
 //! - [`decoder`]: a push decoder that finds frames in a byte stream;
 //! - [`message`], [`position`]: typed messages declared field by field,
 //!   and the position-table records they share;
-//! - [`stream`]: position tables of any size, record by record;
+//! - [`table`]: position tables of any size, record by record;
 //! - [`line`](mod@line): one line to a controller, what is on it and what may still
 //!   arrive; [`engine`]: the shape of the engines and their driver loops;
 //! - [`client`], [`transfer`], [`readback`]: any command and its reply; a
@@ -75,19 +75,9 @@ pub mod message;
 pub mod position;
 pub mod profile;
 pub mod readback;
-pub mod stream;
+pub mod table;
 pub mod transfer;
 mod window;
 
 #[cfg(test)]
 mod testing;
-
-pub use client::Client;
-pub use decoder::FrameDecoder;
-pub use engine::Step;
-pub use error::{Error, Failure, Result};
-pub use frame::{Frame, Station};
-pub use line::{Line, LineConfig};
-pub use profile::Profile;
-pub use readback::{ReadBack, ReadBackConfig};
-pub use transfer::{Transfer, TransferConfig, Verify};

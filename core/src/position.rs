@@ -16,7 +16,7 @@
 //!
 //! Submodules: `layout` (the record layouts, field at a time), `whole_field`
 //! (the same codec whole fields at a time, for the message layouts, tested
-//! against the first) and `stream` (the message shapes).
+//! against the first) and `kinds` (the position-stream messages and their shapes).
 //!
 //! ```
 //! use iai_protocol_b::position::{PositionRecord, RecordLayout};
@@ -29,12 +29,12 @@
 //! assert_eq!(w.written(), b"000103001E001E0064000186A0FFFF9C64");
 //! ```
 
+mod kinds;
 mod layout;
-mod stream;
 mod whole_field;
 
+pub use kinds::{PositionStream, RESERVED};
 pub use layout::RecordLayout;
-pub use stream::{PositionStream, RESERVED};
 pub(crate) use whole_field::{len_as, put_exact, PER_FIELD};
 
 use crate::axis::{per_axis_values, AxisPattern, PerAxis};

@@ -18,7 +18,7 @@ use crate::message::{
     Repeated, TestCall, TestCallResponse,
 };
 use crate::position::PositionRecord;
-use crate::stream::{PositionStreamDecoder, StreamEvent};
+use crate::table::{PositionStreamDecoder, StreamEvent};
 
 pub(crate) const ST: Station = Station(0x99);
 

@@ -49,7 +49,7 @@ use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::position::PositionStream;
-use iai_protocol_b::stream::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
+use iai_protocol_b::table::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
 
 /// One workload: 26DH frames of `per_frame` records of `axes` axes.
 struct Workload {

@@ -44,7 +44,3 @@ pub mod modbus;
 pub mod net;
 pub mod serial;
 pub mod status;
-
-pub use bridge::{Bridge, Poll};
-pub use config::{Config, Policy};
-pub use serial::Port;

@@ -16,7 +16,8 @@ use cortex_m_semihosting::{debug, hio};
 use firmware_example::bridge::{Bridge, Error};
 use firmware_example::config::{BlockError, Config, Source, BLOCK_LEN};
 use firmware_example::serial::{
-    DownstreamLine, FlowControl, IsrEnd, ThreadEnd, UpstreamLine, DOWNSTREAM_MARKS, UPSTREAM_MARKS,
+    DownstreamRings, FlowControl, IsrEnd, ThreadEnd, UpstreamRings, DOWNSTREAM_MARKS,
+    UPSTREAM_MARKS,
 };
 use firmware_example::status::Stats;
 
@@ -132,9 +133,9 @@ pub struct Statics {
     /// Room for the bridge.
     pub bridge: &'static mut MaybeUninit<Bridge>,
     /// The host line.
-    pub up: &'static mut UpstreamLine,
+    pub up: &'static mut UpstreamRings,
     /// The controller line.
-    pub down: &'static mut DownstreamLine,
+    pub down: &'static mut DownstreamRings,
     /// Pends the host UART's interrupt.
     pub pend_up: &'static dyn Fn(),
     /// Pends the controller UART's interrupt.

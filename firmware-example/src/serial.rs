@@ -1,8 +1,8 @@
 //! Interrupt-driven serial lines: the rings between a UART interrupt
 //! handler and the bridge, and the receive-side flow control.
 //!
-//! A [`Line`] holds two [`heapless::spsc`] queues (receive, transmit) and
-//! the state both sides share. [`Line::split`] hands out:
+//! A [`UartRings`] holds two [`heapless::spsc`] queues (receive, transmit) and
+//! the state both sides share. [`UartRings::split`] hands out:
 //! * an [`IsrEnd`], owned by the UART interrupt handler: it pushes received
 //!   bytes ([`IsrEnd::on_receive`]) and takes bytes to transmit
 //!   ([`IsrEnd::next_tx`]);
@@ -53,26 +53,26 @@ pub const XOFF_REPEAT: usize = 32;
 
 /// The upstream (host) line of every board: a 256-byte receive queue (255
 /// usable) and a 64-byte transmit queue.
-pub type UpstreamLine = Line<256, 64>;
+pub type UpstreamRings = UartRings<256, 64>;
 /// The Modbus RTU line of the gateway (lm3s6965): the loop moves its
 /// bytes to the RTU framer at every pass, so at the line rate the ring
 /// only bridges a pass; its 255 usable bytes hold nearly the longest
 /// request (256), so that a frame delivered faster than its line rate (a
 /// pass that takes long, QEMU's bursts) is not cut; no flow control.
-pub type ModbusLine = Line<256, 64>;
+pub type ModbusRings = UartRings<256, 64>;
 /// The downstream (controller) line of every board.
-pub type DownstreamLine = Line<128, 64>;
+pub type DownstreamRings = UartRings<128, 64>;
 /// Bytes a host may still send after it was told to stop (XOFF arrived, or
 /// RTS dropped): a PC UART finishes its 16-byte transmit FIFO, plus the
 /// byte on the wire. The boards leave this much room above the pause mark.
 pub const HOST_LATENCY: usize = 17;
 
-/// The receive marks of [`UpstreamLine`] for a host with [`HOST_LATENCY`].
+/// The receive marks of [`UpstreamRings`] for a host with [`HOST_LATENCY`].
 pub const UPSTREAM_MARKS: Watermarks =
-    Watermarks::for_latency(UpstreamLine::RX_CAPACITY, HOST_LATENCY);
-/// The receive marks of [`DownstreamLine`] (no flow control downstream:
+    Watermarks::for_latency(UpstreamRings::RX_CAPACITY, HOST_LATENCY);
+/// The receive marks of [`DownstreamRings`] (no flow control downstream:
 /// the controller's replies are short and the bridge always reads them).
-pub const DOWNSTREAM_MARKS: Watermarks = Watermarks::for_latency(DownstreamLine::RX_CAPACITY, 0);
+pub const DOWNSTREAM_MARKS: Watermarks = Watermarks::for_latency(DownstreamRings::RX_CAPACITY, 0);
 
 /// How the receive side of a line throttles its sender.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -167,22 +167,22 @@ impl Shared {
 
 /// The rings and shared state of one serial line: `RX` and `TX` are the
 /// queue sizes (each holds one byte less; use powers of two).
-pub struct Line<const RX: usize, const TX: usize> {
+pub struct UartRings<const RX: usize, const TX: usize> {
     rx: Queue<u8, RX>,
     tx: Queue<u8, TX>,
     shared: Shared,
 }
 
-impl<const RX: usize, const TX: usize> Default for Line<RX, TX> {
+impl<const RX: usize, const TX: usize> Default for UartRings<RX, TX> {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl<const RX: usize, const TX: usize> Line<RX, TX> {
+impl<const RX: usize, const TX: usize> UartRings<RX, TX> {
     /// Empty rings (const: a line can live in a `static`).
     pub const fn new() -> Self {
-        Line {
+        UartRings {
             rx: Queue::new(),
             tx: Queue::new(),
             shared: Shared::new(),
@@ -230,7 +230,7 @@ impl<const RX: usize, const TX: usize> Line<RX, TX> {
     }
 }
 
-/// The interrupt handler's end of a [`Line`].
+/// The interrupt handler's end of a [`UartRings`].
 pub struct IsrEnd<'a> {
     rx: Producer<'a, u8>,
     tx: Consumer<'a, u8>,
@@ -364,7 +364,7 @@ impl IsrEnd<'_> {
     }
 }
 
-/// The bridge's end of a [`Line`]: never blocks.
+/// The bridge's end of a [`UartRings`]: never blocks.
 pub struct ThreadEnd<'a> {
     rx: Consumer<'a, u8>,
     tx: Producer<'a, u8>,
@@ -498,7 +498,7 @@ mod tests {
 
     #[test]
     fn xoff_at_the_mark_xon_after_draining() {
-        let mut line: Line<16, 8> = Line::new();
+        let mut line: UartRings<16, 8> = UartRings::new();
         let marks = Watermarks {
             pause_at: 10,
             resume_at: 3,
@@ -521,7 +521,7 @@ mod tests {
 
     #[test]
     fn full_ring_counts_overruns_and_received_xoff_stops_tx() {
-        let mut line: Line<4, 8> = Line::new();
+        let mut line: UartRings<4, 8> = UartRings::new();
         let marks = Watermarks::for_latency(3, 0);
         let (mut isr, mut thr) = line.split(FlowControl::XonXoff, marks, &|| {});
         for b in *b"abcde" {
@@ -539,7 +539,7 @@ mod tests {
 
     #[test]
     fn rts_follows_the_marks_and_cts_gates_tx() {
-        let mut line: Line<8, 8> = Line::new();
+        let mut line: UartRings<8, 8> = UartRings::new();
         let marks = Watermarks {
             pause_at: 4,
             resume_at: 1,

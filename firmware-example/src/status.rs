@@ -260,7 +260,7 @@ impl Report<'_> {
     }
 
     /// Writes the reply into `buf`; returns its length.
-    pub fn emit(&self, station: Station, buf: &mut [u8]) -> iai_protocol_b::Result<usize> {
+    pub fn emit(&self, station: Station, buf: &mut [u8]) -> iai_protocol_b::error::Result<usize> {
         let values = self.values();
         emit_frame(
             buf,

@@ -21,7 +21,8 @@
 
 use std::convert::Infallible;
 
-use firmware_example::bridge::{Bridge, Poll, Port};
+use firmware_example::bridge::{Bridge, Poll};
+use firmware_example::serial::Port;
 use firmware_example::codes;
 use firmware_example::config::{AllowList, Config, Policy, Source};
 use firmware_example::serial::FlowControl;

@@ -59,7 +59,7 @@ use iai_protocol_b::catalogue::text_span;
 use iai_protocol_b::checksum::{BypassPolicy, Checksum, ChecksumField};
 use iai_protocol_b::decoder::{Event, FrameDecoder, FrameSkipper, Skipped, DEFAULT_CAPACITY};
 use iai_protocol_b::frame::{Frame, Header, ENVELOPE_LEN};
-use iai_protocol_b::Error;
+use iai_protocol_b::error::Error;
 use libfuzzer_sys::fuzz_target;
 
 /// The byte-by-byte decoder, producing one event at a time.

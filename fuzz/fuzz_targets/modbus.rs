@@ -14,7 +14,8 @@
 
 use std::convert::Infallible;
 
-use firmware_example::bridge::{Bridge, NoPort, Port};
+use firmware_example::bridge::{Bridge, NoPort};
+use firmware_example::serial::Port;
 use firmware_example::config::{AllowList, Config, Policy, Source};
 use firmware_example::modbus::{rtu, Gateway};
 use libfuzzer_sys::fuzz_target;

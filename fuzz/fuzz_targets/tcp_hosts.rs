@@ -41,7 +41,8 @@
 use std::collections::VecDeque;
 use std::convert::Infallible;
 
-use firmware_example::bridge::{Bridge, Poll, Port};
+use firmware_example::bridge::{Bridge, Poll};
+use firmware_example::serial::Port;
 use firmware_example::codes;
 use firmware_example::config::{Config, Source};
 use firmware_example::modbus::Gateway;

@@ -27,7 +27,7 @@ use iai_protocol_b::checksum::{BypassPolicy, Checksum};
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::position::PositionStream;
-use iai_protocol_b::stream::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
+use iai_protocol_b::table::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
 
 const RECORDS: u32 = 20_000;
 /// Timed runs per figure (the median is printed) and the least time spent.

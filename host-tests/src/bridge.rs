@@ -24,9 +24,9 @@ use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::frame::{Frame, Header, Station};
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::position::PositionStream;
-use iai_protocol_b::stream::PositionStreamEncoder;
+use iai_protocol_b::table::PositionStreamEncoder;
 
-use crate::sim::Simulator;
+use iai_simulator::Simulator;
 
 /// The bridge's `&` codes and IDs, from the bridge library itself.
 pub use firmware_example::codes;

@@ -69,9 +69,9 @@ use crate::qemu::{
     QemuSession, QUIT_GUARD, QUIT_SEQUENCE, READY_MARKER,
 };
 use crate::rtu_relay::RtuRelay;
-use crate::sim::{Faults, Simulator};
 use firmware_example::net::config::{NetConfig, BLOCK_OFFSET, DEFAULT_PORT};
 use firmware_example::net::modbus::MODBUS_PORT;
+use iai_simulator::{Faults, Simulator};
 
 /// What the gateway runs.
 #[derive(Debug, Clone)]

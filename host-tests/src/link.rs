@@ -12,9 +12,12 @@ use iai_protocol_b::message::Request;
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::readback::ReadBackStats;
 use iai_protocol_b::transfer::{Guarantee, RecordSource};
-use iai_protocol_b::{Client, Failure, Line, LineConfig, ReadBack, Transfer};
+use iai_protocol_b::{
+    client::Client, error::Failure, line::Line, line::LineConfig, readback::ReadBack,
+    transfer::Transfer,
+};
 
-use crate::sim::Simulator;
+use iai_simulator::Simulator;
 
 /// How a simulated run ended.
 #[derive(Debug)]

@@ -12,13 +12,14 @@
 use std::collections::VecDeque;
 use std::convert::Infallible;
 
-use firmware_example::bridge::{Bridge, Poll, Port};
+use firmware_example::bridge::{Bridge, Poll};
 use firmware_example::config::{Config, Source};
 use firmware_example::modbus::{rtu, Gateway};
+use firmware_example::serial::Port;
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameDecoder};
 
-use crate::sim::Simulator;
+use iai_simulator::Simulator;
 
 /// How long the master waits for a response.
 pub const MASTER_TIMEOUT_MS: u64 = 1_000;

@@ -31,11 +31,11 @@ use firmware_example::codes;
 use firmware_example::serial::FlowControl;
 use host_tests::bridge::model::{self, ModelConfig};
 use host_tests::bridge::{check_table, command_26dh, reply_26dh};
-use host_tests::sim::{Faults, Rng, Simulator, INJECTED_ERROR_CODE};
 use host_tests::table::table;
 use iai_protocol_b::axis::AxisPattern;
 use iai_protocol_b::frame::{Frame, Header};
 use iai_protocol_b::message::{AxisStatusQuery, Message};
+use iai_simulator::{Faults, Rng, Simulator, INJECTED_ERROR_CODE};
 
 /// Seeds per test function (four functions run in parallel).
 const SEEDS: u64 = 600;

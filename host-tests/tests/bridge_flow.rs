@@ -11,10 +11,10 @@ use firmware_example::codes;
 use firmware_example::serial::FlowControl;
 use host_tests::bridge::model::{self, ModelConfig, ModelReport};
 use host_tests::bridge::{check_table, command_26dh, error_reply, reply_26dh, Throughput};
-use host_tests::sim::Simulator;
 use host_tests::table::table;
+use iai_protocol_b::line::LineConfig;
 use iai_protocol_b::position::PositionRecord;
-use iai_protocol_b::LineConfig;
+use iai_simulator::Simulator;
 
 /// Processing time the controller takes per command (writing 24 records).
 const PROCESSING_MS: u32 = 50;

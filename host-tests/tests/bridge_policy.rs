@@ -6,9 +6,10 @@
 
 use std::convert::Infallible;
 
-use firmware_example::bridge::{Bridge, Poll, Port};
+use firmware_example::bridge::{Bridge, Poll};
 use firmware_example::codes;
 use firmware_example::config::{AllowList, Config, Policy, Source, READ_ONLY};
+use firmware_example::serial::Port;
 use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
 use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::frame::{emit_frame, Header, Station};

@@ -175,6 +175,6 @@ fn no_response_type_for_software_reset() {
     let frame = check(&bytes);
     assert_eq!(
         decode_any(&frame).unwrap_err(),
-        iai_protocol_b::Error::UnknownMessageId { id: 0x25B }
+        iai_protocol_b::error::Error::UnknownMessageId { id: 0x25B }
     );
 }

@@ -7,6 +7,7 @@ mod common;
 
 use common::*;
 use iai_protocol_b::axis::AxisPattern;
+use iai_protocol_b::error::Error;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::message::{
     decode_any, AnyMessage, ChangePositionData, ChangePositionData2, ChangePositionData3, Command,
@@ -16,7 +17,6 @@ use iai_protocol_b::message::{
 };
 use iai_protocol_b::position::{PositionRecord, RecordLayout};
 use iai_protocol_b::profile::Profile;
-use iai_protocol_b::Error;
 use proptest::prelude::*;
 use V::{S, T, U};
 

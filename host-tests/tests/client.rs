@@ -4,7 +4,6 @@
 use std::collections::VecDeque;
 
 use host_tests::link::{call, line_to};
-use host_tests::sim::{Faults, Simulator};
 use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::engine::{feed, Step};
 use iai_protocol_b::error::ErrorDetail;
@@ -14,7 +13,8 @@ use iai_protocol_b::message::{
     ErrorResponse, Message, RelativeMove, Request, SoftwareReset, SystemStatusQuery, TestCall,
     TestCallResponse,
 };
-use iai_protocol_b::{Client, Failure, Line, LineConfig};
+use iai_protocol_b::{client::Client, error::Failure, line::Line, line::LineConfig};
+use iai_simulator::{Faults, Simulator};
 
 const ST: Station = Station(0x99);
 
@@ -485,7 +485,10 @@ fn the_blocking_flavour_over_a_uart_and_a_closure_clock() {
 /// on day 25 (past 2^31 ms) or just before its clock wraps on day 49.7.
 #[test]
 fn engines_start_at_once_on_any_tick() {
-    use iai_protocol_b::{Profile, ReadBack, ReadBackConfig, Transfer, TransferConfig};
+    use iai_protocol_b::{
+        profile::Profile, readback::ReadBack, readback::ReadBackConfig, transfer::Transfer,
+        transfer::TransferConfig,
+    };
     for now in [0u32, 0x8000_0000, 0x8000_0001, u32::MAX - 5_000, u32::MAX] {
         let fence = |l: &mut Line, bytes: &[u8]| -> bool {
             bytes.starts_with(b"!99200") && {
@@ -496,7 +499,8 @@ fn engines_start_at_once_on_any_tick() {
                     e[16..18].copy_from_slice(format!("{:02X}", sum & 0xFF).as_bytes());
                     e
                 };
-                let f = iai_protocol_b::Frame::new_checked(&echo, Default::default()).unwrap();
+                let f =
+                    iai_protocol_b::frame::Frame::new_checked(&echo, Default::default()).unwrap();
                 l.sent(now);
                 l.offer(&f, true, now);
                 true

@@ -12,8 +12,8 @@ use replay::{decode_chunks, push_bytes, Out};
 
 use iai_protocol_b::checksum::{BypassPolicy, Checksum, ChecksumField};
 use iai_protocol_b::decoder::{Event, FrameDecoder, DEFAULT_CAPACITY};
+use iai_protocol_b::error::Error;
 use iai_protocol_b::frame::Frame;
-use iai_protocol_b::Error;
 use proptest::prelude::*;
 
 /// Small deterministic generator (SplitMix64), so failures reproduce.

@@ -11,12 +11,15 @@
 use std::collections::BTreeMap;
 
 use host_tests::link::{read_back, run_transfer};
-use host_tests::sim::{Faults, Simulator};
 use host_tests::table::table;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::transfer::{Guarantee, Transfer, TransferConfig, Verify};
-use iai_protocol_b::{Failure, Line, LineConfig, Profile, ReadBack, ReadBackConfig};
+use iai_protocol_b::{
+    error::Failure, line::Line, line::LineConfig, profile::Profile, readback::ReadBack,
+    readback::ReadBackConfig,
+};
+use iai_simulator::{Faults, Simulator};
 
 const ST: Station = Station(0x99);
 const BAUD: u32 = 115_200;

@@ -11,10 +11,10 @@ mod fixture_file;
 use fixture_file::{escape, Fixture};
 use iai_protocol_b::axis::{AxisPattern, PerAxis};
 use iai_protocol_b::checksum::{BypassPolicy, Checksum, ChecksumField, ChecksumMode};
+use iai_protocol_b::error::Error;
 use iai_protocol_b::frame::{emit_frame, Frame, Header, Station};
 use iai_protocol_b::message::*;
 use iai_protocol_b::position::PositionRecord;
-use iai_protocol_b::Error;
 
 // ---------------------------------------------------------------------------
 // Rendering a decoded message in the `means:` notation of the fixture file.

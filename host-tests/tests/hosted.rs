@@ -9,7 +9,10 @@ use host_tests::table::table;
 use iai_protocol_b::hosted::StdLink;
 use iai_protocol_b::message::{AxisStatusQuery, Homing, ServoOnOff};
 use iai_protocol_b::transfer::Guarantee;
-use iai_protocol_b::{Client, LineConfig, Profile, Station, Transfer, TransferConfig};
+use iai_protocol_b::{
+    client::Client, frame::Station, line::LineConfig, profile::Profile, transfer::Transfer,
+    transfer::TransferConfig,
+};
 use iai_simulator::server::{serve_tcp, ServeOptions, Shared};
 use iai_simulator::{Controller, Faults};
 

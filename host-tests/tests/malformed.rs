@@ -19,12 +19,12 @@ mod replay;
 use iai_protocol_b::axis::{AxisPattern, PerAxis};
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameDecoder, DEFAULT_CAPACITY};
+use iai_protocol_b::error::Error;
+use iai_protocol_b::error::Error::*;
 use iai_protocol_b::field::{decode_signed, encode_signed, FieldSpec};
 use iai_protocol_b::frame::{Frame, Header, Station};
 use iai_protocol_b::message::*;
 use iai_protocol_b::position::PositionRecord;
-use iai_protocol_b::Error;
-use iai_protocol_b::Error::*;
 use replay::{decode_chunks, push_bytes, Out};
 
 /// The valid frame appended to every row.

@@ -5,16 +5,16 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use host_tests::sim::Simulator;
 use host_tests::table::table;
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::engine::{feed, Engine, Step};
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionStream;
-use iai_protocol_b::stream::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
+use iai_protocol_b::table::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
 use iai_protocol_b::transfer::{Transfer, TransferConfig};
-use iai_protocol_b::{Line, LineConfig, Profile};
+use iai_protocol_b::{line::Line, line::LineConfig, profile::Profile};
+use iai_simulator::Simulator;
 
 struct Counting;
 static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
@@ -120,7 +120,7 @@ fn the_core_allocates_nothing() {
     assert_eq!(t.stats().records_verified, 2_000);
 
     // The request engine: a 212H and its typed reply.
-    let mut client: iai_protocol_b::Client = core_call(iai_protocol_b::Client::new);
+    let mut client: iai_protocol_b::client::Client = core_call(iai_protocol_b::client::Client::new);
     let q = iai_protocol_b::message::AxisStatusQuery::of(&[1, 2]).unwrap();
     let now = sim.next_output_at().unwrap_or(0) + 10_000;
     core_call(|| client.start(&mut line, &q, now)).unwrap();
@@ -144,9 +144,9 @@ fn the_core_allocates_nothing() {
         >(),
         std::mem::size_of::<PositionStreamDecoder>(),
         std::mem::size_of::<Transfer<std::iter::Empty<iai_protocol_b::position::PositionRecord>>>(),
-        std::mem::size_of::<iai_protocol_b::ReadBack>(),
-        std::mem::size_of::<iai_protocol_b::Client>(),
-        std::mem::size_of::<iai_protocol_b::Client<64, 128>>(),
+        std::mem::size_of::<iai_protocol_b::readback::ReadBack>(),
+        std::mem::size_of::<iai_protocol_b::client::Client>(),
+        std::mem::size_of::<iai_protocol_b::client::Client<64, 128>>(),
     );
     println!("RAM (size_of): Line {} B", std::mem::size_of::<Line>());
 }
@@ -157,7 +157,7 @@ fn drive_counted<G: Engine>(
     engine: &mut G,
     line: &mut Line,
     sim: &mut Simulator,
-) -> Result<G::Output, iai_protocol_b::Failure> {
+) -> Result<G::Output, iai_protocol_b::error::Failure> {
     let mut now = 0u32;
     loop {
         let reply = sim.take_output(now);

@@ -29,12 +29,12 @@ use host_tests::bridge::{
     check_table, codes, command_26dh, error_reply, reply_26dh, HostLink, SimThread,
 };
 use host_tests::qemu::{build_firmware, test_config, Board, QemuSession, READY_MARKER};
-use host_tests::sim::{Simulator, UNSUPPORTED_ERROR_CODE};
 use host_tests::table::table;
 use iai_protocol_b::axis::AxisPattern;
 use iai_protocol_b::checksum::ChecksumMode;
 use iai_protocol_b::frame::{emit_frame, Frame, Header, Station};
 use iai_protocol_b::message::{AxisStatusQuery, ErrorDetailQuery, Message};
+use iai_simulator::{Simulator, UNSUPPORTED_ERROR_CODE};
 
 const STATION: Station = Station(0x99);
 

@@ -72,8 +72,8 @@ use host_tests::gateway::{tcp_status_query, EthernetGateway, Options};
 use host_tests::qemu::build_ethernet_firmware;
 use host_tests::table::table;
 use iai_protocol_b::frame::{Frame, Header, Station};
+use iai_protocol_b::line::LineConfig;
 use iai_protocol_b::position::{PositionRecord, PositionStream};
-use iai_protocol_b::LineConfig;
 
 use firmware_example::codes;
 
@@ -555,7 +555,7 @@ fn exchange_when_served(
 
 #[test]
 fn a_thousand_connects_and_disconnects() {
-    use host_tests::sim::Simulator;
+    use iai_simulator::Simulator;
     let started = Instant::now();
     let elf = build_ethernet_firmware().expect("build lm3s6965-eth");
     let opts = Options {

@@ -10,10 +10,10 @@ use std::time::{Duration, Instant};
 
 use host_tests::bridge::{HostLink, SimThread};
 use host_tests::qemu::{build_firmware, Board, QemuSession};
-use host_tests::sim::Simulator;
 use iai_protocol_b::axis::AxisPattern;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::message::{AxisStatusQuery, Message};
+use iai_simulator::Simulator;
 
 const STATION: Station = Station(0x99);
 

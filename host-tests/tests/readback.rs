@@ -2,12 +2,15 @@
 //! windows with 21FH and compared with the source.
 
 use host_tests::link::{line_to, run_transfer};
-use host_tests::sim::{Faults, Simulator};
 use host_tests::table::table;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::readback::ReadBackStats;
-use iai_protocol_b::{Failure, Profile, ReadBack, ReadBackConfig, Transfer, TransferConfig};
+use iai_protocol_b::{
+    error::Failure, profile::Profile, readback::ReadBack, readback::ReadBackConfig,
+    transfer::Transfer, transfer::TransferConfig,
+};
+use iai_simulator::{Faults, Simulator};
 
 const ST: Station = Station(0x99);
 
@@ -179,7 +182,7 @@ fn the_blocking_flavour_hands_every_window_to_the_sink() {
     };
     let mut rb: ReadBack = ReadBack::new(tta(1, 300));
     let mut got = Vec::new();
-    let mut line = iai_protocol_b::Line::new(iai_protocol_b::LineConfig::new(ST), 1);
+    let mut line = iai_protocol_b::line::Line::new(iai_protocol_b::line::LineConfig::new(ST), 1);
     let stats = rb
         .run_blocking(&mut line, &mut port, &mut clock, |records| {
             got.extend(records)

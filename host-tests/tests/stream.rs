@@ -3,12 +3,12 @@
 
 use host_tests::table::table;
 use iai_protocol_b::checksum::BypassPolicy;
+use iai_protocol_b::error::Error;
 use iai_protocol_b::frame::{Frame, Station};
 use iai_protocol_b::message::{ChangePositionData2, Message, Repeated};
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::position::PositionStream;
-use iai_protocol_b::stream::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
-use iai_protocol_b::Error;
+use iai_protocol_b::table::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
 
 fn encode_all(kind: PositionStream, recs: &[PositionRecord], chunk: usize) -> Vec<u8> {
     let mut enc = PositionStreamEncoder::new(

@@ -2,7 +2,6 @@
 //! engine into the simulated controller, with and without faults.
 
 use host_tests::link::{line_to, run_fed, run_transfer, LinkRun};
-use host_tests::sim::{Faults, Simulator};
 use host_tests::table::table;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
@@ -10,7 +9,8 @@ use iai_protocol_b::position::PositionStream;
 use iai_protocol_b::transfer::{
     packed_len, Guarantee, RecordBuffer, RecordSource, Transfer, TransferConfig, Verify,
 };
-use iai_protocol_b::{Failure, Profile};
+use iai_protocol_b::{error::Failure, profile::Profile};
+use iai_simulator::{Faults, Simulator};
 
 const ST: Station = Station(0x99);
 
@@ -213,7 +213,7 @@ fn persistent_error_replies_fail_with_the_code() {
     assert_eq!(
         r.result,
         Err(Failure::Controller {
-            code: host_tests::sim::INJECTED_ERROR_CODE,
+            code: iai_simulator::INJECTED_ERROR_CODE,
             detail: None,
         })
     );
@@ -234,7 +234,7 @@ fn an_invalid_record_stops_before_anything_is_sent_for_it() {
         Err(Failure::InvalidRecord {
             index: 70,
             error:
-                iai_protocol_b::Error::CountMismatch {
+                iai_protocol_b::error::Error::CountMismatch {
                     expected: 2,
                     found: 1,
                 },
@@ -298,7 +298,7 @@ fn the_simulator_answers_what_it_models_and_refuses_the_rest() {
                 answered += 1;
             }
             AnyMessage::Error(e) => {
-                assert_eq!(e.code, host_tests::sim::NOT_MODELLED_CODE, "{id:03X}H");
+                assert_eq!(e.code, iai_simulator::NOT_MODELLED_CODE, "{id:03X}H");
                 refused += 1;
             }
             other => panic!("{id:03X}H answered with {other:?}"),

@@ -9,12 +9,12 @@ use std::pin::pin;
 use std::rc::Rc;
 use std::task::{Context, Poll, Waker};
 
-use host_tests::sim::{Faults, Simulator};
 use host_tests::table::table;
 use iai_protocol_b::clock::AsyncClock;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::transfer::{Guarantee, Transfer, TransferConfig};
-use iai_protocol_b::{Line, LineConfig, Profile};
+use iai_protocol_b::{line::Line, line::LineConfig, profile::Profile};
+use iai_simulator::{Faults, Simulator};
 
 struct SimUart {
     sim: Simulator,
@@ -112,8 +112,8 @@ fn async_transfer_with_faults_writes_the_whole_table() {
 
 #[test]
 fn async_client_gets_its_typed_reply_through_a_lossy_line() {
+    use iai_protocol_b::client::Client;
     use iai_protocol_b::message::AxisStatusQuery;
-    use iai_protocol_b::Client;
     let now = Rc::new(Cell::new(0));
     let faults = Faults {
         drop_every_nth_reply: Some(2),

@@ -262,7 +262,7 @@ impl Session {
             let cmd = match self.decoder.push(b) {
                 Event::NeedMore => None,
                 Event::Error(e) => {
-                    if matches!(e, iai_protocol_b::Error::FrameTooLong { .. }) {
+                    if matches!(e, iai_protocol_b::error::Error::FrameTooLong { .. }) {
                         self.stats.oversize_frames += 1;
                     } else {
                         self.stats.broken_frames += 1;

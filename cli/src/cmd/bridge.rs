@@ -15,9 +15,9 @@ use iai_cli::link::{Flow, Link, Target};
 use iai_cli::probe::nonce;
 use iai_cli::table::{self, Hooks};
 use iai_protocol_b::frame::{Header, Station};
+use iai_protocol_b::line::LineConfig;
 use iai_protocol_b::message::TestCall;
 use iai_protocol_b::position::{PositionRecord, PositionStream};
-use iai_protocol_b::LineConfig;
 
 use super::{out_err, progress_bar, stop_flag, table_failure, Failure, Run, EXIT_INTERRUPTED};
 use crate::{BridgeStatusArgs, WriteArgs};

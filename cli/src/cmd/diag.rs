@@ -10,7 +10,7 @@ use iai_cli::bridge::{decode_status, query_status, status_json};
 use iai_cli::link::{Flow, Link, Target, BAUD_RATES};
 use iai_cli::probe::{nonce, observe, test_call, Observation};
 use iai_protocol_b::frame::Station;
-use iai_protocol_b::LineConfig;
+use iai_protocol_b::line::LineConfig;
 
 use super::{out_err, Run};
 use crate::ProbeArgs;

@@ -49,10 +49,11 @@ impl Failure {
 }
 
 /// Whether `e` means no valid reply came (where the line's hint helps).
-pub(crate) fn unanswered(e: &iai_protocol_b::Failure) -> bool {
+pub(crate) fn unanswered(e: &iai_protocol_b::error::Failure) -> bool {
     matches!(
         e,
-        iai_protocol_b::Failure::Timeout { .. } | iai_protocol_b::Failure::OutcomeUnknown { .. }
+        iai_protocol_b::error::Failure::Timeout { .. }
+            | iai_protocol_b::error::Failure::OutcomeUnknown { .. }
     )
 }
 
@@ -60,7 +61,7 @@ pub(crate) fn unanswered(e: &iai_protocol_b::Failure) -> bool {
 /// with the line's hint when no reply came; exit 130 when interrupted.
 pub(crate) fn table_failure(link: &Link, e: TableError, what: &str) -> Failure {
     let mut msg = match &e {
-        TableError::Engine(iai_protocol_b::Failure::Timeout { sends }) => format!(
+        TableError::Engine(iai_protocol_b::error::Failure::Timeout { sends }) => format!(
             "{}: the controller did not answer ({sends} send(s), {} each){what}",
             link.target(),
             iai_cli::send::wait_text(link.line().config().timeout_ms)

@@ -9,7 +9,7 @@ use std::time::Instant;
 use iai_cli::inspect;
 use iai_cli::link::{Flow, Link};
 use iai_protocol_b::frame::Station;
-use iai_protocol_b::LineConfig;
+use iai_protocol_b::line::LineConfig;
 
 use super::{out_err, stop_flag, Run, EXIT_INTERRUPTED};
 use crate::LinkArgs;

@@ -4,10 +4,11 @@ use std::io::{self, Write};
 use std::process::ExitCode;
 
 use iai_cli::csvtable;
-use iai_cli::sim::Controller;
-use iai_cli::simulate::{self, ServeOptions, Shared};
+use iai_cli::simulate;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
+use iai_simulator::server::{self, ServeOptions, Shared};
+use iai_simulator::Controller;
 
 use super::{Failure, Run};
 use crate::{ProfileArg, SimArgs};
@@ -37,12 +38,10 @@ pub(crate) fn simulate_cmd(args: &SimArgs) -> Run {
     let listening = if args.pty {
         start_pty(&shared, &opts)?
     } else if let Some(addr) = &args.connect {
-        let wait = args
-            .connect_wait_ms
-            .map_or(simulate::CONNECT_PATIENCE, |ms| {
-                std::time::Duration::from_millis(ms)
-            });
-        let conn = simulate::connect(addr, wait)?;
+        let wait = args.connect_wait_ms.map_or(server::CONNECT_PATIENCE, |ms| {
+            std::time::Duration::from_millis(ms)
+        });
+        let conn = server::connect(addr, wait)?;
         let peer = conn
             .peer_addr()
             .map_or_else(|_| addr.clone(), |a| a.to_string());
@@ -57,7 +56,7 @@ pub(crate) fn simulate_cmd(args: &SimArgs) -> Run {
             .local_addr()
             .map_err(|e| format!("--tcp {addr:?}: {e}"))?;
         let (s, o) = (shared.clone(), opts.clone());
-        std::thread::spawn(move || simulate::serve_tcp(listener, s, o));
+        std::thread::spawn(move || server::serve_tcp(listener, s, o));
         format!("listening tcp {local}")
     };
     {
@@ -78,7 +77,7 @@ pub(crate) fn simulate_cmd(args: &SimArgs) -> Run {
     if let Some(conn) = connected {
         let (s, o) = (shared.clone(), opts.clone());
         std::thread::spawn(move || {
-            simulate::serve_connected(conn, &s, &o);
+            server::serve_connected(conn, &s, &o);
             let _ = done.send(());
         });
     }
@@ -110,10 +109,10 @@ pub(crate) fn simulate_cmd(args: &SimArgs) -> Run {
 
 #[cfg(unix)]
 fn start_pty(shared: &Shared, opts: &ServeOptions) -> Result<String, Failure> {
-    let pty = simulate::pty::Pty::open().map_err(|e| format!("--pty: {e}"))?;
+    let pty = server::pty::Pty::open().map_err(|e| format!("--pty: {e}"))?;
     let line = format!("listening pty {}", pty.path);
     let (s, o) = (shared.clone(), opts.clone());
-    std::thread::spawn(move || simulate::pty::serve_pty(pty, s, o));
+    std::thread::spawn(move || server::pty::serve_pty(pty, s, o));
     Ok(line)
 }
 

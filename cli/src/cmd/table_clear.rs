@@ -7,7 +7,7 @@ use std::sync::atomic::Ordering;
 
 use iai_cli::link::Link;
 use iai_cli::table::{self, Hooks, TableError, CLEAR_LAST, COUNT_MAX};
-use iai_protocol_b::Failure as CoreFailure;
+use iai_protocol_b::error::Failure as CoreFailure;
 
 use super::{progress_bar, stop_flag, table_failure, Failure, Run};
 use crate::ClearArgs;

@@ -16,8 +16,8 @@ use iai_cli::csvtable;
 use iai_cli::link::Link;
 use iai_cli::resume::{read_path, read_progress, refuse_stale, ReadState};
 use iai_cli::table::{self, Hooks, TableError, COUNT_MAX};
+use iai_protocol_b::error::Failure as CoreFailure;
 use iai_protocol_b::position::{PositionRecord, RecordLayout};
-use iai_protocol_b::Failure as CoreFailure;
 
 use super::{out_err, progress_bar, stop_flag, table_failure, Failure, Run};
 use crate::ReadArgs;

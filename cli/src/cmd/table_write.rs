@@ -11,9 +11,9 @@ use iai_cli::csvtable;
 use iai_cli::link::{Flow, Link};
 use iai_cli::resume::{self, refuse_stale, write_progress, ResumeState};
 use iai_cli::table::{self, Hooks, Plan, TableError, CLEAR_LAST, COUNT_MAX};
+use iai_protocol_b::error::Failure as CoreFailure;
 use iai_protocol_b::position::{PositionRecord, PositionStream};
 use iai_protocol_b::transfer::{Guarantee, Verify as CoreVerify};
-use iai_protocol_b::Failure as CoreFailure;
 
 use super::{progress_bar, stop_flag, table_failure, Failure, Run};
 use crate::{Verify, WriteArgs};

@@ -49,7 +49,7 @@ fn rewrite(n: usize) -> Option<Vec<u8>> {
 /// A body the core decodes for message `id` in direction `header`, with
 /// every repeat group holding at least one item where the decoder allows.
 pub fn sample_body(header: Header, id: u16) -> Option<Vec<u8>> {
-    use iai_protocol_b::Error as E;
+    use iai_protocol_b::error::Error as E;
     let mut body: Vec<u8> = Vec::new();
     let mut tries: BTreeMap<usize, usize> = BTreeMap::new();
     for _ in 0..20_000 {

@@ -21,7 +21,7 @@ use iai_protocol_b::checksum::{BypassPolicy, ChecksumField};
 use iai_protocol_b::decoder::{Event, FrameDecoder, DEFAULT_CAPACITY};
 use iai_protocol_b::frame::{Frame, Header};
 use iai_protocol_b::position::PositionStream;
-use iai_protocol_b::stream::{PositionStreamDecoder, StreamEvent};
+use iai_protocol_b::table::{PositionStreamDecoder, StreamEvent};
 
 use super::held::Held;
 use super::item::{frame_item, Item, Origin, StreamItem, What};
@@ -62,7 +62,7 @@ impl Default for Inspector {
     }
 }
 
-fn error_kind(e: &iai_protocol_b::Error) -> String {
+fn error_kind(e: &iai_protocol_b::error::Error) -> String {
     let d = format!("{e:?}");
     d.split([' ', '{', '(']).next().unwrap_or("").to_string()
 }
@@ -479,7 +479,9 @@ impl Inspector {
                     };
                     self.held.drop_to(holds);
                     let idle = input.is_empty() && self.dec.pending() == 0;
-                    if idle && matches!(e, iai_protocol_b::Error::FrameTooLong { .. }) && b != b'\n'
+                    if idle
+                        && matches!(e, iai_protocol_b::error::Error::FrameTooLong { .. })
+                        && b != b'\n'
                     {
                         // The frame goes on past the decoder's buffer: the
                         // bytes up to its LF (or the next header) belong to

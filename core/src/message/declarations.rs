@@ -67,7 +67,7 @@ mod test_support {
 
     pub(super) const ST: Station = Station(0x99);
 
-    pub(super) fn parse<'a, M: Message<'a>>(bytes: &'a [u8]) -> crate::Result<M> {
+    pub(super) fn parse<'a, M: Message<'a>>(bytes: &'a [u8]) -> crate::error::Result<M> {
         M::parse(&Frame::new_checked(bytes, BypassPolicy::CommandsOnly)?)
     }
 

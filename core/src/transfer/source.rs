@@ -52,7 +52,7 @@ pub const fn packed_len(axes: usize) -> usize {
 const RECORD_HEAD: usize = 11;
 
 /// A FIFO of records that a producer fills as they arrive (for example
-/// from a [`PositionStreamDecoder`](crate::stream::PositionStreamDecoder))
+/// from a [`PositionStreamDecoder`](crate::table::PositionStreamDecoder))
 /// and a [`Transfer`](super::Transfer) drains, packed into `BYTES` bytes:
 /// a record takes [`packed_len`] of its axes, so the same buffer holds
 /// three times as many 1-axis records as 8-axis ones. It is pending while

@@ -18,7 +18,7 @@ use crate::field::{FieldSpec, Reader};
 use crate::frame::{Header, Station, ENVELOPE_LEN};
 use crate::line::{Claim, Command, Heard, Line, Span};
 use crate::position::{PositionRecord, PositionStream};
-use crate::stream::{PositionStreamDecoder, StreamEvent};
+use crate::table::{PositionStreamDecoder, StreamEvent};
 use crate::window::{write_query, Windows, QUERY_LEN};
 
 /// The read-back of the frame in flight.

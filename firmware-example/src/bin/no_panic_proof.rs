@@ -55,14 +55,16 @@ use iai_protocol_b::field::{FieldSpec, Reader};
 use iai_protocol_b::frame::{read_envelope, Frame, Header, Station};
 use iai_protocol_b::message::{decode_any, AxisStatusQuery, Fields, GroupInfo, Value, Visitor};
 use iai_protocol_b::position::{PositionRecord, PositionStream, RecordLayout};
-use iai_protocol_b::stream::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
+use iai_protocol_b::table::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
 use iai_protocol_b::{
-    Client, Line, LineConfig, Profile, ReadBack, ReadBackConfig, Transfer, TransferConfig,
+    client::Client, line::Line, line::LineConfig, profile::Profile, readback::ReadBack,
+    readback::ReadBackConfig, transfer::Transfer, transfer::TransferConfig,
 };
 
-use firmware_example::bridge::{Bridge, Port};
+use firmware_example::bridge::Bridge;
 use firmware_example::config::Config;
 use firmware_example::modbus::Gateway;
+use firmware_example::serial::Port;
 use firmware_example::serial::{self, FlowControl, Watermarks};
 
 #[cfg(not(feature = "no-panic-audit"))]
@@ -360,7 +362,7 @@ fn main() -> ! {
     black_box(gateway.stats());
 
     // The serial line's interrupt end, fed the same bytes.
-    let mut line: serial::Line<256, 64> = serial::Line::new();
+    let mut line: serial::UartRings<256, 64> = serial::UartRings::new();
     let marks = Watermarks::for_latency(black_box(255), black_box(17));
     let (mut isr, mut thr) = line.split(black_box(FlowControl::XonXoff), marks, &|| {});
     for &b in input {

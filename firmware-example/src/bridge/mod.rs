@@ -15,7 +15,7 @@
 //! - `passthrough`: any other command is checked, forwarded, and the
 //!   controller's checked reply relayed; without one within 3 s the bridge
 //!   answers nothing and the host resends (2003 p. 62);
-//! - `stream`: a 26DH of any size is decoded record by record and written
+//! - `table_write`: a 26DH of any size is decoded record by record and written
 //!   in controller-sized chunks, each confirmed and read back equal before
 //!   more is taken from the host; one `#` with the count at the end;
 //! - [`pipeline`]: chunk and queue sizes for the downstream rate, so that
@@ -34,7 +34,7 @@
 mod passthrough;
 pub mod pipeline;
 mod session;
-mod stream;
+mod table_write;
 mod upstream;
 
 use embedded_io::{Write, WriteReady};
@@ -42,18 +42,16 @@ use iai_protocol_b::axis::MAX_AXES;
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::FrameDecoder;
 use iai_protocol_b::frame::Station;
-use iai_protocol_b::line::Line as ControllerLine;
-pub use iai_protocol_b::line::Line;
+use iai_protocol_b::line::Line;
 use iai_protocol_b::position::PositionStream;
 use iai_protocol_b::transfer::{packed_len, RecordBuffer, Transfer};
-use iai_protocol_b::{LineConfig, Profile, TransferConfig};
+use iai_protocol_b::{line::LineConfig, profile::Profile, transfer::TransferConfig};
 
 use crate::config::{Config, Source};
-pub use crate::serial::Port;
+use crate::serial::Port;
 use crate::status::{self, LastError, Stats};
-pub use pipeline::Pipeline;
 
-use stream::StreamWork;
+use table_write::StreamWork;
 use upstream::Upstream;
 
 /// Upstream silence required before the quit sequence.
@@ -272,7 +270,7 @@ pub struct Bridge {
     mode: Mode,
     up: Upstream,
     /// The downstream line: the command on it and what may still arrive.
-    line: ControllerLine,
+    line: Line,
     /// The 26DH transfer, built once and restarted in place for each 26DH.
     /// Between 26DHs its frame buffer is the pass-through's decoder.
     job: Job,
@@ -315,7 +313,7 @@ impl Bridge {
             source,
             mode: Mode::Idle,
             up: Upstream::new(),
-            line: ControllerLine::new(line_config(&cfg), seed),
+            line: Line::new(line_config(&cfg), seed),
             job: Transfer::new(TransferConfig::new(Profile::TTA), RecordBuffer::new()),
             fence_replies: FrameDecoder::with_policy(BypassPolicy::Reject),
             stream: StreamWork::new(cfg.downstream_baud),

@@ -3,14 +3,14 @@
 //! may go (after a fence, when something may still arrive from an earlier
 //! command) and which frame is its reply; the bridge relays the reply as
 //! it is, so it judges nothing beyond the envelope and its host checks the
-//! body ([`ControllerLine::offer`] with `content_ok`).
+//! body ([`Line::offer`] with `content_ok`).
 //!
 //! With XON/XOFF on, a reply whose text holds 0x11 or 0x13 is not relayed
 //! (it would stop or start the host's transmitter): the host gets `&`
 //! [`codes::XON_XOFF_IN_TEXT`] instead.
 
 use iai_protocol_b::decoder::{Event, FrameDecoder};
-use iai_protocol_b::line::{Due, Heard, Line as ControllerLine};
+use iai_protocol_b::line::{Due, Heard, Line};
 
 use super::{write_some, Bridge, Error, Mode, Port};
 use crate::codes;
@@ -163,7 +163,7 @@ impl Bridge {
 /// it is (the bridge relays, so `content_ok`), a broken one by what could
 /// be read of it. Also says whether the frame holds XON or XOFF.
 fn hear<const N: usize>(
-    line: &mut ControllerLine,
+    line: &mut Line,
     frames: &mut FrameDecoder<N>,
     b: u8,
     now: u32,

@@ -281,7 +281,7 @@ fn read_back(x: i32) -> Vec<u8> {
 
 /// The commands the bridge wrote downstream since the last call, by ID.
 fn commands(down: &mut Fake) -> Vec<u16> {
-    let mut dec: iai_protocol_b::FrameDecoder<4096> = Default::default();
+    let mut dec: iai_protocol_b::decoder::FrameDecoder<4096> = Default::default();
     let mut ids = Vec::new();
     for &b in &down.output {
         if let iai_protocol_b::decoder::Event::Frame(f) = dec.push(b) {

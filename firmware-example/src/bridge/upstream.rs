@@ -5,7 +5,7 @@
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameSkipper, Skipped};
 use iai_protocol_b::frame::{emit_frame, read_envelope, Frame, Header, Station, ENVELOPE_LEN};
-use iai_protocol_b::line::Line as ControllerLine;
+use iai_protocol_b::line::Line;
 
 use super::{write_some, Bridge, Error, Mode, Port, STREAM};
 use crate::codes;
@@ -366,7 +366,7 @@ enum Next {
 
 /// Starts forwarding command `id` on the line: one send (the host resends
 /// after its own timeout).
-pub(super) fn start_forward(line: &mut ControllerLine, id: u16, now: u32) {
+pub(super) fn start_forward(line: &mut Line, id: u16, now: u32) {
     line.start_raw(id, 1, now);
 }
 

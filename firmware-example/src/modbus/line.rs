@@ -17,7 +17,8 @@ use iai_protocol_b::message::{
 };
 use iai_protocol_b::transfer::{packed_len, Guarantee, RecordBuffer};
 use iai_protocol_b::{
-    Client, Error, Failure, Profile, ReadBack, ReadBackConfig, Transfer, TransferConfig,
+    client::Client, error::Error, error::Failure, profile::Profile, readback::ReadBack,
+    readback::ReadBackConfig, transfer::Transfer, transfer::TransferConfig,
 };
 
 use super::cache::Cache;
@@ -28,8 +29,9 @@ use super::map::{
 };
 use super::poll::Query;
 use super::registers::Registers;
-use crate::bridge::{write_some, Port};
+use crate::bridge::write_some;
 use crate::codes;
+use crate::serial::Port;
 
 /// Largest frame of the window's engines: a 21FH reply with three 8-axis
 /// records (264 bytes; a 26DH of three takes 260). The five records of

@@ -43,8 +43,9 @@ use rmodbus::consts::ModbusFunction;
 use rmodbus::server::{ModbusFrame, Read};
 use rmodbus::{ErrorKind, ModbusProto};
 
-use crate::bridge::{write_some, Bridge, Error, Guest, GuestWait, NoPort, Poll, Port};
+use crate::bridge::{write_some, Bridge, Error, Guest, GuestWait, NoPort, Poll};
 use crate::config::{ModbusConfig, Policy, UpstreamProtocol};
+use crate::serial::Port;
 use crate::status::Stats;
 use line::Engines;
 pub use registers::Registers;

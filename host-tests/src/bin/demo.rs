@@ -31,9 +31,9 @@ use host_tests::bridge::{
     check_table, command_26dh, reply_26dh, status_query, HostLink, SimThread, Throughput,
 };
 use host_tests::qemu::{build_firmware, test_config, Board, QemuSession, READY_MARKER};
-use host_tests::sim::{Faults, Simulator};
 use host_tests::table::table;
-use iai_protocol_b::LineConfig;
+use iai_protocol_b::line::LineConfig;
+use iai_simulator::{Faults, Simulator};
 
 /// Sends of the 26DH before the demo gives up (a host's own retries).
 const MAX_SENDS: u32 = 8;

@@ -5,7 +5,7 @@
 //! * **Line rate.** Each line carries one byte per 10 bit times (8N1) in
 //!   each direction, at its own baud rate.
 //! * **The receive rings of the boards**: the bridge's
-//!   [`UpstreamLine`] and [`DownstreamLine`] with their real capacities and
+//!   [`UpstreamRings`] and [`DownstreamRings`] with their real capacities and
 //!   marks, driven through their interrupt ends exactly as the boards' UART
 //!   interrupt handlers drive them (receive a byte, then service and
 //!   transmit). A byte that finds the upstream ring full is an overrun,
@@ -29,13 +29,13 @@ use std::collections::VecDeque;
 use firmware_example::bridge::{Bridge, Poll};
 use firmware_example::config::{Config, Source};
 use firmware_example::serial::{
-    DownstreamLine, FlowControl, UpstreamLine, DOWNSTREAM_MARKS, HOST_LATENCY, UPSTREAM_MARKS,
+    DownstreamRings, FlowControl, UpstreamRings, DOWNSTREAM_MARKS, HOST_LATENCY, UPSTREAM_MARKS,
     XOFF, XON,
 };
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameDecoder};
 
-use crate::sim::Simulator;
+use iai_simulator::Simulator;
 
 /// Settings of a model run.
 #[derive(Debug, Clone, Copy)]
@@ -186,8 +186,8 @@ pub fn run(
     commands: &[&[u8]],
     start_ns: u64,
 ) -> ModelReport {
-    let mut up_line: Box<UpstreamLine> = Box::default();
-    let mut down_line: Box<DownstreamLine> = Box::default();
+    let mut up_line: Box<UpstreamRings> = Box::default();
+    let mut down_line: Box<DownstreamRings> = Box::default();
     let pend = || {};
     let flow = cfg.bridge.flow;
     let (mut up_isr, mut up) = up_line.split(flow, UPSTREAM_MARKS, &pend);

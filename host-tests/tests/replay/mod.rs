@@ -2,7 +2,7 @@
 //! and malformed-input tests.
 
 use iai_protocol_b::decoder::{Event, FrameDecoder};
-use iai_protocol_b::Error;
+use iai_protocol_b::error::Error;
 
 /// An event with the frame copied out of the decoder.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -284,7 +284,7 @@ macro_rules! per_axis_constructor {
                 " (0.001 mm, 0.001 deg on a rotary axis), in any order; the axis pattern is ",
                 "derived from them. Acceleration, deceleration and speed are 0 (the ",
                 "controller's parameters). An axis outside 1..=8 or named twice is ",
-                "[`Error::InvalidAxis`](crate::Error::InvalidAxis).")]
+                "[`Error::InvalidAxis`](crate::error::Error::InvalidAxis).")]
             pub fn $ctor(pairs: &[(u8, i32)]) -> Result<Self> {
                 let (axis_pattern, $values) = per_axis_values(pairs)?;
                 Ok($ty { axis_pattern, $values, ..Default::default() })
@@ -357,11 +357,11 @@ mod tests {
     fn per_axis_commands_cannot_be_built_wrong() {
         assert_eq!(
             AbsoluteMove::to(&[(1, 0), (1, 5)]),
-            Err(crate::Error::InvalidAxis { axis: 1 })
+            Err(crate::error::Error::InvalidAxis { axis: 1 })
         );
         assert_eq!(
             RelativeMove::by(&[(0, 5)]),
-            Err(crate::Error::InvalidAxis { axis: 0 })
+            Err(crate::error::Error::InvalidAxis { axis: 0 })
         );
         let m = RelativeMove::by(&[(4, -1), (2, 2)]).unwrap();
         assert_eq!(m.axis_pattern.bits(), 0b1010);

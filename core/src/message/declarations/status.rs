@@ -257,7 +257,7 @@ wire! {
     /// The record number is used by type 5 only and must be 0 otherwise;
     /// `type_2` is unused by type 5 and sent as `00` (**inferred**: the
     /// manual says "not used", not what to send). Both rules are checked
-    /// when parsing and emitting ([`Error::ValueOutOfRange`](crate::Error::ValueOutOfRange) at the field).
+    /// when parsing and emitting ([`Error::ValueOutOfRange`](crate::error::Error::ValueOutOfRange) at the field).
     pub struct ErrorDetailQuery {
         /// 0 system, 1 axis, 2 program, 3 error-list record,
         /// 5 error-list record with extended count (TTA only; the 2003
@@ -381,7 +381,7 @@ mod tests {
         // Type 0 with a record number, and type 5 with a type 2: refused.
         assert_eq!(
             parse::<ErrorDetailQuery>(b"!992160010014E\r\n"),
-            Err(crate::Error::ValueOutOfRange { offset: 9 })
+            Err(crate::error::Error::ValueOutOfRange { offset: 9 })
         );
         let bad = ErrorDetailQuery {
             type_1: 5,

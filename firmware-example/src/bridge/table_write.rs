@@ -16,8 +16,8 @@ use iai_protocol_b::clock::reached;
 use iai_protocol_b::engine::{feed, Step};
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
-use iai_protocol_b::stream::{PositionStreamDecoder, StreamEvent};
-use iai_protocol_b::{Failure, Profile, TransferConfig};
+use iai_protocol_b::table::{PositionStreamDecoder, StreamEvent};
+use iai_protocol_b::{error::Failure, profile::Profile, transfer::TransferConfig};
 
 use super::pipeline::{pipeline, Pipeline, END_PHASE_RECORDS};
 use super::upstream::Up;

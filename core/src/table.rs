@@ -15,7 +15,7 @@
 //!
 //! ```
 //! use iai_protocol_b::position::PositionStream;
-//! use iai_protocol_b::stream::PositionStreamEncoder;
+//! use iai_protocol_b::table::PositionStreamEncoder;
 //! use iai_protocol_b::position::PositionRecord;
 //! use iai_protocol_b::frame::Station;
 //! let recs = [PositionRecord::new(1, 30, 30, 100, &[(1, 100_000), (2, -25_500)]).unwrap()];
@@ -514,7 +514,7 @@ impl PositionStreamDecoder {
     /// ```
     /// use iai_protocol_b::checksum::BypassPolicy;
     /// use iai_protocol_b::position::PositionRecord;
-    /// use iai_protocol_b::stream::{PositionStreamDecoder, StreamEvent};
+    /// use iai_protocol_b::table::{PositionStreamDecoder, StreamEvent};
     /// let wire = b"!9926D0002000103001E001E0064000186A0FFFF9C64000201000000000000000030392B\r\n";
     /// let mut dec = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
     /// let mut recs: [PositionRecord; 8] = Default::default();
