@@ -26,6 +26,12 @@
 //!
 //! Start with the [`guide`]: three runnable walkthroughs.
 //!
+//! # Paths
+//! Every public type has one path: the public module that holds it
+//! (`iai_protocol_b::line::Line`, `iai_protocol_b::client::Client`). The
+//! crate root re-exports nothing; a module re-exports only from its own
+//! private submodules.
+//!
 //! # Cargo features
 //! - `async`: the engines over an `embedded-io-async` UART
 //!   (`engine::run_async`, `Client::call_async`, `Transfer::run_async`,

@@ -18,6 +18,9 @@
 //! moves bytes between UART registers and a [`serial::IsrEnd`], reads the
 //! configuration block and runs [`bridge::run`].
 //!
+//! Every public type has one path, its module's (`bridge::Bridge`,
+//! `serial::Port`); the crate root re-exports nothing, as in the core.
+//!
 //! # Panic freedom
 //! Like the core: buffer accesses use `get`, arithmetic on untrusted values
 //! is checked, saturating or wrapping, and the lints below forbid `unwrap`,
