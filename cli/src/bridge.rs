@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 use firmware_example::codes as bridge_codes;
 use firmware_example::status;
 use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
-use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 use iai_protocol_b::frame::{emit_frame, Frame, Header, Station};
 use iai_protocol_b::position::{PositionRecord, PositionStream};
 use iai_protocol_b::table::PositionStreamEncoder;
@@ -219,7 +219,7 @@ pub fn await_frame(
         while !rest.is_empty() {
             let r = dec.decode(rest);
             rest = rest.get(r.consumed..).unwrap_or(&[]);
-            if let Event::Frame(f) = r.event {
+            if let Status::Complete(Event::Frame(f)) = r.status {
                 if accept(&f) {
                     return Ok(Some(f.as_bytes().to_vec()));
                 }

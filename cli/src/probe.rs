@@ -9,7 +9,7 @@
 use std::collections::BTreeSet;
 
 use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
-use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 use iai_protocol_b::frame::{emit_frame, Header, Station};
 
 use crate::codes;
@@ -84,7 +84,7 @@ pub fn observe(sent: &[u8], station: u8, nonce: &[u8; 10], received: &[u8]) -> O
     while !rest.is_empty() {
         let r = dec.decode(rest);
         rest = rest.get(r.consumed..).unwrap_or(&[]);
-        if let Event::Frame(f) = r.event {
+        if let Status::Complete(Event::Frame(f)) = r.status {
             let st = f.station().0;
             match f.header() {
                 Header::Command if f.as_bytes() == sent => o.echo = true,

@@ -35,12 +35,12 @@
 use crate::catalogue;
 use crate::checksum::BypassPolicy;
 use crate::clock::Clock;
-use crate::decoder::{Event, FrameDecoder, Received};
+use crate::decoder::Received;
 use crate::engine::{self, Engine, Step};
 use crate::error::{Error, ErrorDetail, Failure};
 use crate::frame::{Frame, Header};
 use crate::limits;
-use crate::line::{Due, Heard, Line};
+use crate::line::{Due, Heard, Judge, Line, Receiver, Span, Verdict};
 use crate::message::{ErrorDetailQuery, ErrorDetailResponse, Message, Request, Response};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -63,7 +63,7 @@ pub struct Client<
 > {
     command: [u8; CMD],
     command_len: usize,
-    replies: FrameDecoder<REPLY>,
+    replies: Receiver<REPLY>,
     /// Ask 216H after an `&`, unless this says the code is not the
     /// controller's.
     fetch_error_detail: Option<fn(u16) -> bool>,
@@ -84,7 +84,7 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
         Client {
             command: [0; CMD],
             command_len: 0,
-            replies: FrameDecoder::with_policy(BypassPolicy::Reject),
+            replies: Receiver::new(),
             fetch_error_detail: None,
             phase: Phase::Idle,
             id: 0,
@@ -175,28 +175,13 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
                 Phase::Done(r) => return Step::Done(r.map(|_| ())),
                 Phase::Running { detail_for } => detail_for,
             };
-            if line.busy()
-                && !line.awaiting()
-                && !line.fence_awaited()
-                && line.sends() == 0
-                && self.replies.pending() > 0
-            {
-                // Bytes held from before the first send (a frame in
-                // progress, or a 200H's text that took in other frames)
-                // cannot answer it, but a late reply may hide in them: a
-                // copy of it may follow. Not while the fence's echo is
-                // awaited: what is held then is the start of the echo (or
-                // of a reply owed before it), arriving in pieces as bytes
-                // off a serial line do.
-                line.unread(now);
-                self.replies.reset();
-            }
             match line.poll(now) {
                 Due::Idle => self.phase = Phase::Idle,
                 Due::Fence => return Step::Transmit(line.fence_bytes()),
                 Due::Send { fresh } => {
                     if fresh {
-                        self.replies.reset();
+                        // Bytes from before the send cannot answer it.
+                        self.replies.clear(line, now);
                     }
                     return Step::Transmit(self.command.get(..self.command_len).unwrap_or(&[]));
                 }
@@ -220,7 +205,7 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
                 code,
                 detail: self
                     .replies
-                    .last_frame()
+                    .reply()
                     .and_then(|fr| ErrorDetailResponse::parse(&fr).ok())
                     .map(|r| detail(&r, code)),
             }),
@@ -268,45 +253,19 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
     }
 
     /// Bytes from the controller at tick `now`. Returns at the first frame
-    /// (or broken one), with the bytes used; call again with the rest.
-    /// Once the reply was taken it takes no more bytes (`consumed` 0,
-    /// [`Heard::NeedMore`]) until the next start, so that the reply stays
-    /// readable ([`Client::response`]); bytes after it answer nothing.
+    /// (or broken one), with the bytes used; call again with the rest. The
+    /// reply taken stays readable ([`Client::response`]) until the next
+    /// start; bytes after it answer nothing.
     pub fn received(&mut self, line: &mut Line, bytes: &[u8], now: u32) -> Received<Heard> {
-        let holding = match self.phase {
-            Phase::Done(_) | Phase::Idle => true,
-            Phase::Running { .. } => line.answered(),
-        };
-        if holding {
-            return Received {
-                consumed: 0,
-                event: Heard::NeedMore,
-            };
-        }
-        let d = self.replies.decode(bytes);
-        let consumed = d.consumed;
-        let event = match d.event {
-            Event::NeedMore => Heard::NeedMore,
-            Event::Error(e) => {
-                line.broken(self.replies.failed_envelope(), now);
-                Heard::Broken(e)
-            }
-            Event::Frame(f) => {
-                // Chapter 5 condition 1: a normal response must have its
-                // message's layout.
-                let layout_ok = f.header() != Header::Response
-                    || catalogue::lookup(f.code()).is_none()
-                    || Response::parse(&f).is_ok();
-                line.offer(&f, layout_ok, now)
-            }
-        };
-        Received { consumed, event }
+        let command = self.command.get(..self.command_len).unwrap_or(&[]);
+        let mut judge = ReplyCheck { command };
+        self.replies.receive(line, &mut judge, bytes, now)
     }
 
     /// The raw reply frame of the finished request, if it was answered.
     pub fn reply_frame(&self) -> Option<Frame<'_>> {
         match self.phase {
-            Phase::Done(Ok(true)) => self.replies.last_frame(),
+            Phase::Done(Ok(true)) => self.replies.reply(),
             _ => None,
         }
     }
@@ -404,6 +363,31 @@ impl<const CMD: usize, const REPLY: usize> Engine for Client<CMD, REPLY> {
     fn sent(&mut self, line: &mut Line, now: u32) {
         Client::sent(self, line, now);
     }
+}
+
+/// A client's check of a reply: chapter 5 condition 1, a normal response
+/// has its message's layout; a 200H reply echoes the call's text exactly.
+struct ReplyCheck<'c> {
+    command: &'c [u8],
+}
+
+impl Judge for ReplyCheck<'_> {
+    fn judge(&mut self, f: &Frame<'_>) -> Verdict {
+        let layout_ok = catalogue::lookup(f.code()).is_none() || Response::parse(f).is_ok();
+        let echo_ok = f.code() != catalogue::TEST_CALL.id || echoes(self.command, f);
+        Verdict {
+            fits: layout_ok && echo_ok,
+            values: Span::UNKNOWN,
+            keep: true,
+        }
+    }
+}
+
+/// Whether `reply` (a 200H response) carries exactly the text of
+/// `command` (the 200H sent): the controller echoes it (2003 p. 15).
+pub(crate) fn echoes(command: &[u8], reply: &Frame<'_>) -> bool {
+    Frame::new_checked(command, BypassPolicy::Accept)
+        .is_ok_and(|c| c.code() == catalogue::TEST_CALL.id && c.body() == reply.body())
 }
 
 /// The numbers of a 216H reply, for the `&` with `code`.

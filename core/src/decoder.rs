@@ -1,7 +1,7 @@
 //! The streaming frame decoder: push bytes in, get whole frames out.
 //!
 //! It never blocks and never allocates: it takes whatever bytes the UART
-//! produced (one at a time or any slice) and answers [`Event::NeedMore`]
+//! produced (one at a time or any slice) and answers [`Status::Partial`]
 //! until a frame is complete. Its buffer is a const generic `N` (default
 //! [`DEFAULT_CAPACITY`], the TTA's 2,051 bytes); every access is checked.
 //!
@@ -18,21 +18,21 @@
 //! bytes again from the first header byte after its start, and the valid
 //! frames among them come out as if nothing had happened. Those bytes are
 //! replayed by the following calls, before any new input: call
-//! [`FrameDecoder::decode`] until it answers [`Event::NeedMore`], even with
+//! [`FrameDecoder::decode`] until it answers [`Status::Partial`], even with
 //! an empty input.
 //!
 //! ```
-//! use iai_protocol_b::decoder::{Event, FrameDecoder};
+//! use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 //! let mut dec: FrameDecoder = FrameDecoder::new();
 //! let mut input: &[u8] = b"noise#992322C\r\n";
 //! let mut frames = 0;
 //! loop {
 //!     let d = dec.decode(input);
 //!     input = &input[d.consumed..];
-//!     match d.event {
-//!         Event::NeedMore => break,
-//!         Event::Frame(f) => { assert_eq!(f.as_bytes(), b"#992322C\r\n"); frames += 1 }
-//!         Event::Error(e) => panic!("{e}"),
+//!     match d.status {
+//!         Status::Partial => break,
+//!         Status::Complete(Event::Frame(f)) => { assert_eq!(f.as_bytes(), b"#992322C\r\n"); frames += 1 }
+//!         Status::Complete(Event::Error(e)) => panic!("{e}"),
 //!     }
 //! }
 //! assert_eq!(frames, 1);
@@ -52,11 +52,36 @@ pub use skip::{FrameSkipper, Skipped};
 /// ([`limits::LARGEST_FRAME`], the TTA's 2,051-byte receive buffer).
 pub const DEFAULT_CAPACITY: usize = limits::LARGEST_FRAME;
 
-/// What one step of decoding produced.
+/// What a push decoder, or the line, made of the bytes it was given: the
+/// one "need more" shape of the crate (the frame and stream decoders, the
+/// frame skipper, an engine's `received`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Status<T> {
+    /// Every byte given was used and nothing is complete yet: give more.
+    Partial,
+    /// Something is complete.
+    Complete(T),
+}
+
+impl<T> Status<T> {
+    /// What is complete, if anything.
+    pub fn complete(self) -> Option<T> {
+        match self {
+            Status::Partial => None,
+            Status::Complete(t) => Some(t),
+        }
+    }
+
+    /// Whether nothing is complete yet.
+    pub const fn is_partial(&self) -> bool {
+        matches!(self, Status::Partial)
+    }
+}
+
+/// A complete step of frame decoding.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Event<'d> {
-    /// All input was used; no frame is complete yet.
-    NeedMore,
     /// A complete, checked frame. It borrows the decoder until the next call.
     Frame(Frame<'d>),
     /// A broken frame was dropped; decoding goes on with the next byte.
@@ -68,11 +93,11 @@ pub enum Event<'d> {
 /// in the next call.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Received<E> {
+pub struct Received<T> {
     /// Bytes of the input consumed.
     pub consumed: usize,
     /// What they completed.
-    pub event: E,
+    pub status: Status<T>,
 }
 
 /// Counters of what the decoder has seen.
@@ -225,9 +250,10 @@ impl<const N: usize> FrameDecoder<N> {
     }
 
     /// After an [`Event::Error`] for a frame that ended with CR LF but
-    /// failed its check (checksum, digits, layout of the envelope): its
-    /// header, station and code, if they could be read. An engine awaiting
-    /// a reply uses this to tell "my reply arrived broken" from noise.
+    /// failed its check (checksum, digits, layout of the envelope), or that
+    /// outgrew the buffer: its header, station and code, if they could be
+    /// read. An engine awaiting a reply uses this to tell "my reply arrived
+    /// broken" from noise.
     pub fn failed_envelope(&self) -> Option<(Header, Station, u16)> {
         self.inner.failed
     }
@@ -240,25 +266,25 @@ impl<const N: usize> FrameDecoder<N> {
 
     /// Pushes one byte. If bytes of a failed text frame are waiting to be
     /// decoded again, `byte` joins them and they come first; call
-    /// `decode(&[])` until [`Event::NeedMore`] to drain them.
-    pub fn push(&mut self, byte: u8) -> Event<'_> {
+    /// `decode(&[])` until [`Status::Partial`] to drain them.
+    pub fn push(&mut self, byte: u8) -> Status<Event<'_>> {
         let outcome = self.inner.push(&mut self.buf, byte);
         self.event(outcome)
     }
 
     /// Consumes bytes from `input` until a frame or an error is ready or
     /// the input is used up. Call again with the rest of the input until
-    /// it answers [`Event::NeedMore`] (bytes being decoded again after a
+    /// it answers [`Status::Partial`] (bytes being decoded again after a
     /// failed text frame come out before new input, with `consumed` 0).
     pub fn decode(&mut self, input: &[u8]) -> Received<Event<'_>> {
         let (consumed, outcome) = self.inner.decode(&mut self.buf, input);
         Received {
             consumed,
-            event: self.event(outcome),
+            status: self.event(outcome),
         }
     }
 
-    fn event(&self, outcome: Step) -> Event<'_> {
+    fn event(&self, outcome: Step) -> Status<Event<'_>> {
         self.inner.event(&self.buf, outcome)
     }
 
@@ -283,14 +309,14 @@ impl<const N: usize> FrameDecoder<N> {
 }
 
 impl Inner {
-    fn event<'b>(&self, buf: &'b [u8], outcome: Step) -> Event<'b> {
+    fn event<'b>(&self, buf: &'b [u8], outcome: Step) -> Status<Event<'b>> {
         match outcome {
-            Step::More => Event::NeedMore,
+            Step::More => Status::Partial,
             Step::Frame(env) => {
                 let bytes = buf.get(..self.len).unwrap_or(&[]);
-                Event::Frame(Frame::from_parts(bytes, env))
+                Status::Complete(Event::Frame(Frame::from_parts(bytes, env)))
             }
-            Step::Error(e) => Event::Error(e),
+            Step::Error(e) => Status::Complete(Event::Error(e)),
         }
     }
 
@@ -531,6 +557,8 @@ impl Inner {
         if self.store(buf, byte) {
             Step::More
         } else {
+            // What it was can still be told by its envelope.
+            self.failed = frame::read_envelope(buf);
             let e = Error::FrameTooLong { limit: buf.len() };
             if let Some(step) = self.recover(buf, e, Some(byte)) {
                 return step;
@@ -555,10 +583,10 @@ mod tests {
         loop {
             let d = dec.decode(input);
             input = &input[d.consumed..];
-            match d.event {
-                Event::NeedMore => return out,
-                Event::Frame(f) => out.push(Ok(f.as_bytes().to_vec())),
-                Event::Error(e) => out.push(Err(e)),
+            match d.status {
+                Status::Partial => return out,
+                Status::Complete(Event::Frame(f)) => out.push(Ok(f.as_bytes().to_vec())),
+                Status::Complete(Event::Error(e)) => out.push(Err(e)),
             }
         }
     }
@@ -574,7 +602,9 @@ mod tests {
     fn a_decoder_keeps_its_bypass_policy() {
         let reply: &[u8] = b"#99232@@\r\n";
         let decode = |dec: &mut FrameDecoder<16>| {
-            dec.decode(reply).event.map_frame(|f| f.as_bytes().to_vec())
+            dec.decode(reply)
+                .status
+                .map_frame(|f| f.as_bytes().to_vec())
         };
         let mut dec = FrameDecoder::<16>::default();
         assert_eq!(dec.policy(), BypassPolicy::CommandsOnly);
@@ -594,7 +624,7 @@ mod tests {
     #[test]
     fn a_taken_buffer_drops_the_frame_in_progress() {
         let mut dec = FrameDecoder::<16>::new();
-        assert_eq!(dec.decode(b"!992").event, Event::NeedMore);
+        assert_eq!(dec.decode(b"!992").status, Status::Partial);
         assert_eq!(dec.pending(), 4);
         dec.take_buffer().fill(b'%');
         assert_eq!(dec.pending(), 0);
@@ -602,7 +632,7 @@ mod tests {
         let d = dec.decode(SERVO_REPLY);
         assert_eq!(d.consumed, SERVO_REPLY.len());
         assert_eq!(
-            d.event.map_frame(|f| f.as_bytes().to_vec()),
+            d.status.map_frame(|f| f.as_bytes().to_vec()),
             Ok(SERVO_REPLY.to_vec())
         );
     }
@@ -612,7 +642,7 @@ mod tests {
     #[test]
     fn a_frame_decoder_debugs_as_its_buffer_and_state() {
         let mut dec: FrameDecoder<4> = FrameDecoder::new();
-        assert_eq!(dec.decode(b"!9").event, Event::NeedMore);
+        assert_eq!(dec.decode(b"!9").status, Status::Partial);
         let shown = std::format!("{dec:?}");
         assert!(
             shown.starts_with("FrameDecoder { buf: [33, 57, 0, 0], len: 2, state: InFrame, "),
@@ -626,13 +656,13 @@ mod tests {
         );
     }
 
-    impl<'d> Event<'d> {
+    impl<'d> Status<Event<'d>> {
         /// `Ok(frame)`, `Err(Some(error))` or `Err(None)` (need more).
         fn map_frame<T>(self, f: impl FnOnce(Frame<'d>) -> T) -> Result<T, Option<Error>> {
             match self {
-                Event::NeedMore => Err(None),
-                Event::Frame(fr) => Ok(f(fr)),
-                Event::Error(e) => Err(Some(e)),
+                Status::Partial => Err(None),
+                Status::Complete(Event::Frame(fr)) => Ok(f(fr)),
+                Status::Complete(Event::Error(e)) => Err(Some(e)),
             }
         }
     }
@@ -689,9 +719,9 @@ mod tests {
         let mut got = Vec::new();
         for &b in &input {
             match bytewise.push(b) {
-                Event::NeedMore => {}
-                Event::Frame(f) => got.push(Ok(f.as_bytes().to_vec())),
-                Event::Error(e) => got.push(Err(e)),
+                Status::Partial => {}
+                Status::Complete(Event::Frame(f)) => got.push(Ok(f.as_bytes().to_vec())),
+                Status::Complete(Event::Error(e)) => got.push(Err(e)),
             }
             got.extend(events(&mut bytewise, &[]));
         }
@@ -757,13 +787,13 @@ mod golden {
             let d = dec.decode(input);
             assert!(d.consumed >= 1 && d.consumed <= input.len());
             input = &input[d.consumed..];
-            let ev = match d.event {
-                Event::NeedMore => {
+            let ev = match d.status {
+                Status::Partial => {
                     assert!(input.is_empty(), "NeedMore with input left");
                     break;
                 }
-                Event::Frame(f) => Ok(f.len()),
-                Event::Error(e) => Err(e),
+                Status::Complete(Event::Frame(f)) => Ok(f.len()),
+                Status::Complete(Event::Error(e)) => Err(e),
             };
             out[k] = Some(ev);
             k += 1;
@@ -777,12 +807,12 @@ mod golden {
         assert_eq!(dec.capacity(), DEFAULT_CAPACITY);
         let (last, head) = P10.split_last().unwrap();
         for (i, &b) in head.iter().enumerate() {
-            assert_eq!(dec.push(b), Event::NeedMore);
+            assert_eq!(dec.push(b), Status::Partial);
             assert_eq!(dec.pending(), i + 1);
             assert_eq!(dec.last_frame(), None);
         }
         match dec.push(*last) {
-            Event::Frame(f) => {
+            Status::Complete(Event::Frame(f)) => {
                 assert_eq!(f.as_bytes(), P10);
                 assert_eq!(f.station(), Station(0x99));
                 assert_eq!(f.code(), 0x209);
@@ -802,7 +832,7 @@ mod golden {
             }
         );
         // The next byte clears the frame.
-        assert_eq!(dec.push(b'x'), Event::NeedMore);
+        assert_eq!(dec.push(b'x'), Status::Partial);
         assert_eq!(dec.last_frame(), None);
         assert_eq!(dec.stats().discarded_bytes, 1);
     }
@@ -819,7 +849,7 @@ mod golden {
         let mut dec: FrameDecoder = FrameDecoder::default();
         let d = dec.decode(&input[..n]);
         assert_eq!(d.consumed, 5 + P10.len());
-        assert!(matches!(d.event, Event::Frame(f) if f.as_bytes() == P10));
+        assert!(matches!(d.status, Status::Complete(Event::Frame(f)) if f.as_bytes() == P10));
         let (ev, k) = events(&mut dec, &input[5 + P10.len()..n]);
         assert_eq!(k, 2);
         assert_eq!(ev[0], Some(Ok(R232.len())));
@@ -980,7 +1010,7 @@ mod golden {
             dec.failed_envelope(),
             Some((Header::Command, Station(0x99), 0x209))
         );
-        assert_eq!(dec.push(b'x'), Event::NeedMore);
+        assert_eq!(dec.push(b'x'), Status::Partial);
         assert_eq!(dec.failed_envelope(), None, "forgotten at the next byte");
         // An unreadable envelope, and errors before CR LF, leave nothing.
         for bad in [&b"!9G209001005@@\r\n"[..], b"#99232\r\r", b"#99232\n"] {
@@ -1000,7 +1030,10 @@ mod golden {
         let mut dec: FrameDecoder = FrameDecoder::new();
         let d = dec.decode(SWALLOWED);
         assert_eq!(d.consumed, SWALLOWED.len());
-        assert_eq!(d.event, Event::Error(Error::BodyTooShort { offset: 14 }));
+        assert_eq!(
+            d.status,
+            Status::Complete(Event::Error(Error::BodyTooShort { offset: 14 }))
+        );
         assert_eq!(
             dec.pending(),
             R232.len(),
@@ -1009,9 +1042,9 @@ mod golden {
         assert_eq!(dec.stats().discarded_bytes, 8);
         let d = dec.decode(b"");
         assert_eq!(d.consumed, 0);
-        assert!(matches!(d.event, Event::Frame(f) if f.as_bytes() == R232));
+        assert!(matches!(d.status, Status::Complete(Event::Frame(f)) if f.as_bytes() == R232));
         assert_eq!(dec.pending(), 0);
-        assert_eq!(dec.decode(b"").event, Event::NeedMore);
+        assert_eq!(dec.decode(b"").status, Status::Partial);
     }
 
     #[test]
@@ -1019,15 +1052,17 @@ mod golden {
         let mut dec: FrameDecoder = FrameDecoder::new();
         let (last, head) = SWALLOWED.split_last().unwrap();
         for &b in head {
-            assert_eq!(dec.push(b), Event::NeedMore);
+            assert_eq!(dec.push(b), Status::Partial);
         }
         assert_eq!(
             dec.push(*last),
-            Event::Error(Error::BodyTooShort { offset: 14 })
+            Status::Complete(Event::Error(Error::BodyTooShort { offset: 14 }))
         );
         // The next byte comes after the waiting reply, which comes out first.
-        assert!(matches!(dec.push(b'!'), Event::Frame(f) if f.as_bytes() == R232));
-        assert_eq!(dec.decode(b"").event, Event::NeedMore);
+        assert!(
+            matches!(dec.push(b'!'), Status::Complete(Event::Frame(f)) if f.as_bytes() == R232)
+        );
+        assert_eq!(dec.decode(b"").status, Status::Partial);
         assert_eq!(dec.pending(), 1, "the '!' starts the next frame");
         let (ev, _) = events(&mut dec, b"99209001005@@\r\n");
         assert_eq!(ev[0], Some(Ok(16)));
@@ -1045,8 +1080,10 @@ mod golden {
         assert_eq!(ev[1], Some(Err(Error::BodyTooShort { offset: 14 })));
         // The reply waits to be decoded again.
         assert_eq!(dec.pending(), R232.len());
-        assert!(matches!(dec.decode(b"").event, Event::Frame(f) if f.as_bytes() == R232));
-        assert_eq!(dec.decode(b"").event, Event::NeedMore);
+        assert!(
+            matches!(dec.decode(b"").status, Status::Complete(Event::Frame(f)) if f.as_bytes() == R232)
+        );
+        assert_eq!(dec.decode(b"").status, Status::Partial);
         assert_eq!(dec.stats().frames, 1);
         assert_eq!(dec.pending(), 0);
         // Every byte is accounted for: in the frame or discarded.
@@ -1058,10 +1095,12 @@ mod golden {
         let mut bytewise: FrameDecoder = FrameDecoder::new();
         let mut frames = 0;
         for &b in &input[..] {
-            if let Event::Frame(_) = bytewise.push(b) {
+            if let Status::Complete(Event::Frame(_)) = bytewise.push(b) {
                 frames += 1;
             }
-            while let Event::Frame(_) | Event::Error(_) = bytewise.decode(b"").event {
+            while let Status::Complete(Event::Frame(_)) | Status::Complete(Event::Error(_)) =
+                bytewise.decode(b"").status
+            {
                 frames += usize::from(bytewise.last_frame().is_some());
             }
         }
@@ -1100,14 +1139,14 @@ mod golden {
         loop {
             let d = dec.decode(rest);
             rest = &rest[d.consumed..];
-            match d.event {
-                Event::NeedMore if rest.is_empty() => break,
-                Event::NeedMore => {}
-                Event::Frame(f) => {
+            match d.status {
+                Status::Partial if rest.is_empty() => break,
+                Status::Partial => {}
+                Status::Complete(Event::Frame(f)) => {
                     assert_eq!(f.as_bytes(), R232);
                     frames += 1;
                 }
-                Event::Error(e) => {
+                Status::Complete(Event::Error(e)) => {
                     errors[k] = Some(e);
                     k += 1;
                 }
@@ -1131,7 +1170,7 @@ mod golden {
         let mut bytewise: FrameDecoder = FrameDecoder::new();
         for &b in input {
             let _ = bytewise.push(b);
-            while !matches!(bytewise.decode(b"").event, Event::NeedMore) {}
+            while !matches!(bytewise.decode(b"").status, Status::Partial) {}
         }
         assert_eq!(bytewise.stats(), s);
         assert_eq!(bytewise.pending(), 0);
@@ -1162,11 +1201,11 @@ mod golden {
         loop {
             let d = dec.decode(rest);
             rest = &rest[d.consumed..];
-            let ev = match d.event {
-                Event::NeedMore if rest.is_empty() => break,
-                Event::NeedMore => continue,
-                Event::Frame(f) => Ok(f.len()),
-                Event::Error(e) => Err(e),
+            let ev = match d.status {
+                Status::Partial if rest.is_empty() => break,
+                Status::Partial => continue,
+                Status::Complete(Event::Frame(f)) => Ok(f.len()),
+                Status::Complete(Event::Error(e)) => Err(e),
             };
             seen[k] = Some(ev);
             k += 1;
@@ -1195,7 +1234,7 @@ mod golden {
     #[test]
     fn reset_and_an_empty_buffer() {
         let mut dec: FrameDecoder = FrameDecoder::new();
-        assert_eq!(dec.decode(b"!992").event, Event::NeedMore);
+        assert_eq!(dec.decode(b"!992").status, Status::Partial);
         assert_eq!(dec.pending(), 4);
         dec.reset();
         assert_eq!(dec.pending(), 0);

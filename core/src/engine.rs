@@ -1,12 +1,18 @@
-//! The shape every engine has, and the loops that drive one over a UART.
+//! The shape every engine has, and the one driver that moves its bytes.
 //!
-//! The engines ([`crate::client`], [`crate::transfer`], [`crate::readback`])
-//! are sans-IO: [`Engine::poll`] says what to transmit or until when to
-//! wait, [`Engine::received`] takes the bytes that arrive, [`Engine::sent`]
-//! hears that a transmission ended. Each call borrows the [`Line`] the
-//! engine talks over. [`run_blocking`], [`poll_nb`] and (with the `async`
-//! feature) `run_async` move bytes and time between an engine and a UART;
-//! they read the clock *after* a transmission was written and flushed, so
+//! The engines ([`crate::client`], [`crate::transfer`], [`crate::readback`],
+//! [`crate::relay`]) are sans-IO: [`Engine::poll`] says what to transmit
+//! or until when to wait, [`Engine::received`] takes the bytes that arrive,
+//! [`Engine::sent`] hears that a transmission ended. Each call borrows the
+//! [`Line`] the engine talks over.
+//!
+//! [`Driver`] is the one loop body between an engine and a port: it feeds
+//! what arrived, writes what is due as far as the port takes it, and says
+//! what it waits for. [`Driver::turn`] does that over an `embedded-io` port
+//! without ever blocking (the firmware's loops); [`run_blocking`],
+//! [`poll_nb`], `run_async` (feature `async`) and `hosted::StdLink` are
+//! thin shells around the same steps. They read the clock *after* a
+//! transmission was written (and, where the shell may block, flushed), so
 //! that the reply timeout starts at its end.
 
 use crate::clock::Clock;
@@ -29,43 +35,260 @@ pub enum Step<'a, T> {
     Done(Result<T, Failure>),
 }
 
-/// A sans-IO engine that the loops can drive.
+/// A sans-IO engine that the driver can run.
 pub trait Engine {
     /// What it gives when it succeeds.
     type Output;
     /// What it wants at tick `now`.
     fn poll<'a>(&'a mut self, line: &'a mut Line, now: u32) -> Step<'a, Self::Output>;
     /// Bytes from the line at tick `now`: returns at the first frame (or
-    /// broken frame), with the bytes it used. An engine that holds a result
-    /// the next bytes would overwrite takes none (`consumed` 0,
-    /// [`Heard::NeedMore`]) until it was polled.
+    /// broken frame), with the bytes it used ([`crate::decoder::Status::Partial`]
+    /// once all are used and nothing more is complete).
     fn received(&mut self, line: &mut Line, bytes: &[u8], now: u32) -> Received<Heard>;
     /// The transmission ended at tick `now`.
     fn sent(&mut self, line: &mut Line, now: u32);
 }
 
-/// Feeds `bytes` to `engine` until it used them all or takes no more;
-/// returns the bytes used.
-pub fn feed<G: Engine + ?Sized>(engine: &mut G, line: &mut Line, bytes: &[u8], now: u32) -> usize {
+/// Feeds all of `bytes` to `engine`.
+pub fn feed<G: Engine + ?Sized>(engine: &mut G, line: &mut Line, bytes: &[u8], now: u32) {
     let mut used = 0;
     loop {
         let r = engine.received(line, bytes.get(used..).unwrap_or(&[]), now);
         used += r.consumed;
-        if r.event == Heard::NeedMore {
-            return used;
+        if r.status.is_partial() {
+            return;
         }
     }
 }
 
+/// What the driver needs next: bytes written, or a wait.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Next<'a, T> {
+    /// Write these bytes (the rest of the transmission due), then report
+    /// how many were taken ([`Driver::wrote`]).
+    Write(&'a [u8]),
+    /// Nothing to write before this tick, if any (read meanwhile).
+    Wait(Option<u32>),
+    /// The engine's result.
+    Done(Result<T, Failure>),
+}
+
+/// What one [`Driver::turn`] achieved.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Turn<T> {
+    /// Bytes moved: turn again.
+    Busy,
+    /// Nothing moves before `until` (if any), bytes to read, or, with
+    /// `write`, room to write.
+    Wait {
+        /// The engine's next deadline.
+        until: Option<u32>,
+        /// A transmission waits for room in the port.
+        write: bool,
+    },
+    /// The engine's result.
+    Done(Result<T, Failure>),
+}
+
+/// Bytes read from a port per call.
+const READ_CHUNK: usize = 32;
+
+/// The one driver loop body between an engine and a port (see the module
+/// docs): where a transmission stands between calls. Keep one per port;
+/// it holds nothing of the engine, so engines can take turns on it.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Driver {
+    /// Bytes of the transmission due already written.
+    written: usize,
+}
+
+impl Driver {
+    /// A driver with nothing written.
+    pub const fn new() -> Self {
+        Driver { written: 0 }
+    }
+
+    /// Whether a transmission is half written.
+    pub const fn writing(&self) -> bool {
+        self.written > 0
+    }
+
+    /// While no engine runs: reads what `port` has ready and lets the line
+    /// hear it (late replies, copies, noise), so that what arrives between
+    /// engines is placed or noticed, never dropped unread. Whether
+    /// anything came.
+    pub fn listen<P, C>(
+        &mut self,
+        line: &mut Line,
+        port: &mut P,
+        clock: &mut C,
+    ) -> Result<bool, P::Error>
+    where
+        P: embedded_io::Read + embedded_io::ReadReady,
+        C: Clock,
+    {
+        let mut buf = [0u8; READ_CHUNK];
+        let mut moved = false;
+        while port.read_ready()? {
+            let n = port.read(&mut buf)?;
+            if n == 0 {
+                break;
+            }
+            line.listen(buf.get(..n).unwrap_or(&[]), clock.now_ms());
+            moved = true;
+        }
+        Ok(moved)
+    }
+
+    /// What `engine` needs at `now` (sans-IO: the caller moves the bytes).
+    pub fn next<'a, G: Engine>(
+        &mut self,
+        engine: &'a mut G,
+        line: &'a mut Line,
+        now: u32,
+    ) -> Next<'a, G::Output> {
+        match engine.poll(line, now) {
+            Step::Transmit(bytes) => Next::Write(bytes.get(self.written..).unwrap_or(&[])),
+            Step::WaitUntil(t) => {
+                self.written = 0;
+                Next::Wait(Some(t))
+            }
+            Step::Idle => {
+                self.written = 0;
+                Next::Wait(None)
+            }
+            Step::Done(r) => {
+                self.written = 0;
+                Next::Done(r)
+            }
+        }
+    }
+
+    /// `n` bytes of what [`Driver::next`] gave were written; `done` once
+    /// they were its last (and, where the port can say, have left it), at
+    /// tick `now`: the engine hears the transmission ended.
+    pub fn wrote<G: Engine>(
+        &mut self,
+        engine: &mut G,
+        line: &mut Line,
+        n: usize,
+        done: bool,
+        now: u32,
+    ) {
+        self.written += n;
+        if done {
+            self.written = 0;
+            engine.sent(line, now);
+        }
+    }
+
+    /// One turn over a port that never blocks: reads what is ready,
+    /// writes what the port takes of the transmission due (reporting it
+    /// sent once all is taken), polls the engine. Never waits. A port
+    /// that reads nothing while ready was closed: [`Failure::Closed`].
+    pub fn turn<G, P, C>(
+        &mut self,
+        engine: &mut G,
+        line: &mut Line,
+        port: &mut P,
+        clock: &mut C,
+    ) -> Result<Turn<G::Output>, P::Error>
+    where
+        G: Engine,
+        P: embedded_io::Read
+            + embedded_io::ReadReady
+            + embedded_io::Write
+            + embedded_io::WriteReady,
+        C: Clock,
+    {
+        let mut moved = match read_ready(engine, line, port, clock) {
+            Ok(moved) => moved,
+            Err(Failure::Io(e)) => return Err(e),
+            Err(_) => return Ok(Turn::Done(Err(Failure::Closed))),
+        };
+        // Rounds of an engine that asks to be polled again at once (a
+        // read-back delivering window after window), bounded.
+        let mut rounds = 0u8;
+        loop {
+            let now = clock.now_ms();
+            match self.next(engine, line, now) {
+                Next::Write(bytes) => {
+                    let len = bytes.len();
+                    if len > 0 && !port.write_ready()? {
+                        return Ok(if moved {
+                            Turn::Busy
+                        } else {
+                            Turn::Wait {
+                                until: None,
+                                write: true,
+                            }
+                        });
+                    }
+                    let n = if len > 0 { port.write(bytes)? } else { 0 };
+                    let now = clock.now_ms();
+                    self.wrote(engine, line, n, n >= len, now);
+                    if n < len {
+                        return Ok(if n > 0 || moved {
+                            Turn::Busy
+                        } else {
+                            Turn::Wait {
+                                until: None,
+                                write: true,
+                            }
+                        });
+                    }
+                    moved = true;
+                }
+                Next::Wait(Some(t)) if crate::clock::reached(now, t) && rounds < 4 => {
+                    rounds += 1;
+                    moved = true;
+                }
+                Next::Wait(until) => {
+                    return Ok(if moved {
+                        Turn::Busy
+                    } else {
+                        Turn::Wait {
+                            until,
+                            write: false,
+                        }
+                    })
+                }
+                Next::Done(r) => return Ok(Turn::Done(r)),
+            }
+        }
+    }
+}
+
+/// Feeds `engine` what `port` has ready; whether anything came. A port
+/// that reads 0 bytes while ready was closed.
+fn read_ready<G, P, C>(
+    engine: &mut G,
+    line: &mut Line,
+    port: &mut P,
+    clock: &mut C,
+) -> Result<bool, Failure<P::Error>>
+where
+    G: Engine,
+    P: embedded_io::Read + embedded_io::ReadReady,
+    C: Clock,
+{
+    let mut buf = [0u8; READ_CHUNK];
+    let mut moved = false;
+    while port.read_ready().map_err(Failure::Io)? {
+        let n = port.read(&mut buf).map_err(Failure::Io)?;
+        if n == 0 {
+            return Err(Failure::Closed);
+        }
+        feed(engine, line, buf.get(..n).unwrap_or(&[]), clock.now_ms());
+        moved = true;
+    }
+    Ok(moved)
+}
+
 /// Makes what progress is possible without waiting: reads what arrived,
-/// transmits what is due, checks the deadline. `WouldBlock` means "call
+/// transmits what is due (a blocking write, flushed, so the timeout starts
+/// when the last byte left), checks the deadline. `WouldBlock` means "call
 /// again later".
-///
-/// Bytes read in the same chunk after a result the engine still holds are
-/// dropped: they came after the reply and before the next command, so they
-/// answer nothing, but they may hold a reply whose copy is still to come,
-/// so the line hears that bytes went unread ([`Line::unread`]). A driver
-/// that can keep them for the next engine should (`hosted::StdLink` does).
 pub fn poll_nb<G, U, C>(
     engine: &mut G,
     line: &mut Line,
@@ -78,30 +301,20 @@ where
     C: Clock,
 {
     let io = |e| nb::Error::Other(Failure::Io(e));
-    let mut buf = [0u8; 32];
-    while uart.read_ready().map_err(io)? {
-        let n = uart.read(&mut buf).map_err(io)?;
-        if n == 0 {
-            return Err(nb::Error::Other(Failure::Closed));
-        }
-        let chunk = buf.get(..n).unwrap_or(&[]);
-        let now = clock.now_ms();
-        if feed(engine, line, chunk, now) < n {
-            line.unread(now);
-            break;
-        }
-    }
-    match engine.poll(line, clock.now_ms()) {
-        Step::Transmit(bytes) => {
+    read_ready(engine, line, uart, clock).map_err(nb::Error::Other)?;
+    let mut driver = Driver::new();
+    let now = clock.now_ms();
+    match driver.next(engine, line, now) {
+        Next::Write(bytes) => {
             uart.write_all(bytes).map_err(io)?;
             uart.flush().map_err(io)?;
             let end = clock.now_ms();
-            engine.sent(line, end);
+            driver.wrote(engine, line, 0, true, end);
             Err(nb::Error::WouldBlock)
         }
-        Step::WaitUntil(_) | Step::Idle => Err(nb::Error::WouldBlock),
-        Step::Done(Ok(out)) => Ok(out),
-        Step::Done(Err(e)) => Err(nb::Error::Other(e.widen())),
+        Next::Wait(_) => Err(nb::Error::WouldBlock),
+        Next::Done(Ok(out)) => Ok(out),
+        Next::Done(Err(e)) => Err(nb::Error::Other(e.widen())),
     }
 }
 
@@ -142,36 +355,32 @@ where
     U: embedded_io_async::Read + embedded_io_async::ReadReady + embedded_io_async::Write,
     C: crate::clock::AsyncClock,
 {
-    let mut buf = [0u8; 32];
+    let mut buf = [0u8; READ_CHUNK];
+    let mut driver = Driver::new();
     loop {
         while uart.read_ready().map_err(Failure::Io)? {
             let n = uart.read(&mut buf).await.map_err(Failure::Io)?;
             if n == 0 {
                 return Err(Failure::Closed);
             }
-            let chunk = buf.get(..n).unwrap_or(&[]);
-            let now = clock.now_ms();
-            if feed(engine, line, chunk, now) < n {
-                line.unread(now);
-                break;
-            }
+            feed(engine, line, buf.get(..n).unwrap_or(&[]), clock.now_ms());
         }
         let now = clock.now_ms();
-        match engine.poll(line, now) {
-            Step::Transmit(bytes) => {
+        match driver.next(engine, line, now) {
+            Next::Write(bytes) => {
                 uart.write_all(bytes).await.map_err(Failure::Io)?;
                 uart.flush().await.map_err(Failure::Io)?;
                 let end = clock.now_ms();
-                engine.sent(line, end);
+                driver.wrote(engine, line, 0, true, end);
             }
-            Step::WaitUntil(t) => {
+            Next::Wait(Some(t)) => {
                 clock
                     .sleep_ms(t.wrapping_sub(now).clamp(1, poll_ms.max(1)))
                     .await
             }
-            Step::Idle => clock.sleep_ms(poll_ms.max(1)).await,
-            Step::Done(Ok(out)) => return Ok(out),
-            Step::Done(Err(e)) => return Err(e.widen()),
+            Next::Wait(None) => clock.sleep_ms(poll_ms.max(1)).await,
+            Next::Done(Ok(out)) => return Ok(out),
+            Next::Done(Err(e)) => return Err(e.widen()),
         }
     }
 }

@@ -23,7 +23,7 @@
 //! names, units and wire formats, which is what a logger or inspector needs.
 //!
 //! ```
-//! use iai_protocol_b::decoder::{Event, FrameDecoder};
+//! use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 //! use iai_protocol_b::field::FieldSpec;
 //! use iai_protocol_b::message::{decode_any, AnyMessage, Fields, Response, Value, Visitor};
 //!
@@ -49,10 +49,10 @@
 //!     while !input.is_empty() {
 //!         let step = dec.decode(input);
 //!         input = &input[step.consumed..];
-//!         match step.event {
-//!             Event::NeedMore => {}
-//!             Event::Error(e) => println!("dropped a broken frame: {e}"),
-//!             Event::Frame(frame) => {
+//!         match step.status {
+//!             Status::Partial => {}
+//!             Status::Complete(Event::Error(e)) => println!("dropped a broken frame: {e}"),
+//!             Status::Complete(Event::Frame(frame)) => {
 //!                 let decoded = decode_any(&frame).unwrap();
 //!                 assert!(matches!(
 //!                     decoded.message,
@@ -188,10 +188,10 @@
 //!         loop {
 //!             let r = dec.decode(input);
 //!             input = &input[r.consumed..];
-//!             match r.event {
-//!                 StreamEvent::Record(rec) => { map.insert(rec.number, rec); written += 1 }
-//!                 StreamEvent::End { .. } => break,
-//!                 StreamEvent::Error { error, .. } => panic!("{error}"),
+//!             match r.status.complete() {
+//!                 Some(StreamEvent::Record(rec)) => { map.insert(rec.number, rec); written += 1 }
+//!                 Some(StreamEvent::End { .. }) => break,
+//!                 Some(StreamEvent::Error { error, .. }) => panic!("{error}"),
 //!                 _ => {}
 //!             }
 //!         }
@@ -199,7 +199,7 @@
 //!         reply.emit(st, &mut out).unwrap()
 //!     } else {
 //!         let mut dec: FrameDecoder = FrameDecoder::new();
-//!         let Event::Frame(frame) = dec.decode(command).event else { panic!() };
+//!         let Some(Event::Frame(frame)) = dec.decode(command).status.complete() else { panic!() };
 //!         if let Ok(q) = TestCall::parse(&frame) {
 //!             TestCallResponse { test_string: q.test_string }.emit(st, &mut out).unwrap()
 //!         } else {

@@ -34,7 +34,7 @@ use std::vec::Vec;
 
 use crate::client::Client;
 use crate::clock::reached;
-use crate::engine::{feed, Engine, Step};
+use crate::engine::{feed, Driver, Engine, Next};
 use crate::error::Failure;
 use crate::line::{Line, LineConfig};
 use crate::message::Request;
@@ -143,6 +143,7 @@ pub struct StdLink<S> {
     stream: S,
     line: Line,
     clock: SystemClock,
+    driver: Driver,
     pending: Vec<u8>,
 }
 
@@ -163,6 +164,7 @@ impl<S: WaitRead> StdLink<S> {
             stream,
             line: Line::new(cfg, seed()),
             clock: SystemClock::new(),
+            driver: Driver::new(),
             pending: Vec::new(),
         }
     }
@@ -237,18 +239,18 @@ impl<S: WaitRead> StdLink<S> {
     ) -> io::Result<Option<Result<G::Output, Failure>>> {
         self.feed_pending(engine);
         let now = self.now();
-        match engine.poll(&mut self.line, now) {
-            Step::Transmit(bytes) => {
+        match self.driver.next(engine, &mut self.line, now) {
+            Next::Write(bytes) => {
                 self.stream.write_all(bytes)?;
                 self.stream.flush()?;
                 let end = self.now();
-                engine.sent(&mut self.line, end);
+                self.driver.wrote(engine, &mut self.line, 0, true, end);
             }
-            Step::WaitUntil(until) => {
-                let left = if reached(now, until) {
-                    0
-                } else {
-                    until.wrapping_sub(now)
+            Next::Wait(until) => {
+                let left = match until {
+                    Some(t) if !reached(now, t) => t.wrapping_sub(now),
+                    Some(_) => 0,
+                    None => 1,
                 };
                 let left = Duration::from_millis(u64::from(left));
                 let mut buf = [0u8; 4096];
@@ -256,8 +258,7 @@ impl<S: WaitRead> StdLink<S> {
                 self.pending.extend_from_slice(buf.get(..n).unwrap_or(&[]));
                 self.feed_pending(engine);
             }
-            Step::Idle => std::thread::sleep(Duration::from_millis(1)),
-            Step::Done(r) => return Ok(Some(r)),
+            Next::Done(r) => return Ok(Some(r)),
         }
         Ok(None)
     }
@@ -265,8 +266,8 @@ impl<S: WaitRead> StdLink<S> {
     fn feed_pending<G: Engine>(&mut self, engine: &mut G) {
         if !self.pending.is_empty() {
             let now = self.now();
-            let used = feed(engine, &mut self.line, &self.pending, now);
-            self.pending.drain(..used.min(self.pending.len()));
+            feed(engine, &mut self.line, &self.pending, now);
+            self.pending.clear();
         }
     }
 }

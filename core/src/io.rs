@@ -15,7 +15,7 @@
 //! assert_eq!(frame.code(), 0x232);
 //! ```
 
-use crate::decoder::{Event, FrameDecoder};
+use crate::decoder::{Event, FrameDecoder, Status};
 use crate::error::Failure;
 use crate::frame::{Frame, Station};
 use crate::message::Message;
@@ -49,7 +49,7 @@ pub fn receive<'d, R: embedded_io::Read, const N: usize>(
         if r.read(&mut b).map_err(Failure::Io)? == 0 {
             return Err(Failure::Closed);
         }
-        if let Event::Frame(_) = dec.push(b[0]) {
+        if let Status::Complete(Event::Frame(_)) = dec.push(b[0]) {
             break;
         }
     }
@@ -67,7 +67,7 @@ pub fn poll_frame<'d, E, const N: usize>(
 ) -> nb::Result<Frame<'d>, E> {
     loop {
         let b = read_byte()?;
-        if let Event::Frame(_) = dec.push(b) {
+        if let Status::Complete(Event::Frame(_)) = dec.push(b) {
             break;
         }
     }
@@ -113,7 +113,7 @@ impl embedded_io::ReadReady for Loopback {
 impl embedded_io::Write for Loopback {
     fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
         for &b in buf {
-            if let Event::Frame(f) = self.cmd.push(b) {
+            if let Status::Complete(Event::Frame(f)) = self.cmd.push(b) {
                 let mut out = [0u8; 256];
                 let n = loopback_reply(&f, &mut out);
                 for &o in out.get(..n).unwrap_or(&[]) {

@@ -20,8 +20,9 @@
 //! - [`table`]: position tables of any size, record by record;
 //! - [`line`](mod@line): one line to a controller, what is on it and what may still
 //!   arrive; [`engine`]: the shape of the engines and their driver loops;
-//! - [`client`], [`transfer`], [`readback`]: any command and its reply; a
-//!   table written in confirmed, verified commands; a table read back;
+//! - [`client`], [`transfer`], [`readback`], [`relay`]: any command and its
+//!   reply; a table written in confirmed, verified commands; a table read
+//!   back; a command passed on as it came;
 //! - [`profile`], [`io`]: what each controller accepts; UART glue.
 //!
 //! Start with the [`guide`]: three runnable walkthroughs.
@@ -81,6 +82,7 @@ pub mod message;
 pub mod position;
 pub mod profile;
 pub mod readback;
+pub mod relay;
 pub mod table;
 pub mod transfer;
 mod window;

@@ -25,15 +25,14 @@
 //! RAM: the reply decoder (`N` bytes, default 2,048, the TTA's transmit
 //! limit), a 24-byte query, up to 16 windows in flight and counters.
 
-use crate::checksum::BypassPolicy;
 use crate::clock::Clock;
-use crate::decoder::{Event, FrameDecoder, Received};
+use crate::decoder::{Received, Status};
 use crate::engine::{self, Engine, Step};
 use crate::error::{Error, Failure};
 use crate::field::Reader;
 use crate::frame::{Frame, Header};
 use crate::limits;
-use crate::line::{Claim, Command, Due, Heard, Line, Span};
+use crate::line::{fingerprint, Claim, Command, Due, Heard, Judge, Line, Receiver, Span, Verdict};
 use crate::position::{PositionRecord, PositionStream};
 use crate::profile::Profile;
 use crate::window::{write_query, Windows, QUERY_LEN};
@@ -179,7 +178,7 @@ pub struct ReadBack<const N: usize = { limits::TTA.response }> {
     windows: Windows,
     query: [u8; QUERY_LEN],
     query_len: usize,
-    replies: FrameDecoder<N>,
+    replies: Receiver<N>,
     /// Hash and records of the reply taken last.
     answer: Option<(u32, u16)>,
     state: State,
@@ -196,7 +195,7 @@ impl<const N: usize> ReadBack<N> {
             windows: Windows::new(cfg.window()),
             query: [0; QUERY_LEN],
             query_len: 0,
-            replies: FrameDecoder::with_policy(BypassPolicy::Reject),
+            replies: Receiver::new(),
             answer: None,
             state: State::Plan,
             stats: ReadBackStats::default(),
@@ -223,7 +222,7 @@ impl<const N: usize> ReadBack<N> {
                     Due::Fence => return Step::Transmit(line.fence_bytes()),
                     Due::Send { fresh } => {
                         if fresh {
-                            self.replies.reset();
+                            self.replies.clear(line, now);
                             self.answer = None;
                             if line.sends() > 1 {
                                 self.stats.retries += 1;
@@ -256,7 +255,7 @@ impl<const N: usize> ReadBack<N> {
                     let stream = self.cfg.stream;
                     // The reply was checked on arrival; an empty list if it
                     // vanished.
-                    let (r, left) = match self.replies.last_frame() {
+                    let (r, left) = match self.replies.reply() {
                         Some(frame) => {
                             let mut r = frame.reader();
                             let count = stream.read_prefix(&mut r).map_or(0, |(_, c)| c);
@@ -451,63 +450,53 @@ impl<const N: usize> ReadBack<N> {
     }
 
     /// Bytes received at `now`. Returns at the first frame (or broken
-    /// one); a reply that will be delivered stays in the decoder until the
-    /// next `poll` delivers it, so no bytes are taken meanwhile (`consumed`
-    /// 0, [`Heard::NeedMore`]): feed the rest after that poll.
+    /// one); a reply to be delivered stays in the receiver until the next
+    /// `poll` delivers it.
     pub fn received(&mut self, line: &mut Line, bytes: &[u8], now: u32) -> Received<Heard> {
-        let holding = matches!(self.state, State::Deliver)
-            || matches!(self.state, State::Query { delivers: true, .. }) && line.answered();
-        if holding {
-            return Received {
-                consumed: 0,
-                event: Heard::NeedMore,
-            };
+        let (window, delivers) = match self.state {
+            State::Query { at, delivers } => (self.queue.iter().nth(at).copied(), delivers),
+            _ => (None, false),
+        };
+        let mut judge = WindowCheck {
+            cfg: &self.cfg,
+            window,
+            delivers,
+            judged: None,
+        };
+        let r = self.replies.receive(line, &mut judge, bytes, now);
+        let judged = judge.judged;
+        match r.status {
+            Status::Complete(Heard::Answer) => self.answer = judged,
+            Status::Complete(Heard::Mismatch | Heard::Stale | Heard::Unplaced) => {
+                self.stats.stale_replies += 1
+            }
+            Status::Complete(Heard::Foreign | Heard::Broken(_)) => self.stats.ignored += 1,
+            _ => {}
         }
-        let window = match self.state {
-            State::Query { at, .. } => self.queue.iter().nth(at).copied(),
-            _ => None,
-        };
-        let d = self.replies.decode(bytes);
-        let consumed = d.consumed;
-        let event = match d.event {
-            Event::NeedMore => Heard::NeedMore,
-            Event::Error(e) => {
-                self.stats.ignored += 1;
-                line.broken(self.replies.failed_envelope(), now);
-                Heard::Broken(e)
-            }
-            Event::Frame(f) => {
-                let (check, values) = check_reply(&self.cfg, window, &f);
-                let heard = line.hear(
-                    f.header(),
-                    f.station(),
-                    f.code(),
-                    Some(f.body()),
-                    values,
-                    check.is_some(),
-                    now,
-                );
-                match heard {
-                    Heard::Answer => {
-                        self.answer = Some((fnv1a(f.as_bytes()), check.unwrap_or(0)));
-                    }
-                    Heard::Mismatch | Heard::Stale => self.stats.stale_replies += 1,
-                    Heard::Foreign => self.stats.ignored += 1,
-                    _ => {}
-                }
-                heard
-            }
-        };
-        Received { consumed, event }
+        r
     }
 }
 
-/// 32-bit FNV-1a: tells two replies apart (a confirmed read compares the
-/// hashes of two replies, not kept copies of them).
-fn fnv1a(bytes: &[u8]) -> u32 {
-    bytes.iter().fold(0x811C_9DC5, |h, &b| {
-        (h ^ u32::from(b)).wrapping_mul(0x0100_0193)
-    })
+/// A read-back's check of a reply: the records it carries lie in the
+/// window asked, no more than asked.
+struct WindowCheck<'c> {
+    cfg: &'c ReadBackConfig,
+    window: Option<Window>,
+    delivers: bool,
+    /// The fingerprint and record count of the last reply judged to fit.
+    judged: Option<(u32, u16)>,
+}
+
+impl Judge for WindowCheck<'_> {
+    fn judge(&mut self, f: &Frame<'_>) -> Verdict {
+        let (check, values) = check_reply(self.cfg, self.window, f);
+        self.judged = check.map(|n| (fingerprint(f.as_bytes()), n));
+        Verdict {
+            fits: check.is_some(),
+            values,
+            keep: self.delivers,
+        }
+    }
 }
 
 /// Checks a frame as the reply to the query of `window`: its number of

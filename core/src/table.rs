@@ -38,7 +38,7 @@ use crate::position::PositionStream;
 use core::borrow::Borrow;
 
 use crate::checksum::{BypassPolicy, Checksum};
-use crate::decoder::Received;
+use crate::decoder::{Received, Status};
 use crate::error::{Error, Failure, Result};
 use crate::field::{hex_digit, hex_value, FieldSpec, Reader, Writer};
 use crate::frame::{emit_envelope, Header, Station, ENVELOPE_LEN};
@@ -318,8 +318,6 @@ where
 #[derive(Debug, Clone, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum StreamEvent {
-    /// More bytes are needed.
-    NeedMore,
     /// The envelope and prefix were read.
     Start {
         /// The message's stream descriptor.
@@ -356,6 +354,17 @@ enum DecPhase {
     RecordRest,
     Trailer,
     Finished,
+}
+
+/// What [`PositionStreamDecoder::decode_records`] made of its input.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RecordsReceived {
+    /// Bytes of the input consumed.
+    pub consumed: usize,
+    /// Records written to the start of the output.
+    pub records: usize,
+    /// The event it stopped at, never a record.
+    pub status: Status<StreamEvent>,
 }
 
 /// Reads one position-stream frame record by record as bytes arrive.
@@ -430,16 +439,16 @@ impl PositionStreamDecoder {
     ///
     /// Bytes are copied a whole field group at a time. After
     /// [`StreamEvent::End`] or [`StreamEvent::Error`] nothing more is
-    /// consumed (0 bytes, `NeedMore`) until [`PositionStreamDecoder::reset`]:
+    /// consumed (0 bytes, [`Status::Partial`]) until [`PositionStreamDecoder::reset`]:
     /// the rest of the input belongs to whatever follows the frame.
     #[inline]
     pub fn decode(&mut self, input: &[u8]) -> Received<StreamEvent> {
-        let (consumed, event) = self.decode_inner(input);
-        Received { consumed, event }
+        let (consumed, status) = self.decode_inner(input);
+        Received { consumed, status }
     }
 
     #[inline]
-    fn decode_inner(&mut self, input: &[u8]) -> (usize, StreamEvent) {
+    fn decode_inner(&mut self, input: &[u8]) -> (usize, Status<StreamEvent>) {
         let mut used = 0;
         while self.phase != DecPhase::Finished {
             let rest = input.get(used..).unwrap_or(&[]);
@@ -455,7 +464,7 @@ impl PositionStreamDecoder {
                         self.offset += len;
                         self.done += 1;
                         self.enter_record_or_trailer(kind);
-                        return (used + len, StreamEvent::Record(rec));
+                        return (used + len, Status::Complete(StreamEvent::Record(rec)));
                     }
                 }
             }
@@ -486,27 +495,27 @@ impl PositionStreamDecoder {
                 break;
             }
             let (ev, keep) = self.unit_complete();
-            if !keep && !matches!(ev, StreamEvent::Error { .. }) {
+            if !keep && !matches!(ev, Status::Complete(StreamEvent::Error { .. })) {
                 self.offset += self.stage.len;
                 self.stage.len = 0;
             }
-            if ev != StreamEvent::NeedMore {
+            if !ev.is_partial() {
                 return (used, ev);
             }
         }
-        (used, StreamEvent::NeedMore)
+        (used, Status::Partial)
     }
 
     /// Consumes bytes as [`Self::decode`] does, but writes the records
     /// into `out` (overwriting them in place) instead of handing them out
     /// one event at a time: the bulk path, for a caller that takes many
-    /// records at once. Its event is `(records, event)`: the records are
-    /// `out[..records]`, and `event` is never [`StreamEvent::Record`].
+    /// records at once: the records are `out[..records]`, and the status is
+    /// never a [`StreamEvent::Record`].
     ///
-    /// It stops at `Start`, `End` or `Error` (the event says which, as
+    /// It stops at `Start`, `End` or `Error` (the status says which, as
     /// `decode` would), and otherwise when the input is used up or `out` is
-    /// full (`NeedMore` either way; call again with more input, or with
-    /// `out` emptied). Whole records in the input are read in place;
+    /// full ([`Status::Partial`] either way; call again with more input, or
+    /// with `out` emptied). Whole records in the input are read in place;
     /// a record cut by the end of the input is staged and completed on the
     /// next call, as by `decode`. Elements of `out` past `records` may have
     /// been overwritten.
@@ -514,26 +523,25 @@ impl PositionStreamDecoder {
     /// ```
     /// use iai_protocol_b::checksum::BypassPolicy;
     /// use iai_protocol_b::position::PositionRecord;
+    /// use iai_protocol_b::decoder::Status;
     /// use iai_protocol_b::table::{PositionStreamDecoder, StreamEvent};
     /// let wire = b"!9926D0002000103001E001E0064000186A0FFFF9C64000201000000000000000030392B\r\n";
     /// let mut dec = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
     /// let mut recs: [PositionRecord; 8] = Default::default();
     /// let r = dec.decode_records(wire, &mut recs);
-    /// assert!(matches!(r.event, (0, StreamEvent::Start { count: 2, .. })));
+    /// assert_eq!(r.records, 0);
+    /// assert!(matches!(r.status, Status::Complete(StreamEvent::Start { count: 2, .. })));
     /// let rest = dec.decode_records(&wire[r.consumed..], &mut recs);
     /// assert_eq!(r.consumed + rest.consumed, wire.len());
-    /// assert_eq!(rest.event, (2, StreamEvent::End { records: 2 }));
+    /// assert_eq!((rest.records, rest.status), (2, Status::Complete(StreamEvent::End { records: 2 })));
     /// assert_eq!(recs[1].position(1), Some(12_345));
     /// ```
-    pub fn decode_records(
-        &mut self,
-        input: &[u8],
-        out: &mut [PositionRecord],
-    ) -> Received<(usize, StreamEvent)> {
-        let (consumed, records, event) = self.decode_records_inner(input, out);
-        Received {
+    pub fn decode_records(&mut self, input: &[u8], out: &mut [PositionRecord]) -> RecordsReceived {
+        let (consumed, records, status) = self.decode_records_inner(input, out);
+        RecordsReceived {
             consumed,
-            event: (records, event),
+            records,
+            status,
         }
     }
 
@@ -541,7 +549,7 @@ impl PositionStreamDecoder {
         &mut self,
         input: &[u8],
         out: &mut [PositionRecord],
-    ) -> (usize, usize, StreamEvent) {
+    ) -> (usize, usize, Status<StreamEvent>) {
         let mut used = 0;
         let mut n = 0;
         loop {
@@ -564,24 +572,26 @@ impl PositionStreamDecoder {
             }
             let in_records = matches!(self.phase, DecPhase::RecordHead | DecPhase::RecordRest);
             if in_records && n >= out.len() {
-                return (used, n, StreamEvent::NeedMore);
+                return (used, n, Status::Partial);
             }
             let (len, ev) = self.decode_inner(input.get(used..).unwrap_or(&[]));
             used += len;
             match (ev, out.get_mut(n)) {
-                (StreamEvent::Record(rec), Some(slot)) => {
+                (Status::Complete(StreamEvent::Record(rec)), Some(slot)) => {
                     *slot = rec;
                     n += 1;
                 }
                 // `out` had room: a record always finds its slot.
-                (StreamEvent::Record(_), None) => return (used, n, StreamEvent::NeedMore),
+                (Status::Complete(StreamEvent::Record(_)), None) => {
+                    return (used, n, Status::Partial)
+                }
                 (ev, _) => return (used, n, ev),
             }
         }
     }
 
     /// Pushes one byte (ignored after the end of the frame, see [`Self::decode`]).
-    pub fn push(&mut self, byte: u8) -> StreamEvent {
+    pub fn push(&mut self, byte: u8) -> Status<StreamEvent> {
         self.decode_inner(&[byte]).1
     }
 
@@ -599,23 +609,23 @@ impl PositionStreamDecoder {
         })
     }
 
-    fn fail(&mut self, error: Error) -> StreamEvent {
+    fn fail(&mut self, error: Error) -> Status<StreamEvent> {
         self.phase = DecPhase::Finished;
-        StreamEvent::Error {
+        Status::Complete(StreamEvent::Error {
             error,
             records_ok: self.done,
-        }
+        })
     }
 
     /// Handles a complete unit of `need` bytes. Returns the event and
     /// whether the stage keeps its bytes (the unit grows instead).
-    fn unit_complete(&mut self) -> (StreamEvent, bool) {
+    fn unit_complete(&mut self) -> (Status<StreamEvent>, bool) {
         let ev = self.unit_event();
-        let keep = matches!(ev, StreamEvent::NeedMore);
+        let keep = ev.is_partial();
         (ev, keep)
     }
 
-    fn unit_event(&mut self) -> StreamEvent {
+    fn unit_event(&mut self) -> Status<StreamEvent> {
         let unit = self.stage.buf.get(..self.stage.len).unwrap_or(&[]);
         let base = self.offset;
         match self.phase {
@@ -647,7 +657,7 @@ impl PositionStreamDecoder {
                         offset: ENVELOPE_LEN,
                     });
                 }
-                StreamEvent::NeedMore
+                Status::Partial
             }
             DecPhase::Envelope => {
                 let Some(kind) = self.kind else {
@@ -661,12 +671,12 @@ impl PositionStreamDecoder {
                     Ok((start, count)) => {
                         self.count = count;
                         self.enter_record_or_trailer(kind);
-                        StreamEvent::Start {
+                        Status::Complete(StreamEvent::Start {
                             kind,
                             station,
                             start,
                             count,
-                        }
+                        })
                     }
                     Err(e) => self.fail(e),
                 }
@@ -682,7 +692,7 @@ impl PositionStreamDecoder {
                         // Keep the head in the stage; the record is read whole.
                         self.need = kind.layout.record_len((bits as u8).count_ones() as usize);
                         self.phase = DecPhase::RecordRest;
-                        StreamEvent::NeedMore
+                        Status::Partial
                     }
                     Err(e) => self.fail(e),
                 }
@@ -697,7 +707,7 @@ impl PositionStreamDecoder {
                         self.sum.update(unit);
                         self.done += 1;
                         self.enter_record_or_trailer(kind);
-                        StreamEvent::Record(rec)
+                        Status::Complete(StreamEvent::Record(rec))
                     }
                     Err(e) => self.fail(e),
                 }
@@ -735,9 +745,9 @@ impl PositionStreamDecoder {
                     _ => return self.fail(Error::MissingCarriageReturn),
                 }
                 self.phase = DecPhase::Finished;
-                StreamEvent::End { records: self.done }
+                Status::Complete(StreamEvent::End { records: self.done })
             }
-            DecPhase::Finished => StreamEvent::NeedMore,
+            DecPhase::Finished => Status::Partial,
         }
     }
 
@@ -808,8 +818,7 @@ mod tests {
         bytes
             .iter()
             .enumerate()
-            .map(|(i, &b)| (i, d.push(b)))
-            .filter(|(_, e)| *e != StreamEvent::NeedMore)
+            .filter_map(|(i, &b)| d.push(b).complete().map(|e| (i, e)))
             .collect()
     }
 
@@ -861,16 +870,19 @@ mod tests {
         // Fed whole, the same.
         let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
         let start = d.decode(&broken);
-        assert!(matches!(start.event, StreamEvent::Start { count: 2, .. }));
+        assert!(matches!(
+            start.status,
+            Status::Complete(StreamEvent::Start { count: 2, .. })
+        ));
         let used = start.consumed;
         assert_eq!(
             d.decode(&broken[used..]),
             Received {
                 consumed: 31 - used,
-                event: StreamEvent::Error {
+                status: Status::Complete(StreamEvent::Error {
                     error: Error::BodyTooShort { offset: 30 },
                     records_ok: 0,
-                }
+                })
             }
         );
     }
@@ -953,13 +965,13 @@ mod tests {
                 loop {
                     let Received {
                         consumed: n,
-                        event: ev,
+                        status,
                     } = d.decode(rest);
                     used += n;
                     rest = &rest[n..];
-                    match ev {
-                        StreamEvent::NeedMore => break,
-                        ev => events.push(ev),
+                    match status {
+                        Status::Partial => break,
+                        Status::Complete(ev) => events.push(ev),
                     }
                 }
             }
@@ -981,21 +993,22 @@ mod tests {
             for piece in bytes.chunks(chunk) {
                 let mut rest = piece;
                 loop {
-                    let Received {
+                    let RecordsReceived {
                         consumed: n,
-                        event: (k, ev),
+                        records: k,
+                        status: ev,
                     } = d.decode_records(rest, &mut out);
                     assert!(k <= room);
-                    assert_ne!(ev, StreamEvent::Record(stale.clone()));
-                    assert!(!matches!(ev, StreamEvent::Record(_)));
+                    assert_ne!(ev, Status::Complete(StreamEvent::Record(stale.clone())));
+                    assert!(!matches!(ev, Status::Complete(StreamEvent::Record(_))));
                     used += n;
                     rest = &rest[n..];
                     events.extend(out[..k].iter().cloned().map(StreamEvent::Record));
                     match ev {
                         // Stopped for input, or for room: call again.
-                        StreamEvent::NeedMore if k < room || n == 0 && k == 0 => break,
-                        StreamEvent::NeedMore => {}
-                        ev => events.push(ev),
+                        Status::Partial if k < room || n == 0 && k == 0 => break,
+                        Status::Partial => {}
+                        Status::Complete(ev) => events.push(ev),
                     }
                 }
             }
@@ -1077,9 +1090,9 @@ mod tests {
             d: &mut PositionStreamDecoder,
             input: &[u8],
             out: &mut [PositionRecord],
-        ) -> (usize, usize, StreamEvent) {
+        ) -> (usize, usize, Status<StreamEvent>) {
             let r = d.decode_records(input, out);
-            (r.consumed, r.event.0, r.event.1)
+            (r.consumed, r.records, r.status)
         }
 
         #[test]
@@ -1091,11 +1104,14 @@ mod tests {
             let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
             let mut out: [PositionRecord; 2] = Default::default();
             let (used, n, ev) = bulk(&mut d, &wire, &mut out);
-            assert!(matches!(ev, StreamEvent::Start { count: 5, .. }));
+            assert!(matches!(
+                ev,
+                Status::Complete(StreamEvent::Start { count: 5, .. })
+            ));
             assert_eq!((used, n), (10, 0));
             assert_eq!(
                 bulk(&mut d, &wire[used..], &mut []),
-                (0, 0, StreamEvent::NeedMore),
+                (0, 0, Status::Partial),
                 "no room"
             );
             let mut at = used;
@@ -1106,22 +1122,19 @@ mod tests {
                 got.extend_from_slice(&out[..n]);
                 assert_eq!(d.records_done() as usize, got.len());
                 assert_eq!(d.offset(), at);
-                if ev != StreamEvent::NeedMore {
-                    assert_eq!(ev, StreamEvent::End { records: 5 });
+                if !ev.is_partial() {
+                    assert_eq!(ev, Status::Complete(StreamEvent::End { records: 5 }));
                     break;
                 }
                 assert_eq!(n, 2, "stopped for room");
             }
             assert_eq!((at, &got), (wire.len(), &recs));
-            assert_eq!(
-                bulk(&mut d, b"!99", &mut out),
-                (0, 0, StreamEvent::NeedMore)
-            );
+            assert_eq!(bulk(&mut d, b"!99", &mut out), (0, 0, Status::Partial));
             // A record cut by the end of the input completes on the next call.
             let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
             let (u, _, _) = bulk(&mut d, &wire, &mut out);
             let (u2, n, ev) = bulk(&mut d, &wire[u..u + 5], &mut out);
-            assert_eq!((u2, n, ev), (5, 0, StreamEvent::NeedMore));
+            assert_eq!((u2, n, ev), (5, 0, Status::Partial));
             let (_, n, _) = bulk(&mut d, &wire[u + 5..], &mut out);
             assert_eq!(&out[..n], &recs[..2]);
         }

@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 use std::vec::Vec;
 
 use crate::checksum::BypassPolicy;
-use crate::decoder::{Event, FrameDecoder};
+use crate::decoder::{Event, FrameDecoder, Status};
 use crate::engine::{feed, Engine, Step};
 use crate::frame::Station;
 use crate::line::Line;
@@ -94,7 +94,7 @@ impl Controller {
     pub(crate) fn receive(&mut self, bytes: &[u8], now: u32) {
         for &b in bytes {
             let cmd = match self.commands.push(b) {
-                Event::Frame(f) => f.as_bytes().to_vec(),
+                Status::Complete(Event::Frame(f)) => f.as_bytes().to_vec(),
                 _ => continue,
             };
             let n = self.received.len();
@@ -120,7 +120,7 @@ impl Controller {
     fn answer(&mut self, cmd: &[u8], shows: Option<(u16, i32)>) -> Vec<u8> {
         let mut out = std::vec![0u8; 2048];
         let mut dec: FrameDecoder = FrameDecoder::with_policy(BypassPolicy::Accept);
-        let Event::Frame(f) = dec.decode(cmd).event else {
+        let Status::Complete(Event::Frame(f)) = dec.decode(cmd).status else {
             return Vec::new();
         };
         let n = if let Ok(q) = TestCall::parse(&f) {
@@ -160,8 +160,8 @@ impl Controller {
             loop {
                 let r = dec.decode(input);
                 input = &input[r.consumed..];
-                match r.event {
-                    StreamEvent::Record(mut rec) => {
+                match r.status {
+                    Status::Complete(StreamEvent::Record(mut rec)) => {
                         if let Some((n, v)) = alter.filter(|(n, _)| *n == rec.number) {
                             let _ = n;
                             rec.positions[0] = v;
@@ -169,7 +169,7 @@ impl Controller {
                         self.table.insert(rec.number, rec);
                         written += 1;
                     }
-                    StreamEvent::NeedMore | StreamEvent::Start { .. } => {}
+                    Status::Partial | Status::Complete(StreamEvent::Start { .. }) => {}
                     _ => break,
                 }
             }
@@ -201,8 +201,8 @@ pub(crate) fn run<G: Engine>(
     let mut pending = Vec::new();
     for _ in 0..1_000_000 {
         pending.extend(ctl.take(now));
-        let used = feed(engine, line, &pending, now);
-        pending.drain(..used);
+        feed(engine, line, &pending, now);
+        pending.clear();
         match engine.poll(line, now) {
             Step::Transmit(b) => {
                 let b = b.to_vec();

@@ -45,7 +45,7 @@ use core::sync::atomic::{compiler_fence, Ordering};
 use cortex_m::peripheral::{CPUID, SYST};
 use iai_protocol_b::axis::{AxisPattern, PerAxis};
 use iai_protocol_b::checksum::Checksum;
-use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::position::PositionStream;
@@ -220,16 +220,16 @@ fn decode(frame: &[u8]) -> Option<u16> {
     let mut records = 0;
     while !input.is_empty() {
         let r = dec.decode(input);
-        let (used, ev) = (r.consumed, r.event);
+        let (used, ev) = (r.consumed, r.status);
         input = input.get(used..)?;
         match ev {
-            StreamEvent::Record(r) => {
+            Status::Complete(StreamEvent::Record(r)) => {
                 black_box(r);
                 records += 1;
             }
-            StreamEvent::End { .. } => return Some(records),
-            StreamEvent::Error { .. } => return None,
-            StreamEvent::NeedMore | StreamEvent::Start { .. } => {}
+            Status::Complete(StreamEvent::End { .. }) => return Some(records),
+            Status::Complete(StreamEvent::Error { .. }) => return None,
+            Status::Partial | Status::Complete(StreamEvent::Start { .. }) => {}
         }
     }
     None
@@ -245,13 +245,13 @@ fn decode_records(frame: &[u8], recs: &mut [PositionRecord; BATCH]) -> Option<u1
     let mut records = 0;
     while !input.is_empty() {
         let r = dec.decode_records(input, recs);
-        let (used, n, ev) = (r.consumed, r.event.0, r.event.1);
+        let (used, n, ev) = (r.consumed, r.records, r.status);
         input = input.get(used..)?;
         black_box(recs.get(..n)?);
         records += n as u16;
         match ev {
-            StreamEvent::End { .. } => return Some(records),
-            StreamEvent::Error { .. } => return None,
+            Status::Complete(StreamEvent::End { .. }) => return Some(records),
+            Status::Complete(StreamEvent::Error { .. }) => return None,
             _ => {}
         }
     }
@@ -265,9 +265,9 @@ fn push(dec: &mut FrameDecoder, frame: &[u8]) -> Option<usize> {
     let mut found = None;
     for &b in frame {
         match dec.push(b) {
-            Event::NeedMore => {}
-            Event::Frame(f) => found = Some(black_box(f.len())),
-            Event::Error(_) => return None,
+            Status::Partial => {}
+            Status::Complete(Event::Frame(f)) => found = Some(black_box(f.len())),
+            Status::Complete(Event::Error(_)) => return None,
         }
     }
     found

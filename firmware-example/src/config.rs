@@ -44,6 +44,11 @@ pub const BLOCK_LEN: usize = 64;
 pub const MAGIC: [u8; 4] = *b"IAIB";
 /// Layout version this firmware writes (it reads 1 and 2).
 pub const VERSION: u8 = 2;
+/// The longest an XOFF holds the bridge's transmitter unless configured
+/// otherwise, ms: longer than any host's pause to drain its buffer, short
+/// enough that a bridge stopped by noise answers again within the host's
+/// resends.
+pub const DEFAULT_XOFF_HOLD_MS: u32 = 5_000;
 /// Baud rates the TTA offers (TTA p. 7).
 pub const BAUD_RATES: [u32; 5] = [9_600, 19_200, 38_400, 57_600, 115_200];
 
@@ -260,6 +265,13 @@ pub struct Config {
     /// What the upstream port speaks on a two-UART board (a board with a
     /// port of its own for Modbus ignores it).
     pub upstream: UpstreamProtocol,
+    /// How long after a reply a copy of it may arrive on the controller
+    /// line, ms (a converter that repeats frames); 0 for a direct wire (the
+    /// line still notices copies and then expects them).
+    pub duplicate_window_ms: u32,
+    /// The longest an XOFF from the host holds the bridge's transmitter,
+    /// ms: noise that looks like XOFF must not stop the bridge for good.
+    pub xoff_hold_ms: u32,
 }
 
 impl Config {
@@ -276,6 +288,8 @@ impl Config {
         quit_sequence: false,
         modbus: ModbusConfig::DEFAULT,
         upstream: UpstreamProtocol::ProtocolB,
+        duplicate_window_ms: 0,
+        xoff_hold_ms: DEFAULT_XOFF_HOLD_MS,
     };
 
     /// Reads a configuration block: the configuration and where it came
@@ -353,6 +367,9 @@ impl Config {
             quit_sequence: flags & 1 != 0,
             modbus,
             upstream,
+            // Not in a version 2 block: its defaults.
+            duplicate_window_ms: Config::DEFAULT.duplicate_window_ms,
+            xoff_hold_ms: Config::DEFAULT.xoff_hold_ms,
         })
     }
 
@@ -491,6 +508,7 @@ mod tests {
                 axes: 2,
             },
             upstream: UpstreamProtocol::ModbusRtu,
+            ..Config::DEFAULT
         };
         let block = cfg.to_block();
         assert_eq!(Config::from_block(&block), (cfg, Source::Block));

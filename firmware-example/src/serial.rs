@@ -475,6 +475,65 @@ pub trait Port:
     }
 }
 
+/// A port that counts the bytes read from it and written to it (a line's
+/// traffic counters), for a driver that moves the bytes itself.
+pub struct Counted<'a, P> {
+    port: &'a mut P,
+    read: &'a mut u64,
+    written: &'a mut u64,
+}
+
+impl<'a, P: Port> Counted<'a, P> {
+    /// `port`, adding what is read to `read` and what is written to
+    /// `written`.
+    pub fn new(port: &'a mut P, read: &'a mut u64, written: &'a mut u64) -> Self {
+        Counted {
+            port,
+            read,
+            written,
+        }
+    }
+}
+
+impl<P: Port> embedded_io::ErrorType for Counted<'_, P> {
+    type Error = P::Error;
+}
+impl<P: Port> embedded_io::ReadReady for Counted<'_, P> {
+    fn read_ready(&mut self) -> Result<bool, Self::Error> {
+        self.port.read_ready()
+    }
+}
+impl<P: Port> embedded_io::Read for Counted<'_, P> {
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
+        let n = self.port.read(buf)?;
+        *self.read += n as u64;
+        Ok(n)
+    }
+}
+impl<P: Port> embedded_io::WriteReady for Counted<'_, P> {
+    fn write_ready(&mut self) -> Result<bool, Self::Error> {
+        self.port.write_ready()
+    }
+}
+impl<P: Port> embedded_io::Write for Counted<'_, P> {
+    fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+        let n = self.port.write(buf)?;
+        *self.written += n as u64;
+        Ok(n)
+    }
+    fn flush(&mut self) -> Result<(), Self::Error> {
+        self.port.flush()
+    }
+}
+impl<P: Port> Port for Counted<'_, P> {
+    fn take_overruns(&mut self) -> u32 {
+        self.port.take_overruns()
+    }
+    fn last_rx_us(&mut self) -> Option<u32> {
+        self.port.last_rx_us()
+    }
+}
+
 impl Port for ThreadEnd<'_> {
     fn take_overruns(&mut self) -> u32 {
         let total = self.shared.overruns.load(Ordering::Acquire);

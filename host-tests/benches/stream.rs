@@ -109,14 +109,14 @@ fn decode_core(frame: &[u8]) -> u32 {
         let mut rest = chunk;
         while !rest.is_empty() {
             let r = dec.decode(rest);
-            let (used, ev) = (r.consumed, r.event);
+            let (used, ev) = (r.consumed, r.status.complete());
             rest = &rest[used..];
             match ev {
-                StreamEvent::Record(r) => {
+                Some(StreamEvent::Record(r)) => {
                     black_box(r);
                     n += 1;
                 }
-                StreamEvent::Error { error, .. } => panic!("decode: {error}"),
+                Some(StreamEvent::Error { error, .. }) => panic!("decode: {error}"),
                 _ => {}
             }
         }
@@ -133,11 +133,11 @@ fn decode_core_records(frame: &[u8], batch: &mut [PositionRecord; 64]) -> u32 {
         let mut rest = chunk;
         while !rest.is_empty() {
             let r = dec.decode_records(rest, batch);
-            let (used, k, ev) = (r.consumed, r.event.0, r.event.1);
+            let (used, k, ev) = (r.consumed, r.records, r.status.complete());
             rest = &rest[used..];
             black_box(&batch[..k]);
             n += k as u32;
-            if let StreamEvent::Error { error, .. } = ev {
+            if let Some(StreamEvent::Error { error, .. }) = ev {
                 panic!("decode_records: {error}");
             }
         }

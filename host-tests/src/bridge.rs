@@ -20,7 +20,7 @@ use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant};
 
 use iai_protocol_b::checksum::BypassPolicy;
-use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 use iai_protocol_b::frame::{Frame, Header, Station};
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::position::PositionStream;
@@ -439,7 +439,7 @@ impl HostLink {
         let mut st = state.lock().unwrap_or_else(PoisonError::into_inner);
         loop {
             while let Some(b) = st.data.pop_front() {
-                if let Event::Frame(f) = dec.push(b) {
+                if let Status::Complete(Event::Frame(f)) = dec.push(b) {
                     return Ok(Some(f.as_bytes().to_vec()));
                 }
             }

@@ -101,8 +101,8 @@ pub fn drive<G: Engine>(
             pending.extend_from_slice(&reply);
         }
         if !pending.is_empty() {
-            let used = feed(engine, line, &pending, now);
-            pending.drain(..used);
+            feed(engine, line, &pending, now);
+            pending.clear();
         }
         let result = match engine.poll(line, now) {
             Step::Transmit(bytes) => {

@@ -17,7 +17,7 @@ use firmware_example::config::{Config, Source};
 use firmware_example::modbus::{rtu, Gateway};
 use firmware_example::serial::Port;
 use iai_protocol_b::checksum::BypassPolicy;
-use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 
 use iai_simulator::Simulator;
 
@@ -276,7 +276,7 @@ impl Rig {
         if !self.up.tx.is_empty() && self.bridge_up_free <= t {
             if let Some(b) = self.up.tx.pop_front() {
                 self.bridge_up_free = t + self.line_byte;
-                if let Event::Frame(f) = self.host_frames.push(b) {
+                if let Status::Complete(Event::Frame(f)) = self.host_frames.push(b) {
                     let frame = f.as_bytes().to_vec();
                     self.host_replies.push((t + self.line_byte, frame));
                 }

@@ -11,7 +11,7 @@ use firmware_example::codes;
 use firmware_example::config::{AllowList, Config, Policy, Source, READ_ONLY};
 use firmware_example::serial::Port;
 use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
-use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 use iai_protocol_b::frame::{emit_frame, Header, Station};
 use proptest::prelude::*;
 
@@ -61,7 +61,7 @@ fn frames(bytes: &[u8]) -> Vec<(Header, u8, u16)> {
     let mut dec: FrameDecoder<4096> = FrameDecoder::with_policy(BypassPolicy::Accept);
     let mut out = Vec::new();
     for &b in bytes {
-        if let Event::Frame(f) = dec.push(b) {
+        if let Status::Complete(Event::Frame(f)) = dec.push(b) {
             let fence = f.code() == 0x200 && f.body().starts_with(b"000007");
             if !fence {
                 out.push((f.header(), f.station().0, f.code()));

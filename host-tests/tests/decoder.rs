@@ -11,7 +11,7 @@ mod replay;
 use replay::{decode_chunks, push_bytes, Out};
 
 use iai_protocol_b::checksum::{BypassPolicy, Checksum, ChecksumField};
-use iai_protocol_b::decoder::{Event, FrameDecoder, DEFAULT_CAPACITY};
+use iai_protocol_b::decoder::{FrameDecoder, Status, DEFAULT_CAPACITY};
 use iai_protocol_b::error::Error;
 use iai_protocol_b::frame::Frame;
 use proptest::prelude::*;
@@ -188,7 +188,7 @@ fn fixture_stream_under_each_bypass_policy() {
 #[test]
 fn reset_drops_the_partial_frame_and_counts_it() {
     let mut dec: FrameDecoder = FrameDecoder::new();
-    assert!(matches!(dec.decode(b"xx#99212").event, Event::NeedMore));
+    assert!(matches!(dec.decode(b"xx#99212").status, Status::Partial));
     assert_eq!(dec.pending(), 6);
     dec.reset();
     assert_eq!(dec.pending(), 0);

@@ -18,7 +18,7 @@ mod replay;
 
 use iai_protocol_b::axis::{AxisPattern, PerAxis};
 use iai_protocol_b::checksum::BypassPolicy;
-use iai_protocol_b::decoder::{Event, FrameDecoder, DEFAULT_CAPACITY};
+use iai_protocol_b::decoder::{Event, FrameDecoder, Status, DEFAULT_CAPACITY};
 use iai_protocol_b::error::Error;
 use iai_protocol_b::error::Error::*;
 use iai_protocol_b::field::{decode_signed, encode_signed, FieldSpec};
@@ -264,16 +264,19 @@ fn decoders_with_a_small_buffer_report_their_own_limit() {
     let mut dec: FrameDecoder<16> = FrameDecoder::new();
     let frame = b"!9920900100554\r\n"; // exactly 16 bytes
     let d = dec.decode(frame);
-    assert!(matches!(d.event, Event::Frame(f) if f.as_bytes() == frame));
+    assert!(matches!(d.status, Status::Complete(Event::Frame(f)) if f.as_bytes() == frame));
     let longer = b"!99212021C00000000002715AF\r\n";
     let d = dec.decode(longer);
-    assert_eq!(d.event, Event::Error(FrameTooLong { limit: 16 }));
+    assert_eq!(
+        d.status,
+        Status::Complete(Event::Error(FrameTooLong { limit: 16 }))
+    );
     assert_eq!(d.consumed, 17);
     let rest = &longer[17..];
     let d = dec.decode(rest);
-    assert_eq!(d.event, Event::NeedMore);
+    assert_eq!(d.status, Status::Partial);
     let d = dec.decode(NEXT);
-    assert!(matches!(d.event, Event::Frame(f) if f.as_bytes() == NEXT));
+    assert!(matches!(d.status, Status::Complete(Event::Frame(f)) if f.as_bytes() == NEXT));
     assert_eq!(dec.stats().discarded_bytes as usize, longer.len());
 }
 
@@ -538,7 +541,7 @@ fn malformed_message_catalogue() {
         // The same bytes through the decoder give the frame unchanged.
         let mut dec: FrameDecoder = FrameDecoder::new();
         assert!(
-            matches!(dec.decode(bytes).event, Event::Frame(f) if f.as_bytes() == &bytes[..]),
+            matches!(dec.decode(bytes).status, Status::Complete(Event::Frame(f)) if f.as_bytes() == &bytes[..]),
             "{name}: decoder"
         );
     }
@@ -798,10 +801,10 @@ fn frame_check_and_decoder_agree_when_a_text_field_runs_into_the_trailer() {
     let no_count_216 = sealed(&DETAIL[..88]);
     for bytes in [short_200, over_216, no_count_216] {
         let mut dec: FrameDecoder = FrameDecoder::new();
-        let from_decoder = match dec.decode(&bytes).event {
-            Event::Frame(_) => Ok(()),
-            Event::Error(e) => Err(e),
-            Event::NeedMore => Err(Truncated { len: bytes.len() }),
+        let from_decoder = match dec.decode(&bytes).status {
+            Status::Complete(Event::Frame(_)) => Ok(()),
+            Status::Complete(Event::Error(e)) => Err(e),
+            Status::Partial => Err(Truncated { len: bytes.len() }),
         };
         let from_check = Frame::new_checked(&bytes, BypassPolicy::default()).map(|_| ());
         assert_eq!(
@@ -819,7 +822,7 @@ fn zero_capacity_decoder_accounts_for_every_byte() {
     let input = b"#992322C\r\n";
     let mut events = Vec::new();
     for &b in input {
-        if let Event::Error(e) = dec.push(b) {
+        if let Status::Complete(Event::Error(e)) = dec.push(b) {
             events.push(e);
         }
     }

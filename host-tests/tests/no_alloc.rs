@@ -80,12 +80,12 @@ fn the_core_allocates_nothing() {
     let mut rest = &wire[..];
     let end = core_call(|| loop {
         let r = dec.decode(rest);
-        let (used, ev) = (r.consumed, r.event);
+        let (used, ev) = (r.consumed, r.status.complete());
         rest = &rest[used..];
         match ev {
-            StreamEvent::Record(_) => records += 1,
-            StreamEvent::NeedMore | StreamEvent::Start { .. } => {}
-            other => break other,
+            Some(StreamEvent::Record(_)) => records += 1,
+            None | Some(StreamEvent::Start { .. }) => {}
+            Some(other) => break other,
         }
     });
     assert_eq!(end, StreamEvent::End { records: 20_000 });
@@ -100,10 +100,10 @@ fn the_core_allocates_nothing() {
         loop {
             let d = fd.decode(input);
             input = &input[d.consumed..];
-            match d.event {
-                Event::NeedMore => break n,
-                Event::Frame(_) => n += 1,
-                Event::Error(_) => {}
+            match d.status.complete() {
+                None => break n,
+                Some(Event::Frame(_)) => n += 1,
+                Some(Event::Error(_)) => {}
             }
         }
     });

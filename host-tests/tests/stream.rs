@@ -37,12 +37,12 @@ fn decode_all(bytes: &[u8]) -> (Vec<PositionRecord>, Option<StreamEvent>) {
     let mut rest = bytes;
     while !rest.is_empty() {
         let r = dec.decode(rest);
-        let (used, ev) = (r.consumed, r.event);
+        let (used, ev) = (r.consumed, r.status.complete());
         rest = &rest[used..];
         match ev {
-            StreamEvent::Record(r) => recs.push(r),
-            StreamEvent::NeedMore | StreamEvent::Start { .. } => {}
-            other => return (recs, Some(other)),
+            Some(StreamEvent::Record(r)) => recs.push(r),
+            None | Some(StreamEvent::Start { .. }) => {}
+            Some(other) => return (recs, Some(other)),
         }
     }
     (recs, None)

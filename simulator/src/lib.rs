@@ -69,7 +69,7 @@ pub use controller::Controller;
 pub use io::Io;
 
 use iai_protocol_b::checksum::BypassPolicy;
-use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 use iai_protocol_b::frame::{Frame, Header, Station};
 use iai_protocol_b::position::PositionStream;
 
@@ -260,8 +260,8 @@ impl Session {
                 b
             };
             let cmd = match self.decoder.push(b) {
-                Event::NeedMore => None,
-                Event::Error(e) => {
+                Status::Partial => None,
+                Status::Complete(Event::Error(e)) => {
                     if matches!(e, iai_protocol_b::error::Error::FrameTooLong { .. }) {
                         self.stats.oversize_frames += 1;
                     } else {
@@ -269,7 +269,7 @@ impl Session {
                     }
                     None
                 }
-                Event::Frame(f) => {
+                Status::Complete(Event::Frame(f)) => {
                     let f: Frame<'_> = f;
                     if f.len() > ctl.max_receive {
                         self.stats.oversize_frames += 1;

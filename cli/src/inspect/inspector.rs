@@ -18,7 +18,7 @@
 //! listed too.
 
 use iai_protocol_b::checksum::{BypassPolicy, ChecksumField};
-use iai_protocol_b::decoder::{Event, FrameDecoder, DEFAULT_CAPACITY};
+use iai_protocol_b::decoder::{Event, FrameDecoder, Status, DEFAULT_CAPACITY};
 use iai_protocol_b::frame::{Frame, Header};
 use iai_protocol_b::position::PositionStream;
 use iai_protocol_b::table::{PositionStreamDecoder, StreamEvent};
@@ -269,7 +269,7 @@ impl Inspector {
         });
         for b in env {
             st.push_copy(b);
-            if let StreamEvent::Error { .. } = st.dec.decode(&[b]).event {
+            if let Status::Complete(StreamEvent::Error { .. }) = st.dec.decode(&[b]).status {
                 // An envelope the stream decoder refuses: let the frame
                 // decoder report it.
                 self.env = std::mem::take(&mut st.copy);
@@ -285,12 +285,15 @@ impl Inspector {
             return;
         };
         let r = st.dec.decode(&[b]);
-        let (used, ev) = (r.consumed, r.event);
+        let (used, ev) = (r.consumed, r.status);
         if used > 0 {
             st.push_copy(b);
         }
+        let Status::Complete(ev) = ev else {
+            self.stream = Some(st);
+            return;
+        };
         match ev {
-            StreamEvent::NeedMore => self.stream = Some(st),
             StreamEvent::Start {
                 kind,
                 station,
@@ -437,10 +440,10 @@ impl Inspector {
         loop {
             let d = self.dec.decode(input);
             input = input.get(d.consumed..).unwrap_or(&[]);
-            let event = match d.event {
-                Event::NeedMore => None,
-                Event::Frame(f) => Some(Ok((f.len() as u64, frame_item(&f)))),
-                Event::Error(e) => Some(Err(e)),
+            let event = match d.status {
+                Status::Partial => None,
+                Status::Complete(Event::Frame(f)) => Some(Ok((f.len() as u64, frame_item(&f)))),
+                Status::Complete(Event::Error(e)) => Some(Err(e)),
             };
             // What the decoder still holds starts here; what it reported
             // ends here.

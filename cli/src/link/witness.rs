@@ -7,7 +7,7 @@
 use std::collections::{BTreeMap, VecDeque};
 
 use iai_protocol_b::checksum::BypassPolicy;
-use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 use iai_protocol_b::frame::Header;
 
 /// Frames sent that an echo is compared with (the latest).
@@ -65,9 +65,9 @@ impl Witness {
         while !bytes.is_empty() {
             let r = self.dec.decode(bytes);
             bytes = bytes.get(r.consumed..).unwrap_or(&[]);
-            match r.event {
-                Event::NeedMore => {}
-                Event::Frame(f) => {
+            match r.status {
+                Status::Partial => {}
+                Status::Complete(Event::Frame(f)) => {
                     let raw = f.as_bytes();
                     if f.header() == Header::Command {
                         if self.sent.iter().any(|s| s.as_slice() == raw) {
@@ -81,7 +81,7 @@ impl Witness {
                         *self.foreign.entry(f.station().0).or_insert(0) += 1;
                     }
                 }
-                Event::Error(_) => self.broken += 1,
+                Status::Complete(Event::Error(_)) => self.broken += 1,
             }
             if r.consumed == 0 {
                 break;

@@ -4,17 +4,17 @@
 //! a refused command (a 26DH may be 1.6 MB) to its end before it answers,
 //! and skips commands for other stations.
 
+use super::Status;
 use crate::catalogue::text_span;
 use crate::checksum::BypassPolicy;
+use crate::error::Error;
 use crate::frame::{Header, ENVELOPE_LEN};
 use crate::hex;
 
-/// What one byte did to a skipped frame.
+/// How a skipped frame ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Skipped {
-    /// The frame goes on.
-    NeedMore,
     /// The frame ended with CR LF: whether its checksum was right.
     End {
         /// The SC matched the bytes it covers, or was an `@@` the policy
@@ -59,8 +59,29 @@ impl FrameSkipper {
         }
     }
 
-    /// One more byte of the frame.
-    pub fn push(&mut self, b: u8) -> Skipped {
+    /// After [`Skipped::End`] with a bad checksum: what was wrong with it.
+    pub fn checksum_error(&self) -> Error {
+        let [h, l] = self.tail;
+        let covered = self.sum.wrapping_sub(h).wrapping_sub(l);
+        match hex::decode2(&[h, l]) {
+            _ if h == b'@' && l == b'@' => Error::ChecksumBypassRejected,
+            Some(received) => Error::ChecksumMismatch {
+                computed: covered,
+                received,
+            },
+            None => Error::InvalidHexDigit {
+                offset: self.len.saturating_sub(2),
+                byte: if hex::decode2(&[h, h]).is_some() {
+                    l
+                } else {
+                    h
+                },
+            },
+        }
+    }
+
+    /// One more byte of the frame: [`Status::Partial`] while it goes on.
+    pub fn push(&mut self, b: u8) -> Status<Skipped> {
         let in_text = self
             .text
             .is_some_and(|(start, end)| self.len >= start && self.len < end);
@@ -69,23 +90,23 @@ impl FrameSkipper {
             let covered = self.sum.wrapping_sub(h).wrapping_sub(l);
             let bypass = h == b'@' && l == b'@' && self.policy.allows(self.header);
             let sc_ok = bypass || hex::decode2(&[h, l]) == Some(covered);
-            return if b == b'\n' {
+            return Status::Complete(if b == b'\n' {
                 Skipped::End { checksum_ok: sc_ok }
             } else {
                 Skipped::Broken
-            };
+            });
         }
         if !in_text && (Header::from_byte(b).is_some() || b == b'\n') {
-            return Skipped::Broken;
+            return Status::Complete(Skipped::Broken);
         }
         if !in_text && b == b'\r' {
             self.cr = true;
-            return Skipped::NeedMore;
+            return Status::Partial;
         }
         self.sum = self.sum.wrapping_add(b);
         self.tail = [self.tail[1], b];
         self.len = self.len.saturating_add(1);
-        Skipped::NeedMore
+        Status::Partial
     }
 }
 
@@ -95,7 +116,7 @@ mod tests {
     use super::*;
     use std::vec::Vec;
 
-    fn skip(frame: &[u8], policy: BypassPolicy) -> Vec<Skipped> {
+    fn skip(frame: &[u8], policy: BypassPolicy) -> Vec<Status<Skipped>> {
         let mut env = [0u8; ENVELOPE_LEN];
         env.copy_from_slice(&frame[..ENVELOPE_LEN]);
         let header = Header::from_byte(frame[0]).unwrap();
@@ -104,7 +125,7 @@ mod tests {
     }
 
     fn end(frame: &[u8], policy: BypassPolicy) -> Skipped {
-        *skip(frame, policy).last().unwrap()
+        skip(frame, policy).last().unwrap().complete().unwrap()
     }
 
     #[test]
@@ -140,7 +161,8 @@ mod tests {
         let t = b"!99200!9921201391A\r\n";
         assert!(skip(t, BypassPolicy::Reject)
             .iter()
-            .all(|&e| e == Skipped::NeedMore || e == Skipped::End { checksum_ok: true }));
+            .all(|&e| e == Status::Partial
+                || e == Status::Complete(Skipped::End { checksum_ok: true })));
         assert_eq!(
             end(t, BypassPolicy::Reject),
             Skipped::End { checksum_ok: true }

@@ -6,13 +6,15 @@
 //! is in, every reply to a command sent before the fence has arrived or
 //! never will.
 //!
-//! The text is ten upper-case hex digits: six from the line's seed (so
-//! that two runs on one line do not share texts) and four of a sequence
-//! number. Hex keeps it free of header bytes, CR, LF, XON and XOFF.
+//! The text is ten upper-case hex digits: six of a nonce (the line's seed,
+//! stirred with whatever varies: see [`Fence::stir`]) and four of a
+//! sequence number. Hex keeps it free of header bytes, CR, LF, XON and
+//! XOFF. An echo settles the fence only if its text is exactly the text of
+//! the fence in flight, kept with its bytes.
 
 use crate::catalogue;
 use crate::checksum::ChecksumMode;
-use crate::frame::{emit_frame, Header, Station};
+use crate::frame::{emit_frame, Header, Station, ENVELOPE_LEN};
 use crate::hex;
 
 /// Bytes of a fence command: header, station, ID, ten characters, SC, CR LF.
@@ -22,7 +24,7 @@ pub(crate) const FENCE_LEN: usize = 20;
 #[derive(Debug, Clone, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub(crate) struct Fence {
-    /// Six hex digits of the seed.
+    /// The nonce: 24 bits of the seed, stirred.
     nonce: u32,
     /// Sequence number of the fence in flight (or the last one).
     pub(crate) seq: u16,
@@ -38,6 +40,15 @@ impl Fence {
             frame: [0; FENCE_LEN],
             len: 0,
         }
+    }
+
+    /// Mixes `entropy` into the nonce of the fences still to come (the
+    /// fence in flight keeps its text): a tick of when something outside
+    /// happened, a chip's unique ID, a boot counter.
+    pub(crate) fn stir(&mut self, entropy: u32) {
+        // A multiply-xorshift round: every input bit reaches every nonce bit.
+        let x = (self.nonce ^ entropy.rotate_left(8)).wrapping_mul(0x9E37_79B1);
+        self.nonce = (x ^ (x >> 15)) & 0x00FF_FFFF;
     }
 
     /// The ten characters of fence `seq`.
@@ -72,9 +83,10 @@ impl Fence {
         self.frame.get(..self.len).unwrap_or(&[])
     }
 
-    /// Whether `body` (a 200H reply's) is the echo of the fence in flight.
+    /// Whether `body` (a 200H reply's) is the echo of the fence in flight:
+    /// exactly its text.
     pub(crate) fn is_echo(&self, body: &[u8]) -> bool {
-        body == self.text(self.seq)
+        self.len == FENCE_LEN && self.frame.get(ENVELOPE_LEN..ENVELOPE_LEN + 10) == Some(body)
     }
 }
 
@@ -96,5 +108,21 @@ mod tests {
             &f.next(Station(0x99), ChecksumMode::Compute)[6..16],
             b"1234560002"
         );
+        assert!(!f.is_echo(b"1234560001"));
+    }
+
+    #[test]
+    fn stirring_changes_the_next_fence_not_the_one_in_flight() {
+        let mut f = Fence::new(0x12_3456);
+        f.next(Station(0x99), ChecksumMode::Compute);
+        f.stir(0x0000_0001);
+        assert!(f.is_echo(b"1234560001"));
+        let next = f.next(Station(0x99), ChecksumMode::Compute);
+        assert_ne!(&next[6..12], b"123456");
+        // Two stirs with different entropy give different nonces.
+        let (mut a, mut b) = (Fence::new(7), Fence::new(7));
+        a.stir(1);
+        b.stir(2);
+        assert_ne!(a.nonce, b.nonce);
     }
 }

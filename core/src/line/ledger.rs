@@ -44,6 +44,12 @@ impl Span {
         Span { lo: v, hi: v }
     }
 
+    /// Whether the two could describe the same reply: either is unknown,
+    /// or they share a value.
+    pub(crate) const fn meets(self, other: Span) -> bool {
+        self.lo > self.hi || other.lo > other.hi || (self.lo <= other.hi && other.lo <= self.hi)
+    }
+
     /// Whether a reply carrying these values could be accepted by a command
     /// that accepts `accepts`.
     pub(crate) const fn within(self, accepts: Span) -> bool {
@@ -141,6 +147,14 @@ impl Ledger {
                 };
             }
         }
+    }
+
+    /// Whether a copy of a reply `id` carrying `values` is expected at
+    /// `now` (an `&`, whose `id` is [`ANY_ID`], only by an `&`'s copy).
+    pub(crate) fn expects(&self, id: u16, values: Span, now: u32) -> bool {
+        self.copies.iter().any(|c| {
+            (c.id == id || c.id == ANY_ID) && c.values.meets(values) && !self.over(now, c.until)
+        })
     }
 
     /// The first tick, from `now`, at which no copy could pass for the

@@ -12,7 +12,7 @@
 //! - **Matching**: a frame is the reply only if its station, header and
 //!   ID fit the command, its SC checked (the decoders' job), it came after
 //!   the command was completely sent, and the owner's content check
-//!   passed ([`Line::offer`]). Within a command's resends, the first reply
+//!   passed (the receiver's offer). Within a command's resends, the first reply
 //!   counts (a late reply to an earlier send answers the same command).
 //! - **Timing** (chapter 5, 2003 p. 62): the reply is awaited `timeout_ms`
 //!   after the end of transmission; up to `max_sends` sends of a command
@@ -28,17 +28,31 @@
 //! - **Fences**: owed replies are settled by order, not time. Before the
 //!   next command the line sends a 200H whose text is its own; once the
 //!   echo is back, a controller that answers in order has nothing left
-//!   to say about earlier commands. A line just opened knows
-//!   nothing of its past, so its first command is fenced too. Copies are
-//!   not settled by a fence: an echoing converter may repeat a reply after
-//!   later ones, so they keep their time. What breaks the order
-//!   assumption: a controller that buffers commands and answers out of
-//!   order (none is documented), and copies (handled by time).
+//!   to say about earlier commands. A line just opened knows nothing of
+//!   its past, so its first command is fenced too. Copies are not settled
+//!   by a fence: they keep their time.
+//! - **Copies noticed** (order proves what time only guesses): a frame
+//!   from the station that nothing explains (no reply owed, no copy
+//!   expected, or the very bytes of a reply already taken) is
+//!   [`Heard::Unplaced`]: the line repeats frames (a converter) or answers
+//!   out of order. From then on it expects copies as if a duplicate window
+//!   had been declared ([`Line::copy_window`]), and an engine that took
+//!   replies since its last proof of order ([`Line::start_proof`]: a fence
+//!   echoed with nothing unplaced before it) asks again or says its result
+//!   is unconfirmed.
+//!
+//! Bytes reach the line one way: an engine's receiver decodes them,
+//! asks the engine to judge a frame's content, and offers it here.
 
 mod fence;
 mod ledger;
+mod overheard;
+mod receiver;
 
 pub(crate) use ledger::{Span, ANY_ID};
+pub(crate) use receiver::{
+    fingerprint, fingerprint_more, receive, Judge, Receiver, Verdict, FINGERPRINT_START,
+};
 
 use fence::Fence;
 use ledger::Ledger;
@@ -144,8 +158,12 @@ pub struct LineStats {
     pub error_replies: u32,
     /// Replies with the command's ID whose content did not fit it.
     pub mismatches: u32,
-    /// Replies that came when none was awaited (late or copied).
+    /// Replies that came when none was awaited, explained by a reply still
+    /// owed or a copy still expected.
     pub stale: u32,
+    /// Frames from the station that nothing explained: the line repeats
+    /// frames or answers out of order ([`Heard::Unplaced`]).
+    pub unplaced: u32,
     /// Frames for another station or command.
     pub foreign: u32,
     /// Broken frames, and bytes that may have held a reply dropped unread.
@@ -181,8 +199,6 @@ pub enum Due {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Heard {
-    /// All bytes were used; nothing is complete.
-    NeedMore,
     /// The command's reply: taken.
     Answer,
     /// An error response to the command, with its code: taken.
@@ -192,9 +208,14 @@ pub enum Heard {
     Mismatch,
     /// The echo of the line's fence.
     Fence,
-    /// A reply from the station while none was awaited: late or copied.
+    /// A frame from the station other than the awaited reply, explained
+    /// by a reply still owed or a copy still expected.
     Stale,
-    /// Another station's frame, a command, or a reply to another ID.
+    /// A frame from the station that nothing explains: a copy of a reply
+    /// already taken, or a reply no command is owed. The line repeats
+    /// frames; it now expects copies ([`Line::copy_window`]).
+    Unplaced,
+    /// Another station's frame, or a command.
     Foreign,
     /// A broken frame or noise was dropped.
     Broken(Error),
@@ -260,9 +281,8 @@ enum Phase {
     Finished(Result<(), Failure>),
 }
 
-/// One line to a controller (see the module docs). About 400 bytes.
+/// One line to a controller (see the module docs). About 600 bytes.
 #[derive(Debug, Clone)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Line {
     cfg: LineConfig,
     cmd: Command,
@@ -279,14 +299,53 @@ pub struct Line {
     /// A fence failed: wait for owed replies instead until this tick.
     no_fence_until: Option<u32>,
     ledger: Ledger,
+    /// Replies taken lately (the last [`TAKEN`], in no order; a fixed
+    /// array rather than a history ring, whose indexing the no-panic proof
+    /// cannot see through): a frame with the same bytes is a copy.
+    taken: [Option<Taken>; TAKEN],
+    /// The slot the next reply taken goes to.
+    taken_next: usize,
+    /// The copy window the line learned from unplaced frames, ms.
+    learned_copy_ms: u32,
+    /// A proof of order was asked for ([`Line::start_proof`]).
+    proving: bool,
+    /// Frames heard while the owner holds its reply, or no engine runs.
+    overheard: overheard::Overheard,
     stats: LineStats,
     horizon: u32,
 }
 
+#[cfg(feature = "defmt")]
+impl defmt::Format for Line {
+    fn format(&self, f: defmt::Formatter<'_>) {
+        defmt::write!(
+            f,
+            "Line {{ station: {}, phase: {}, stats: {} }}",
+            self.cfg.station,
+            self.phase,
+            self.stats
+        )
+    }
+}
+
+/// Replies remembered as taken.
+const TAKEN: usize = 8;
+
+/// A reply taken: its bytes' fingerprint, what it carried and when.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+struct Taken {
+    fingerprint: u32,
+    id: u16,
+    values: Span,
+    at: u32,
+}
+
 impl Line {
     /// A line with these settings. `seed` makes its fence texts its own:
-    /// give each start of a program a different one (a hardware timer, the
-    /// time of day), so that a fence echo of an earlier run cannot pass
+    /// give each start of a program a different one (the time of day, a
+    /// boot counter, a chip's unique ID), and [`Line::stir`] in what
+    /// varies later, so that a fence echo of an earlier run cannot pass
     /// for this run's.
     pub const fn new(cfg: LineConfig, seed: u32) -> Self {
         Line {
@@ -309,6 +368,11 @@ impl Line {
             fence_sent: 0,
             no_fence_until: None,
             ledger: Ledger::new(cfg.horizon()),
+            taken: [None; TAKEN],
+            taken_next: 0,
+            learned_copy_ms: 0,
+            proving: false,
+            overheard: overheard::Overheard::new(),
             stats: LineStats {
                 commands: 0,
                 sends: 0,
@@ -317,6 +381,7 @@ impl Line {
                 error_replies: 0,
                 mismatches: 0,
                 stale: 0,
+                unplaced: 0,
                 foreign: 0,
                 line_errors: 0,
                 fences: 0,
@@ -343,6 +408,53 @@ impl Line {
         self.stats
     }
 
+    /// Mixes `entropy` into the texts of the fences to come (the one in
+    /// flight keeps its text): a tick of something outside (a host's first
+    /// byte, a timer at a pin change), so that two starts with the same
+    /// seed still fence differently.
+    pub fn stir(&mut self, entropy: u32) {
+        self.fence.stir(entropy);
+    }
+
+    /// How long after a reply a copy of it is expected, ms: the declared
+    /// duplicate window, or the one the line learned from frames it could
+    /// not place, if longer.
+    pub const fn copy_window(&self) -> u32 {
+        if self.learned_copy_ms > self.cfg.duplicate_window_ms {
+            self.learned_copy_ms
+        } else {
+            self.cfg.duplicate_window_ms
+        }
+    }
+
+    /// Whether the line has shown that it repeats frames (an unplaced frame
+    /// was heard).
+    pub const fn repeats(&self) -> bool {
+        self.stats.unplaced > 0
+    }
+
+    /// Begins a proof of order: a fence, sent even when nothing is owed.
+    /// Once its echo is back ([`Due::Done`] `Ok`), every reply to a command
+    /// sent before it has arrived (the controller answers in order); if no
+    /// frame was [`Heard::Unplaced`] since a reply was taken, that reply was
+    /// no copy. A line without fences waits out the replies instead.
+    pub fn start_proof(&mut self, now: u32) {
+        self.abandon(now);
+        self.cmd = Command {
+            id: catalogue::TEST_CALL.id,
+            resend: Resend::Safe,
+            reply: Reply::Normal,
+            accepts: Span::ANY,
+            claim: Claim::Proof,
+            max_sends: 1,
+        };
+        self.sends = 0;
+        self.faulted = false;
+        self.proving = true;
+        self.opened = false;
+        self.phase = Phase::Ready;
+    }
+
     /// Begins command `info` (its first send is due from `now`, when
     /// nothing that may still arrive could pass for its reply). A command
     /// still running is abandoned: its replies are owed.
@@ -367,13 +479,11 @@ impl Line {
 
     pub(crate) fn begin(&mut self, cmd: Command, now: u32) {
         self.abandon(now);
+        self.proving = false;
         if core::mem::take(&mut self.opened) {
             // The past is unknown: a reply to anything sent before may
             // still come, and a copy of anything received before.
-            let owed = now
-                .wrapping_add(self.cfg.timeout_ms)
-                .wrapping_add(self.cfg.late_window_ms)
-                .wrapping_add(1);
+            let owed = self.late_horizon(now);
             self.ledger.owe(owed, now);
             self.copy_possible(ANY_ID, Span::UNKNOWN, now);
         }
@@ -410,13 +520,6 @@ impl Line {
     /// Whether the command's reply is awaited now (it was completely sent).
     pub const fn awaiting(&self) -> bool {
         matches!(self.phase, Phase::Await { .. })
-    }
-
-    /// Whether the echo of the line's fence is awaited now (the fence was
-    /// completely sent): bytes received meanwhile are the echo or what the
-    /// controller owed before it, and must be decoded, not dropped.
-    pub(crate) const fn fence_awaited(&self) -> bool {
-        matches!(self.phase, Phase::FenceAwait { .. })
     }
 
     /// Whether a command is in progress (not idle, not finished).
@@ -478,11 +581,20 @@ impl Line {
                         return Due::WaitUntil(hold);
                     }
                     self.ledger.prune(now);
-                    if let Some(owed) = self.ledger.owed(now) {
+                    let owed = self.ledger.owed(now);
+                    if owed.is_some() || self.proving {
                         let fence_ok = self.cfg.fences
                             && self.no_fence_until.is_none_or(|t| self.over(now, t));
                         if !fence_ok {
-                            return Due::WaitUntil(owed);
+                            match owed {
+                                Some(t) => return Due::WaitUntil(t),
+                                None => {
+                                    // No fence: the replies are waited out.
+                                    self.proving = false;
+                                    self.phase = Phase::Finished(Ok(()));
+                                    continue;
+                                }
+                            }
                         }
                         self.fence.next(self.cfg.station, self.cfg.checksum);
                         self.stats.fences += 1;
@@ -575,16 +687,17 @@ impl Line {
         }
     }
 
-    /// A checked frame arrived at `now`. `content_ok` is the owner's check
-    /// of a normal response's body against the command (always `true` for
-    /// an owner that only relays the reply: its host judges the body).
-    pub fn offer(&mut self, frame: &Frame<'_>, content_ok: bool, now: u32) -> Heard {
+    /// A checked frame arrived at `now`, with its owner's verdict on its
+    /// content (see [`Receiver`]).
+    pub(crate) fn offer(&mut self, frame: &Frame<'_>, verdict: Verdict, now: u32) -> Heard {
         let (h, s, c) = (frame.header(), frame.station(), frame.code());
-        self.hear(h, s, c, Some(frame.body()), Span::UNKNOWN, content_ok, now)
+        let print = fingerprint(frame.as_bytes());
+        self.hear(h, s, c, Some(frame.body()), verdict, print, now)
     }
 
-    /// [`Line::offer`] for a frame known by its envelope, with the values
-    /// its content commits to (for the ledger).
+    /// [`Line::offer`] for a frame known by its envelope (its body streamed
+    /// by: a transfer's read-back reply), with the verdict on its content
+    /// and the fingerprint of its bytes.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn hear(
         &mut self,
@@ -592,73 +705,136 @@ impl Line {
         station: Station,
         code: u16,
         body: Option<&[u8]>,
-        values: Span,
-        content_ok: bool,
+        verdict: Verdict,
+        print: u32,
         now: u32,
     ) -> Heard {
         if station != self.cfg.station || header == Header::Command {
             self.stats.foreign += 1;
             return Heard::Foreign;
         }
+        let values = verdict.values;
         let id = if header == Header::Error {
             ANY_ID
         } else {
             code
         };
         if header == Header::Response && code == catalogue::TEST_CALL.id {
-            let seq = Span::one(self.fence.seq);
             let echo = body.is_some_and(|b| self.fence.is_echo(b));
-            self.copy_possible(id, if echo { seq } else { values }, now);
             if echo && matches!(self.phase, Phase::FenceAwait { .. }) {
+                let seq = Span::one(self.fence.seq);
+                self.copy_possible(id, seq, now);
+                self.took(print, id, seq, now);
                 self.ledger.settle_owed();
                 self.no_fence_until = None;
                 self.not_before = Some(self.turnaround_after(now));
-                self.phase = Phase::Ready;
+                if core::mem::take(&mut self.proving) {
+                    self.phase = Phase::Finished(Ok(()));
+                } else {
+                    self.phase = Phase::Ready;
+                }
                 return Heard::Fence;
             }
-        } else {
-            self.copy_possible(id, values, now);
         }
         let for_command = match header {
             Header::Error => true,
-            _ => header == Header::Response && code == self.cmd.id,
+            _ => header == Header::Response && code == self.cmd.id && !self.proving,
         };
-        if !for_command {
-            self.stats.foreign += 1;
-            return Heard::Foreign;
-        }
-        if !self.awaiting() {
-            if self.busy() {
-                self.faulted = true;
+        if for_command && self.awaiting() {
+            let pending = self.sends.saturating_sub(1);
+            if header == Header::Error {
+                self.copy_possible(id, values, now);
+                self.took(print, id, values, now);
+                self.stats.error_replies += 1;
+                self.finish(
+                    Err(Failure::Controller { code, detail: None }),
+                    now,
+                    pending,
+                );
+                self.replied(now);
+                return Heard::Rejected(code);
             }
-            self.stats.stale += 1;
-            return Heard::Stale;
+            if verdict.fits {
+                self.copy_possible(id, values, now);
+                self.took(print, id, values, now);
+                self.finish(Ok(()), now, pending);
+                self.replied(now);
+                return Heard::Answer;
+            }
         }
-        let pending = self.sends.saturating_sub(1);
-        if header == Header::Error {
-            self.stats.error_replies += 1;
-            self.finish(
-                Err(Failure::Controller { code, detail: None }),
-                now,
-                pending,
-            );
-            self.replied(now);
-            return Heard::Rejected(code);
-        }
-        if !content_ok {
+        if self.busy() {
             self.faulted = true;
-            self.stats.mismatches += 1;
-            return Heard::Mismatch;
         }
-        self.finish(Ok(()), now, pending);
-        self.replied(now);
-        Heard::Answer
+        // The command's ID but not its content: the controller's answer to
+        // something else, or a copy; the command goes on waiting.
+        let heard = if for_command && self.awaiting() {
+            self.stats.mismatches += 1;
+            Heard::Mismatch
+        } else if self.ledger.owed(now).is_some() || self.ledger.expects(id, values, now) {
+            self.stats.stale += 1;
+            Heard::Stale
+        } else {
+            self.unplaced(Some(print), now);
+            Heard::Unplaced
+        };
+        self.copy_possible(id, values, now);
+        heard
+    }
+
+    /// Remembers a reply taken at `now`.
+    fn took(&mut self, print: u32, id: u16, values: Span, now: u32) {
+        if let Some(slot) = self.taken.get_mut(self.taken_next) {
+            *slot = Some(Taken {
+                fingerprint: print,
+                id,
+                values,
+                at: now,
+            });
+        }
+        self.taken_next = (self.taken_next + 1) % TAKEN;
+    }
+
+    /// A frame nothing explains arrived at `now`: the line repeats frames.
+    /// It learns a copy window (twice the lateness of a copy whose original
+    /// it took, or the time a reply may take, late window included), and
+    /// every reply taken within it may still be copied.
+    fn unplaced(&mut self, print: Option<u32>, now: u32) {
+        self.stats.unplaced += 1;
+        let late = self
+            .taken
+            .iter()
+            .flatten()
+            .filter(|t| Some(t.fingerprint) == print)
+            .map(|t| now.wrapping_sub(t.at))
+            .min();
+        let window = match late {
+            Some(l) => l.saturating_mul(2).max(self.cfg.timeout_ms),
+            None => self.cfg.timeout_ms.saturating_add(self.cfg.late_window_ms),
+        }
+        .min(MAX_HORIZON_MS / 2);
+        if window > self.learned_copy_ms {
+            self.learned_copy_ms = window;
+            let cfg = LineConfig {
+                duplicate_window_ms: window,
+                ..self.cfg
+            };
+            self.horizon = self.horizon.max(cfg.horizon());
+            self.ledger.set_horizon(self.horizon);
+        }
+        let window = self.copy_window();
+        let taken = self.taken;
+        for t in taken.iter().flatten() {
+            let until = t.at.wrapping_add(window).wrapping_add(1);
+            if !self.over(now, until) {
+                self.ledger.copy(t.id, t.values, until, now);
+            }
+        }
     }
 
     /// A reply of `id` carrying `values` arrived at `now`: its copy may
     /// follow within the duplicate window.
     fn copy_possible(&mut self, id: u16, values: Span, now: u32) {
-        let dup = self.cfg.duplicate_window_ms;
+        let dup = self.copy_window();
         if dup > 0 {
             let until = now.wrapping_add(dup).wrapping_add(1);
             self.ledger.copy(id, values, until, now);
@@ -674,14 +850,27 @@ impl Line {
     /// it may come whole. If it was the awaited reply, the controller will
     /// not answer again: the command is resent as soon as the turnaround
     /// has passed (an **inference** from the half-duplex rules, 2003 p. 8),
-    /// unless it may be an earlier send's late reply on the last send.
-    pub fn broken(&mut self, envelope: Option<(Header, Station, u16)>, now: u32) {
+    /// unless it may be an earlier send's late reply on the last send. A
+    /// broken frame of the station that nothing explains is unplaced: it
+    /// may have been a copy or a reply out of order.
+    pub(crate) fn broken(&mut self, envelope: Option<(Header, Station, u16)>, now: u32) {
         self.stats.line_errors += 1;
         let ours = match envelope {
             Some((h, s, code)) if s == self.cfg.station && h != Header::Command => {
                 let id = if h == Header::Error { ANY_ID } else { code };
+                let awaited =
+                    self.awaiting() && !self.proving && (h == Header::Error || code == self.cmd.id);
+                let fence = code == catalogue::TEST_CALL.id
+                    && matches!(self.phase, Phase::FenceAwait { .. });
+                let explained = awaited
+                    || fence
+                    || self.ledger.owed(now).is_some()
+                    || self.ledger.expects(id, Span::UNKNOWN, now);
+                if !explained {
+                    self.unplaced(None, now);
+                }
                 self.copy_possible(id, Span::UNKNOWN, now);
-                h == Header::Error || code == self.cmd.id
+                awaited
             }
             Some(_) => false,
             None => {
@@ -717,7 +906,7 @@ impl Line {
     /// Bytes that may have held a reply were dropped unread at `now` (an
     /// engine clearing its decoder before a send): a copy of whatever they
     /// held may still come.
-    pub fn unread(&mut self, now: u32) {
+    pub(crate) fn unread(&mut self, now: u32) {
         self.stats.line_errors += 1;
         self.copy_possible(ANY_ID, Span::UNKNOWN, now);
     }

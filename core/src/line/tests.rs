@@ -18,6 +18,26 @@ fn spec() -> Line {
     line(LineConfig::new(S))
 }
 
+/// Offers `f` at `now`, its content fitting the command or not.
+fn offer(l: &mut Line, f: &Frame<'_>, fits: bool, now: u32) -> Heard {
+    let verdict = Verdict {
+        fits,
+        values: Span::UNKNOWN,
+        keep: false,
+    };
+    l.offer(f, verdict, now)
+}
+
+/// [`Line::hear`] of a frame known by its envelope.
+fn hear(l: &mut Line, id: u16, values: Span, now: u32) -> Heard {
+    let verdict = Verdict {
+        fits: true,
+        values,
+        keep: false,
+    };
+    l.hear(Header::Response, S, id, None, verdict, 0, now)
+}
+
 /// Runs `l` to its first send of the command started, from `now`.
 fn first_send(l: &mut Line, now: u32) {
     assert_eq!(l.poll(now), Due::Send { fresh: true });
@@ -33,11 +53,11 @@ fn a_reply_counts_only_after_the_command_was_sent() {
     assert_eq!(l.poll(0), Due::Send { fresh: true });
     assert_eq!(l.poll(0), Due::Send { fresh: false });
     let f = frame(b"#99215000000000000000FD\r\n");
-    // Before `sent`: stale, not the reply.
-    assert_eq!(l.offer(&f, true, 0), Heard::Stale);
+    // Before `sent`: not the reply, and nothing explains it.
+    assert_eq!(offer(&mut l, &f, true, 0), Heard::Unplaced);
     l.sent(10);
     assert_eq!(l.poll(11), Due::WaitUntil(3_010));
-    assert_eq!(l.offer(&f, true, 12), Heard::Answer);
+    assert_eq!(offer(&mut l, &f, true, 12), Heard::Answer);
     assert_eq!(l.poll(12), Due::Done(Ok(())));
 }
 
@@ -90,7 +110,7 @@ fn an_error_reply_finishes_without_a_resend() {
     first_send(&mut l, 0);
     l.sent(1);
     assert_eq!(
-        l.offer(&frame(b"&99C7446\r\n"), true, 2),
+        offer(&mut l, &frame(b"&99C7446\r\n"), true, 2),
         Heard::Rejected(0xC74)
     );
     assert_eq!(
@@ -109,7 +129,10 @@ fn the_turnaround_is_two_ticks() {
     l.start(&catalogue::SERVO_ON_OFF, 0);
     first_send(&mut l, 0);
     l.sent(0);
-    assert_eq!(l.offer(&frame(b"#992322C\r\n"), true, 7), Heard::Answer);
+    assert_eq!(
+        offer(&mut l, &frame(b"#992322C\r\n"), true, 7),
+        Heard::Answer
+    );
     l.start(&catalogue::SERVO_ON_OFF, 7);
     assert_eq!(l.poll(8), Due::WaitUntil(9));
     assert_eq!(l.poll(9), Due::Send { fresh: true });
@@ -153,14 +176,24 @@ fn a_broken_error_reply_to_a_reset_is_not_a_sent_reset() {
 }
 
 #[test]
-fn wrong_station_or_id_is_foreign_and_wrong_content_is_a_mismatch() {
+fn another_station_is_foreign_another_id_unplaced_and_wrong_content_a_mismatch() {
     let mut l = spec();
     l.start(&catalogue::SERVO_ON_OFF, 0);
     first_send(&mut l, 0);
     l.sent(0);
-    assert_eq!(l.offer(&frame(b"#012321B\r\n"), true, 1), Heard::Foreign);
-    assert_eq!(l.offer(&frame(b"#992332D\r\n"), true, 1), Heard::Foreign);
-    assert_eq!(l.offer(&frame(b"#992322C\r\n"), false, 1), Heard::Mismatch);
+    assert_eq!(
+        offer(&mut l, &frame(b"#012321B\r\n"), true, 1),
+        Heard::Foreign
+    );
+    // A reply to 233H, which nothing on this line is owed.
+    assert_eq!(
+        offer(&mut l, &frame(b"#992332D\r\n"), true, 1),
+        Heard::Unplaced
+    );
+    assert_eq!(
+        offer(&mut l, &frame(b"#992322C\r\n"), false, 1),
+        Heard::Mismatch
+    );
     assert!(l.awaiting());
     assert!(l.faulted());
 }
@@ -181,7 +214,7 @@ fn holds_set_long_ago_are_over() {
     l.start(&catalogue::AXIS_STATUS_QUERY, 0);
     first_send(&mut l, 0);
     l.sent(0);
-    assert_eq!(l.offer(&frame(REPLY_212), true, 10), Heard::Answer);
+    assert_eq!(offer(&mut l, &frame(REPLY_212), true, 10), Heard::Answer);
     // Idle for 30 days: the turnaround hold at 12 now seems to lie 19
     // days ahead on the wrapping clock.
     let later = 12u32.wrapping_add(30 * 86_400_000);
@@ -205,13 +238,13 @@ fn a_line_just_opened_fences_before_its_first_command() {
     assert_eq!(l.fence_bytes(), FENCE_1);
     l.sent(5);
     // A late reply to a command of an earlier run arrives first: stale.
-    assert_eq!(l.offer(&frame(REPLY_212), true, 6), Heard::Stale);
-    assert_eq!(l.offer(&frame(ECHO_1), true, 8), Heard::Fence);
+    assert_eq!(offer(&mut l, &frame(REPLY_212), true, 6), Heard::Stale);
+    assert_eq!(offer(&mut l, &frame(ECHO_1), true, 8), Heard::Fence);
     // The turnaround after the echo, then the command.
     assert_eq!(l.poll(9), Due::WaitUntil(10));
     assert_eq!(l.poll(10), Due::Send { fresh: true });
     l.sent(12);
-    assert_eq!(l.offer(&frame(REPLY_212), true, 14), Heard::Answer);
+    assert_eq!(offer(&mut l, &frame(REPLY_212), true, 14), Heard::Answer);
     assert_eq!(l.stats().fences, 1);
 }
 
@@ -221,9 +254,10 @@ fn an_echo_with_another_text_settles_nothing() {
     l.start(&catalogue::AXIS_STATUS_QUERY, 0);
     assert_eq!(l.poll(0), Due::Fence);
     l.sent(5);
-    // A host's own test call, or an earlier run's fence.
+    // A host's own test call, or an earlier run's fence: what the line
+    // owes from before it was opened.
     let other = frame(b"#99200012345678934\r\n");
-    assert_eq!(l.offer(&other, true, 6), Heard::Foreign);
+    assert_eq!(offer(&mut l, &other, true, 6), Heard::Stale);
     assert_eq!(l.poll(7), Due::WaitUntil(3_005));
 }
 
@@ -246,17 +280,20 @@ fn after_a_given_up_command_the_next_is_fenced_and_its_late_reply_is_stale() {
     assert_eq!(l.poll(9_000), Due::Fence);
     l.sent(9_002);
     // The 212H's late `&` arrives at 6,000 + 3,000 + 3,000: stale.
-    assert_eq!(l.offer(&frame(b"&99C7446\r\n"), true, 12_000), Heard::Stale);
+    assert_eq!(
+        offer(&mut l, &frame(b"&99C7446\r\n"), true, 12_000),
+        Heard::Stale
+    );
     let echo = {
         let mut e = [0u8; 20];
         e.copy_from_slice(ECHO_1);
         e
     };
-    assert_eq!(l.offer(&frame(&echo), true, 12_001), Heard::Fence);
+    assert_eq!(offer(&mut l, &frame(&echo), true, 12_001), Heard::Fence);
     assert_eq!(l.poll(12_003), Due::Send { fresh: true });
     l.sent(12_004);
     assert_eq!(
-        l.offer(&frame(b"#992342E\r\n"), true, 12_050),
+        offer(&mut l, &frame(b"#992342E\r\n"), true, 12_050),
         Heard::Answer
     );
 }
@@ -275,7 +312,7 @@ fn without_fences_the_quarantine_lasts_through_the_last_tick_a_reply_may_end() {
     // A reply may still complete at 0 + 3,000 + 3,000: the next send waits
     // one tick more.
     assert_eq!(l.poll(3_000), Due::WaitUntil(6_001));
-    assert_eq!(l.offer(&frame(REPLY_212), true, 6_000), Heard::Stale);
+    assert_eq!(offer(&mut l, &frame(REPLY_212), true, 6_000), Heard::Stale);
     assert_eq!(l.poll(6_001), Due::Send { fresh: true });
 }
 
@@ -301,7 +338,7 @@ fn a_late_reply_to_an_earlier_send_answers_the_same_command_once() {
     assert_eq!(l.poll(3_000), Due::Send { fresh: true });
     l.sent(3_010);
     // The first send's late reply: taken.
-    assert_eq!(l.offer(&frame(REPLY_212), true, 3_020), Heard::Answer);
+    assert_eq!(offer(&mut l, &frame(REPLY_212), true, 3_020), Heard::Answer);
     assert!(l.faulted(), "the second send's reply is still owed");
     // The second send's reply is owed: the next command is fenced.
     l.start(&catalogue::AXIS_STATUS_QUERY, 3_021);
@@ -332,11 +369,11 @@ fn on_a_line_that_repeats_frames_a_reply_keeps_its_command_from_going_out_again(
     l.start(&catalogue::AXIS_STATUS_QUERY, 0);
     first_send(&mut l, 0);
     l.sent(0);
-    assert_eq!(l.offer(&frame(REPLY_212), true, 10), Heard::Answer);
+    assert_eq!(offer(&mut l, &frame(REPLY_212), true, 10), Heard::Answer);
     // Its copy may come until 3,010: another 212H waits; a 215H need not.
     l.start(&catalogue::AXIS_STATUS_QUERY, 10);
     assert_eq!(l.poll(12), Due::WaitUntil(3_011));
-    assert_eq!(l.offer(&frame(REPLY_212), true, 2_000), Heard::Stale);
+    assert_eq!(offer(&mut l, &frame(REPLY_212), true, 2_000), Heard::Stale);
     // The copy of the copy, until 5,000.
     assert_eq!(l.poll(3_011), Due::WaitUntil(5_001));
     l.start(&catalogue::SYSTEM_STATUS_QUERY, 3_011);
@@ -350,7 +387,7 @@ fn a_copy_of_an_error_reply_keeps_every_command_back() {
     first_send(&mut l, 0);
     l.sent(0);
     assert_eq!(
-        l.offer(&frame(b"&99C7446\r\n"), true, 10),
+        offer(&mut l, &frame(b"&99C7446\r\n"), true, 10),
         Heard::Rejected(0xC74)
     );
     l.start(&catalogue::ERROR_DETAIL_QUERY, 10);
@@ -367,15 +404,7 @@ fn a_copy_passes_only_for_a_command_that_accepts_what_it_carries() {
     first_send(&mut l, 0);
     l.sent(0);
     let reply = frame(b"#9926D00180A\r\n");
-    let heard = l.hear(
-        reply.header(),
-        reply.station(),
-        reply.code(),
-        None,
-        Span::one(0x18),
-        true,
-        10,
-    );
+    let heard = hear(&mut l, reply.code(), Span::one(0x18), 10);
     assert_eq!(heard, Heard::Answer);
     l.begin(Command::of(0x26D, Span::one(23), Claim::Proof, 3), 10);
     assert_eq!(l.poll(12), Due::Send { fresh: true });
@@ -394,7 +423,7 @@ fn a_tentative_read_minds_only_copies_that_could_pass_as_errors() {
     );
     first_send(&mut l, 0);
     l.sent(0);
-    let heard = l.hear(Header::Response, S, 0x21F, None, Span::UNKNOWN, true, 10);
+    let heard = hear(&mut l, 0x21F, Span::UNKNOWN, 10);
     assert_eq!(heard, Heard::Answer);
     // The confirming read of the same window waits for the copy; a first
     // read of the next window need not.
@@ -416,6 +445,6 @@ fn a_line_just_opened_on_a_line_that_repeats_frames_waits_for_copies_of_its_past
     l.start(&catalogue::AXIS_STATUS_QUERY, 100);
     assert_eq!(l.poll(100), Due::Fence);
     l.sent(102);
-    assert_eq!(l.offer(&frame(ECHO_1), true, 110), Heard::Fence);
+    assert_eq!(offer(&mut l, &frame(ECHO_1), true, 110), Heard::Fence);
     assert_eq!(l.poll(112), Due::WaitUntil(601));
 }

@@ -47,12 +47,12 @@ use verify::Verifier;
 
 use crate::checksum::BypassPolicy;
 use crate::clock::Clock;
-use crate::decoder::{Event, FrameDecoder, Received};
+use crate::decoder::{FrameDecoder, Received, Status};
 use crate::engine::{self, Engine, Step};
-use crate::error::{Error, Failure};
-use crate::frame::TRAILER_LEN;
+use crate::error::Failure;
+use crate::frame::{Frame, Header, TRAILER_LEN};
 use crate::limits;
-use crate::line::{Claim, Command, Due, Heard, Line, Span};
+use crate::line::{Claim, Command, Due, Heard, Judge, Line, Receiver, Span, Verdict};
 use crate::position::{PositionRecord, PositionStream};
 use crate::profile::Profile;
 
@@ -261,7 +261,7 @@ pub struct Transfer<I, const N: usize = { limits::TTA.command }> {
     /// Records per frame now: halved after a timeout, grown back after
     /// each confirmation.
     frame_limit: u16,
-    replies: FrameDecoder<32>,
+    replies: Receiver<32>,
     verifier: Verifier,
     state: State,
     stats: TransferStats,
@@ -288,7 +288,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             chunk: None,
             pending_fault: false,
             frame_limit: cfg.max_records.clamp(1, MAX_FRAME_RECORDS),
-            replies: FrameDecoder::with_policy(BypassPolicy::Reject),
+            replies: Receiver::new(),
             verifier: Verifier::new(&cfg),
             state: State::Build,
             stats: TransferStats {
@@ -362,7 +362,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         *chunk = None;
         *pending_fault = false;
         *frame_limit = cfg.max_records.clamp(1, MAX_FRAME_RECORDS);
-        *replies = FrameDecoder::with_policy(BypassPolicy::Reject);
+        *replies = Receiver::new();
         *verifier = Verifier::new(&cfg);
         *state = State::Build;
         *stats = TransferStats::default();
@@ -454,7 +454,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                                         self.shrink_window(line);
                                     }
                                 }
-                                self.replies.reset();
+                                self.replies.clear(line, now);
                                 self.verifier.hunting = true;
                             }
                             if !matches!(self.state, State::Write | State::Verify) {
@@ -530,94 +530,57 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
 
     /// Bytes received from the controller at tick `now`. Returns at the
     /// first frame (or broken one): call again with the rest of the input
-    /// until it answers [`Heard::NeedMore`].
+    /// until it answers [`Status::Partial`].
     pub fn received(&mut self, line: &mut Line, bytes: &[u8], now: u32) -> Received<Heard> {
+        if self.state != State::Verify {
+            let r = self.receive(line, bytes, now);
+            self.stats.bytes_received += r.consumed as u64;
+            return r;
+        }
+        // A read-back reply is compared as it streams by, byte by byte;
+        // the receiver takes the other frames.
         for (i, &b) in bytes.iter().enumerate() {
             self.stats.bytes_received += 1;
-            let event = self.byte(line, b, now);
-            if event != Heard::NeedMore {
+            let mut heard = self.verify_byte(line, b, now);
+            if heard.is_partial() {
+                heard = self.receive(line, core::slice::from_ref(&b), now).status;
+            }
+            if let Status::Complete(h) = heard {
                 return Received {
                     consumed: i + 1,
-                    event,
+                    status: Status::Complete(h),
                 };
             }
         }
         Received {
             consumed: bytes.len(),
-            event: Heard::NeedMore,
+            status: Status::Partial,
         }
     }
 
-    fn byte(&mut self, line: &mut Line, b: u8, now: u32) -> Heard {
-        let reading_back = self.state == State::Verify;
-        if reading_back {
-            let e = self.verify_byte(line, b, now);
-            if e != Heard::NeedMore {
-                return e;
-            }
-        }
-        let read_back = self.verifier.stream;
-        let heard = match self.replies.push(b) {
-            Event::NeedMore => return Heard::NeedMore,
-            // A long read-back reply overflows this small decoder: during
-            // a read-back the read-back path decodes it.
-            Event::Error(Error::FrameTooLong { .. }) if reading_back => return Heard::NeedMore,
-            Event::Error(e) => {
-                self.stats.line_errors += 1;
-                line.broken(self.replies.failed_envelope(), now);
-                Heard::Broken(e)
-            }
-            Event::Frame(f) if f.header() == read_back.header && f.code() == read_back.id => {
-                if reading_back {
-                    return Heard::NeedMore;
-                }
-                // A read-back reply outside a read-back (short enough for
-                // this decoder: empty).
-                line.hear(
-                    f.header(),
-                    f.station(),
-                    f.code(),
-                    None,
-                    Span::UNKNOWN,
-                    false,
-                    now,
-                )
-            }
-            Event::Frame(f) => {
-                let (content_ok, values) = match (self.state, self.chunk) {
-                    (State::Write, Some(c)) => match self.cfg.stream.parse_reply(&f) {
-                        Ok((start, count)) => {
-                            let start_ok = self.cfg.stream.start_width == 0 || start == c.start;
-                            (start_ok && count == c.records, Span::one(count))
-                        }
-                        Err(_) => (false, Span::UNKNOWN),
-                    },
-                    _ => (
-                        false,
-                        self.cfg
-                            .stream
-                            .parse_reply(&f)
-                            .map_or(Span::UNKNOWN, |(_, n)| Span::one(n)),
-                    ),
-                };
-                line.hear(
-                    f.header(),
-                    f.station(),
-                    f.code(),
-                    Some(f.body()),
-                    values,
-                    content_ok,
-                    now,
-                )
-            }
+    /// The receiver's part: write replies, errors, fences, anything else.
+    fn receive(&mut self, line: &mut Line, bytes: &[u8], now: u32) -> Received<Heard> {
+        let mut judge = CountCheck {
+            cfg: &self.cfg,
+            chunk: match self.state {
+                State::Write => self.chunk,
+                _ => None,
+            },
+            reading_back: self.state == State::Verify,
         };
-        self.judged(heard);
-        heard
+        let r = self.replies.receive(line, &mut judge, bytes, now);
+        if let Status::Complete(heard) = r.status {
+            if let Heard::Broken(_) = heard {
+                self.stats.line_errors += 1;
+            }
+            self.judged(heard);
+        }
+        r
     }
 
     /// Counts what a frame meant; anything but the reply faults the chunk.
     fn judged(&mut self, heard: Heard) {
-        if !matches!(heard, Heard::Answer | Heard::Fence | Heard::NeedMore) {
+        if !matches!(heard, Heard::Answer | Heard::Fence) {
             match self.chunk.as_mut() {
                 Some(c) => c.faulted = true,
                 None => self.pending_fault = true,
@@ -627,9 +590,9 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             Heard::Answer => self.stats.frames_confirmed += 1,
             Heard::Rejected(_) => self.stats.error_replies += 1,
             Heard::Mismatch => self.stats.count_mismatches += 1,
-            Heard::Stale => self.stats.stale_replies += 1,
+            Heard::Stale | Heard::Unplaced => self.stats.stale_replies += 1,
             Heard::Foreign => self.stats.ignored_frames += 1,
-            Heard::NeedMore | Heard::Fence | Heard::Broken(_) => {}
+            Heard::Fence | Heard::Broken(_) => {}
         }
     }
 
@@ -707,6 +670,43 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         C: crate::clock::AsyncClock,
     {
         engine::run_async(self, line, uart, clock, poll_ms).await
+    }
+}
+
+/// A transfer's check of a write reply: exactly the chunk's records (and,
+/// for a range write, its start). Read-back replies stream to the
+/// verifier while a read-back runs.
+struct CountCheck<'c> {
+    cfg: &'c TransferConfig,
+    /// The chunk being written, if a write reply is awaited.
+    chunk: Option<Chunk>,
+    reading_back: bool,
+}
+
+impl Judge for CountCheck<'_> {
+    fn judge(&mut self, f: &Frame<'_>) -> Verdict {
+        let reply = if f.code() == self.cfg.stream.id {
+            self.cfg.stream.parse_reply(f).ok()
+        } else {
+            None
+        };
+        let values = reply.map_or(Span::UNKNOWN, |(_, n)| Span::one(n));
+        let fits = match (self.chunk, reply) {
+            (Some(c), Some((start, count))) => {
+                (self.cfg.stream.start_width == 0 || start == c.start) && count == c.records
+            }
+            _ => false,
+        };
+        Verdict {
+            fits,
+            values,
+            keep: false,
+        }
+    }
+
+    fn streams(&self, header: Header, code: u16) -> bool {
+        let read_back = self.cfg.stream.read_back();
+        self.reading_back && header == read_back.header && code == read_back.id
     }
 }
 

@@ -63,10 +63,10 @@ fn events(t: &mut Transfer<Iter>, l: &mut Line, mut bytes: &[u8], now: u32) -> V
     loop {
         let r = t.received(l, bytes, now);
         bytes = &bytes[r.consumed..];
-        if r.event == Heard::NeedMore {
-            return out;
+        match r.status {
+            Status::Partial => return out,
+            Status::Complete(h) => out.push(h),
         }
-        out.push(r.event);
     }
 }
 
@@ -83,8 +83,8 @@ fn a_reply_with_another_count_never_confirms_and_a_reply_before_the_send_is_stal
     let mut t = Transfer::<_>::new(TTA.with_verify(Verify::Off), records(3, 2).into_iter());
     let frame = transmitted(&mut t, &mut l, 0);
     assert_eq!(&frame[..10], b"!9926D0003");
-    // Before `sent`: not a reply to this frame.
-    assert_eq!(events(&mut t, &mut l, &reply_26dh(3), 0), [Heard::Stale]);
+    // Before `sent`: not a reply to this frame, and nothing explains it.
+    assert_eq!(events(&mut t, &mut l, &reply_26dh(3), 0), [Heard::Unplaced]);
     t.sent(&mut l, 5);
     assert_eq!(
         events(&mut t, &mut l, &reply_26dh(2), 10),

@@ -13,10 +13,11 @@
 use super::source::RecordSource;
 use super::{Resume, State, Transfer, TransferConfig};
 use crate::checksum::BypassPolicy;
+use crate::decoder::Status;
 use crate::error::Failure;
 use crate::field::{FieldSpec, Reader};
 use crate::frame::{Header, Station, ENVELOPE_LEN};
-use crate::line::{Claim, Command, Heard, Line, Span};
+use crate::line::{fingerprint_more, Claim, Command, Heard, Line, Span, Verdict};
 use crate::position::{PositionRecord, PositionStream};
 use crate::table::{PositionStreamDecoder, StreamEvent};
 use crate::window::{write_query, Windows, QUERY_LEN};
@@ -46,6 +47,8 @@ pub(super) struct Verifier {
     /// Whether the frame being decoded is a read-back reply from the
     /// station (so that breaking means the reply was lost).
     started: bool,
+    /// The fingerprint of the frame's bytes so far.
+    print: u32,
     station: Station,
     pub(super) rewrites: u8,
 }
@@ -68,6 +71,7 @@ impl Verifier {
             carried: Span::UNKNOWN,
             candidate: false,
             started: false,
+            print: crate::line::FINGERPRINT_START,
             station: Station(0),
             rewrites: 0,
         }
@@ -262,18 +266,22 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
     /// One byte in the read-back: the stream decoder compares the reply's
     /// records as they arrive; the comparison counts when the line takes
     /// the reply.
-    pub(super) fn verify_byte(&mut self, line: &mut Line, b: u8, now: u32) -> Heard {
+    pub(super) fn verify_byte(&mut self, line: &mut Line, b: u8, now: u32) -> Status<Heard> {
         let v = &mut self.verifier;
         if v.hunting {
             if Header::from_byte(b).is_none() {
-                return Heard::NeedMore;
+                return Status::Partial;
             }
             v.decoder.reset();
             v.hunting = false;
             v.candidate = false;
+            v.print = crate::line::FINGERPRINT_START;
         }
-        match v.decoder.push(b) {
-            StreamEvent::NeedMore => Heard::NeedMore,
+        v.print = fingerprint_more(v.print, core::slice::from_ref(&b));
+        let Status::Complete(event) = v.decoder.push(b) else {
+            return Status::Partial;
+        };
+        match event {
             StreamEvent::Start {
                 kind,
                 station,
@@ -285,7 +293,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 v.carried = Span::UNKNOWN;
                 v.candidate = kind == v.stream && count <= v.asked;
                 v.started = kind == v.stream && station == line.config().station;
-                Heard::NeedMore
+                Status::Partial
             }
             StreamEvent::Record(rec) => {
                 let v = &mut self.verifier;
@@ -306,20 +314,27 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                         self.verifier.seen |= bit(i);
                     }
                 }
-                Heard::NeedMore
+                Status::Partial
             }
             StreamEvent::End { .. } => {
                 v.hunting = true;
                 v.started = false;
-                let (station, id, ok, carried) = (v.station, v.stream.id, v.candidate, v.carried);
-                let heard = line.hear(Header::Response, station, id, None, carried, ok, now);
+                let (station, id, print) = (v.station, v.stream.id, v.print);
+                let verdict = Verdict {
+                    fits: v.candidate,
+                    values: v.carried,
+                    keep: false,
+                };
+                let heard = line.hear(Header::Response, station, id, None, verdict, print, now);
                 match heard {
                     Heard::Answer => self.commit_window(),
                     // A reply to another window, or one that came early.
-                    Heard::Mismatch | Heard::Stale => self.stats.stale_replies += 1,
+                    Heard::Mismatch | Heard::Stale | Heard::Unplaced => {
+                        self.stats.stale_replies += 1
+                    }
                     _ => self.judged(heard),
                 }
-                heard
+                Status::Complete(heard)
             }
             StreamEvent::Error { .. } => {
                 v.hunting = true;
@@ -332,9 +347,10 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 if Header::from_byte(b).is_some() {
                     v.decoder.reset();
                     v.hunting = false;
+                    v.print = fingerprint_more(crate::line::FINGERPRINT_START, &[b]);
                     let _ = v.decoder.push(b);
                 }
-                Heard::NeedMore
+                Status::Partial
             }
         }
     }

@@ -49,10 +49,10 @@ use core::hint::black_box;
 use cortex_m_rt::entry;
 use iai_protocol_b::axis::{AxisPattern, PerAxis};
 use iai_protocol_b::checksum::BypassPolicy;
-use iai_protocol_b::decoder::{Event, FrameDecoder, FrameSkipper};
-use iai_protocol_b::engine::{feed, Step};
+use iai_protocol_b::decoder::{Event, FrameDecoder, FrameSkipper, Status};
+use iai_protocol_b::engine::{feed, Driver, Step};
 use iai_protocol_b::field::{FieldSpec, Reader};
-use iai_protocol_b::frame::{read_envelope, Frame, Header, Station};
+use iai_protocol_b::frame::{read_envelope, Frame, Station};
 use iai_protocol_b::message::{decode_any, AxisStatusQuery, Fields, GroupInfo, Value, Visitor};
 use iai_protocol_b::position::{PositionRecord, PositionStream, RecordLayout};
 use iai_protocol_b::table::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
@@ -194,14 +194,14 @@ fn main() -> ! {
     loop {
         let d = dec.decode(rest);
         rest = rest.get(d.consumed..).unwrap_or(&[]);
-        match d.event {
-            Event::NeedMore => break,
-            Event::Frame(f) => {
+        match d.status {
+            Status::Partial => break,
+            Status::Complete(Event::Frame(f)) => {
                 if let Ok(m) = decode_any(&f) {
                     m.message.fields(&mut Sink);
                 }
             }
-            Event::Error(e) => {
+            Status::Complete(Event::Error(e)) => {
                 black_box(e);
             }
         }
@@ -216,10 +216,10 @@ fn main() -> ! {
     while !rest.is_empty() {
         let r = sd.decode(rest);
         rest = rest.get(r.consumed..).unwrap_or(&[]);
-        match r.event {
-            StreamEvent::NeedMore => {}
-            StreamEvent::End { .. } | StreamEvent::Error { .. } => sd.reset(),
-            other => {
+        match r.status {
+            Status::Partial => {}
+            Status::Complete(StreamEvent::End { .. } | StreamEvent::Error { .. }) => sd.reset(),
+            Status::Complete(other) => {
                 black_box(other);
             }
         }
@@ -294,9 +294,13 @@ fn main() -> ! {
     feed(&mut t, &mut line, input, now);
     black_box(t.poll(&mut line, now.wrapping_add(black_box(5_000))));
     black_box(t.mismatched_positions().count());
-    line.broken(read_envelope(input), now);
-    line.broken(black_box(Some((Header::Error, Station(0x99), 0x0E1))), now);
-    line.unread(now);
+    // What the line hears while no engine runs, and a proof of order.
+    let mut driver = Driver::new();
+    let mut port = Wire(input);
+    let mut clock = || now;
+    black_box(driver.listen(&mut line, &mut port, &mut clock).is_ok());
+    line.start_proof(now);
+    black_box(line.poll(now));
     let mut c: Client = Client::new().with_error_detail();
     let _ = black_box(c.start_frame(&mut line, input, now));
     if let Ok(q) = AxisStatusQuery::of(black_box(&[1, 2])) {

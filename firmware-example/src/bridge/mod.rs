@@ -13,18 +13,20 @@
 //!   other stations' commands are skipped, refused ones ([`crate::config`])
 //!   are read to their end and answered `&` [`crate::codes::REFUSED`];
 //! - `passthrough`: any other command is checked, forwarded, and the
-//!   controller's checked reply relayed; without one within 3 s the bridge
-//!   answers nothing and the host resends (2003 p. 62);
+//!   controller's checked reply relayed (the core's relay engine); without
+//!   one in time the bridge answers nothing and the host resends (2003
+//!   p. 62);
 //! - `table_write`: a 26DH of any size is decoded record by record and written
 //!   in controller-sized chunks, each confirmed and read back equal before
 //!   more is taken from the host; one `#` with the count at the end;
 //! - [`pipeline`]: chunk and queue sizes for the downstream rate, so that
 //!   the final reply fits the host's timeout.
 //!
-//! The downstream line is one [`Line`] for both paths: what the 26DH path
-//! left in flight (a read-back's late reply) the pass-through knows, and the
-//! reverse; a line just booted fences its first command. The bridge is
-//! wired to the controller, so its line expects no copied replies.
+//! The downstream line is one [`Line`] for both paths, moved by one
+//! [`Driver`]: what the 26DH path left in flight (a read-back's late reply)
+//! the pass-through knows, and the reverse; a line just booted fences its
+//! first command. The line expects copied replies only as long after a
+//! reply as [`Config::duplicate_window_ms`] says, or as it learns.
 //!
 //! Buffers: one 2,051-byte area serves both paths. It is the frame buffer
 //! of the 26DH transfer, built once and restarted in place for each 26DH;
@@ -40,15 +42,16 @@ mod upstream;
 use embedded_io::{Write, WriteReady};
 use iai_protocol_b::axis::MAX_AXES;
 use iai_protocol_b::checksum::BypassPolicy;
-use iai_protocol_b::decoder::FrameDecoder;
+use iai_protocol_b::engine::Driver;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::line::Line;
 use iai_protocol_b::position::PositionStream;
+use iai_protocol_b::relay::Relay;
 use iai_protocol_b::transfer::{packed_len, RecordBuffer, Transfer};
 use iai_protocol_b::{line::LineConfig, profile::Profile, transfer::TransferConfig};
 
 use crate::config::{Config, Source};
-use crate::serial::Port;
+use crate::serial::{Counted, Port};
 use crate::status::{self, LastError, Stats};
 
 use table_write::StreamWork;
@@ -241,11 +244,9 @@ enum Mode {
     Command,
     /// Skipping a command to its end; at a valid end answer `answer`.
     Skip { answer: Option<u16> },
-    /// Sending the decoded command downstream (after a fence, if the line
-    /// asks for one).
-    SendCommand,
-    /// Waiting for the controller's reply (the line says until when).
-    AwaitReply,
+    /// The decoded command is relayed downstream (after a fence, if the
+    /// line asks for one) and its reply awaited.
+    Forward,
     /// Writing the reply upstream.
     RelayReply,
     /// A 26DH stream is being decoded and transferred.
@@ -274,9 +275,10 @@ pub struct Bridge {
     /// The 26DH transfer, built once and restarted in place for each 26DH.
     /// Between 26DHs its frame buffer is the pass-through's decoder.
     job: Job,
-    /// Downstream frames while a pass-through command waits for its fence:
-    /// the fence's echo and stale replies (never kept).
-    fence_replies: FrameDecoder<24>,
+    /// The pass-through's exchange, run in the job's frame buffer.
+    relay: Relay,
+    /// Where the transmission downstream stands.
+    driver: Driver,
     /// A 26DH's upstream side.
     stream: StreamWork,
     /// Bytes of the current outgoing frame already written.
@@ -299,7 +301,7 @@ pub struct Bridge {
 
 /// The line to the controller for `cfg`.
 const fn line_config(cfg: &Config) -> LineConfig {
-    LineConfig::new(cfg.controller_station)
+    LineConfig::new(cfg.controller_station).with_duplicate_window(cfg.duplicate_window_ms)
 }
 
 impl Bridge {
@@ -315,7 +317,8 @@ impl Bridge {
             up: Upstream::new(),
             line: Line::new(line_config(&cfg), seed),
             job: Transfer::new(TransferConfig::new(Profile::TTA), RecordBuffer::new()),
-            fence_replies: FrameDecoder::with_policy(BypassPolicy::Reject),
+            relay: Relay::new(),
+            driver: Driver::new(),
             stream: StreamWork::new(cfg.downstream_baud),
             out_off: 0,
             stream_deadline: None,
@@ -392,10 +395,7 @@ impl Bridge {
             guest.yield_line(&mut self.line, now);
             guest_moved = true;
         }
-        let host_busy = matches!(
-            self.mode,
-            Mode::SendCommand | Mode::AwaitReply | Mode::Stream { .. }
-        );
+        let host_busy = matches!(self.mode, Mode::Forward | Mode::Stream { .. });
         if guest.holds_line() || (!host_busy && guest.wants_line(now)) {
             guest_moved |= guest
                 .run(&mut self.line, down, now)
@@ -405,7 +405,7 @@ impl Bridge {
         let lost = down.take_overruns();
         if lost > 0 {
             self.stats.downstream_overruns = self.stats.downstream_overruns.wrapping_add(lost);
-            if self.mode == Mode::AwaitReply {
+            if self.mode == Mode::Forward && self.line.awaiting() {
                 // The reply being decoded lost bytes: start again.
                 self.job.idle_decoder().reset();
             }
@@ -417,9 +417,7 @@ impl Bridge {
                     upstream::Read::Moved(moved) => moved,
                 }
             }
-            Mode::SendCommand | Mode::AwaitReply | Mode::RelayReply => {
-                self.poll_passthrough(up, down, now)?
-            }
+            Mode::Forward | Mode::RelayReply => self.poll_passthrough(up, down, now)?,
             Mode::Stream { .. } => self.poll_stream(up, down, now)?,
             Mode::Respond => self.poll_respond(up).map_err(Error::Upstream)?,
         };
@@ -452,7 +450,7 @@ impl Bridge {
                     ..Interest::default()
                 },
             ),
-            Mode::SendCommand if self.forward_pending.is_some() => (
+            Mode::Forward if self.forward_pending.is_some() || self.guest_holds => (
                 None,
                 Reason::Controller,
                 Interest {
@@ -460,36 +458,19 @@ impl Bridge {
                     ..Interest::default()
                 },
             ),
-            Mode::SendCommand | Mode::AwaitReply => {
-                let due = self.line.poll(now);
-                let sending = matches!(
-                    due,
-                    iai_protocol_b::line::Due::Fence | iai_protocol_b::line::Due::Send { .. }
-                );
-                let deadline = match due {
-                    iai_protocol_b::line::Due::WaitUntil(t) => Some(t),
-                    _ => Some(now),
-                };
-                if sending {
-                    (
-                        None,
-                        Reason::ControllerRoom,
-                        only(Interest {
-                            down_write: true,
-                            ..Interest::default()
-                        }),
-                    )
+            Mode::Forward => (
+                self.stream_deadline,
+                if self.tx_blocked {
+                    Reason::ControllerRoom
                 } else {
-                    (
-                        deadline,
-                        Reason::Controller,
-                        only(Interest {
-                            down_read: true,
-                            ..Interest::default()
-                        }),
-                    )
-                }
-            }
+                    Reason::Controller
+                },
+                only(Interest {
+                    down_read: true,
+                    down_write: self.tx_blocked,
+                    ..Interest::default()
+                }),
+            ),
             Mode::RelayReply | Mode::Respond => (
                 None,
                 Reason::HostRoom,
@@ -549,25 +530,21 @@ impl Bridge {
         frames.set_policy(BypassPolicy::CommandsOnly);
     }
 
-    /// Reads and drops whatever the controller sends unasked (late replies,
-    /// noise) while no command is on the line: the line already counts
-    /// them as owed until its next fence.
-    fn drain_downstream<D: Port>(&mut self, down: &mut D) -> Result<bool, D::Error> {
+    /// Lets the line hear whatever the controller sends while no command
+    /// is on it (late replies, copies, noise): placed or noticed by the
+    /// line, never dropped unread.
+    fn drain_downstream<D: Port>(&mut self, down: &mut D, now: u32) -> Result<bool, D::Error> {
         if self.guest_holds {
             // The bytes are the guest's.
             return Ok(false);
         }
-        let mut buf = [0u8; 16];
-        let mut moved = false;
-        while down.read_ready()? {
-            let n = down.read(&mut buf)?;
-            if n == 0 {
-                break;
-            }
-            self.stats.downstream_in += n as u64;
-            moved = true;
-        }
-        Ok(moved)
+        let (din, dout) = (
+            &mut self.stats.downstream_in,
+            &mut self.stats.downstream_out,
+        );
+        let mut port = Counted::new(down, din, dout);
+        let mut clock = || now;
+        self.driver.listen(&mut self.line, &mut port, &mut clock)
     }
 }
 

@@ -13,7 +13,8 @@
 use iai_protocol_b::axis::MAX_AXES;
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::clock::reached;
-use iai_protocol_b::engine::{feed, Step};
+use iai_protocol_b::decoder::Status;
+use iai_protocol_b::engine::Turn;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::table::{PositionStreamDecoder, StreamEvent};
@@ -21,9 +22,10 @@ use iai_protocol_b::{error::Failure, profile::Profile, transfer::TransferConfig}
 
 use super::pipeline::{pipeline, Pipeline, END_PHASE_RECORDS};
 use super::upstream::Up;
-use super::{write_some, Bridge, Error, Job, Mode, Port, UPSTREAM_STALL_MS};
+use super::{Bridge, Error, Job, Mode, Port, UPSTREAM_STALL_MS};
 use crate::codes;
 use crate::log;
+use crate::serial::Counted;
 
 /// The 26DH state beside the transfer: the upstream decoder.
 pub(super) struct StreamWork {
@@ -137,8 +139,10 @@ impl Bridge {
             moved = true;
             waiting_since = now;
             let work = &mut self.stream;
-            match work.decoder.push(b) {
-                StreamEvent::NeedMore => {}
+            let Status::Complete(event) = work.decoder.push(b) else {
+                continue;
+            };
+            match event {
                 StreamEvent::Start {
                     station: s, count, ..
                 } => {
@@ -203,54 +207,29 @@ impl Bridge {
             // The guest finishes its exchange first.
         } else if self.stream.started {
             let (job, line) = (&mut self.job, &mut self.line);
-            let mut buf = [0u8; 16];
-            while down.read_ready().map_err(Error::Downstream)? {
-                let n = down.read(&mut buf).map_err(Error::Downstream)?;
-                if n == 0 {
-                    break;
-                }
-                self.stats.downstream_in += n as u64;
-                feed(job, line, buf.get(..n).unwrap_or(&[]), now);
-                moved = true;
-            }
-            loop {
-                match job.poll(line, now) {
-                    Step::Transmit(bytes) => {
-                        if abort.is_some() && self.out_off == 0 {
-                            answer = abort.map(Err);
-                            break;
-                        }
-                        let out = &mut self.stats.downstream_out;
-                        let n = write_some(down, bytes, &mut self.out_off, out)
-                            .map_err(Error::Downstream)?;
-                        moved |= n > 0;
-                        if self.out_off < bytes.len() {
-                            self.tx_blocked = true;
-                            break;
-                        }
-                        // All in the transmit ring: the reply clock starts.
-                        self.out_off = 0;
-                        job.sent(line, now);
+            if abort.is_some() && !self.driver.writing() {
+                // Nothing half sent: stop here (what is in flight is the
+                // line's to remember).
+                answer = abort.map(Err);
+            } else {
+                let (din, dout) = (
+                    &mut self.stats.downstream_in,
+                    &mut self.stats.downstream_out,
+                );
+                let mut port = Counted::new(down, din, dout);
+                let mut clock = || now;
+                match self.driver.turn(job, line, &mut port, &mut clock) {
+                    Err(e) => return Err(Error::Downstream(e)),
+                    Ok(Turn::Busy) => moved = true,
+                    Ok(Turn::Wait { until, write }) => {
+                        self.stream_deadline = until;
+                        self.tx_blocked = write;
                     }
-                    Step::WaitUntil(t) => {
-                        self.stream_deadline = Some(t);
-                        if abort.is_some() {
-                            answer = abort.map(Err);
-                        }
-                        break;
-                    }
-                    Step::Idle => {
-                        if abort.is_some() {
-                            answer = abort.map(Err);
-                        }
-                        break;
-                    }
-                    Step::Done(Ok(_verified)) => {
+                    Ok(Turn::Done(Ok(_verified))) => {
                         // Every chunk was read back and compared equal.
                         answer = Some(Ok(job.stats().records_confirmed as u16));
-                        break;
                     }
-                    Step::Done(Err(e)) => {
+                    Ok(Turn::Done(Err(e))) => {
                         log::warning!("26DH transfer failed: {}", e);
                         answer = Some(Err(match e {
                             Failure::Timeout { .. } => codes::CONTROLLER_TIMEOUT,
@@ -260,7 +239,6 @@ impl Bridge {
                             Failure::Mismatch { .. } => codes::VERIFY_MISMATCH,
                             _ => codes::INTERNAL,
                         }));
-                        break;
                     }
                 }
             }
@@ -273,7 +251,9 @@ impl Bridge {
                 self.stats.chunk_error_replies += s.error_replies;
             }
         } else {
-            moved |= self.drain_downstream(down).map_err(Error::Downstream)?;
+            moved |= self
+                .drain_downstream(down, now)
+                .map_err(Error::Downstream)?;
             if abort.is_some() {
                 answer = abort.map(Err);
             }

@@ -196,12 +196,17 @@ fn a_reply_with_xoff_in_its_text_is_not_relayed_under_xon_xoff() {
             SEED,
         );
         let (mut up, mut down) = (Fake::default(), Fake::controller());
-        let cmd = frame(Header::Command, 0x99, 0x200, b"0123456789");
+        // 216H: the latest system error, whose reply carries a message.
+        let cmd = emitted(&iai_protocol_b::message::ErrorDetailQuery::latest_system_error());
         up.input = cmd.clone();
         settle(&mut b, &mut up, &mut down, 0);
         settle(&mut b, &mut up, &mut down, 2);
         assert_eq!(down.output, cmd);
-        let reply = frame(Header::Response, 0x99, 0x200, b"01234\x1356789");
+        let reply = emitted(&iai_protocol_b::message::ErrorDetailResponse {
+            error_number: 0x0E1,
+            message: b"axis 1 \x13 stopped",
+            ..Default::default()
+        });
         down.input = reply.clone();
         settle(&mut b, &mut up, &mut down, 5);
         settle(&mut b, &mut up, &mut down, 6);
@@ -284,7 +289,9 @@ fn commands(down: &mut Fake) -> Vec<u16> {
     let mut dec: iai_protocol_b::decoder::FrameDecoder<4096> = Default::default();
     let mut ids = Vec::new();
     for &b in &down.output {
-        if let iai_protocol_b::decoder::Event::Frame(f) = dec.push(b) {
+        if let iai_protocol_b::decoder::Status::Complete(iai_protocol_b::decoder::Event::Frame(f)) =
+            dec.push(b)
+        {
             ids.push(f.code());
         }
     }
@@ -395,8 +402,9 @@ fn the_pass_through_never_relays_a_reply_to_the_bridges_own_query() {
     down.echo_fences = false;
     settle(&mut b, &mut up, &mut down, 9_020);
     // Fenced: the bridge's queries are owed. The controller answers in
-    // order: the late reply to the bridge's last query first (3,008 ms
-    // after it), then the fence's echo.
+    // order: the late reply to the bridge's last query first (5,998 ms
+    // after it was sent: within its timeout and late window), then the
+    // fence's echo.
     let fence = down.output.clone();
     assert!(fence.starts_with(b"!99200"), "a fence, not the host's 21FH");
     down.output.clear();
@@ -404,8 +412,8 @@ fn the_pass_through_never_relays_a_reply_to_the_bridges_own_query() {
     down.input = read_back(999);
     down.input
         .extend(frame(Header::Response, 0x99, 0x200, f.body()));
-    settle(&mut b, &mut up, &mut down, 12_020);
-    settle(&mut b, &mut up, &mut down, 12_022);
+    settle(&mut b, &mut up, &mut down, 12_010);
+    settle(&mut b, &mut up, &mut down, 12_012);
     assert_eq!(commands(&mut down), [0x21F]);
     assert!(up.output.is_empty(), "the late reply was not relayed");
     down.input = read_back(111_111);

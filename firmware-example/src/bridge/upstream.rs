@@ -3,9 +3,8 @@
 //! the pass-through; and the bridge's own answers going up.
 
 use iai_protocol_b::checksum::BypassPolicy;
-use iai_protocol_b::decoder::{Event, FrameSkipper, Skipped};
+use iai_protocol_b::decoder::{Event, FrameSkipper, Skipped, Status};
 use iai_protocol_b::frame::{emit_frame, read_envelope, Frame, Header, Station, ENVELOPE_LEN};
-use iai_protocol_b::line::Line;
 
 use super::{write_some, Bridge, Error, Mode, Port, STREAM};
 use crate::codes;
@@ -73,7 +72,9 @@ impl Bridge {
         down: &mut D,
         now: u32,
     ) -> Result<Read, Error<U::Error, D::Error>> {
-        let mut moved = self.drain_downstream(down).map_err(Error::Downstream)?;
+        let mut moved = self
+            .drain_downstream(down, now)
+            .map_err(Error::Downstream)?;
         while matches!(
             self.mode,
             Mode::Idle | Mode::Head | Mode::Command | Mode::Skip { .. }
@@ -209,8 +210,10 @@ impl Bridge {
             self.go_idle();
             return;
         };
-        match (skipper.push(b), answer) {
-            (Skipped::NeedMore, _) => {}
+        let Status::Complete(end) = skipper.push(b) else {
+            return;
+        };
+        match (end, answer) {
             (Skipped::End { checksum_ok: true }, Some(code)) => {
                 self.stats.refused += 1;
                 let station = self.cfg.controller_station;
@@ -235,8 +238,10 @@ impl Bridge {
         let bridge_station = self.cfg.bridge_station;
         let policy = self.cfg.policy;
         // What a checked frame asks for: decided while it is borrowed.
-        let decided = match self.job.idle_decoder().push(b) {
-            Event::NeedMore => return,
+        let Status::Complete(event) = self.job.idle_decoder().push(b) else {
+            return;
+        };
+        let decided = match event {
             Event::Frame(f) if f.header() == Header::Command => {
                 let (station, id) = (f.station(), f.code());
                 if station == bridge_station {
@@ -276,7 +281,7 @@ impl Bridge {
                 // Started on the line once the guest (if any) let go of
                 // it; sent once: the host resends after its own timeout.
                 self.forward_pending = Some(id);
-                self.mode = Mode::SendCommand;
+                self.mode = Mode::Forward;
                 self.out_off = 0;
             }
             Next::Drop(restart) => {
@@ -362,12 +367,6 @@ enum Next {
     Forward(u16),
     /// Dropped; `true` if the byte that broke it starts the next frame.
     Drop(bool),
-}
-
-/// Starts forwarding command `id` on the line: one send (the host resends
-/// after its own timeout).
-pub(super) fn start_forward(line: &mut Line, id: u16, now: u32) {
-    line.start_raw(id, 1, now);
 }
 
 /// Whether a command may carry a frame in its free text under `policy`: a

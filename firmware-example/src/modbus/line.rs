@@ -7,7 +7,7 @@
 use iai_protocol_b::axis::AxisPattern;
 use iai_protocol_b::axis::MAX_AXES;
 use iai_protocol_b::clock::reached;
-use iai_protocol_b::engine::{feed, Engine, Step};
+use iai_protocol_b::engine::{Driver, Engine, Turn};
 use iai_protocol_b::line::Line;
 use iai_protocol_b::message::{
     AbsoluteMove, AlarmReset, AxisStatusQuery, ErrorDetailQuery, FlagChange, FlagQuery, HomeReturn,
@@ -29,9 +29,8 @@ use super::map::{
 };
 use super::poll::Query;
 use super::registers::Registers;
-use crate::bridge::write_some;
 use crate::codes;
-use crate::serial::Port;
+use crate::serial::{Counted, Port};
 
 /// Largest frame of the window's engines: a 21FH reply with three 8-axis
 /// records (264 bytes; a 26DH of three takes 260). The five records of
@@ -65,14 +64,16 @@ pub struct Engines {
     readback: ReadBack<WINDOW_FRAME>,
     transfer: Transfer<RecordBuffer<WINDOW_BYTES>, WINDOW_FRAME>,
     exchange: Exchange,
-    /// Bytes of the current transmission already written.
-    tx_off: usize,
+    /// Where the transmission of the exchange stands.
+    driver: Driver,
     /// The engine waits until this tick.
     deadline: Option<u32>,
     /// A transmission waits for room downstream.
     blocked: bool,
     /// Bytes written downstream.
     pub bytes_out: u64,
+    /// Bytes read downstream.
+    pub bytes_in: u64,
 }
 
 /// How an engine's run ended for now.
@@ -90,10 +91,11 @@ impl Engines {
             readback: ReadBack::new(window_config(0)),
             transfer: Transfer::new(transfer_config(), RecordBuffer::new()),
             exchange: Exchange::Idle,
-            tx_off: 0,
+            driver: Driver::new(),
             deadline: None,
             blocked: false,
             bytes_out: 0,
+            bytes_in: 0,
         }
     }
 
@@ -105,7 +107,7 @@ impl Engines {
     /// Whether it is a poll not in the middle of its transmission: it may
     /// be abandoned for the protocol-B host (the next round asks again).
     pub fn may_yield(&self) -> bool {
-        matches!(self.exchange, Exchange::Poll(_)) && self.tx_off == 0
+        matches!(self.exchange, Exchange::Poll(_)) && !self.driver.writing()
     }
 
     /// Abandons a poll: the line owes its reply and fences before the next
@@ -143,10 +145,9 @@ impl Engines {
             }
             moved = true;
         }
-        let (out, off) = (&mut self.bytes_out, &mut self.tx_off);
+        let mut port = Counted::new(down, &mut self.bytes_in, &mut self.bytes_out);
         let mut tx = Tx {
-            off,
-            out,
+            driver: &mut self.driver,
             deadline: None,
             blocked: false,
         };
@@ -163,19 +164,19 @@ impl Engines {
                         }
                     }
                 });
-                match drive(&mut rb, line, down, now, &mut tx)? {
+                match drive(&mut rb, line, &mut port, now, &mut tx)? {
                     (m, Drive::Pending) => (m, None),
                     (m, Drive::Done(r)) => (m, Some(r.map(|_| ()))),
                 }
             }
             Exchange::Command(Job::WriteWindow { .. }) => {
-                match drive(&mut self.transfer, line, down, now, &mut tx)? {
+                match drive(&mut self.transfer, line, &mut port, now, &mut tx)? {
                     (m, Drive::Pending) => (m, None),
                     (m, Drive::Done(r)) => (m, Some(r.map(|_: Guarantee| ()))),
                 }
             }
             Exchange::Command(_) | Exchange::Poll(_) => {
-                match drive(&mut self.client, line, down, now, &mut tx)? {
+                match drive(&mut self.client, line, &mut port, now, &mut tx)? {
                     (m, Drive::Pending) => (m, None),
                     (m, Drive::Done(r)) => (m, Some(r)),
                 }
@@ -193,7 +194,6 @@ impl Engines {
 
     /// Starts a queued command, or the next poll due; `false` if none.
     fn start(&mut self, regs: &mut Registers, line: &mut Line, now: u32) -> bool {
-        self.tx_off = 0;
         if let Some(job) = regs.hs.take() {
             match self.start_job(regs, job, line, now) {
                 Ok(()) => self.exchange = Exchange::Command(job),
@@ -507,16 +507,16 @@ fn transfer_config() -> TransferConfig {
     }
 }
 
-/// The transmission state an engine run shares.
+/// The driver and what an engine's turn left to wait for.
 struct Tx<'a> {
-    off: &'a mut usize,
-    out: &'a mut u64,
+    driver: &'a mut Driver,
     deadline: Option<u32>,
     blocked: bool,
 }
 
-/// Feeds what the controller sent to `engine`, transmits what it asks
-/// for, as far as the port allows now; `(moved, how it ended)`.
+/// One turn of `engine` on the core's driver: feeds what the controller
+/// sent, transmits what it asks for as far as the port allows now;
+/// `(moved, how it ended)`.
 fn drive<G: Engine, D: Port>(
     engine: &mut G,
     line: &mut Line,
@@ -524,40 +524,18 @@ fn drive<G: Engine, D: Port>(
     now: u32,
     tx: &mut Tx<'_>,
 ) -> Result<(bool, Drive<G::Output>), D::Error> {
-    let mut moved = false;
-    let mut buf = [0u8; 16];
-    while down.read_ready()? {
-        let n = down.read(&mut buf)?;
-        if n == 0 {
-            break;
+    let mut clock = || now;
+    match tx.driver.turn(engine, line, down, &mut clock) {
+        Err(e) => Err(e),
+        Ok(Turn::Busy) => {
+            tx.deadline = Some(now);
+            Ok((true, Drive::Pending))
         }
-        moved = true;
-        // Bytes after a reply the engine holds answer nothing: dropped.
-        feed(engine, line, buf.get(..n).unwrap_or(&[]), now);
-    }
-    // A few rounds: a delivering read-back asks to be polled again at once.
-    for _ in 0..4 {
-        match engine.poll(line, now) {
-            Step::Transmit(bytes) => {
-                let len = bytes.len();
-                moved |= write_some(down, bytes, tx.off, tx.out)? > 0;
-                if *tx.off < len {
-                    tx.blocked = true;
-                    return Ok((moved, Drive::Pending));
-                }
-                *tx.off = 0;
-                engine.sent(line, now);
-                moved = true;
-            }
-            Step::WaitUntil(t) if t == now => moved = true,
-            Step::WaitUntil(t) => {
-                tx.deadline = Some(t);
-                return Ok((moved, Drive::Pending));
-            }
-            Step::Idle => return Ok((moved, Drive::Pending)),
-            Step::Done(r) => return Ok((true, Drive::Done(r))),
+        Ok(Turn::Wait { until, write }) => {
+            tx.deadline = until;
+            tx.blocked = write;
+            Ok((false, Drive::Pending))
         }
+        Ok(Turn::Done(r)) => Ok((true, Drive::Done(r))),
     }
-    tx.deadline = Some(now);
-    Ok((moved, Drive::Pending))
 }

@@ -33,7 +33,7 @@ use firmware_example::serial::{
     XOFF, XON,
 };
 use iai_protocol_b::checksum::BypassPolicy;
-use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 
 use iai_simulator::Simulator;
 
@@ -343,7 +343,7 @@ pub fn run(
                             }
                             XON if flow == FlowControl::XonXoff => host.go_on(),
                             _ => {
-                                if let Event::Frame(f) = host.replies.push(b) {
+                                if let Status::Complete(Event::Frame(f)) = host.replies.push(b) {
                                     report.answers.push(f.as_bytes().to_vec());
                                     reply = Some(f.as_bytes().to_vec());
                                     report.elapsed_ns = t + up_byte - start_ns;

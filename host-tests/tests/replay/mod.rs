@@ -1,7 +1,7 @@
 //! Replaying a byte stream through the push decoder, shared by the decoder
 //! and malformed-input tests.
 
-use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 use iai_protocol_b::error::Error;
 
 /// An event with the frame copied out of the decoder.
@@ -30,13 +30,13 @@ pub fn decode_chunks<const N: usize>(
         loop {
             let d = dec.decode(chunk);
             assert!(d.consumed <= chunk.len());
-            match d.event {
-                Event::NeedMore => {
+            match d.status {
+                Status::Partial => {
                     assert_eq!(d.consumed, chunk.len(), "NeedMore before the chunk ended");
                     break;
                 }
-                Event::Frame(f) => out.push(Out::Frame(f.as_bytes().to_vec())),
-                Event::Error(e) => out.push(Out::Error(e)),
+                Status::Complete(Event::Frame(f)) => out.push(Out::Frame(f.as_bytes().to_vec())),
+                Status::Complete(Event::Error(e)) => out.push(Out::Error(e)),
             }
             chunk = &chunk[d.consumed..];
         }
@@ -52,10 +52,10 @@ pub fn drain<const N: usize>(dec: &mut FrameDecoder<N>) -> Vec<Out> {
     loop {
         let d = dec.decode(&[]);
         assert_eq!(d.consumed, 0);
-        match d.event {
-            Event::NeedMore => return out,
-            Event::Frame(f) => out.push(Out::Frame(f.as_bytes().to_vec())),
-            Event::Error(e) => out.push(Out::Error(e)),
+        match d.status {
+            Status::Partial => return out,
+            Status::Complete(Event::Frame(f)) => out.push(Out::Frame(f.as_bytes().to_vec())),
+            Status::Complete(Event::Error(e)) => out.push(Out::Error(e)),
         }
     }
 }
@@ -65,9 +65,9 @@ pub fn push_bytes<const N: usize>(dec: &mut FrameDecoder<N>, input: &[u8]) -> Ve
     let mut out = Vec::new();
     for &b in input {
         match dec.push(b) {
-            Event::NeedMore => {}
-            Event::Frame(f) => out.push(Out::Frame(f.as_bytes().to_vec())),
-            Event::Error(e) => out.push(Out::Error(e)),
+            Status::Partial => {}
+            Status::Complete(Event::Frame(f)) => out.push(Out::Frame(f.as_bytes().to_vec())),
+            Status::Complete(Event::Error(e)) => out.push(Out::Error(e)),
         }
         out.extend(drain(dec));
     }
