@@ -90,6 +90,9 @@ pub const AXIS_BUSY_CODE: u16 = 0x0E6;
 /// Refusal: 237H/26BH to an undefined position (simulator's own code).
 pub const NO_POSITION_CODE: u16 = 0x0E7;
 
+/// The simulated controller's delay before each reply (its α), ms.
+pub const REPLY_DELAY_MS: u32 = 2;
+
 /// Speed used when a command and its record give 0, mm/s.
 pub const DEFAULT_SPEED: u16 = 100;
 /// Acceleration and deceleration used when a command gives 0, 0.01 G.
