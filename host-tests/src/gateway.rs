@@ -36,6 +36,7 @@ use firmware_example::codes;
 use firmware_example::config::Config;
 use firmware_example::serial::XON;
 use iai_protocol_b::frame::Station;
+use iai_protocol_b::line;
 
 use crate::bridge::{status_query, status_query_frame, HostLink, SimThread};
 use crate::qemu::{
@@ -111,10 +112,12 @@ impl Default for Options {
 
 /// How long QEMU may take to boot the firmware.
 const BOOT_TIMEOUT: Duration = Duration::from_secs(30);
-/// How long the bridge may take to answer its status query (it first
-/// finishes what it was doing: a command it forwarded waits up to 3 s for
-/// the controller, three times over).
-const FENCE_TIMEOUT: Duration = Duration::from_secs(15);
+/// How long the bridge may take to answer its status query: it first
+/// finishes what it was doing (a command it forwarded waits
+/// [`line::TIMEOUT_MS`] for the controller, [`line::MAX_SENDS`] times
+/// over), with room to spare.
+const FENCE_TIMEOUT: Duration =
+    Duration::from_millis(line::TIMEOUT_MS as u64 * line::MAX_SENDS as u64 + 6_000);
 /// A client that takes nothing for this long is dropped.
 const CLIENT_WRITE_TIMEOUT: Duration = Duration::from_secs(10);
 /// How often the loops look at their stop flags.
