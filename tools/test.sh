@@ -13,8 +13,8 @@ step() { printf '\n==> %s\n' "$*"; }
 step "formatting"
 cargo fmt --all --check
 
-step "clippy (core, host tests, iai, simulator) -D warnings"
-cargo clippy -p iai-protocol-b -p host-tests -p iai-cli -p iai-simulator --all-targets -- -D warnings
+step "clippy (core, host tests, iai, simulator, test support) -D warnings"
+cargo clippy -p iai-protocol-b -p host-tests -p iai-cli -p iai-simulator -p test-support --all-targets -- -D warnings
 cargo clippy -p iai-protocol-b --features defmt -- -D warnings
 
 step "core builds for thumbv6m / thumbv7m / thumbv7em (no std, no alloc)"
@@ -83,4 +83,4 @@ step "fuzzing smoke run: 30 s per cargo-fuzz target (installs nightly and cargo-
 ./fuzz/smoke.sh 30
 
 step "tests"
-cargo nextest run -p iai-protocol-b -p host-tests -p firmware-example -p iai-cli -p iai-simulator --no-default-features --no-fail-fast
+cargo nextest run -p iai-protocol-b -p host-tests -p firmware-example -p iai-cli -p iai-simulator -p test-support --no-default-features --no-fail-fast

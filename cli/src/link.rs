@@ -22,14 +22,11 @@ use std::io::{self, Read, Write};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
+use firmware_example::config::BAUD_RATES;
+use firmware_example::serial::{XOFF, XON};
 use iai_protocol_b::engine::Engine;
 use iai_protocol_b::hosted::{StdLink, WaitRead};
 use iai_protocol_b::{error::Failure, line::Line, line::LineConfig};
-
-/// XON (resume), as the bridge and serial drivers send it.
-pub const XON: u8 = 0x11;
-/// XOFF (stop).
-pub const XOFF: u8 = 0x13;
 
 /// How long a write waits for XON after an XOFF before it fails.
 const XOFF_PATIENCE: Duration = Duration::from_secs(10);
@@ -76,14 +73,20 @@ pub struct SerialSettings {
     pub flow: Flow,
 }
 
+impl SerialSettings {
+    /// 8 data bits, no parity, 1 stop bit (8N1), no flow control: what
+    /// `iai` uses where nothing else is given.
+    pub const DEFAULT: SerialSettings = SerialSettings {
+        data_bits: 8,
+        parity: Parity::None,
+        stop_bits: 1,
+        flow: Flow::None,
+    };
+}
+
 impl Default for SerialSettings {
     fn default() -> Self {
-        SerialSettings {
-            data_bits: 8,
-            parity: Parity::None,
-            stop_bits: 1,
-            flow: Flow::None,
-        }
+        SerialSettings::DEFAULT
     }
 }
 
@@ -231,8 +234,16 @@ pub struct Link {
     target: Target,
 }
 
-/// Baud rates the controllers offer (TTA p. 7).
-pub const BAUD_RATES: &[u32] = &[9600, 19200, 38400, 57600, 115_200];
+/// The baud rates the controllers offer ([`BAUD_RATES`]), listed: `9600,
+/// 19200, ... 115200` with `last` before the last.
+pub fn baud_rates_text(last: &str) -> String {
+    let rates: Vec<String> = BAUD_RATES.iter().map(u32::to_string).collect();
+    match rates.split_last() {
+        Some((tail, [])) => tail.clone(),
+        Some((tail, head)) => format!("{}{last}{tail}", head.join(", ")),
+        None => String::new(),
+    }
+}
 
 impl Link {
     /// Opens `target`, a line with the settings `cfg`. The error names what
@@ -247,7 +258,8 @@ impl Link {
             } => {
                 if !BAUD_RATES.contains(baud) {
                     return Err(format!(
-                        "--baud {baud}: the controllers use 9600, 19200, 38400, 57600 or 115200"
+                        "--baud {baud}: the controllers use {}",
+                        baud_rates_text(" or ")
                     ));
                 }
                 let port = serialport::new(path, *baud)

@@ -11,8 +11,13 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
+use cmd::line::{station_text, DEFAULT_BAUD, DEFAULT_STATION};
 use cmd::Failure;
+use firmware_example::config::{Config as BridgeConfig, BAUD_RATES};
+use iai_cli::link::{Parity, SerialSettings};
+use iai_protocol_b::line::{MAX_SENDS, TIMEOUT_MS};
 use iai_protocol_b::profile::Profile;
+use iai_simulator::server::CONNECT_PATIENCE;
 
 /// IAI protocol B tools: captures, messages, position tables, a simulator.
 ///
@@ -53,7 +58,7 @@ pub(crate) enum Cmd {
         #[command(flatten)]
         msg: MessageArgs,
         /// Station (two hex digits).
-        #[arg(long, default_value = "99", value_parser = parse_station)]
+        #[arg(long, default_value = station_text(DEFAULT_STATION), value_parser = parse_station)]
         station: u8,
         /// Build the normal response instead of the command.
         #[arg(long)]
@@ -87,10 +92,10 @@ pub(crate) enum Cmd {
         #[arg(long, value_name = "FILE")]
         save: Option<PathBuf>,
     },
-    /// Send one command, wait for its reply (3 s, resent up to 3 times
-    /// when resending cannot repeat an operation) and print it with what
-    /// its values mean. A field without a documented default must be
-    /// given.
+    /// Send one command, wait for its reply (--timeout; sent again up to
+    /// --retries times when resending cannot repeat an operation) and print
+    /// it with what its values mean. A field without a documented default
+    /// must be given.
     #[command(after_help = help::SEND)]
     Send {
         #[command(flatten)]
@@ -127,9 +132,9 @@ pub(crate) enum Cmd {
         json: bool,
     },
     /// Find what answers on a line: at each baud rate, a 200H test call
-    /// with a nonce to each station (99 and 00 unless given, then any
-    /// station that replies show); says what came back. Exit status 0 when
-    /// a controller answered.
+    /// with a nonce to each station (--station, then any station that
+    /// replies show); says what came back. Exit status 0 when a controller
+    /// answered.
     #[command(after_help = help::PROBE)]
     Probe(ProbeArgs),
     /// Run the controller simulator.
@@ -150,14 +155,14 @@ pub(crate) struct BridgeStatusArgs {
     #[command(flatten)]
     pub(crate) link: LinkArgs,
     /// The bridge's own station (two hex digits).
-    #[arg(long, default_value = "BB", value_parser = parse_station)]
+    #[arg(long, default_value = bridge_station_text(), value_parser = parse_station)]
     pub(crate) bridge_station: u8,
     /// How long the reply may take, ms.
-    #[arg(long, value_name = "MS", default_value_t = 3_000,
+    #[arg(long, value_name = "MS", default_value_t = TIMEOUT_MS,
           value_parser = clap::value_parser!(u32).range(1..=600_000))]
     pub(crate) timeout: u32,
     /// Queries after the first when no reply came.
-    #[arg(long, value_name = "N", default_value_t = 2,
+    #[arg(long, value_name = "N", default_value_t = MAX_SENDS - 1,
           value_parser = clap::value_parser!(u8).range(0..=9))]
     pub(crate) retries: u8,
     /// One JSON object: the fields and what they mean.
@@ -169,14 +174,18 @@ pub(crate) struct BridgeStatusArgs {
 pub(crate) struct ProbeArgs {
     #[command(flatten)]
     pub(crate) target: Where,
-    /// Baud rates to try, comma-separated [default: 9600,19200,38400,57600,115200].
-    #[arg(long, value_delimiter = ',')]
+    /// Baud rates to try, comma-separated [default: every rate the
+    /// controllers offer].
+    #[arg(long, value_delimiter = ',', help = format!(
+        "Baud rates to try, comma-separated [default: {}]",
+        BAUD_RATES.map(|b| b.to_string()).join(",")
+    ))]
     pub(crate) baud: Vec<u32>,
     #[command(flatten)]
     pub(crate) serial: SerialArgs,
-    /// Stations to try (two hex digits each, comma-separated) [default:
-    /// 99,00].
-    #[arg(long, value_parser = parse_station, value_delimiter = ',')]
+    /// Stations to try (two hex digits each, comma-separated).
+    #[arg(long, value_parser = parse_station, value_delimiter = ',',
+          default_values = cmd::diag::PROBE_STATIONS.map(station_text))]
     pub(crate) station: Vec<u8>,
     /// How long to wait after each test call, ms.
     #[arg(long, value_name = "MS", default_value_t = 500,
@@ -184,7 +193,7 @@ pub(crate) struct ProbeArgs {
     pub(crate) timeout: u32,
     /// The station a bridge would answer its status query at (two hex
     /// digits); asked at each baud rate first.
-    #[arg(long, default_value = "BB", value_parser = parse_station)]
+    #[arg(long, default_value = bridge_station_text(), value_parser = parse_station)]
     pub(crate) bridge_station: u8,
     /// One JSON object per try, then the result.
     #[arg(long)]
@@ -238,7 +247,7 @@ pub(crate) struct WriteArgs {
     #[arg(long, conflicts_with = "resume")]
     pub bridge: bool,
     /// The bridge's own station (two hex digits), for --bridge.
-    #[arg(long, default_value = "BB", value_parser = parse_station, requires = "bridge")]
+    #[arg(long, default_value = bridge_station_text(), value_parser = parse_station, requires = "bridge")]
     pub bridge_station: u8,
 }
 
@@ -318,8 +327,8 @@ pub(crate) struct Where {
 pub(crate) struct LinkArgs {
     #[command(flatten)]
     pub(crate) target: Where,
-    /// Baud rate of the serial port [default: 38400].
-    #[arg(long)]
+    /// Baud rate of the serial port.
+    #[arg(long, help = format!("Baud rate of the serial port [default: {DEFAULT_BAUD}]"))]
     pub(crate) baud: Option<u32>,
     #[command(flatten)]
     pub(crate) serial: SerialArgs,
@@ -329,14 +338,23 @@ pub(crate) struct LinkArgs {
 /// parameters Nos. 93-95 must match).
 #[derive(Args)]
 pub(crate) struct SerialArgs {
-    /// Data bits of the serial port, 7 or 8 (I/O parameter No. 93) [default: 8].
-    #[arg(long, value_parser = clap::value_parser!(u8).range(7..=8))]
+    /// Data bits of the serial port, 7 or 8 (I/O parameter No. 93).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(7..=8), help = format!(
+        "Data bits of the serial port, 7 or 8 (I/O parameter No. 93) [default: {}]",
+        SerialSettings::DEFAULT.data_bits
+    ))]
     pub(crate) data_bits: Option<u8>,
-    /// Parity of the serial port (No. 95) [default: none].
-    #[arg(long, value_enum)]
+    /// Parity of the serial port (No. 95).
+    #[arg(long, value_enum, help = format!(
+        "Parity of the serial port (No. 95) [default: {}]",
+        ParityArg::name(SerialSettings::DEFAULT.parity)
+    ))]
     pub(crate) parity: Option<ParityArg>,
-    /// Stop bits of the serial port, 1 or 2 (No. 94) [default: 1].
-    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=2))]
+    /// Stop bits of the serial port, 1 or 2 (No. 94).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=2), help = format!(
+        "Stop bits of the serial port, 1 or 2 (No. 94) [default: {}]",
+        SerialSettings::DEFAULT.stop_bits
+    ))]
     pub(crate) stop_bits: Option<u8>,
     /// Flow control: xonxoff (over TCP, done by iai), rtscts (a serial
     /// port's modem lines) or none [default: none; xonxoff with --bridge].
@@ -351,24 +369,25 @@ pub(crate) struct LineArgs {
     #[command(flatten)]
     pub(crate) link: LinkArgs,
     /// Station code (two hex digits, I/O parameter No. 91).
-    #[arg(long, default_value = "99", value_parser = parse_station)]
+    #[arg(long, default_value = station_text(DEFAULT_STATION), value_parser = parse_station)]
     pub(crate) station: u8,
     /// Controller kind: buffer sizes and messages.
     #[arg(long, value_enum, default_value = "tta")]
     pub(crate) profile: ProfileArg,
     /// How long after a reply a copy of it may still come, ms, on a line
     /// that repeats frames (an echoing converter). A command goes out only
-    /// when no copy could pass for its reply. Default 0: a direct line.
-    #[arg(long, default_value_t = 0)]
-    pub(crate) duplicate_window_ms: u32,
+    /// when no copy could pass for its reply. Not given: the line's
+    /// default, a direct line that repeats nothing.
+    #[arg(long, value_name = "MS")]
+    pub(crate) duplicate_window_ms: Option<u32>,
     /// How long a reply may take after the command was sent, ms (2003
-    /// p. 62: 3000).
-    #[arg(long, value_name = "MS", default_value_t = 3_000,
+    /// p. 62).
+    #[arg(long, value_name = "MS", default_value_t = TIMEOUT_MS,
           value_parser = clap::value_parser!(u32).range(1..=600_000))]
     pub(crate) timeout: u32,
     /// Sends of a command after the first when no reply came (2003 p. 62:
     /// 2 or 3); a command that is unsafe to repeat is sent once.
-    #[arg(long, value_name = "N", default_value_t = 2,
+    #[arg(long, value_name = "N", default_value_t = MAX_SENDS - 1,
           value_parser = clap::value_parser!(u8).range(0..=9))]
     pub(crate) retries: u8,
 }
@@ -386,18 +405,20 @@ pub(crate) struct SimArgs {
     /// port under QEMU), serve that one connection and exit when it closes.
     #[arg(long)]
     connect: Option<String>,
-    /// How long --connect keeps trying while nothing listens yet, ms
-    /// (default 10000).
-    #[arg(long, conflicts_with_all = ["tcp", "pty"])]
+    /// How long --connect keeps trying while nothing listens yet, ms.
+    #[arg(long, conflicts_with_all = ["tcp", "pty"], help = format!(
+        "How long --connect keeps trying while nothing listens yet, ms [default: {}]",
+        CONNECT_PATIENCE.as_millis()
+    ))]
     connect_wait_ms: Option<u64>,
     /// Controller kind.
     #[arg(long, value_enum, default_value = "tta")]
     profile: ProfileArg,
     /// Station code (two hex digits).
-    #[arg(long, default_value = "99", value_parser = parse_station)]
+    #[arg(long, default_value = station_text(DEFAULT_STATION), value_parser = parse_station)]
     station: u8,
     /// Delay before each reply, ms (the controller's α).
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = iai_simulator::REPLY_DELAY_MS)]
     reply_delay_ms: u32,
     /// Faults: corrupt=P,swap=P,drop=P,late=P:MS,dup=P:MS,error=P.
     #[arg(long, value_parser = iai_simulator::server::parse_faults)]
@@ -459,6 +480,19 @@ pub(crate) enum ProfileArg {
     Xsel2003,
 }
 
+impl ParityArg {
+    /// The name the command line gives `parity`.
+    fn name(parity: Parity) -> String {
+        let arg = match parity {
+            Parity::None => ParityArg::None,
+            Parity::Odd => ParityArg::Odd,
+            Parity::Even => ParityArg::Even,
+        };
+        arg.to_possible_value()
+            .map_or_else(String::new, |v| v.get_name().to_string())
+    }
+}
+
 impl ProfileArg {
     fn profile(self) -> Profile {
         match self {
@@ -466,6 +500,11 @@ impl ProfileArg {
             ProfileArg::Xsel2003 => Profile::XSEL_2003,
         }
     }
+}
+
+/// The bridge's own station by default (its configuration's default).
+fn bridge_station_text() -> String {
+    station_text(BridgeConfig::DEFAULT.bridge_station.0)
 }
 
 fn parse_station(v: &str) -> Result<u8, String> {

@@ -30,6 +30,7 @@
 //! fields in G with 2, as the CSV tables write them (on a rotary axis the
 //! same digits are degrees).
 
+use iai_protocol_b::catalogue::{self, MessageInfo};
 use iai_protocol_b::frame::Header;
 
 use crate::csvtable::format_scaled;
@@ -41,7 +42,8 @@ pub type Code = (&'static str, u64, &'static str);
 
 /// An enumerated field.
 struct Enum {
-    ids: &'static [u16],
+    /// The messages that carry it.
+    messages: &'static [&'static MessageInfo],
     /// Commands (`true`) or responses.
     command: bool,
     field: &'static str,
@@ -50,19 +52,19 @@ struct Enum {
 
 const ENUMS: &[Enum] = &[
     Enum {
-        ids: &[0x201],
+        messages: &[&catalogue::VERSION_QUERY],
         command: true,
         field: "unit_type",
         codes: UNIT_TYPES,
     },
     Enum {
-        ids: &[0x201],
+        messages: &[&catalogue::VERSION_QUERY],
         command: false,
         field: "unit_type",
         codes: UNIT_TYPES,
     },
     Enum {
-        ids: &[0x215],
+        messages: &[&catalogue::SYSTEM_STATUS_QUERY],
         command: false,
         field: "system_mode",
         codes: &[
@@ -74,7 +76,7 @@ const ENUMS: &[Enum] = &[
         ],
     },
     Enum {
-        ids: &[0x216],
+        messages: &[&catalogue::ERROR_DETAIL_QUERY],
         command: true,
         field: "type_1",
         codes: &[
@@ -90,7 +92,7 @@ const ENUMS: &[Enum] = &[
         ],
     },
     Enum {
-        ids: &[0x216],
+        messages: &[&catalogue::ERROR_DETAIL_QUERY],
         command: true,
         field: "type_2",
         codes: &[
@@ -99,13 +101,13 @@ const ENUMS: &[Enum] = &[
         ],
     },
     Enum {
-        ids: &[0x232],
+        messages: &[&catalogue::SERVO_ON_OFF],
         command: true,
         field: "operation_type",
         codes: &[("off", 0, "servo off"), ("on", 1, "servo on")],
     },
     Enum {
-        ids: &[0x236],
+        messages: &[&catalogue::JOG_INCH],
         command: true,
         field: "operation_type",
         codes: &[
@@ -114,7 +116,7 @@ const ENUMS: &[Enum] = &[
         ],
     },
     Enum {
-        ids: &[0x238],
+        messages: &[&catalogue::OPERATION_STOP],
         command: true,
         field: "appended_command_byte",
         codes: &[
@@ -127,19 +129,19 @@ const ENUMS: &[Enum] = &[
         ],
     },
     Enum {
-        ids: &[0x24A, 0x24B],
+        messages: &[&catalogue::OUTPUT_PORT_CHANGE, &catalogue::FLAG_CHANGE],
         command: true,
         field: "change_type",
         codes: &[("off", 0, "off"), ("on", 1, "on")],
     },
     Enum {
-        ids: &[0x2A0, 0x2A4],
+        messages: COORDINATE_QUERIES,
         command: true,
         field: "type",
         codes: COORDINATE_TYPES,
     },
     Enum {
-        ids: &[0x2A0, 0x2A4],
+        messages: COORDINATE_QUERIES,
         command: false,
         field: "type",
         codes: COORDINATE_TYPES,
@@ -151,6 +153,12 @@ const UNIT_TYPES: &[Code] = &[
     ("main-core", 1, "main CPU core"),
     ("driver", 2, "driver CPU"),
     ("sio", 3, "mounted SIO (TTA)"),
+];
+
+/// The coordinate system queries (their `type` codes are alike).
+const COORDINATE_QUERIES: &[&MessageInfo] = &[
+    &catalogue::COORDINATE_SYSTEM_QUERY,
+    &catalogue::COORDINATE_SYSTEM_QUERY_2,
 ];
 
 const COORDINATE_TYPES: &[Code] = &[
@@ -197,13 +205,29 @@ pub const STATUS_BYTES: &[(&str, &[(u8, &str)])] = &[
 ];
 
 /// The axis status queries (their per-axis blocks are alike).
-const AXIS_QUERIES: &[u16] = &[0x212, 0x2A1, 0x2A3];
+const AXIS_QUERIES: &[&MessageInfo] = &[
+    &catalogue::AXIS_STATUS_QUERY,
+    &catalogue::SCARA_AXIS_STATUS_QUERY,
+    &catalogue::SCARA_AXIS_STATUS_QUERY_2,
+];
+
+/// The position-number moves (their 0 speeds fall back to the position's).
+const POSITION_NUMBER_MOVES: &[&MessageInfo] = &[
+    &catalogue::POSITION_NUMBER_MOVE,
+    &catalogue::POSITION_NUMBER_MOVE_2,
+    &catalogue::SCARA_POSITION_NUMBER_MOVE,
+];
+
+/// Whether message `id` is one of `messages`.
+fn is_one_of(id: u16, messages: &[&MessageInfo]) -> bool {
+    messages.iter().any(|m| m.id == id)
+}
 
 fn enum_of(id: u16, header: Header, field: &str) -> Option<&'static Enum> {
     let command = header == Header::Command;
     ENUMS
         .iter()
-        .find(|e| e.command == command && e.field == field && e.ids.contains(&id))
+        .find(|e| e.command == command && e.field == field && is_one_of(id, e.messages))
 }
 
 /// The codes of an enumerated field (`&[]` if it is not one).
@@ -224,16 +248,20 @@ pub fn named(id: u16, header: Header, field: &str, name: &str) -> Option<u64> {
 /// What 0 means in a field whose value may be left out (`None`: the field
 /// must be given). Patterns and counts are derived elsewhere.
 pub fn default_meaning(id: u16, field: &str) -> Option<&'static str> {
-    Some(match (id, field) {
-        (0x216, "record_number") => "000 (used only with type_1 = 5)",
-        (0x233, "end_search_speed" | "creep_speed") => "0 = the parameter's value",
-        (0x236, "inching_distance") => "0 = jog (no distance)",
-        (0x237 | 0x26B | 0x2D6, "acceleration" | "deceleration" | "speed") => {
+    Some(match field {
+        "record_number" if id == catalogue::ERROR_DETAIL_QUERY.id => {
+            "000 (used only with type_1 = 5)"
+        }
+        "end_search_speed" | "creep_speed" if id == catalogue::HOME_RETURN.id => {
+            "0 = the parameter's value"
+        }
+        "inching_distance" if id == catalogue::JOG_INCH.id => "0 = jog (no distance)",
+        "acceleration" | "deceleration" | "speed" if is_one_of(id, POSITION_NUMBER_MOVES) => {
             "0 = the position's stored value, then the parameter"
         }
-        (_, "acceleration" | "deceleration" | "speed") => "0 = the controller's parameter",
-        (0x238, "appended_command_byte") => "0 = none",
-        (_, f) if f.starts_with("reserved") => "0 (reserved)",
+        "acceleration" | "deceleration" | "speed" => "0 = the controller's parameter",
+        "appended_command_byte" if id == catalogue::OPERATION_STOP.id => "0 = none",
+        f if f.starts_with("reserved") => "0 (reserved)",
         _ => return None,
     })
 }
@@ -310,7 +338,7 @@ pub fn describe(id: u16, header: Header, field: &str, unit: &str, value: &Val) -
         ));
     }
     let response = header == Header::Response;
-    if response && AXIS_QUERIES.contains(&id) {
+    if response && is_one_of(id, AXIS_QUERIES) {
         return match field {
             "axis_status" => Some(axis_status(u)),
             "sensor_input_status" => Some(list(
@@ -343,8 +371,11 @@ pub fn describe(id: u16, header: Header, field: &str, unit: &str, value: &Val) -
             _ => None,
         };
     }
-    match (id, field) {
-        (0x213, "status") if response => Some(
+    if !response {
+        return None;
+    }
+    match field {
+        "status" if id == catalogue::PROGRAM_STATUS_QUERY.id => Some(
             if u & 1 != 0 {
                 "program running"
             } else {
@@ -352,7 +383,7 @@ pub fn describe(id: u16, header: Header, field: &str, unit: &str, value: &Val) -
             }
             .to_string(),
         ),
-        (0x215, f) if response => STATUS_BYTES
+        f if id == catalogue::SYSTEM_STATUS_QUERY.id => STATUS_BYTES
             .iter()
             .find(|(name, _)| *name == f)
             .map(|(_, table)| list(bits(u, table), "no flag set")),

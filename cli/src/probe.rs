@@ -8,28 +8,22 @@
 
 use std::collections::BTreeSet;
 
-use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
+use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
-use iai_protocol_b::frame::{emit_frame, Header, Station};
+use iai_protocol_b::frame::{Header, Station};
+use iai_protocol_b::message::{Message, TestCall, TestCallResponse};
 
 use crate::codes;
 
-/// The 200H test call's message ID.
-pub const TEST_CALL: u16 = 0x200;
-
 /// A 200H test call to `station` carrying `nonce`.
 pub fn test_call(station: u8, nonce: &[u8; 10]) -> Vec<u8> {
-    let mut buf = [0u8; 32];
-    let n = emit_frame(
-        &mut buf,
-        Header::Command,
-        Station(station),
-        TEST_CALL,
-        ChecksumMode::Compute,
-        |w| w.put(nonce),
-    )
-    .unwrap_or(0);
-    buf.get(..n).unwrap_or(&[]).to_vec()
+    let call = TestCall {
+        test_string: *nonce,
+    };
+    let mut buf = vec![0u8; call.emit_len()];
+    let n = call.emit(Station(station), &mut buf).unwrap_or(0);
+    buf.truncate(n);
+    buf
 }
 
 /// Ten characters for a test call: `P` and nine upper-case hex digits of
@@ -93,7 +87,9 @@ pub fn observe(sent: &[u8], station: u8, nonce: &[u8; 10], received: &[u8]) -> O
                     o.foreign.insert(st);
                 }
                 Header::Error => o.reply = Some(Reply::Refused(f.code())),
-                _ if f.code() == TEST_CALL && f.body() == nonce => o.reply = Some(Reply::Echoed),
+                _ if TestCallResponse::parse(&f).is_ok_and(|r| r.test_string == *nonce) => {
+                    o.reply = Some(Reply::Echoed)
+                }
                 _ => o.reply = Some(Reply::Other(f.code())),
             }
         }
@@ -164,6 +160,8 @@ impl Observation {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use iai_protocol_b::checksum::ChecksumMode;
+    use iai_protocol_b::frame::emit_frame;
 
     fn reply(station: u8, id: u16, body: &[u8], header: Header) -> Vec<u8> {
         let mut buf = [0u8; 64];
@@ -185,10 +183,10 @@ mod tests {
         assert_eq!(&n, b"P000001234");
         let sent = test_call(0x99, &n);
         assert_eq!(&sent[..7], b"!99200P");
-        let ours = reply(0x99, 0x200, &n, Header::Response);
+        let ours = reply(0x99, TestCallResponse::ID, &n, Header::Response);
         assert_eq!(observe(&sent, 0x99, &n, &ours).kind(), "answered");
         assert_eq!(observe(&sent, 0x99, &n, &sent).kind(), "echo");
-        let other = reply(0x12, 0x200, &n, Header::Response);
+        let other = reply(0x12, TestCallResponse::ID, &n, Header::Response);
         let o = observe(&sent, 0x99, &n, &other);
         assert_eq!(o.kind(), "other_station");
         assert_eq!(o.foreign.iter().copied().collect::<Vec<_>>(), vec![0x12]);
@@ -206,7 +204,7 @@ mod tests {
             o.describe(0x99)
         );
         // A stale text is not our answer.
-        let stale = reply(0x99, 0x200, b"P999999999", Header::Response);
+        let stale = reply(0x99, TestCallResponse::ID, b"P999999999", Header::Response);
         assert_eq!(observe(&sent, 0x99, &n, &stale).kind(), "other");
     }
 }

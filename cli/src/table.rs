@@ -17,8 +17,8 @@ use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::engine::Engine;
 use iai_protocol_b::frame::Frame;
 use iai_protocol_b::message::{
-    ClearPositionData, EffectivePositionCountQuery, EffectivePositionCountResponse, Message,
-    Request,
+    ClearPositionData, EffectivePositionCountQuery, EffectivePositionCountResponse, Fields,
+    Message, Request,
 };
 use iai_protocol_b::position::{PositionRecord, PositionStream};
 use iai_protocol_b::profile::Profile;
@@ -29,6 +29,7 @@ use iai_protocol_b::{
     readback::ReadBackConfig, transfer::Transfer, transfer::TransferConfig, transfer::Verify,
 };
 
+use crate::fields::{tree, Node};
 use crate::link::Link;
 
 /// Longest wait for one read, so that an interruption is seen promptly.
@@ -111,7 +112,7 @@ impl std::fmt::Display for TableError {
 }
 
 /// The frame buffer for the engines: the largest frame any profile allows.
-const FRAME: usize = 2051;
+const FRAME: usize = iai_protocol_b::limits::LARGEST_FRAME;
 
 /// What a table operation tells its caller, and asks it.
 #[derive(Clone, Copy)]
@@ -301,9 +302,26 @@ pub fn command<'a, R: Request<'a>>(
         .unwrap_or_default())
 }
 
-/// The largest value of 208H's count field (3 hex digits): a table of
-/// this many records or more cannot be counted exactly.
-pub const COUNT_MAX: u16 = 0xFFF;
+/// The largest value field `field` of `msg` carries, from its width in
+/// the core's layout of the message (0 if `msg` has no such field).
+fn field_max(msg: &dyn Fields, field: &str) -> u16 {
+    tree(msg)
+        .iter()
+        .find_map(|n| match n {
+            Node::Leaf { name, spec, .. } if *name == field => Some(spec.max_unsigned()),
+            _ => None,
+        })
+        .map_or(0, |m| u16::try_from(m).unwrap_or(u16::MAX))
+}
+
+/// The largest value of 208H's count field (FFFH): a table of this many
+/// records or more cannot be counted exactly.
+pub fn count_max() -> u16 {
+    field_max(
+        &EffectivePositionCountResponse::default(),
+        "number_of_effective_positions",
+    )
+}
 
 /// 208H: how many positions the controller's table defines.
 pub fn count(link: &mut Link, hooks: &Hooks<'_>) -> Result<u16, TableError> {
@@ -314,13 +332,22 @@ pub fn count(link: &mut Link, hooks: &Hooks<'_>) -> Result<u16, TableError> {
     Ok(r.number_of_effective_positions)
 }
 
-/// 246H's fields are 3 hex digits (2003 p. 42; the TTA page is lost and
-/// the layout assumed identical): a clear starts at position FFFH at the
-/// latest and spans at most FFFH positions.
-pub const CLEAR_FIELD_MAX: u16 = 0xFFF;
+/// The reach of 246H's fields (the first position, how many): a clear
+/// starts at position FFFH at the latest and spans at most FFFH positions
+/// (2003 p. 42; the TTA page is lost and the layout assumed identical).
+fn clear_fields_max() -> (u16, u16) {
+    let clear = ClearPositionData::default();
+    (
+        field_max(&clear, "clear_start_position_number"),
+        field_max(&clear, "number_of_clear_positions"),
+    )
+}
 
 /// The last position a 246H reaches: FFFH + FFFH - 1 = 8189.
-pub const CLEAR_LAST: u16 = CLEAR_FIELD_MAX + CLEAR_FIELD_MAX - 1;
+pub fn clear_last() -> u16 {
+    let (start, count) = clear_fields_max();
+    (start + count).saturating_sub(1)
+}
 
 /// The 246H commands (start, count) that clear exactly `first..=last`, in
 /// ascending order; an error says why the range cannot be cleared.
@@ -328,10 +355,12 @@ pub fn clear_commands(first: u16, last: u16) -> Result<Vec<(u16, u16)>, String> 
     if first > last {
         return Err(format!("the range {first}..={last} is empty"));
     }
+    let (start_max, count_max) = clear_fields_max();
+    let clear_last = clear_last();
     let reach = format!(
-        "246H gives the first position in 3 hex digits (at most {CLEAR_FIELD_MAX}) and clears at most {CLEAR_FIELD_MAX} positions at a time, so it reaches positions 0..={CLEAR_LAST}"
+        "246H gives the first position in 3 hex digits (at most {start_max}) and clears at most {count_max} positions at a time, so it reaches positions 0..={clear_last}"
     );
-    if last > CLEAR_LAST {
+    if last > clear_last {
         return Err(format!("position {last} is out of reach: {reach}"));
     }
     // From the top down, each command as long as it may be.
@@ -339,8 +368,8 @@ pub fn clear_commands(first: u16, last: u16) -> Result<Vec<(u16, u16)>, String> 
     let mut end = u32::from(last);
     let lo = u32::from(first);
     loop {
-        let start = lo.max(end.saturating_sub(u32::from(CLEAR_FIELD_MAX) - 1));
-        if start > u32::from(CLEAR_FIELD_MAX) {
+        let start = lo.max(end.saturating_sub(u32::from(count_max) - 1));
+        if start > u32::from(start_max) {
             return Err(format!(
                 "positions {first}..={last} cannot be cleared without clearing others: {reach}"
             ));
@@ -421,6 +450,14 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_count_and_clear_fields_hold_3_hex_digits() {
+        // 208H's count and 246H's fields: 3 hex digits (TTA p. 18, 2003 pp. 17, 42).
+        assert_eq!(count_max(), 0xFFF);
+        assert_eq!(clear_fields_max(), (0xFFF, 0xFFF));
+        assert_eq!(clear_last(), 8189);
+    }
+
+    #[test]
     fn clears_tile_the_range_within_246h_reach() {
         assert_eq!(clear_commands(0, 8189), Ok(vec![(0, 4095), (4095, 4095)]));
         assert_eq!(clear_commands(5, 5), Ok(vec![(5, 1)]));
@@ -447,7 +484,7 @@ mod tests {
             let mut next = u32::from(a);
             for (s, n) in cmds {
                 assert_eq!(u32::from(s), next);
-                assert!(s <= CLEAR_FIELD_MAX && (1..=CLEAR_FIELD_MAX).contains(&n));
+                assert!(s <= 0xFFF && (1..=0xFFF).contains(&n));
                 next += u32::from(n);
             }
             assert_eq!(next, u32::from(b) + 1);

@@ -1,52 +1,42 @@
-//! # iai-protocol-b
-//!
 //! A `no_std`, allocation-free, panic-free implementation of IAI's
-//! "protocol B" serial interface, spoken by TTA, X-SEL, SSEL, ASEL and PSEL
-//! controllers.
+//! "protocol B" serial interface of TTA, X-SEL, SSEL, ASEL and PSEL
+//! controllers. Start with the [`guide`]: three runnable walkthroughs.
 //!
-//! ```text
-//! '!' station(2) ID(3) fields… SC(2) CR LF      command      (host → controller)
-//! '#' station(2) ID(3) fields… SC(2) CR LF      normal reply (controller → host)
-//! '&' station(2) code(3)       SC(2) CR LF      error reply
-//! ```
-//!
-//! Layers, lowest first (each imports only those before it):
-//! - [`checksum`], [`field`], [`hex`], [`axis`]: the checksum, fixed-width
-//!   digits, axis patterns; [`catalogue`]: every message's rules, once;
-//! - [`frame`]: a checked zero-copy view of one frame, and the emitter;
-//! - [`decoder`]: a push decoder that finds frames in a byte stream;
-//! - [`message`], [`position`]: typed messages declared field by field,
-//!   and the position-table records they share;
-//! - [`table`]: position tables of any size, record by record;
-//! - [`line`](mod@line): one line to a controller, what is on it and what may still
-//!   arrive; [`engine`]: the shape of the engines and their driver loops;
+//! Modules, lowest layer first (each imports only those before it):
+//! - [`error`], [`limits`], [`clock`]: `Error` (what a frame or value is)
+//!   and `Failure` (how an exchange ended); the controllers' buffer
+//!   limits; the millisecond clock
+//! - [`checksum`], [`field`], [`hex`], [`axis`]: SC; fixed-width hex and
+//!   decimal fields; 2, 4 or 8 hex digits per call (the fast paths); axis
+//!   patterns
+//! - [`catalogue`]: every message's ID, name, kind, families, resend
+//!   safety and reply kind, written once
+//! - [`frame`], [`decoder`]: `Frame`, a checked zero-copy view of one
+//!   frame, and the emitter; `FrameDecoder<N>`: push bytes in, frames out,
+//!   resynchronising after noise
+//! - [`message`], [`position`]: typed messages, each a short field
+//!   declaration bound to its catalogue entry; `PositionRecord` and the
+//!   position-stream layouts they share
+//! - [`profile`], [`table`]: what each kind of controller accepts;
+//!   position tables of any size, encoded and decoded record by record
+//! - [`line`](mod@line): one line to a controller: the command on it, how
+//!   a reply is matched, chapter 5's timeouts and resends, and every reply
+//!   that may still arrive
+//! - [`engine`], [`io`]: the one shape every engine has and the one driver
+//!   that moves its bytes (non-blocking, blocking, `nb`, async); `embedded-io`
+//!   and `nb` glue
 //! - [`client`], [`transfer`], [`readback`], [`relay`]: any command and its
-//!   reply; a table written in confirmed, verified commands; a table read
-//!   back; a command passed on as it came;
-//! - [`profile`], [`io`]: what each controller accepts; UART glue.
+//!   typed reply; a table written in confirmed, verified commands; a table
+//!   read back in confirmed windows; a command passed on as it came
 //!
-//! Start with the [`guide`]: three runnable walkthroughs.
-//!
-//! # Paths
-//! Every public type has one path: the public module that holds it
-//! (`iai_protocol_b::line::Line`, `iai_protocol_b::client::Client`). The
-//! crate root re-exports nothing; a module re-exports only from its own
-//! private submodules.
-//!
-//! # Cargo features
-//! - `async`: the engines over an `embedded-io-async` UART
-//!   (`engine::run_async`, `Client::call_async`, `Transfer::run_async`,
-//!   `ReadBack::run_async`) and the `AsyncClock` trait in [`clock`].
-//! - `defmt`: `defmt::Format` for the public types.
-//! - `std`: `hosted::StdLink`, the engines over a TCP
-//!   socket or a serial port, blocking without spinning.
-//!
-//! Neither is on by default. The minimum supported Rust version is 1.87.
-//!
-//! # Panic freedom
-//! No function of this crate panics on any input: buffer accesses use
-//! `get`, arithmetic on untrusted values is checked or saturating, and the
-//! lints below forbid `unwrap`, `expect`, `panic!` and indexing.
+//! Every public type has one path, the public module that holds it
+//! (`iai_protocol_b::line::Line`): the root re-exports nothing; a module
+//! re-exports only from its own private submodules. Features, none by
+//! default: `async` (the engines over `embedded-io-async`), `defmt`
+//! (`defmt::Format` on the public types), `std` (`hosted`: the engines
+//! over a TCP socket or a serial port, blocking without spinning). No
+//! function panics on any input: the lints below forbid `unwrap`,
+//! `expect`, `panic!` and indexing.
 #![no_std]
 #![deny(missing_docs)]
 #![cfg_attr(

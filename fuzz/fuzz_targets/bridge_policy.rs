@@ -19,10 +19,7 @@
 //! so nothing can be relayed).
 #![no_main]
 
-use std::convert::Infallible;
-
 use firmware_example::bridge::{Bridge, Poll};
-use firmware_example::serial::Port;
 use firmware_example::codes;
 use firmware_example::config::{AllowList, Config, Policy, Source};
 use firmware_example::serial::FlowControl;
@@ -30,47 +27,10 @@ use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameDecoder};
 use iai_protocol_b::frame::Header;
 use libfuzzer_sys::fuzz_target;
+use test_support::VecPort;
 
 /// The bridge's fence seed.
 const SEED: u32 = 0x5EED;
-
-#[derive(Default)]
-struct Fake {
-    input: Vec<u8>,
-    output: Vec<u8>,
-}
-
-impl embedded_io::ErrorType for Fake {
-    type Error = Infallible;
-}
-impl embedded_io::ReadReady for Fake {
-    fn read_ready(&mut self) -> Result<bool, Infallible> {
-        Ok(!self.input.is_empty())
-    }
-}
-impl embedded_io::Read for Fake {
-    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Infallible> {
-        let n = buf.len().min(self.input.len());
-        buf[..n].copy_from_slice(&self.input[..n]);
-        self.input.drain(..n);
-        Ok(n)
-    }
-}
-impl embedded_io::WriteReady for Fake {
-    fn write_ready(&mut self) -> Result<bool, Infallible> {
-        Ok(true)
-    }
-}
-impl embedded_io::Write for Fake {
-    fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
-        self.output.extend_from_slice(buf);
-        Ok(buf.len())
-    }
-    fn flush(&mut self) -> Result<(), Infallible> {
-        Ok(())
-    }
-}
-impl Port for Fake {}
 
 fuzz_target!(|data: &[u8]| {
     let Some((&mode, rest)) = data.split_first() else {
@@ -98,7 +58,7 @@ fuzz_target!(|data: &[u8]| {
         ..Config::DEFAULT
     };
     let mut bridge = Bridge::new(cfg, Source::Default, SEED);
-    let (mut up, mut down) = (Fake::default(), Fake::default());
+    let (mut up, mut down) = (VecPort::default(), VecPort::default());
     let mut now = 0u32;
     for piece in host.chunks(16).chain(std::iter::repeat_n(&[][..], 8)) {
         up.input.extend_from_slice(piece);

@@ -30,26 +30,12 @@
 //! - every frame goes through `decode_any` and the field visitor (see
 //!   `common/mod.rs`);
 //! - `decoder::FrameSkipper` (a frame passed over without a buffer): every
-//!   frame the decoder returns (but a 216H reply, whose counted text the
+//!   frame the decoder returns but a 216H reply (whose counted text the
 //!   skipper does not know), skipped from its envelope on, gives
 //!   `NeedMore` for each byte and `End { checksum_ok: true }` at its LF;
-//!   and the whole stream is scanned with it on its own (at each header
-//!   byte the envelope is read, then the skipper runs to `End` or
-//!   `Broken`, a header byte that broke it starting the next frame): every
-//!   `End` comes at an LF, and for frames without a text field beyond a
-//!   200H's (216H replies' counted text is not the skipper's) `End {
-//!   checksum_ok }` agrees with the decoder's check under the same policy
-//!   (`Frame::new_checked`, what the decoder runs on a complete frame,
-//!   which checks the checksum last): `checksum_ok` is exactly whether it
-//!   accepts the frame, whenever it accepts it or refuses it for its
-//!   checksum (a wrong sum, a refused `@@`, a non-hex SC).
-//!
-//! Decoders answer `decoder::Received { consumed, event }`.
-//!
-//! Changed with the decoder's re-decoding of failed text frames (200H,
-//! 216H): an event may come with `consumed == 0`; the byte-by-byte side
-//! drains after each `push`. The old check "every event consumes a byte"
-//! became the `pending()` condition above.
+//!   the whole stream scanned with the skipper alone (`skip_scan`) ends
+//!   frames only at an LF, `checksum_ok` agreeing with the decoder's check
+//!   (`skipped_frame`).
 #![no_main]
 
 #[path = "common/mod.rs"]
@@ -142,10 +128,12 @@ fn counted_text(bytes: &[u8]) -> bool {
     text_span(header, bytes).is_some() && !test_call
 }
 
-/// A frame the skipper ended with `checksum_ok`: compared with the frame
-/// check the decoder runs (`Frame::new_checked`, `frame::validate`),
-/// which checks the checksum last: when it fails on the checksum (a
-/// wrong sum, a refused `@@`, a non-hex SC), nothing else was wrong.
+/// A frame the skipper ended with `checksum_ok` (but one with a counted
+/// text, which the skipper does not know): compared with the frame check
+/// the decoder runs (`Frame::new_checked`, `frame::validate`), which
+/// checks the checksum last: `checksum_ok` is exactly whether it accepts
+/// the frame, whenever it accepts it or refuses it for its checksum (a
+/// wrong sum, a refused `@@`, a non-hex SC: nothing else was wrong).
 fn skipped_frame(bytes: &[u8], checksum_ok: bool, policy: BypassPolicy) {
     if counted_text(bytes) {
         return;

@@ -12,51 +12,11 @@
 //! answer is longer than 256 bytes.
 #![no_main]
 
-use std::convert::Infallible;
-
 use firmware_example::bridge::{Bridge, NoPort};
-use firmware_example::serial::Port;
 use firmware_example::config::{AllowList, Config, Policy, Source};
 use firmware_example::modbus::{rtu, Gateway};
 use libfuzzer_sys::fuzz_target;
-
-#[derive(Default)]
-struct Fake {
-    input: Vec<u8>,
-    output: Vec<u8>,
-}
-
-impl embedded_io::ErrorType for Fake {
-    type Error = Infallible;
-}
-impl embedded_io::ReadReady for Fake {
-    fn read_ready(&mut self) -> Result<bool, Infallible> {
-        Ok(!self.input.is_empty())
-    }
-}
-impl embedded_io::Read for Fake {
-    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Infallible> {
-        let n = buf.len().min(self.input.len());
-        buf[..n].copy_from_slice(&self.input[..n]);
-        self.input.drain(..n);
-        Ok(n)
-    }
-}
-impl embedded_io::WriteReady for Fake {
-    fn write_ready(&mut self) -> Result<bool, Infallible> {
-        Ok(true)
-    }
-}
-impl embedded_io::Write for Fake {
-    fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
-        self.output.extend_from_slice(buf);
-        Ok(buf.len())
-    }
-    fn flush(&mut self) -> Result<(), Infallible> {
-        Ok(())
-    }
-}
-impl Port for Fake {}
+use test_support::VecPort;
 
 fuzz_target!(|data: &[u8]| {
     let Some((&mode, rest)) = data.split_first() else {
@@ -73,8 +33,8 @@ fuzz_target!(|data: &[u8]| {
     };
     let mut gw = Gateway::new(cfg.modbus, cfg.policy);
     let mut bridge = Bridge::new(cfg, Source::Default, 1);
-    let mut mb = Fake::default();
-    let mut down = Fake::default();
+    let mut mb = VecPort::default();
+    let mut down = VecPort::default();
     let mut ms = 0u32;
     for piece in rest.split(|&b| b == 0xFE) {
         mb.input.extend_from_slice(piece);

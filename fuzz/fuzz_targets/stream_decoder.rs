@@ -1,5 +1,5 @@
-//! The position-stream decoder (`stream::PositionStreamDecoder`) and
-//! encoder (`stream::PositionStreamEncoder`).
+//! The position-stream decoder (`table::PositionStreamDecoder`) and
+//! encoder (`table::PositionStreamEncoder`).
 //!
 //! Input layout: byte 0 bit 0 picks the mode, bits 1-2 the bypass policy,
 //! bits 3-5 the room of the bulk decoder's record slice (1-8); byte 1:
@@ -41,7 +41,7 @@ use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::Received;
 use iai_protocol_b::frame::{Frame, Station};
 use iai_protocol_b::position::{PositionRecord, PositionStream};
-use iai_protocol_b::stream::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
+use iai_protocol_b::table::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
 use libfuzzer_sys::fuzz_target;
 use records::Input;
 

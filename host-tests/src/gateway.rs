@@ -12,42 +12,16 @@
 //!   previous ones, stopped by the bridge's XOFF and restarted by its XON,
 //!   as a PC's serial port with IXON does. XON and XOFF from the bridge are
 //!   flow control, not data: they never reach the client; the bridge's
-//!   other bytes go to the client as they come.
+//!   other bytes go to the client as they come. One client at a time
+//!   ([`run`]).
 //! - **Controller side**: the simulator (`iai_simulator`, the controller
 //!   `iai simulate` runs) serves the second UART in this process
 //!   ([`SimThread`]), its replies paced to the line rate the same way.
 //!
-//! Why the simulator runs in-process rather than as an `iai simulate
-//! --connect` process: pacing needs to know how much QEMU has not read
-//! yet, which a Unix socket to QEMU tells (`SIOCOUTQ`) and a TCP socket
-//! does not (loopback TCP counts bytes as delivered once the kernel holds
-//! them); and one process is one thing to stop: QEMU is this process's
-//! child, killed through its own handle (and by the kernel should this
-//! process die without stopping it, [`QemuSession::start_tied`]), and the
-//! simulator is a thread.
-//!
-//! One client at a time: a connection made while a client is connected
-//! is closed at once, unanswered. What a client wrote before it closed its
-//! connection is still sent (a serial driver drains its output on close),
-//! and one connection made meanwhile waits for that instead of being
-//! refused. Between clients the line is made clean: an XON (in case the
-//! client sent an XOFF, which stops the bridge's transmitter), CR LF if
-//! the client stopped in the middle of a frame (the bridge drops a partial
-//! frame, and ends a partial 26DH with `&` B01), then the bridge's own
-//! status query, whose reply comes after anything the bridge still owed;
-//! what came before it is dropped. Only then is the next client served
-//! (its bytes wait meanwhile).
-//!
-//! The bridge runs the default configuration (controller station 99,
-//! bridge station BB, XON/XOFF, forward all) at the chosen baud rate on
-//! both sides; the quit sequence stays off, since a client's bytes could
-//! hold it. The gateway stops when asked (`stop`), or fails when QEMU
-//! exits on its own.
-//!
 //! On a board with the Modbus RTU port (`lm3s6965evb`, its third UART),
 //! that port is on a second TCP port, relayed as an RTU line
-//! ([`crate::rtu_relay`]): the configuration block keeps the gateway's
-//! defaults (unit 1, even parity) at the Modbus baud rate chosen.
+//! ([`crate::rtu_relay`]). With [`Options::ethernet`] the firmware's own
+//! TCP stack is the host side ([`run_ethernet`]).
 
 use std::collections::VecDeque;
 use std::io::{self, Read, Write};
@@ -62,6 +36,7 @@ use firmware_example::codes;
 use firmware_example::config::Config;
 use firmware_example::serial::XON;
 use iai_protocol_b::frame::Station;
+use iai_protocol_b::line;
 
 use crate::bridge::{status_query, status_query_frame, HostLink, SimThread};
 use crate::qemu::{
@@ -137,18 +112,21 @@ impl Default for Options {
 
 /// How long QEMU may take to boot the firmware.
 const BOOT_TIMEOUT: Duration = Duration::from_secs(30);
-/// How long the bridge may take to answer its status query (it first
-/// finishes what it was doing: a command it forwarded waits up to 3 s for
-/// the controller, three times over).
-const FENCE_TIMEOUT: Duration = Duration::from_secs(15);
+/// How long the bridge may take to answer its status query: it first
+/// finishes what it was doing (a command it forwarded waits
+/// [`line::TIMEOUT_MS`] for the controller, [`line::MAX_SENDS`] times
+/// over), with room to spare.
+const FENCE_TIMEOUT: Duration =
+    Duration::from_millis(line::TIMEOUT_MS as u64 * line::MAX_SENDS as u64 + 6_000);
 /// A client that takes nothing for this long is dropped.
 const CLIENT_WRITE_TIMEOUT: Duration = Duration::from_secs(10);
 /// How often the loops look at their stop flags.
 const POLL: Duration = Duration::from_millis(20);
 
-/// The configuration block the gateway boots the bridge with: the
-/// defaults at `baud` on both protocol-B sides, the Modbus port's defaults
-/// at `modbus_baud`.
+/// The configuration block the gateway boots the bridge with:
+/// [`Config::DEFAULT`] at `baud` on both protocol-B sides, the Modbus
+/// port's defaults (unit 1, even parity) at `modbus_baud`. The quit
+/// sequence stays off, since a client's bytes could hold it.
 pub fn config(baud: u32, modbus_baud: u32) -> Config {
     let mut cfg = Config {
         upstream_baud: baud,
@@ -182,9 +160,19 @@ fn log(line: &str) {
 /// Boots the bridge, puts the simulator behind it, listens on
 /// 127.0.0.1:`port` (and `modbus_port` on a board with the Modbus port),
 /// calls `on_ready` with those addresses once the bridge has answered
-/// through the relay, and relays clients until `stop` is set. An error if
-/// anything fails to start or QEMU exits on its own; QEMU is stopped in
-/// every case.
+/// through the relay, and relays clients until `stop` is set, one at a
+/// time (`serve`).
+/// An error if anything fails to start or QEMU exits on its own; QEMU is
+/// stopped in every case.
+///
+/// The simulator runs in this process rather than as an `iai simulate
+/// --connect` process: pacing needs to know how much QEMU has not read
+/// yet, which a Unix socket to QEMU tells (`SIOCOUTQ`) and a TCP socket
+/// does not (loopback TCP counts bytes as delivered once the kernel holds
+/// them); and one process is one thing to stop: QEMU is this process's
+/// child, killed through its own handle (and by the kernel should this
+/// process die without stopping it, [`QemuSession::start_tied`]), and the
+/// simulator is a thread.
 pub fn run(opts: &Options, stop: &AtomicBool, on_ready: impl FnOnce(Ready)) -> Result<(), String> {
     for b in [opts.baud, opts.modbus_baud] {
         if !firmware_example::config::BAUD_RATES.contains(&b) {
@@ -351,6 +339,13 @@ type Served = (Option<Client>, Result<(), String>);
 
 /// Relays one client at a time until `stop`; returns the client being
 /// served at that moment.
+///
+/// A connection made while a client is connected is closed at once,
+/// unanswered. What a client wrote before it closed its connection is
+/// still sent (a serial driver drains its output on close), and one
+/// connection made meanwhile waits for that instead of being refused.
+/// Between clients the line is made clean ([`settle`]); only then is the
+/// next client served (its bytes wait meanwhile).
 fn serve(
     listener: &TcpListener,
     link: &Arc<HostLink>,
@@ -446,9 +441,12 @@ fn retire_finished(client: &mut Option<Client>, link: &HostLink, bridge: Station
     }
 }
 
-/// Makes the line clean after a client: XON, the end of a frame it left
-/// unfinished, then the bridge's status query, dropping what came before
-/// its reply.
+/// Makes the line clean after a client: an XON (in case the client sent
+/// an XOFF, which stops the bridge's transmitter), CR LF if it stopped in
+/// the middle of a frame (the bridge drops a partial frame, and ends a
+/// partial 26DH with `&` B01), then the bridge's own status query, whose
+/// reply comes after anything the bridge still owed: what came before it
+/// is dropped.
 fn settle(link: &HostLink, bridge: Station, mid_frame: bool) {
     let _ = link.write_raw(&[XON]);
     if mid_frame {

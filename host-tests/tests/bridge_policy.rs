@@ -4,55 +4,14 @@
 //! the bridge never addresses another station than the controller's.
 //! (`fuzz/fuzz_targets/bridge_policy.rs` checks the same with libFuzzer.)
 
-use std::convert::Infallible;
-
 use firmware_example::bridge::{Bridge, Poll};
 use firmware_example::codes;
 use firmware_example::config::{AllowList, Config, Policy, Source, READ_ONLY};
-use firmware_example::serial::Port;
 use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
 use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 use iai_protocol_b::frame::{emit_frame, Header, Station};
 use proptest::prelude::*;
-
-/// A port over byte vectors: reads `input`, collects what is written.
-#[derive(Default)]
-struct Fake {
-    input: Vec<u8>,
-    output: Vec<u8>,
-}
-
-impl embedded_io::ErrorType for Fake {
-    type Error = Infallible;
-}
-impl embedded_io::ReadReady for Fake {
-    fn read_ready(&mut self) -> Result<bool, Infallible> {
-        Ok(!self.input.is_empty())
-    }
-}
-impl embedded_io::Read for Fake {
-    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Infallible> {
-        let n = buf.len().min(self.input.len());
-        buf[..n].copy_from_slice(&self.input[..n]);
-        self.input.drain(..n);
-        Ok(n)
-    }
-}
-impl embedded_io::WriteReady for Fake {
-    fn write_ready(&mut self) -> Result<bool, Infallible> {
-        Ok(true)
-    }
-}
-impl embedded_io::Write for Fake {
-    fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
-        self.output.extend_from_slice(buf);
-        Ok(buf.len())
-    }
-    fn flush(&mut self) -> Result<(), Infallible> {
-        Ok(())
-    }
-}
-impl Port for Fake {}
+use test_support::VecPort;
 
 /// Every frame in `bytes`, except the bridge's own fences (a 200H whose
 /// text begins with the six digits of its seed): they are the line's
@@ -109,7 +68,7 @@ proptest! {
     ) {
         let cfg = Config { policy, ..Config::DEFAULT };
         let mut bridge = Bridge::new(cfg, Source::Default, 7);
-        let (mut up, mut down) = (Fake::default(), Fake::default());
+        let (mut up, mut down) = (VecPort::default(), VecPort::default());
         let mut now = 0u32;
         let mut refused_ok = 0;
         for (station, id, body, good_sum) in &cmds {

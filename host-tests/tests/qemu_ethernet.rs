@@ -1,59 +1,7 @@
 //! Protocol B over TCP end to end: the Ethernet build (`lm3s6965-eth`,
 //! smoltcp on the Stellaris MAC) under QEMU `lm3s6965evb` with QEMU's user
 //! network forwarding a port of 127.0.0.1 to the bridge's, and the
-//! simulator on the controller UART.
-//!
-//! 1. `iai_over_tcp`: the gateway binary with `--ethernet` (what
-//!    `tools/gateway.sh --ethernet` runs) prints `protocol-b-tcp
-//!    127.0.0.1:PORT`; `iai send 212` gets the typed axis status; a second
-//!    connection while one is served gets `&` BB B0B and is closed, the
-//!    first goes on; `iai table write` (one command per record) and `iai
-//!    table write --bridge` (one 26DH, chunks read back by the bridge) of
-//!    200 records x 8 axes report `verified`, `iai table read` gives the
-//!    same CSV back; SIGTERM stops it.
-//! 2. `a_26dh_over_tcp_is_verified_and_timed`: one 26DH written whole to
-//!    the socket (TCP's window holds the host back), answered `#` with the
-//!    record count; the simulator's table equal to the source; prints the
-//!    throughput against the downstream line's limit; the run ends with
-//!    the quit sequence over TCP and the firmware's stack peak is printed
-//!    (`stack lm3s6965-eth N`, read by `tools/size-report.sh`).
-//!    `IAI_ETH_RECORDS` sets the record count (default 200; 20000 for the
-//!    full table).
-//! 3. `dropped_connections_and_garbage`: a connection dropped in the
-//!    middle of a 26DH, then a new connection works; the bridge counts the
-//!    failed stream and its last code is B04; what reached the controller
-//!    is a prefix of that message's records, each equal to its source, and
-//!    the last record sent was never written; garbage on the port and a
-//!    connection dropped in the middle of a frame leave a bridge that
-//!    answers the next host.
-//! 4. `static_address_and_port_from_the_network_block`: a network block
-//!    in the configuration page gives a static address and port 6020; the
-//!    firmware says so and answers there.
-//! 5. `a_thousand_connects_and_disconnects`: 1,000 connections made one
-//!    after another, 20 ms apart (QEMU's user network accepts one at a
-//!    time), and dropped: at once, after part of a 212H, after part of a
-//!    26DH's first record (positions 901..), after a whole 212H or status
-//!    query whose reply is never read; then a new client gets the 212H
-//!    reply the controller gives, byte for byte, and a 26DH of 20 records
-//!    is answered `#`; the simulator holds exactly those 20 records; the
-//!    firmware's counters (after the quit sequence) show every connection
-//!    that sent bytes served or refused (all of them on an idle machine)
-//!    and none reset for not reading. About 21 s;
-//!    `IAI_ETH_CONNECTIONS` sets the count.
-//! 6. `a_host_that_stops_reading_is_reset`: a host whose socket offers
-//!    the smallest window the kernel allows sends 20,000 status queries
-//!    and reads nothing; QEMU's user network buffers what it can (about
-//!    1.6 MB), then the bridge's transmit buffer stays full, it stops
-//!    answering, and 10 s later resets the host: a client refused
-//!    meanwhile is served no sooner than 10 s after the slow host began,
-//!    fewer queries were answered than sent, the slow host's connection
-//!    ends, and the firmware counts one host reset for it. About 12 s.
-//! 7. `iai_writes_the_full_table_through_the_bridge`: `iai table write
-//!    --bridge --tcp` of 20,000 records x 8 axes (1,640,014 bytes, one
-//!    26DH): iai reports it verified by the bridge, the bridge counts one
-//!    stream of 20,000 records, and the simulator's table equals the
-//!    source; prints the time and the throughput (about 170 s on an idle
-//!    machine; no bound on speed, only a 20-minute limit on the run).
+//! simulator on the controller UART. Each test's doc says what it checks.
 //!
 //! Needs `qemu-system-arm` and the `thumbv7m-none-eabi` rustup target.
 
@@ -189,6 +137,13 @@ fn assert_refused(conn: TcpStream, bridge: Station) {
     assert_eq!(frames.next(Duration::from_secs(5)), None, "closed after it");
 }
 
+/// The gateway binary with `--ethernet` (what `tools/gateway.sh --ethernet`
+/// runs) prints `protocol-b-tcp 127.0.0.1:PORT`; `iai send 212` gets the
+/// typed axis status; a second connection while one is served gets `&` BB
+/// B0B and is closed, the first goes on; `iai table write` (one command per
+/// record) and `iai table write --bridge` (one 26DH, chunks read back by
+/// the bridge) of 200 records x 8 axes report `verified`, `iai table read`
+/// gives the same CSV back; SIGTERM stops it.
 #[test]
 fn iai_over_tcp() {
     let elf = build_ethernet_firmware().expect("build lm3s6965-eth");
@@ -308,6 +263,13 @@ fn one_stream_held(
     (exit, chunks, throughput)
 }
 
+/// One 26DH written whole to the socket (TCP's window holds the host back),
+/// answered `#` with the record count; the simulator's table equal to the
+/// source; prints the throughput against the downstream line's limit; the
+/// run ends with the quit sequence over TCP and the firmware's stack peak
+/// is printed (`stack lm3s6965-eth N`, read by `tools/size-report.sh`).
+/// `IAI_ETH_RECORDS` sets the record count (default 200; 20000 for the full
+/// table).
 #[test]
 fn a_26dh_over_tcp_is_verified_and_timed() {
     let n: u32 = std::env::var("IAI_ETH_RECORDS")
@@ -353,6 +315,12 @@ fn a_26dh_over_tcp_is_verified_and_timed() {
     );
 }
 
+/// A connection dropped in the middle of a 26DH, then a new connection
+/// works; the bridge counts the failed stream and its last code is B04;
+/// what reached the controller is a prefix of that message's records, each
+/// equal to its source, and the last record sent was never written; garbage
+/// on the port and a connection dropped in the middle of a frame leave a
+/// bridge that answers the next host.
 #[test]
 fn dropped_connections_and_garbage() {
     let elf = build_ethernet_firmware().expect("build lm3s6965-eth");
@@ -438,6 +406,8 @@ fn dropped_connections_and_garbage() {
     assert_eq!(written[..], cut[..written.len()]);
 }
 
+/// A network block in the configuration page gives a static address and
+/// port 6020; the firmware says so and answers there.
 #[test]
 fn static_address_and_port_from_the_network_block() {
     use firmware_example::net::config::{Addressing, Ipv4Setting, NetConfig};
@@ -553,6 +523,16 @@ fn exchange_when_served(
     }
 }
 
+/// 1,000 connections made one after another, 20 ms apart (QEMU's user
+/// network accepts one at a time), and dropped: at once, after part of a
+/// 212H, after part of a 26DH's first record (positions 901..), after a
+/// whole 212H or status query whose reply is never read; then a new client
+/// gets the 212H reply the controller gives, byte for byte, and a 26DH of
+/// 20 records is answered `#`; the simulator holds exactly those 20
+/// records; the firmware's counters (after the quit sequence) show every
+/// connection that sent bytes served or refused (all of them on an idle
+/// machine) and none reset for not reading. About 21 s;
+/// `IAI_ETH_CONNECTIONS` sets the count.
 #[test]
 fn a_thousand_connects_and_disconnects() {
     use iai_simulator::Simulator;
@@ -735,6 +715,13 @@ fn connect_small_window(addr: std::net::SocketAddrV4, rcvbuf: i32) -> TcpStream 
     }
 }
 
+/// A host whose socket offers the smallest window the kernel allows sends
+/// 20,000 status queries and reads nothing; QEMU's user network buffers
+/// what it can (about 1.6 MB), then the bridge's transmit buffer stays
+/// full, it stops answering, and 10 s later resets the host: a client
+/// refused meanwhile is served no sooner than 10 s after the slow host
+/// began, fewer queries were answered than sent, the slow host's connection
+/// ends, and the firmware counts one host reset for it. About 12 s.
 #[test]
 fn a_host_that_stops_reading_is_reset() {
     let started = Instant::now();
@@ -819,6 +806,11 @@ fn a_host_that_stops_reading_is_reset() {
     );
 }
 
+/// `iai table write --bridge --tcp` of 20,000 records x 8 axes (1,640,014
+/// bytes, one 26DH): iai reports it verified by the bridge, the bridge
+/// counts one stream of 20,000 records, and the simulator's table equals
+/// the source; prints the time and the throughput (about 170 s on an idle
+/// machine; no bound on speed, only a 20-minute limit on the run).
 #[test]
 fn iai_writes_the_full_table_through_the_bridge() {
     const RECORDS: u32 = 20_000;

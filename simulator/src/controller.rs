@@ -54,11 +54,8 @@ use super::axis::{Axis, Home, Kind};
 use super::io::Io;
 use super::{
     Rng, AXIS_BUSY_CODE, DEFAULT_ACC, DEFAULT_SPEED, NOT_HOMED_CODE, NOT_MODELLED_CODE,
-    NO_POSITION_CODE, SERVO_OFF_CODE, SOFT_LIMIT, UNSUPPORTED_ERROR_CODE,
+    NO_POSITION_CODE, REPLY_DELAY_MS, SERVO_OFF_CODE, SOFT_LIMIT, UNSUPPORTED_ERROR_CODE,
 };
-
-/// The largest count 208H can carry (3 hex digits).
-const MAX_208H_COUNT: usize = 0xFFF;
 
 /// The controller's memory: position table, axes, limits.
 #[derive(Debug, Clone)]
@@ -67,9 +64,10 @@ pub struct Controller {
     pub profile: Profile,
     /// Station code.
     pub station: Station,
-    /// Largest command frame accepted (TTA 2,051; X-SEL J/K 1,023).
+    /// Largest command frame accepted (the constructors take the
+    /// profile's [`Profile::max_command_frame`]).
     pub max_receive: usize,
-    /// Largest response frame sent (TTA 2,048; X-SEL J/K 1,024).
+    /// Largest response frame sent ([`Profile::max_response_frame`]).
     pub max_transmit: usize,
     /// Delay before replying (the controller's α), ms.
     pub response_delay_ms: u32,
@@ -95,14 +93,15 @@ type Reply = Option<Vec<u8>>;
 type Profile3 = (u16, u16, u16);
 
 impl Controller {
-    /// A TTA at `station`: 2,051 / 2,048-byte buffers, α = 2 ms.
+    /// A TTA at `station` ([`Profile::TTA`]'s buffers), α =
+    /// [`REPLY_DELAY_MS`].
     pub fn tta(station: Station) -> Self {
         Controller {
             profile: Profile::TTA,
             station,
-            max_receive: 2051,
-            max_transmit: 2048,
-            response_delay_ms: 2,
+            max_receive: Profile::TTA.max_command_frame(),
+            max_transmit: Profile::TTA.max_response_frame(),
+            response_delay_ms: REPLY_DELAY_MS,
             table: BTreeMap::new(),
             axes: [Axis::default(); MAX_AXES],
             records_written: 0,
@@ -111,12 +110,12 @@ impl Controller {
         }
     }
 
-    /// A 2003-generation X-SEL (1,023 / 1,024-byte buffers).
+    /// A 2003-generation X-SEL ([`Profile::XSEL_2003`]'s buffers).
     pub fn xsel_2003(station: Station) -> Self {
         Controller {
             profile: Profile::XSEL_2003,
-            max_receive: 1023,
-            max_transmit: 1024,
+            max_receive: Profile::XSEL_2003.max_command_frame(),
+            max_transmit: Profile::XSEL_2003.max_response_frame(),
             ..Self::tta(station)
         }
     }
@@ -479,15 +478,18 @@ impl Controller {
         Ok(())
     }
 
-    /// 208H: how many records the table holds. Its 3-digit field cannot
-    /// carry more than FFFH: a larger table is refused with
+    /// 208H: how many records the table holds. A count its field cannot
+    /// carry (3 hex digits: more than FFFH) is refused with
     /// [`NOT_MODELLED_CODE`] (what a TTA answers then is not known).
     fn count_positions(&self) -> Vec<u8> {
-        match u16::try_from(self.table.len()) {
-            Ok(n) if self.table.len() <= MAX_208H_COUNT => {
-                self.emit(&EffectivePositionCountResponse {
-                    number_of_effective_positions: n,
-                })
+        let count = u16::try_from(self.table.len()).map(|n| EffectivePositionCountResponse {
+            number_of_effective_positions: n,
+        });
+        let mut buf = vec![0u8; self.max_transmit];
+        match count.map(|msg| msg.emit(self.station, &mut buf)) {
+            Ok(Ok(n)) => {
+                buf.truncate(n);
+                buf
             }
             _ => self.error_frame(NOT_MODELLED_CODE),
         }

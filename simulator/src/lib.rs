@@ -1,29 +1,21 @@
 //! A controller simulator: the controller's side of protocol B, built on
 //! the core, with a position table, a model of each axis and faults
-//! injected on demand. It answers only what it models (200H, positions,
-//! axes, status, I/O and integer variables: see [`Controller::execute`]);
-//! every other message is refused.
+//! injected on demand. It answers what it models (see
+//! [`Controller::execute`]) and refuses every other message. It needs
+//! only the core, so a test can put a controller on a port without the
+//! `iai` tool (which runs it as `iai simulate`).
 //!
-//! This is the simulator `iai simulate` runs, as a library of its own so
-//! that a test can put a controller on a port without the `iai` tool and
-//! its dependencies: it needs only the core.
-//!
-//! Two parts:
 //! - [`Controller`]: what a controller remembers (position table, axes,
-//!   counters) and how it answers a command ([`Controller::execute`]). It
-//!   persists across connections, as a real controller's memory does.
-//! - [`Session`]: what belongs to one connection (the frame decoder, replies
-//!   not yet sent, the fault generator).
+//!   counters) and how it answers a command; it persists across
+//!   connections, as a real controller's memory does.
+//! - [`Session`]: what belongs to one connection (the frame decoder,
+//!   replies not yet sent, the fault draws) and when its replies are due.
+//! - [`Simulator`]: one of each, sans-IO, for tests that drive one link.
+//! - [`server`]: many connections on one shared controller (TCP, a
+//!   pseudo-terminal, or one connection it makes itself).
 //!
-//! [`Simulator`] is one of each, for tests that drive a single link. It is
-//! sans-IO: bytes from the host go in with [`Simulator::receive`], reply
-//! bytes come out of [`Simulator::take_output`] once their time has come.
-//! Time is a millisecond tick supplied by the caller, so tests can run a
-//! 1.6 MB transfer with 3-second timeouts in a fraction of a second of real
-//! time, and watch a move take the time its distance and speed imply.
-//! [`serve_tcp`] puts a simulator on a socket; [`server`] serves many
-//! connections on one shared controller (TCP, a pseudo-terminal, or one
-//! connection it makes itself), as `iai simulate` does:
+//! Like the controller (manual p. 9), it does not answer a command it could
+//! not receive: bad checksum, broken frame, or longer than its buffer.
 //!
 //! ```no_run
 //! use std::net::TcpListener;
@@ -42,22 +34,6 @@
 //! serve_tcp(listener, shared, opts)?;
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
-//!
-//! Like the controller (manual p. 9), it does not answer a command it could
-//! not receive: bad checksum, broken frame, or longer than its buffer.
-//!
-//! # Reply timing and order
-//! A reply is due [`Controller::response_delay_ms`] after its command. A
-//! real controller answers its commands one at a time, in the order it
-//! received them, so late replies keep their order: a reply made late by
-//! [`Faults::late_reply`] or [`Faults::late_every_nth_reply`] delays every
-//! reply scheduled after it (no reply is due before one scheduled
-//! earlier). Copies may come after later replies: a [`Faults::dup_reply`]
-//! copy stands for an echoing converter on the line repeating a frame, and
-//! arrives its delay after the original whatever was answered meanwhile.
-//! A caller whose clock goes back (a command at a tick before the last
-//! one's) starts a new time base: replies pending from before hold no new
-//! one back.
 
 mod axis;
 mod controller;
@@ -89,6 +65,9 @@ pub const NOT_HOMED_CODE: u16 = 0x0E5;
 pub const AXIS_BUSY_CODE: u16 = 0x0E6;
 /// Refusal: 237H/26BH to an undefined position (simulator's own code).
 pub const NO_POSITION_CODE: u16 = 0x0E7;
+
+/// The simulated controller's delay before each reply (its α), ms.
+pub const REPLY_DELAY_MS: u32 = 2;
 
 /// Speed used when a command and its record give 0, mm/s.
 pub const DEFAULT_SPEED: u16 = 100;
@@ -197,6 +176,19 @@ impl Rng {
 }
 
 /// One connection's state: decoder, replies waiting to go out, faults.
+///
+/// # Reply timing and order
+/// A reply is due [`Controller::response_delay_ms`] after its command. A
+/// real controller answers its commands one at a time, in the order it
+/// received them, so late replies keep their order: a reply made late by
+/// [`Faults::late_reply`] or [`Faults::late_every_nth_reply`] delays every
+/// reply scheduled after it (no reply is due before one scheduled
+/// earlier). Copies may come after later replies: a [`Faults::dup_reply`]
+/// copy stands for an echoing converter on the line repeating a frame, and
+/// arrives its delay after the original whatever was answered meanwhile.
+/// A caller whose clock goes back (a command at a tick before the last
+/// one's) starts a new time base: replies pending from before hold no new
+/// one back.
 pub struct Session {
     decoder: Box<FrameDecoder<4096>>,
     /// Replies (and copies) with the tick each is due at.
@@ -313,7 +305,7 @@ impl Session {
 
     /// Queues `reply` to the command received at `now`, with the faults
     /// drawn for it. Replies keep their order; copies need not (see "Reply
-    /// timing and order" in the module docs).
+    /// timing and order" above).
     fn schedule(&mut self, ctl: &Controller, faults: &Faults, reply: Option<Vec<u8>>, now: u32) {
         let Some(mut reply) = reply else { return };
         self.reply_no += 1;
@@ -379,6 +371,12 @@ impl Session {
 
 /// A controller with one connection: the simulator for single-link tests.
 /// Derefs to its [`Controller`] (`sim.table`, `sim.station`, …).
+///
+/// It is sans-IO: bytes from the host go in with [`Simulator::receive`],
+/// reply bytes come out of [`Simulator::take_output`] once their time has
+/// come. Time is a millisecond tick supplied by the caller, so a test runs
+/// a 1.6 MB transfer with 3-second timeouts in a fraction of a second, and
+/// watches a move take the time its distance and speed imply.
 pub struct Simulator {
     /// Faults to inject.
     pub faults: Faults,
@@ -414,7 +412,7 @@ impl Simulator {
         Self::new(Controller::tta(station))
     }
 
-    /// A 2003-generation X-SEL (1,023 / 1,024-byte buffers).
+    /// A 2003-generation X-SEL, no faults.
     pub fn xsel_2003(station: Station) -> Self {
         Self::new(Controller::xsel_2003(station))
     }

@@ -6,14 +6,20 @@ use std::io::{self, Write};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
+use firmware_example::config::BAUD_RATES;
 use iai_cli::bridge::{decode_status, query_status, status_json};
-use iai_cli::link::{Flow, Link, Target, BAUD_RATES};
+use iai_cli::link::{Flow, Link, Target};
 use iai_cli::probe::{nonce, observe, test_call, Observation};
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::line::LineConfig;
 
+use super::line::DEFAULT_STATION;
 use super::{out_err, Run};
 use crate::ProbeArgs;
+
+/// The stations `iai probe` tries when none is given: the default one and
+/// 00.
+pub(crate) const PROBE_STATIONS: [u8; 2] = [DEFAULT_STATION, 0x00];
 
 /// One port as `iai ports` shows it: name, kind, details.
 fn port_line(p: &serialport::SerialPortInfo) -> (String, String, String) {
@@ -110,11 +116,7 @@ pub(crate) fn probe_cmd(a: &ProbeArgs) -> Run {
     } else {
         a.baud.iter().map(|b| Some(*b)).collect()
     };
-    let stations: Vec<u8> = if a.station.is_empty() {
-        vec![0x99, 0x00]
-    } else {
-        a.station.clone()
-    };
+    let stations = a.station.clone();
     let wait = Duration::from_millis(u64::from(a.timeout));
     let base = a.serial.target(&a.target, BAUD_RATES[0], Flow::None);
     let where_ = match &base {
@@ -155,7 +157,7 @@ pub(crate) fn probe_cmd(a: &ProbeArgs) -> Run {
             },
             (t, _) => t.clone(),
         };
-        let mut link = Link::open(&target, LineConfig::new(Station(0x99)))?;
+        let mut link = Link::open(&target, LineConfig::new(Station(DEFAULT_STATION)))?;
         let mut queue: VecDeque<u8> = stations.iter().copied().collect();
         let mut tried = BTreeSet::new();
         let rate = baud.map_or_else(|| "tcp".to_string(), |b| format!("{b} baud"));

@@ -137,7 +137,7 @@ A pseudo-terminal (iai simulate --pty) is not listed: give it to --port.";
 
 pub(crate) const PROBE: &str = "\
 Examples:
-  iai probe --port /dev/ttyUSB0                   every baud rate, stations 99 and 00
+  iai probe --port /dev/ttyUSB0                   every baud rate, the default stations
   iai probe --port COM3 --baud 38400,115200 --station 01,99
   iai probe --tcp 127.0.0.1:5000 --json
 

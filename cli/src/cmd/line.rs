@@ -10,6 +10,15 @@ use crate::{FlowArg, LineArgs, LinkArgs, ParityArg, SerialArgs, Where};
 /// The baud rate when none is given.
 pub(crate) const DEFAULT_BAUD: u32 = 38_400;
 
+/// The controller's station when none is given: 99, the spec's examples'
+/// (the controller's I/O parameter No. 91).
+pub(crate) const DEFAULT_STATION: u8 = 0x99;
+
+/// A station as the command line writes it: two hex digits.
+pub(crate) fn station_text(station: u8) -> String {
+    format!("{station:02X}")
+}
+
 impl SerialArgs {
     /// The flow control asked, or `default`.
     fn flow(&self, default: Flow) -> Flow {
@@ -29,13 +38,14 @@ impl SerialArgs {
                 path: path.clone(),
                 baud,
                 settings: SerialSettings {
-                    data_bits: self.data_bits.unwrap_or(8),
+                    data_bits: self.data_bits.unwrap_or(SerialSettings::DEFAULT.data_bits),
                     parity: match self.parity {
+                        Some(ParityArg::None) => Parity::None,
                         Some(ParityArg::Odd) => Parity::Odd,
                         Some(ParityArg::Even) => Parity::Even,
-                        _ => Parity::None,
+                        None => SerialSettings::DEFAULT.parity,
                     },
-                    stop_bits: self.stop_bits.unwrap_or(1),
+                    stop_bits: self.stop_bits.unwrap_or(SerialSettings::DEFAULT.stop_bits),
                     flow,
                 },
             },
@@ -120,7 +130,9 @@ impl LineArgs {
     /// window, `--timeout`, `--retries`.
     pub(crate) fn plan(&self) -> Plan {
         let mut plan = Plan::new(self.profile.profile(), Station(self.station));
-        plan.line = plan.line.with_duplicate_window(self.duplicate_window_ms);
+        if let Some(ms) = self.duplicate_window_ms {
+            plan.line = plan.line.with_duplicate_window(ms);
+        }
         plan.line.timeout_ms = self.timeout;
         plan.line.max_sends = self.retries.saturating_add(1);
         plan

@@ -11,6 +11,7 @@ use iai_cli::link::{Flow, Link};
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::line::LineConfig;
 
+use super::line::DEFAULT_STATION;
 use super::{out_err, stop_flag, Run, EXIT_INTERRUPTED};
 use crate::LinkArgs;
 
@@ -59,7 +60,7 @@ pub(crate) fn monitor_cmd(
     save: Option<&Path>,
 ) -> Run {
     let target = line.resolve(Flow::None);
-    let mut link = Link::open(&target, LineConfig::new(Station(0x99)))?;
+    let mut link = Link::open(&target, LineConfig::new(Station(DEFAULT_STATION)))?;
     let mut saved = match save {
         Some(p) => Some((
             io::BufWriter::new(

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use std::sync::atomic::Ordering;
 
 use iai_cli::link::Link;
-use iai_cli::table::{self, Hooks, TableError, CLEAR_LAST, COUNT_MAX};
+use iai_cli::table::{self, Hooks, TableError};
 use iai_protocol_b::error::Failure as CoreFailure;
 
 use super::{progress_bar, stop_flag, table_failure, Failure, Run};
@@ -16,7 +16,7 @@ use crate::ClearArgs;
 /// refused).
 fn count(link: &mut Link, hooks: &Hooks<'_>) -> Result<Option<u16>, TableError> {
     match table::count(link, hooks) {
-        Ok(n) if n < COUNT_MAX => Ok(Some(n)),
+        Ok(n) if n < table::count_max() => Ok(Some(n)),
         Ok(_) | Err(TableError::Engine(CoreFailure::Controller { .. })) => Ok(None),
         Err(e) => Err(e),
     }
@@ -27,7 +27,7 @@ pub(crate) fn table_clear(a: &ClearArgs) -> Run {
     let plan = line.plan();
     let top = plan.last_position();
     let (lo, hi) = if a.all {
-        (0, CLEAR_LAST.min(top))
+        (0, table::clear_last().min(top))
     } else {
         let (first, n) = (a.first.unwrap_or(0), a.count.unwrap_or(1));
         let last = u32::from(first) + n - 1;

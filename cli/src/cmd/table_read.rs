@@ -15,7 +15,7 @@ use iai_cli::codes::answered_with;
 use iai_cli::csvtable;
 use iai_cli::link::Link;
 use iai_cli::resume::{read_path, read_progress, refuse_stale, ReadState};
-use iai_cli::table::{self, Hooks, TableError, COUNT_MAX};
+use iai_cli::table::{self, Hooks, TableError};
 use iai_protocol_b::error::Failure as CoreFailure;
 use iai_protocol_b::position::{PositionRecord, RecordLayout};
 
@@ -190,7 +190,7 @@ pub(crate) fn table_read(a: &ReadArgs) -> Run {
 /// cannot say (refused, or at its maximum): then every position is read.
 fn expect(link: &mut Link, hooks: &Hooks<'_>, hi: u16) -> Result<Option<usize>, TableError> {
     match table::count(link, hooks) {
-        Ok(n) if n < COUNT_MAX => {
+        Ok(n) if n < table::count_max() => {
             eprintln!("the table defines {n} position(s) (208H)");
             Ok(Some(usize::from(n)))
         }

@@ -10,7 +10,7 @@ use iai_cli::codes::answered_with;
 use iai_cli::csvtable;
 use iai_cli::link::{Flow, Link};
 use iai_cli::resume::{self, refuse_stale, write_progress, ResumeState};
-use iai_cli::table::{self, Hooks, Plan, TableError, CLEAR_LAST, COUNT_MAX};
+use iai_cli::table::{self, Hooks, Plan, TableError};
 use iai_protocol_b::error::Failure as CoreFailure;
 use iai_protocol_b::position::{PositionRecord, PositionStream};
 use iai_protocol_b::transfer::{Guarantee, Verify as CoreVerify};
@@ -46,7 +46,7 @@ pub(crate) fn load(file: &Path, plan: &Plan) -> Result<(Vec<u8>, Vec<PositionRec
 
 /// The last position `--replace` clears on this profile.
 fn replace_reach(plan: &Plan) -> u16 {
-    CLEAR_LAST.min(plan.last_position())
+    table::clear_last().min(plan.last_position())
 }
 
 pub(crate) fn table_write(a: &WriteArgs) -> Run {
@@ -274,7 +274,7 @@ fn replaced(
 ) -> Result<Run, TableError> {
     let reach = replace_reach(plan);
     let n = match table::count(link, hooks) {
-        Ok(n) if n < COUNT_MAX => u32::from(n),
+        Ok(n) if n < table::count_max() => u32::from(n),
         Ok(n) => {
             println!(
                 "replace: positions 0..={reach} were cleared first; 208H counts {n}, its largest value, so whether positions past {reach} are defined was not checked"

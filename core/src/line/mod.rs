@@ -99,15 +99,23 @@ pub struct LineConfig {
     pub fences: bool,
 }
 
+/// How long a reply may take after the command was completely sent, ms
+/// (2003 p. 62).
+pub const TIMEOUT_MS: u32 = 3_000;
+
+/// Sends of one command before giving up (2003 p. 62: 2 or 3 re-sends).
+pub const MAX_SENDS: u8 = 3;
+
 impl LineConfig {
-    /// The spec's settings for `station`: 3 s timeout, 3 sends, 1 ms
-    /// turnaround, late replies allowed 3 s after their timeout, no copies,
-    /// unsafe commands sent once, computed checksums, fences on.
+    /// The spec's settings for `station`: [`TIMEOUT_MS`], [`MAX_SENDS`]
+    /// sends, 1 ms turnaround, late replies allowed 3 s after their
+    /// timeout, no copies, unsafe commands sent once, computed checksums,
+    /// fences on.
     pub const fn new(station: Station) -> Self {
         LineConfig {
             station,
-            timeout_ms: 3_000,
-            max_sends: 3,
+            timeout_ms: TIMEOUT_MS,
+            max_sends: MAX_SENDS,
             turnaround_ms: 1,
             late_window_ms: 3_000,
             duplicate_window_ms: 0,

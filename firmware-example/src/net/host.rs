@@ -2,52 +2,35 @@
 //! bridge's upstream [`Port`] on its socket.
 //!
 //! [`SOCKETS`] TCP sockets listen on the port, so that a connection made
-//! while the host is connected (or while its connection is closing) can be
-//! answered.
-//! Each socket has a [`Role`]:
-//!
-//! - the first connection established while nobody is served becomes the
-//!   **host**: its bytes are the bridge's upstream and the bridge's
-//!   answers go to it;
-//! - a connection established while another is the host is **held**,
-//!   unread, for [`HOLD_MS`]: if the host leaves meanwhile, it waits as
-//!   below (a client that closes and connects again before its close
-//!   reached the bridge is not refused); otherwise it is **refused**: it
-//!   gets `&` + the bridge's station + [`codes::HOST_BUSY`] (B0B) + SC CR
-//!   LF and is closed (what it sends is read and dropped; it is reset if
-//!   it is not gone within [`REFUSE_LIMIT_MS`]); while all [`SOCKETS`]
-//!   are taken, one more connection is reset by the stack;
-//! - a connection established while the host is leaving (it closed its
-//!   sending side; the bridge may still be reading what it sent) or while
-//!   the bridge still finishes what the last host started **waits**,
-//!   unread, and becomes the host once the bridge is idle: a client that
-//!   closes and connects again at once is not refused.
+//! while the host is connected, or while its connection is closing, is
+//! answered. Each socket has a [`Role`]: the first connection made while
+//! nobody is served becomes the **host** (its bytes are the bridge's
+//! upstream, the bridge's answers go to it); one made while a host is
+//! served is **held**, then admitted or **refused** with `&` B0B; one made
+//! while the host is leaving, or while the bridge finishes what the last
+//! host started, **waits** unread and becomes the host once the bridge is
+//! idle. A client that closes and connects again at once is not refused.
 //!
 //! **Flow control.** The bridge reads the socket only when it can use the
 //! bytes; while it cannot (a 26DH chunk being confirmed and read back), the
 //! socket's receive buffer fills, its window closes and TCP stops the host.
-//! Nothing is ever lost on the way in, so [`Port::take_overruns`] is 0:
-//! TCP's window replaces XON/XOFF.
+//! Nothing is lost on the way in ([`Port::take_overruns`] is 0): TCP's
+//! window replaces XON/XOFF.
 //!
 //! **End of a host.** When the host closes its sending side and the
 //! bridge has looked at every byte, or the connection is gone (reset,
 //! closed, timed out), the bridge is told ([`Bridge::end_of_input`]): a
 //! partial command is dropped, a 26DH being received ends as after a stall
-//! (`&` B04, with the same guarantees). With the connection still open for
-//! sending (a half-close), the bridge's answers still go to it and the
-//! connection is closed once the bridge is idle and all is sent; a gone
-//! connection's answers are dropped. The next host finds the bridge idle.
+//! (`&` B04, with the same guarantees). A half-closed host still gets the
+//! bridge's answers, then its connection is closed once the bridge is
+//! idle; a gone host's answers are dropped. The next host finds the bridge
+//! idle.
 //!
-//! **A host that stops reading.** The bridge waits while the socket's
-//! transmit buffer is full; if the host takes nothing for
-//! [`HOST_STALL_MS`] while data waits for it, the connection is reset and
-//! the bridge ends its work as above. Keep-alives ([`KEEP_ALIVE_MS`]) find
-//! a host that vanished without closing: the connection is dropped after
-//! [`SILENCE_LIMIT_MS`] without a packet from it (one that vanished with an
-//! answer still waiting for it is reset sooner, [`HOST_STALL_MS`] after it
-//! last took a byte, as a host that stops reading). Either way the bridge
-//! is then free: a connection still held then (made less than [`HOLD_MS`]
-//! before) becomes the host.
+//! **A host that stops reading** is reset after [`HOST_STALL_MS`] without
+//! taking a byte while data waits for it; one that vanished without
+//! closing is found by keep-alives ([`KEEP_ALIVE_MS`],
+//! [`SILENCE_LIMIT_MS`]). Either way the bridge ends its work as above and
+//! is then free for a held connection.
 
 use iai_protocol_b::frame::{emit_frame, Header, Station};
 use smoltcp::iface::{SocketHandle, SocketSet};
@@ -59,7 +42,7 @@ use crate::codes;
 use crate::serial::Port;
 
 /// A host that takes none of the bytes waiting for it for this long is
-/// reset.
+/// reset (the bridge waits while the socket's transmit buffer is full).
 pub const HOST_STALL_MS: u32 = 10_000;
 /// How long a connection made while a host is served is held before it
 /// is refused (the host may be leaving: its close can still be on the
@@ -73,21 +56,27 @@ pub const CLOSE_LIMIT_MS: u32 = 2_000;
 /// Keep-alive interval on an idle connection.
 pub const KEEP_ALIVE_MS: u64 = 5_000;
 /// A connection that hears nothing from its peer for this long (keep-
-/// alives unanswered, data unacknowledged) is reset by the stack.
+/// alives unanswered, data unacknowledged) is reset by the stack. A host
+/// that vanished with an answer still waiting for it is reset sooner, as
+/// one that stops reading ([`HOST_STALL_MS`] after it last took a byte).
 pub const SILENCE_LIMIT_MS: u64 = 20_000;
 /// Sockets listening on the port: the host's, one for a connection made
 /// while it is served (held, then refused or admitted) and one more, so
 /// that a client that closes and connects again at once still finds one
-/// listening while the last host's socket finishes its close.
+/// listening while the last host's socket finishes its close. While all
+/// are taken, one more connection is reset by the stack.
 pub const SOCKETS: usize = 3;
 
 /// What one socket is doing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Role {
-    /// Listening, or connected and waiting to become the host.
+    /// Listening, or connected and waiting, unread, to become the host
+    /// once the bridge is idle.
     Listen,
     /// Connected while a host is served, unread; refused if that host is
-    /// still served [`HOLD_MS`] after `since`.
+    /// still served [`HOLD_MS`] after `since`. If the host leaves first,
+    /// it waits as [`Role::Listen`] does (a client that closes and
+    /// connects again before its close reached the bridge is not refused).
     Held {
         /// Tick when it was first seen connected.
         since: u32,
@@ -99,7 +88,9 @@ pub enum Role {
         /// Tick when the close began.
         since: u32,
     },
-    /// Answered B0B and closing since `since`.
+    /// Answered `&` + the bridge's station + [`codes::HOST_BUSY`] (B0B) +
+    /// SC CR LF and closing since `since`: what it sends is read and
+    /// dropped; it is reset if not gone within [`REFUSE_LIMIT_MS`].
     Refused {
         /// Tick when the refusal went out.
         since: u32,

@@ -2,18 +2,8 @@
 //! [`phy::Device`]: a FIFO device without DMA, driven word by word through
 //! its registers (LM3S6965 datasheet, "Ethernet Controller"; QEMU models it
 //! in `hw/net/stellaris_enet.c`, which is what the offsets and framing
-//! below were checked against).
-//!
-//! | offset | register | use here |
-//! |---|---|---|
-//! | 0x00 | RIS (read) / IACK (write) | interrupt status; write 1s to clear |
-//! | 0x04 | IM | interrupt mask: only RX (bit 0) is enabled |
-//! | 0x08 | RCTL | RXEN (0), BADCRC (3: drop frames with a bad FCS), RSTFIFO (4) |
-//! | 0x0C | TCTL | TXEN (0), PADEN (1: pad to 60 bytes), CRC (2: append the FCS) |
-//! | 0x10 | DATA | the receive FIFO (read) and the transmit FIFO (write), a word at a time, little-endian |
-//! | 0x14, 0x18 | IA0, IA1 | the station's MAC address, bytes 0..4 and 4..6 |
-//! | 0x34 | NP | frames waiting in the receive FIFO |
-//! | 0x38 | TR | write 1 to send the frame in the transmit FIFO; reads 1 while sending |
+//! below were checked against). The registers used are in [`reg`], their
+//! bits beside them.
 //!
 //! **Receive.** Each frame in the FIFO starts with a 16-bit length, the
 //! number of bytes of the whole FIFO record: the 2 length bytes, the frame
@@ -48,17 +38,18 @@
 use smoltcp::phy::{self, DeviceCapabilities, Medium};
 use smoltcp::time::Instant;
 
-/// Register offsets (see the module docs).
+/// Register offsets.
 pub mod reg {
-    /// Raw interrupt status (read) / acknowledge (write).
+    /// Raw interrupt status (read) / acknowledge (IACK, write 1s to clear).
     pub const RIS: usize = 0x00;
-    /// Interrupt mask.
+    /// Interrupt mask: only RX ([`super::INT_RX`]) is enabled.
     pub const IM: usize = 0x04;
-    /// Receive control.
+    /// Receive control (the `RCTL_` bits).
     pub const RCTL: usize = 0x08;
-    /// Transmit control.
+    /// Transmit control (the `TCTL_` bits).
     pub const TCTL: usize = 0x0C;
-    /// Receive and transmit FIFO.
+    /// The receive FIFO (read) and the transmit FIFO (write), a word at a
+    /// time, little-endian.
     pub const DATA: usize = 0x10;
     /// MAC address bytes 0..4.
     pub const IA0: usize = 0x14;
@@ -66,7 +57,8 @@ pub mod reg {
     pub const IA1: usize = 0x18;
     /// Frames waiting in the receive FIFO.
     pub const NP: usize = 0x34;
-    /// Transmission request.
+    /// Transmission request: write 1 to send the frame in the transmit
+    /// FIFO; reads 1 while sending.
     pub const TR: usize = 0x38;
 }
 
