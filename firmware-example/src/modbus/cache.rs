@@ -68,9 +68,9 @@ pub struct Cache {
     pub last_error: u16,
     /// Writes the command policy refused (wrapping).
     pub refused: u16,
-    /// The controller's 201H reply (main CPU application), asked once the
-    /// line comes up; `None` until then, or when the controller did not
-    /// give it.
+    /// The controller's 201H reply (main CPU application), asked each time
+    /// the line comes up; `None` until it answers, while the line is down,
+    /// or when the controller refused it.
     pub version: Option<VersionResponse>,
 }
 
@@ -90,11 +90,12 @@ impl Cache {
     }
 
     /// Whether the controller answered (`up`): `true` when the line came
-    /// up now (it was down, or never up), when the controller may have been
-    /// replaced and its version is asked again.
+    /// up now (it was down, or never up), and its version is to be asked
+    /// (again: it may be another controller). The version is forgotten
+    /// while the line is down.
     pub fn set_link(&mut self, up: bool) -> bool {
         let came_up = up && !self.link_up;
-        if came_up {
+        if !up {
             self.version = None;
         }
         self.link_up = up;

@@ -7,8 +7,9 @@
 //!   gateway has the controller's 201H reply (main CPU application; asked
 //!   each time the line comes up), `; controller VVVV model MM unit UU
 //!   YYYY-MM-DD` (the version number and codes in hex, as 201H gives
-//!   them, the build date in decimal). Before that, or from a controller
-//!   that refuses 201H, the firmware's version alone.
+//!   them, the build date in decimal). Before that, while the line is
+//!   down, or from a controller that refuses 201H: the firmware's version
+//!   alone.
 //!
 //! A stream request for the regular or extended objects is answered with
 //! the basic ones (the standard: a server answers at its conformity
