@@ -294,6 +294,8 @@ pub struct Fields {
     pub stride: u16,
     /// Number of the first repetition (position record 1, port 300, ...).
     pub first: u16,
+    /// What the repetitions are ("records", "ports"; "" for one).
+    pub counts: &'static str,
     /// The fields of one repetition.
     pub list: &'static [Field],
 }
@@ -317,6 +319,7 @@ const fn once(list: &'static [Field]) -> Fields {
         repeat: 1,
         stride: 0,
         first: 0,
+        counts: "",
         list,
     }
 }
@@ -368,13 +371,14 @@ impl Item {
                 f!(5, "DETAIL3", U32, "", "detail 3"),
                 f!(7, "DETAIL4", U32, "", "detail 4"),
             ]),
-            Item::Integers => Fields { repeat: INTEGERS as u16, stride: 2, first: FIRST_INTEGER, list: &[
+            Item::Integers => Fields { repeat: INTEGERS as u16, stride: 2, first: FIRST_INTEGER,
+                counts: "variables", list: &[
                 f!(0, "INTV", I32, "", "global integer variable (read from 20EH); a write of whole variables (even offset, even count) is one 24CH. Done, then the value reads back after the next poll"),
             ]},
             Item::WindowHead => once(&[
                 f!(0, "PWHEAD", U16, "position number", "first position N of the table window, 0..=65531 (above: exception 03): a write reads positions N..N+4 (21FH, two replies that agree). Done, then PWREC holds them"),
             ]),
-            Item::WindowRecords => Fields { repeat: WINDOW_RECORDS as u16, stride: RECORD_WORDS as u16, first: 1, list: &[
+            Item::WindowRecords => Fields { repeat: WINDOW_RECORDS as u16, stride: RECORD_WORDS as u16, first: 1, counts: "records", list: &[
                 f!(0, "NUM", U16, "position number", "the record's position number (a write may name any, in any order)"),
                 f!(1, "PAT", U16, "axis pattern", "bit n-1: axis n has a coordinate; 0 on read: the position is not defined; a write with 0 or above FFH: exception 03"),
                 f!(2, "ACC", U16, "0.01 G", "acceleration"),
@@ -439,13 +443,16 @@ impl Item {
                 f!(1, "CODE", U16, "error code", "why the last command failed: the controller's & code, B02 no answer, B0A read back different, B05 not started"),
                 f!(2, "MSG", U16, "message ID", "the protocol-B message of the last accepted command (232H, 233H, ...)"),
             ]),
-            Item::Inputs => Fields { repeat: BITS, stride: 1, first: FIRST_INPUT, list: &[
+            Item::Inputs => Fields { repeat: BITS, stride: 1, first: FIRST_INPUT,
+                counts: "input ports", list: &[
                 f!(0, "IN", Bool, "", "input port (20BH)"),
             ]},
-            Item::Outputs => Fields { repeat: BITS, stride: 1, first: FIRST_OUTPUT, list: &[
+            Item::Outputs => Fields { repeat: BITS, stride: 1, first: FIRST_OUTPUT,
+                counts: "output ports", list: &[
                 f!(0, "OUT", Bool, "", "output port (read from 20CH); a write of one coil sends 24AH. Done, then it reads back after the next poll"),
             ]},
-            Item::Flags => Fields { repeat: BITS, stride: 1, first: FIRST_FLAG, list: &[
+            Item::Flags => Fields { repeat: BITS, stride: 1, first: FIRST_FLAG,
+                counts: "flags", list: &[
                 f!(0, "FLAG", Bool, "", "global flag (read from 20DH); a write of one coil sends 24BH. Done, then it reads back after the next poll"),
             ]},
         }
