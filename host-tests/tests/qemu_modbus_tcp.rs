@@ -232,69 +232,82 @@ fn reset_on_drop(c: &TcpStream) {
     assert_eq!(r, 0, "SO_LINGER");
 }
 
-/// Four clients take the four sockets, each answered once; each sends
-/// half of a request, then three close their side (FIN) and one resets:
-/// a new client is served at once (before, the FIN's socket was held for
-/// the 60 s idle time while the partial request sat in its buffer).
-fn closed_mid_request(addr: &str) {
-    let connect = || {
-        let c = TcpStream::connect(addr).expect("connect to Modbus TCP");
-        c.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+/// A new client on `addr`, tried again (every 100 ms, at most 10 s after
+/// `t0`) until it is answered: it, the attempts, the seconds since `t0`.
+fn served_after(addr: &str, t0: Instant, why: &str) -> (TcpStream, u32, f64) {
+    for k in 1.. {
+        let mut c = TcpStream::connect(addr).expect("connect to Modbus TCP");
         c.set_nodelay(true).unwrap();
-        c
-    };
-    let mut flaky: Vec<TcpStream> = (0..CLIENTS)
-        .map(|n| {
-            let mut c = connect();
-            let tid = 0x700 + n as u16;
+        c.set_read_timeout(Some(Duration::from_millis(500)))
+            .unwrap();
+        let asked = c.write_all(&read_inputs(0x07FF, 0, PNOW, 2)).is_ok();
+        let mut got = [0u8; 13];
+        if asked && c.read_exact(&mut got).is_ok() {
+            assert_eq!(got[..2], [0x07, 0xFF]);
+            c.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+            return (c, k, t0.elapsed().as_secs_f64());
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "no client served 10 s after {why}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    unreachable!()
+}
+
+/// Clients that hold a socket (each answered once) and then send half of
+/// a request.
+fn holding_half(addr: &str, n: usize, tid: u16) -> Vec<TcpStream> {
+    (0..n)
+        .map(|i| {
+            let mut c = TcpStream::connect(addr).expect("connect to Modbus TCP");
+            c.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+            c.set_nodelay(true).unwrap();
+            let tid = tid + i as u16;
             c.write_all(&read_inputs(tid, 0, PNOW, 2)).unwrap();
-            assert_eq!(read_n(&mut c, 13)[..2], tid.to_be_bytes(), "client {n}");
+            assert_eq!(read_n(&mut c, 13)[..2], tid.to_be_bytes(), "client {i}");
+            c.write_all(&read_inputs(tid | 0x80, 0, PNOW, 2)[..7])
+                .unwrap();
             c
         })
-        .collect();
-    for (n, c) in flaky.iter_mut().enumerate() {
-        c.write_all(&read_inputs(0x780 + n as u16, 0, PNOW, 2)[..7])
-            .unwrap();
-    }
+        .collect()
+}
+
+/// Four clients take the four sockets and send half of a request, then
+/// close their side (FIN): a new client is served at once (before, their
+/// sockets were held for the 60 s idle time while the partial requests
+/// sat in the buffers, and no one was served). Then with that client and
+/// three more holding the sockets, one resets (SO_LINGER 0) mid-request:
+/// the next client is served at once too.
+fn closed_mid_request(addr: &str) {
+    let mut fin = holding_half(addr, CLIENTS, 0x700);
     std::thread::sleep(Duration::from_millis(200));
     let t0 = Instant::now();
-    let last = flaky.pop().expect("four");
-    reset_on_drop(&last);
-    drop(last);
-    for c in &flaky {
+    for c in &fin {
         c.shutdown(std::net::Shutdown::Write).unwrap();
     }
-    // A new client: served within a few seconds (tried again while the
-    // sockets are let go).
-    let (tries, secs) = (1..)
-        .find_map(|k| {
-            let mut c = connect();
-            c.set_read_timeout(Some(Duration::from_millis(500)))
-                .unwrap();
-            let asked = c.write_all(&read_inputs(0x07FF, 0, PNOW, 2)).is_ok();
-            let mut got = [0u8; 13];
-            if asked && c.read_exact(&mut got).is_ok() {
-                assert_eq!(got[..2], [0x07, 0xFF]);
-                return Some((k, t0.elapsed().as_secs_f64()));
-            }
-            assert!(
-                t0.elapsed() < Duration::from_secs(10),
-                "no client served 10 s after four closed or reset mid-request"
-            );
-            std::thread::sleep(Duration::from_millis(100));
-            None
-        })
-        .expect("served");
-    // The three that closed read our close, without an answer to the half.
-    for (n, c) in flaky.iter_mut().enumerate() {
+    let (first, tries, secs) = served_after(addr, t0, "four clients closed mid-request");
+    // They read our close, without an answer to the half request.
+    for (n, c) in fin.iter_mut().enumerate() {
         if let Err(why) = closed_unanswered(c) {
             panic!("client {n} after its FIN mid-request: {why}");
         }
     }
     println!(
-        "four clients closed (3 FIN, 1 RST) mid-request: a new client served {:.2} s later (attempt {tries})",
-        secs
+        "four clients closed (FIN) mid-request: a new client served {secs:.2} s later (attempt {tries})"
     );
+    let mut rst = holding_half(addr, CLIENTS - 1, 0x710);
+    let last = rst.pop().expect("three");
+    std::thread::sleep(Duration::from_millis(200));
+    let t0 = Instant::now();
+    reset_on_drop(&last);
+    drop(last);
+    let (_, tries, secs) = served_after(addr, t0, "a client reset mid-request");
+    println!(
+        "a client reset (RST) mid-request: the next served {secs:.2} s later (attempt {tries})"
+    );
+    drop((first, rst));
 }
 
 #[test]
