@@ -5,9 +5,9 @@
 //!
 //! Two sides, never blocking:
 //! - the **Modbus port** ([`Gateway::serve`]): frames found by silence
-//!   ([`rtu`]), checked (CRC, length), parsed by rmodbus and answered at
-//!   once from the gateway's registers ([`registers`]): reads from the
-//!   cache ([`cache`]), writes stored or queued as a command behind the
+//!   ([`rtu`]), checked (CRC, length) and answered at once from the
+//!   gateway's registers ([`registers`]): reads from the cache
+//!   ([`cache`]), writes stored or queued as a command behind the
 //!   handshake ([`command`]). No reply waits for the controller, so none
 //!   is late, and none says done before the controller confirmed.
 //! - the **controller line** ([`mod@line`]): polls on a schedule ([`poll`])
@@ -17,15 +17,19 @@
 //!
 //! The gateway polls once a master has addressed it (a bridge without a
 //! PLC leaves the line to its host). The register map is one table
-//! ([`map::MAP`]). Broadcasts (unit 0) are
-//! executed if they are writes and never answered; frames for other
-//! units, with a wrong CRC or a length that does not fit their function,
-//! are not answered.
+//! ([`map::MAP`]). The unit is the configured one (on TCP also
+//! [`tcp::GATEWAY_UNIT`]); broadcasts (unit 0) are executed if they are
+//! writes and never answered; frames for other units, with a wrong CRC
+//! or a length that does not fit their function, are not answered.
 //!
-//! rmodbus's own context trait (`ModbusContext`) answers every failed
-//! write with exception 02; the gateway needs 01, 03 and 06 too, so it
-//! serves through rmodbus's external read and write calls, with
-//! [`Registers`] as its context.
+//! One handler answers both transports alike, function by function:
+//! reads (01 to 04) through rmodbus's external read calls with
+//! [`Registers`] as their context; writes (05, 06, 15, 16: quantity and
+//! byte count checked against each other first) and Read Device
+//! Identification ([`ident`]) by the gateway itself, since rmodbus
+//! answers every failed write with 02 (the gateway needs 01, 03 and 06
+//! too) and parses no Modbus TCP ADU shorter than 6 bytes; every other
+//! function is exception 01.
 
 pub mod cache;
 pub mod command;
