@@ -8,8 +8,8 @@
 //!   each time the line comes up), `; controller VVVV model MM unit UU
 //!   YYYY-MM-DD` (the version number and codes in hex, as 201H gives
 //!   them, the build date in decimal). Before that, while the line is
-//!   down, or from a controller that refuses 201H: the firmware's version
-//!   alone.
+//!   down, from a controller that refuses 201H, or under a command policy
+//!   that does not allow it: the firmware's version alone.
 //!
 //! A stream request for the regular or extended objects is answered with
 //! the basic ones (the standard: a server answers at its conformity
