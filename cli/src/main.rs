@@ -124,6 +124,11 @@ pub(crate) enum Cmd {
         #[command(subcommand)]
         op: BridgeCmd,
     },
+    /// The Modbus gateway of the bridge firmware.
+    Modbus {
+        #[command(subcommand)]
+        op: ModbusCmd,
+    },
     /// List the serial ports of this machine (name, kind, USB IDs).
     #[command(after_help = help::PORTS)]
     Ports {
@@ -148,6 +153,30 @@ pub(crate) enum BridgeCmd {
     /// it decoded: configuration, counters, last error.
     #[command(after_help = help::BRIDGE_STATUS)]
     Status(BridgeStatusArgs),
+}
+
+#[derive(Subcommand)]
+pub(crate) enum ModbusCmd {
+    /// Print the gateway's register map from the firmware's own table:
+    /// a Markdown table field by field (default), or every register and
+    /// bit of every axis as CSV, JSON or a KEPServerEX tag import.
+    #[command(after_help = cmd::modbus::MAP_HELP)]
+    Map(ModbusMapArgs),
+}
+
+#[derive(Args)]
+#[group(multiple = false)]
+pub(crate) struct ModbusMapArgs {
+    /// CSV: address, functions, name, type, unit, access, meaning.
+    #[arg(long)]
+    csv: bool,
+    /// One JSON object per register, bit or pair.
+    #[arg(long)]
+    json: bool,
+    /// A KEPServerEX CSV tag import (Modbus TCP/IP Ethernet or Modbus
+    /// RTU Serial driver).
+    #[arg(long)]
+    kepware: bool,
 }
 
 #[derive(Args)]
@@ -550,6 +579,18 @@ fn main() -> ExitCode {
         Cmd::Bridge {
             op: BridgeCmd::Status(a),
         } => cmd::bridge::status_cmd(&a),
+        Cmd::Modbus {
+            op: ModbusCmd::Map(a),
+        } => {
+            use cmd::modbus::Form;
+            let form = match (a.csv, a.json, a.kepware) {
+                (true, _, _) => Form::Csv,
+                (_, true, _) => Form::Json,
+                (_, _, true) => Form::Kepware,
+                _ => Form::Markdown,
+            };
+            cmd::modbus::map_cmd(form)
+        }
         Cmd::Ports { json } => cmd::diag::ports_cmd(json),
         Cmd::Probe(a) => cmd::diag::probe_cmd(&a),
         Cmd::Simulate(args) => cmd::simulate::simulate_cmd(&args),

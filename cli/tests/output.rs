@@ -261,6 +261,7 @@ fn every_help_has_examples_and_flags_mean_one_thing() {
         vec!["table", "read", "--help"],
         vec!["table", "clear", "--help"],
         vec!["simulate", "--help"],
+        vec!["modbus", "map", "--help"],
     ] {
         let out = iai(&cmd);
         assert!(out.status.success(), "{cmd:?}");

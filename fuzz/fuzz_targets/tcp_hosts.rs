@@ -15,7 +15,9 @@
 //! - `2 k`: client `c` sends canned frame `k` (a 212H, the bridge's status
 //!   query, a 26DH of two records, its first 40 bytes; Modbus TCP: PNOW
 //!   read, servo on written, two reads in one segment, a read outside the
-//!   map), whichever port it is connected to;
+//!   map, 43/14 at unit 255, 11H in a 2-byte ADU, a 16 whose byte count
+//!   is not its quantity's, half a request), whichever port it is
+//!   connected to;
 //! - `3`: client `c` closes its sending side (FIN);
 //! - `4`: client `c` aborts (RST);
 //! - `5`: client `c` stops or starts reading;
@@ -243,7 +245,7 @@ fuzz_target!(|data: &[u8]| {
     let cfg = Config::DEFAULT;
     let station = cfg.bridge_station;
     let controller_station = cfg.controller_station;
-    let canned: [Vec<u8>; 8] = {
+    let canned: [Vec<u8>; 12] = {
         let q212 = frame(Header::Command, controller_station.0, 0x212, b"01");
         let status = frame(Header::Command, station.0, codes::STATUS_QUERY, b"");
         let mut body = Vec::new();
@@ -260,7 +262,14 @@ fuzz_target!(|data: &[u8]| {
         let mut two = vec![0, 3, 0, 0, 0, 6, 1, 0x03, 0x90, 0x05, 0, 1];
         two.extend_from_slice(&[0, 4, 0, 0, 0, 6, 1, 0x04, 0x90, 0x00, 0, 2]);
         let outside = vec![0, 5, 0, 0, 0, 6, 1, 0x03, 0xFF, 0xF0, 0, 1];
-        [q212, status, d26, cut, pnow, servo, two, outside]
+        // Read Device Identification (43/14) at unit 255; 11H Report
+        // Server ID, a 2-byte ADU; 16 whose byte count is not its
+        // quantity's; half of a request (the rest never comes).
+        let ident = vec![0, 6, 0, 0, 0, 5, 0xFF, 0x2B, 0x0E, 0x01, 0x00];
+        let report = vec![0, 7, 0, 0, 0, 2, 1, 0x11];
+        let bulk = vec![0, 8, 0, 0, 0, 11, 1, 0x10, 0x0D, 0x03, 0, 1, 4, 0, 9, 0, 9];
+        let half = vec![0, 9, 0, 0, 0, 6, 1, 0x03];
+        [q212, status, d26, cut, pnow, servo, two, outside, ident, report, bulk, half]
     };
 
     // The bridge's side: 10.0.0.1, port 5020.
@@ -527,7 +536,7 @@ fn check_adus(mut conn: &[u8], cut: bool) {
         }
         let function = conn[7] & 0x7F;
         assert!(
-            matches!(function, 0x01..=0x06 | 0x0F | 0x10) || conn[7] & 0x80 != 0,
+            matches!(function, 0x01..=0x06 | 0x0F | 0x10 | 0x2B) || conn[7] & 0x80 != 0,
             "function {:02X} in {conn:02X?}",
             conn[7]
         );

@@ -6,7 +6,8 @@
 
 use firmware_example::codes;
 use firmware_example::config::{Config, Policy};
-use firmware_example::modbus::map::{CMD_BUSY, CMD_DONE, CMD_ERROR, HEND, PEND, PWR, SV};
+use firmware_example::modbus::ident::FIRMWARE;
+use firmware_example::modbus::map::{CMD_BUSY, CMD_DONE, CMD_ERROR, HEND, MOVE, PEND, PWR, SV};
 use host_tests::modbus_model::{read_request, registers, rtu_frame, write_request, Rig};
 
 /// Reads `count` registers from `addr` (function 03).
@@ -275,5 +276,157 @@ fn the_protocol_b_host_keeps_its_line_and_gets_only_its_replies() {
     assert!(
         read(&mut rig, 0xB005, 1)[0] > 10,
         "the gateway polled meanwhile"
+    );
+}
+
+/// DSS1 of axis `axis`.
+fn dss1(rig: &mut Rig, axis: u16) -> u16 {
+    read(rig, 0x9005 + 0x10 * (axis - 1), 1)[0]
+}
+
+/// Waits until DSS1 of axis 1 has MOVE clear: `(DSS1 then, ms waited)`.
+fn wait_rest(rig: &mut Rig) -> (u16, u64) {
+    let t0 = rig.now_ms();
+    loop {
+        let d = dss1(rig, 1);
+        if d & MOVE == 0 {
+            return (d, rig.now_ms() - t0);
+        }
+        assert!(rig.now_ms() - t0 < 30_000, "MOVE never cleared: {d:04X}");
+        rig.run_for(10);
+    }
+}
+
+/// Servo on and home axis 1, waited for as the README says.
+fn servo_and_home(rig: &mut Rig) {
+    command(rig, "servo on", 0x0D00, &[0x1000]);
+    wait_rest(rig);
+    command(rig, "home", 0x0D00, &[0x1010]);
+    let (d, _) = wait_rest(rig);
+    assert_eq!(d & HEND, HEND, "homed once at rest");
+}
+
+#[test]
+fn after_a_stop_a_plc_waits_for_move_0_and_pend_stays_0() {
+    let mut rig = rig();
+    servo_and_home(&mut rig);
+    // A long move: 200 mm at 10 mm/s.
+    let target: i32 = 200_000;
+    let mv = [(target >> 16) as u16, target as u16, 0, 0, 0, 10, 30, 0, 0];
+    let (st, _) = command(&mut rig, "slow move", 0x9900, &mv);
+    assert_eq!(st & CMD_DONE, CMD_DONE);
+    // Done (the controller took the move) and on its way: MOVE, no PEND.
+    rig.run_for(500);
+    let d = dss1(&mut rig, 1);
+    assert_eq!(d & (MOVE | PEND), MOVE, "moving: {d:04X}");
+    // STP's rising edge (SON kept): done, then MOVE clears; PEND stays 0
+    // (the move did not complete), the axis where it stopped.
+    let (st, _) = command(&mut rig, "stop (DRG1 STP, 238H)", 0x0D00, &[0x1030]);
+    assert_eq!(st & CMD_DONE, CMD_DONE);
+    let (d, ms) = wait_rest(&mut rig);
+    println!("after STP: MOVE 0 {ms} ms after done, DSS1 {d:04X}");
+    assert_eq!(
+        d & (MOVE | PEND | HEND | SV),
+        HEND | SV,
+        "at rest, not completed"
+    );
+    let pnow = read(&mut rig, 0x9000, 2);
+    let pnow = (u32::from(pnow[0]) << 16 | u32::from(pnow[1])) as i32;
+    assert!(0 < pnow && pnow < target, "stopped on the way: {pnow}");
+    assert_eq!(pnow, rig.sim.axes[0].position(rig.now_ms() as u32));
+    // PEND never comes: a PLC that waited for it would wait forever.
+    rig.run_for(2_000);
+    assert_eq!(dss1(&mut rig, 1) & PEND, 0);
+    // An alarm reset: done, then MOVE 0 from a poll after it (held 1 until
+    // then, so ALMH read after it is the controller's answer).
+    write(&mut rig, 0x0D00, &[0x1000]).unwrap();
+    let t0 = rig.now_ms();
+    write(&mut rig, 0x0D00, &[0x1100]).unwrap();
+    let (st, _, _) = handshake(&mut rig, t0);
+    assert_eq!(st & CMD_DONE, CMD_DONE);
+    assert_eq!(
+        dss1(&mut rig, 1) & MOVE,
+        MOVE,
+        "not yet polled since the reset"
+    );
+    let (d, ms) = wait_rest(&mut rig);
+    println!("after ALRS: MOVE 0 {ms} ms after done");
+    assert_eq!(d & 0x0400, 0, "no alarm");
+}
+
+#[test]
+fn cstr_moves_its_own_axis_only() {
+    let mut rig = rig();
+    servo_and_home(&mut rig);
+    // Position 7 holds axes 1 and 2.
+    let mut rec = vec![7u16, 0b11, 30, 30, 100, 0, 10_000, 0, 20_000];
+    rec.extend([0u16; 12]);
+    let (st, _) = command(&mut rig, "window write", 0x2200, &rec);
+    assert_eq!(st & CMD_DONE, CMD_DONE);
+    write(&mut rig, 0x0D03, &[7]).unwrap();
+    let (st, _) = command(&mut rig, "CSTR on axis 1's block", 0x0D00, &[0x1008]);
+    assert_eq!(st & CMD_DONE, CMD_DONE);
+    let (d, _) = wait_rest(&mut rig);
+    assert_eq!(d & PEND, PEND);
+    let now = rig.now_ms() as u32;
+    assert_eq!(rig.sim.axes[0].position(now), 10_000, "axis 1 moved");
+    assert_eq!(rig.sim.axes[1].position(now), 0, "axis 2 did not");
+}
+
+#[test]
+fn the_window_says_what_is_not_defined_and_what_an_axis_lacks() {
+    let mut rig = rig();
+    // Position 21: axis 2 only.
+    let mut rec = vec![21u16, 0b10, 30, 40, 250, 0, 0, 0xFFFF, 0x9C64];
+    rec.extend([0u16; 12]);
+    command(&mut rig, "window write", 0x2200, &rec);
+    command(&mut rig, "window read", 0x21F0, &[20]);
+    let w = read(&mut rig, 0x2200, 105);
+    // Position 20 is not defined: its number, pattern 0, all else 0.
+    assert_eq!(
+        w[..21],
+        [20, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]
+    );
+    // Position 21 as written: acceleration and deceleration in 0.01 G,
+    // speed mm/s, axis 1 (not in the pattern) 0, axis 2 -25.500 mm.
+    assert_eq!(w[21..42], rec[..]);
+    let rec21 = &rig.sim.table[&21];
+    assert_eq!(
+        (rec21.acceleration, rec21.deceleration, rec21.speed),
+        (30, 40, 250)
+    );
+    assert_eq!(rec21.position(2), Some(-25_500));
+}
+
+#[test]
+fn device_identification_carries_the_controllers_version_once_the_line_is_up() {
+    let mut rig = Rig::new(Config::DEFAULT);
+    let revision = |rig: &mut Rig| {
+        let req = rtu_frame(&[1, 0x2B, 0x0E, 4, 2]);
+        let (r, _) = rig.request(&req).expect("answered");
+        assert_eq!(r[..10], [1, 0x2B, 0x0E, 4, 0x81, 0, 0, 1, 2, r[9]]);
+        String::from_utf8(r[10..r.len() - 2].to_vec()).unwrap()
+    };
+    // Before any poll: the firmware's version alone.
+    assert_eq!(revision(&mut rig), FIRMWARE);
+    rig.run_for(300);
+    let with = format!("{FIRMWARE}; controller 0100 model 5A unit 01 2026-12-01");
+    assert_eq!(revision(&mut rig), with);
+    let asked = |rig: &Rig| rig.sim.stats().commands;
+    // The controller goes silent, then answers again: asked once more.
+    rig.sim.faults.stop_after_commands = Some(asked(&rig));
+    rig.run_for(4_000);
+    assert_eq!(read(&mut rig, 0xB000, 1), [0], "link down");
+    assert_eq!(revision(&mut rig), FIRMWARE, "forgotten while down");
+    // It answers again (a poll on the line meanwhile times out first).
+    rig.sim.faults.stop_after_commands = None;
+    let t0 = rig.now_ms();
+    while revision(&mut rig) != with {
+        assert!(rig.now_ms() - t0 < 10_000, "the version never came back");
+        rig.run_for(100);
+    }
+    println!(
+        "version known again {} ms after the controller answered again",
+        rig.now_ms() - t0
     );
 }

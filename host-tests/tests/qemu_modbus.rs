@@ -18,7 +18,14 @@
 //!
 //! After each, PNOW is compared with the simulator's 212H, asked by the
 //! real `iai` tool on the protocol-B port, and `iai table read --all`
-//! gives exactly the 500 positions that PLC wrote.
+//! gives exactly the 500 positions that PLC wrote. Then
+//!
+//! 3. **raw RTU frames** on the relay's socket (`plc_gateway::standard`):
+//!    functions 15 and 16 whose byte count is not the quantity's (03),
+//!    Read Device Identification with the simulator's 201H version,
+//!    unsupported functions (01), unit 255 unanswered;
+//! 4. the README's **worked example** ("Worked example: Modbus RTU"), run
+//!    by bash as written, with mbpoll and socat.
 //!
 //! pymodbus comes from the venv `tools/setup.sh` makes (`.venv`), mbpoll
 //! and socat from Debian packages it installs. A client that is absent is
@@ -34,6 +41,7 @@ use host_tests::qemu::{build_firmware, Board};
 use host_tests::table::table;
 use iai_protocol_b::position::PositionRecord;
 use plc_gateway::mbpoll::{plc_sequence, Link};
+use plc_gateway::standard::{standard_cases, worked_example, Raw};
 use plc_gateway::{on_path, pymodbus_python, pymodbus_sequence};
 
 /// Positions each PLC writes and reads back.
@@ -77,6 +85,21 @@ fn pymodbus_and_mbpoll_run_a_plcs_sequence_through_the_gateway() {
         assert!(other.iter().zip(&records).all(|(a, b)| a != b));
         let link = Link::rtu(&gw.modbus, &tmp);
         plc_sequence(&mut gw, &iai, link, &other);
+    }
+
+    // The standard's cases, raw frames as a serial master sends them.
+    let revision = standard_cases(&mut Raw::rtu(&gw.modbus));
+    println!("raw RTU frames: FC 15/16 byte counts 03, unsupported 01, 43/14 {revision:?}");
+
+    if mbpoll.is_ok() {
+        let pty = tmp.join(format!("worked-{}.pty", std::process::id()));
+        let pty = pty.to_str().expect("a path");
+        let addr = gw.modbus.clone();
+        worked_example(
+            "### Worked example: Modbus RTU",
+            &[("127.0.0.1:PORT", &addr), ("/tmp/plc", pty)],
+            &tmp,
+        );
     }
 
     let status = gw.stop();

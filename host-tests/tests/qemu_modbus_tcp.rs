@@ -27,7 +27,16 @@
 //!    the four has left a new client is served; an ADU with a protocol ID
 //!    other than 0 dropped unanswered (the connection goes on), a length
 //!    field out of range closes the connection while the others are still
-//!    served.
+//!    served;
+//! 4. raw sockets, the standard (`plc_gateway::standard`): functions 15
+//!    and 16 whose byte count is not the quantity's (03), Read Device
+//!    Identification with the simulator's 201H version, unsupported
+//!    functions (01) whatever the MBAP length, unit 255 as the gateway;
+//!    four clients that close (FIN) or reset (RST) their connection in
+//!    the middle of a request free their sockets at once: a new client is
+//!    served within seconds, not after the 60 s idle time;
+//! 5. the README's **worked example** ("Worked example: Modbus TCP"), run
+//!    by bash as written, with mbpoll.
 //!
 //! pymodbus comes from the venv `tools/setup.sh` makes (`.venv`), mbpoll
 //! from the Debian package it installs. A client that is absent is
@@ -44,6 +53,7 @@ use gateway_proc::{Gateway, ETHERNET};
 use host_tests::qemu::build_ethernet_firmware;
 use host_tests::table::table;
 use iai_protocol_b::position::PositionRecord;
+use plc_gateway::standard::{standard_cases, worked_example, Raw};
 use plc_gateway::{on_path, pymodbus_python, pymodbus_sequence, PYMODBUS_MOVE_TO};
 
 /// Positions pymodbus writes and reads back through the table window.
@@ -202,6 +212,104 @@ fn raw_framing(addr: &str, pnow: i32) {
     assert_eq!(read_n(&mut again, 13), answer(9));
 }
 
+/// Resets `c` on drop (SO_LINGER 0: an RST instead of a FIN).
+fn reset_on_drop(c: &TcpStream) {
+    use std::os::fd::AsRawFd;
+    let linger = libc::linger {
+        l_onoff: 1,
+        l_linger: 0,
+    };
+    // SAFETY: a valid socket and a linger struct of the size given.
+    let r = unsafe {
+        libc::setsockopt(
+            c.as_raw_fd(),
+            libc::SOL_SOCKET,
+            libc::SO_LINGER,
+            (&linger as *const libc::linger).cast(),
+            std::mem::size_of::<libc::linger>() as libc::socklen_t,
+        )
+    };
+    assert_eq!(r, 0, "SO_LINGER");
+}
+
+/// A new client on `addr`, tried again (every 100 ms, at most 10 s after
+/// `t0`) until it is answered: it, the attempts, the seconds since `t0`.
+fn served_after(addr: &str, t0: Instant, why: &str) -> (TcpStream, u32, f64) {
+    for k in 1.. {
+        let mut c = TcpStream::connect(addr).expect("connect to Modbus TCP");
+        c.set_nodelay(true).unwrap();
+        c.set_read_timeout(Some(Duration::from_millis(500)))
+            .unwrap();
+        let asked = c.write_all(&read_inputs(0x07FF, 0, PNOW, 2)).is_ok();
+        let mut got = [0u8; 13];
+        if asked && c.read_exact(&mut got).is_ok() {
+            assert_eq!(got[..2], [0x07, 0xFF]);
+            c.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+            return (c, k, t0.elapsed().as_secs_f64());
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "no client served 10 s after {why}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    unreachable!()
+}
+
+/// Clients that hold a socket (each answered once) and then send half of
+/// a request.
+fn holding_half(addr: &str, n: usize, tid: u16) -> Vec<TcpStream> {
+    (0..n)
+        .map(|i| {
+            let mut c = TcpStream::connect(addr).expect("connect to Modbus TCP");
+            c.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+            c.set_nodelay(true).unwrap();
+            let tid = tid + i as u16;
+            c.write_all(&read_inputs(tid, 0, PNOW, 2)).unwrap();
+            assert_eq!(read_n(&mut c, 13)[..2], tid.to_be_bytes(), "client {i}");
+            c.write_all(&read_inputs(tid | 0x80, 0, PNOW, 2)[..7])
+                .unwrap();
+            c
+        })
+        .collect()
+}
+
+/// Four clients take the four sockets and send half of a request, then
+/// close their side (FIN): a new client is served at once (before, their
+/// sockets were held for the 60 s idle time while the partial requests
+/// sat in the buffers, and no one was served). Then with that client and
+/// three more holding the sockets, one resets (SO_LINGER 0) mid-request:
+/// the next client is served at once too.
+fn closed_mid_request(addr: &str) {
+    let mut fin = holding_half(addr, CLIENTS, 0x700);
+    std::thread::sleep(Duration::from_millis(200));
+    let t0 = Instant::now();
+    for c in &fin {
+        c.shutdown(std::net::Shutdown::Write).unwrap();
+    }
+    let (first, tries, secs) = served_after(addr, t0, "four clients closed mid-request");
+    // They read our close, without an answer to the half request.
+    for (n, c) in fin.iter_mut().enumerate() {
+        if let Err(why) = closed_unanswered(c) {
+            panic!("client {n} after its FIN mid-request: {why}");
+        }
+    }
+    println!(
+        "four clients closed (FIN) mid-request: a new client served {secs:.2} s later (attempt {tries})"
+    );
+    let mut rst = holding_half(addr, CLIENTS - 1, 0x710);
+    let last = rst.pop().expect("three");
+    std::thread::sleep(Duration::from_millis(200));
+    let t0 = Instant::now();
+    reset_on_drop(&last);
+    drop(last);
+    let (_, tries, secs) = served_after(addr, t0, "a client reset mid-request");
+    println!(
+        "a client reset (RST) mid-request: the next served {secs:.2} s later (attempt {tries})"
+    );
+    drop((first, rst));
+}
+
 #[test]
 fn pymodbus_and_mbpoll_over_modbus_tcp_on_the_ethernet_build() {
     let t0 = Instant::now();
@@ -243,6 +351,19 @@ fn pymodbus_and_mbpoll_over_modbus_tcp_on_the_ethernet_build() {
 
     let pnow = i32::try_from(pnow.expect("pymodbus or mbpoll ran")).expect("PNOW");
     raw_framing(&gw.modbus, pnow);
+    let revision = standard_cases(&mut Raw::tcp(&gw.modbus));
+    println!("raw ADUs: FC 15/16 byte counts 03, unsupported 01, unit 255, 43/14 {revision:?}");
+    closed_mid_request(&gw.modbus);
+
+    if mbpoll.is_ok() {
+        let port = gw.modbus_port().to_owned();
+        let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
+        worked_example(
+            "##### Worked example: Modbus TCP",
+            &[("MBPORT", &port)],
+            &dir,
+        );
+    }
 
     let status = gw.stop();
     let log = gw.log();

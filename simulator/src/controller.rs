@@ -6,6 +6,7 @@
 //! | message | answer |
 //! |---|---|
 //! | 200H Test Call | the 10 characters it was sent, exactly (2003 p. 15; the TTA page is not recovered, its layout is inferred identical) |
+//! | 201H | the unit and device echoed, [`VERSION`]: the simulator's own codes, version and build date (no real controller's) |
 //! | 208H | the number of records in the table (3 hex digits); more than FFFH records cannot be counted in that field and are refused with [`NOT_MODELLED_CODE`] rather than saturated |
 //! | 209H, 21FH, 22DH | the defined records in the window asked for, as many as fit the transmit buffer |
 //! | 244H, 245H, 26DH, 290H, 291H | the records stored, their count confirmed |
@@ -44,7 +45,7 @@ use iai_protocol_b::message::{
     JogInchResponse, Message, OperationStopResponse, OutputPortChangeResponse,
     PositionNumberMove2Response, PositionNumberMoveResponse, PositionRecords,
     ProgramStatusResponse, RelativeMoveResponse, ServoOnOffResponse, SystemStatusResponse,
-    TestCallResponse,
+    TestCallResponse, VersionResponse,
 };
 use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::position::PositionStream;
@@ -55,6 +56,22 @@ use super::io::Io;
 use super::{
     Rng, AXIS_BUSY_CODE, DEFAULT_ACC, DEFAULT_SPEED, NOT_HOMED_CODE, NOT_MODELLED_CODE,
     NO_POSITION_CODE, REPLY_DELAY_MS, SERVO_OFF_CODE, SOFT_LIMIT, UNSUPPORTED_ERROR_CODE,
+};
+
+/// What the simulator answers 201H with (its own made-up codes: model 5AH,
+/// unit 01H, version 0100H, built 2026-12-01 00:00:00).
+pub const VERSION: VersionResponse = VersionResponse {
+    unit_type: 0,
+    device_number: 0,
+    model_code: 0x5A,
+    unit_code: 0x01,
+    version_number: 0x0100,
+    year: 2026,
+    month: 12,
+    day: 1,
+    hour: 0,
+    minute: 0,
+    second: 0,
 };
 
 /// The controller's memory: position table, axes, limits.
@@ -179,6 +196,11 @@ impl Controller {
             // 2003 p. 15: the same 10 characters back.
             Command::TestCall(c) => self.emit(&TestCallResponse {
                 test_string: c.test_string,
+            }),
+            Command::VersionQuery(q) => self.emit(&VersionResponse {
+                unit_type: q.unit_type,
+                device_number: q.device_number,
+                ..VERSION
             }),
             Command::EffectivePositionCountQuery(_) => self.count_positions(),
             Command::AxisStatusQuery(q) => self.axis_status(q.query_axis_pattern, now),
@@ -728,14 +750,23 @@ mod tests {
     }
 
     #[test]
+    fn version_201h_answers_the_simulators_own_codes() {
+        let mut ctl = Controller::tta(ST);
+        // Main CPU application, device 0: model 5A, unit 01, version 0100,
+        // built 2026 (07EA) December 1, 00:00:00.
+        assert_eq!(
+            exec(&mut ctl, "!99201000B6\r\n", 0),
+            "#992010005A01010007EA0C0100000031\r\n"
+        );
+    }
+
+    #[test]
     fn a_message_the_simulator_does_not_model_is_refused() {
         let mut ctl = Controller::tta(ST);
         ctl.table
             .insert(1, PositionRecord::new(1, 1, 1, 1, &[(1, 5)]).unwrap());
-        // 201H version, 25BH software reset.
-        for cmd in ["!99201000B6\r\n", "!9925B3C\r\n"] {
-            assert_eq!(exec(&mut ctl, cmd, 0), "&990E340\r\n", "{cmd}");
-        }
+        // 25BH software reset.
+        assert_eq!(exec(&mut ctl, "!9925B3C\r\n", 0), "&990E340\r\n");
         // An ID outside the catalogue, a body that does not fit (212H without
         // its axis pattern): 0E2.
         assert_eq!(exec(&mut ctl, "!992FF51\r\n", 0), "&990E23F\r\n");
@@ -748,6 +779,7 @@ mod tests {
         // The messages the module docs list as modelled.
         let modelled = [
             &catalogue::TEST_CALL,
+            &catalogue::VERSION_QUERY,
             &catalogue::EFFECTIVE_POSITION_COUNT_QUERY,
             &catalogue::EFFECTIVE_POSITION_QUERY,
             &catalogue::EFFECTIVE_POSITION_QUERY_2,

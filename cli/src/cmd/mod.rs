@@ -7,6 +7,7 @@ pub(crate) mod encode;
 pub(crate) mod help;
 pub(crate) mod inspect;
 pub(crate) mod line;
+pub(crate) mod modbus;
 pub(crate) mod monitor;
 pub(crate) mod send;
 pub(crate) mod simulate;

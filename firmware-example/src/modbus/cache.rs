@@ -4,10 +4,10 @@
 
 use iai_protocol_b::message::{
     AxisStatus, AxisStatusResponse, ErrorDetailResponse, Homing, MoveOutcome,
-    ProgramStatusResponse, SystemStatusResponse,
+    ProgramStatusResponse, SystemStatusResponse, VersionResponse,
 };
 
-use super::map::{ALMH, BITS, HEND, INTEGERS, PEND, PWR, SV};
+use super::map::{ALMH, BITS, HEND, INTEGERS, MOVE, PEND, PWR, SV};
 
 /// A group of polled data and when it was last answered.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -68,6 +68,10 @@ pub struct Cache {
     pub last_error: u16,
     /// Writes the command policy refused (wrapping).
     pub refused: u16,
+    /// The controller's 201H reply (main CPU application), asked each time
+    /// the line comes up; `None` until it answers, while the line is down,
+    /// or when the controller refused it.
+    pub version: Option<VersionResponse>,
 }
 
 impl Cache {
@@ -83,6 +87,19 @@ impl Cache {
             self.stale = 0;
         }
         self.axes_at.set(now);
+    }
+
+    /// Whether the controller answered (`up`): `true` when the line came
+    /// up now (it was down, or never up), and its version is to be asked
+    /// (again: it may be another controller). The version is forgotten
+    /// while the line is down.
+    pub fn set_link(&mut self, up: bool) -> bool {
+        let came_up = up && !self.link_up;
+        if !up {
+            self.version = None;
+        }
+        self.link_up = up;
+        came_up
     }
 
     /// Takes a 213H reply.
@@ -126,6 +143,9 @@ impl Cache {
         };
         let fresh = self.stale & (1 << i) == 0;
         let mut w = 0;
+        if !fresh || a.in_use() {
+            w |= MOVE;
+        }
         if self.link_up {
             w |= PWR;
         }

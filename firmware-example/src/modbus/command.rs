@@ -108,16 +108,18 @@ impl Job {
         }
     }
 
-    /// The axis whose motion state the command changes, if any: its cached
-    /// PEND and HEND are held at 0 until a later 212H.
-    pub const fn moves(&self) -> Option<u8> {
+    /// The axes (bit `n − 1`: axis `n`) whose state the command changes:
+    /// once it is confirmed, their cached status reads MOVE 1, PEND and
+    /// HEND 0 until a later 212H. An alarm reset changes them all.
+    pub const fn moves(&self) -> u8 {
         match *self {
             Job::Servo { axis, .. }
             | Job::Home { axis }
             | Job::MoveToPosition { axis, .. }
             | Job::Move { axis, .. }
-            | Job::Stop { axis } => Some(axis),
-            _ => None,
+            | Job::Stop { axis } => 1 << (axis.wrapping_sub(1) & 7),
+            Job::AlarmReset => u8::MAX,
+            _ => 0,
         }
     }
 }
@@ -247,10 +249,11 @@ pub fn record_words(rec: &PositionRecord) -> [u16; super::map::RECORD_WORDS] {
 }
 
 /// The record that window registers describe; `None` if the axis
-/// pattern is not a byte.
+/// pattern is 0 (read back, it means a position that is not defined;
+/// 26DH defines no meaning for it) or not a byte.
 pub fn words_record(w: &[u16]) -> Option<PositionRecord> {
     let get = |i: usize| w.get(i).copied().unwrap_or(0);
-    let pattern = u8::try_from(get(1)).ok()?;
+    let pattern = u8::try_from(get(1)).ok().filter(|&p| p != 0)?;
     let mut pairs = [(0u8, 0i32); 8];
     let mut n = 0;
     for axis in 1..=8u8 {

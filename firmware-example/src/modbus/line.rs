@@ -13,7 +13,7 @@ use iai_protocol_b::message::{
     AbsoluteMove, AlarmReset, AxisStatusQuery, ErrorDetailQuery, FlagChange, FlagQuery, HomeReturn,
     InputPortQuery, IntegerVariableChange, IntegerVariableQuery, OperationStop, OutputPortChange,
     OutputPortQuery, PositionNumberMove2, ProgramStatusQuery, Repeated, ServoOnOff,
-    SystemStatusQuery,
+    SystemStatusQuery, VersionQuery,
 };
 use iai_protocol_b::transfer::{packed_len, Guarantee, RecordBuffer};
 use iai_protocol_b::{
@@ -267,6 +267,15 @@ impl Engines {
                 },
                 now,
             ),
+            Query::Version => poll(
+                c,
+                line,
+                &VersionQuery {
+                    unit_type: 0,
+                    device_number: 0,
+                },
+                now,
+            ),
         };
         if started.is_ok() {
             self.exchange = Exchange::Poll(q);
@@ -383,7 +392,9 @@ impl Engines {
             Exchange::Idle => {}
             Exchange::Poll(q) => {
                 // An `&` is an answer too: the controller is there.
-                c.link_up = matches!(r, Ok(()) | Err(Failure::Controller { .. }));
+                if c.set_link(matches!(r, Ok(()) | Err(Failure::Controller { .. }))) {
+                    regs.schedule.version_soon();
+                }
                 if r.is_ok() {
                     c.polls_ok = c.polls_ok.wrapping_add(1);
                     take_reply(&self.client, q, c, now);
@@ -394,16 +405,18 @@ impl Engines {
             Exchange::Command(job) => {
                 let result = match r {
                     Ok(()) => {
-                        if let Some(axis) = job.moves() {
-                            c.stale |= 1 << (axis.wrapping_sub(1) & 7);
+                        if job.moves() != 0 {
+                            c.stale |= job.moves();
                             regs.schedule.axes_soon();
                         }
-                        c.link_up = true;
+                        if c.set_link(true) {
+                            regs.schedule.version_soon();
+                        }
                         Ok(())
                     }
                     Err(Failure::Controller { code, .. }) => Err(code),
                     Err(Failure::Timeout { .. } | Failure::OutcomeUnknown { .. }) => {
-                        c.link_up = false;
+                        c.set_link(false);
                         Err(codes::CONTROLLER_TIMEOUT)
                     }
                     Err(Failure::Mismatch { .. }) => Err(codes::VERIFY_MISMATCH),
@@ -478,6 +491,11 @@ fn take_reply(client: &Poller, q: Query, c: &mut Cache, now: u32) {
                     *slot = v;
                 }
                 c.integers_at.set(now);
+            }
+        }
+        Query::Version => {
+            if let Ok(r) = client.response::<VersionQuery>() {
+                c.version = Some(r);
             }
         }
     }

@@ -5,9 +5,9 @@
 //!
 //! Two sides, never blocking:
 //! - the **Modbus port** ([`Gateway::serve`]): frames found by silence
-//!   ([`rtu`]), checked (CRC, length), parsed by rmodbus and answered at
-//!   once from the gateway's registers ([`registers`]): reads from the
-//!   cache ([`cache`]), writes stored or queued as a command behind the
+//!   ([`rtu`]), checked (CRC, length) and answered at once from the
+//!   gateway's registers ([`registers`]): reads from the cache
+//!   ([`cache`]), writes stored or queued as a command behind the
 //!   handshake ([`command`]). No reply waits for the controller, so none
 //!   is late, and none says done before the controller confirmed.
 //! - the **controller line** ([`mod@line`]): polls on a schedule ([`poll`])
@@ -17,18 +17,23 @@
 //!
 //! The gateway polls once a master has addressed it (a bridge without a
 //! PLC leaves the line to its host). The register map is one table
-//! ([`map::MAP`]). Broadcasts (unit 0) are
-//! executed if they are writes and never answered; frames for other
-//! units, with a wrong CRC or a length that does not fit their function,
-//! are not answered.
+//! ([`map::MAP`]). The unit is the configured one (on TCP also
+//! [`tcp::GATEWAY_UNIT`]); broadcasts (unit 0) are executed if they are
+//! writes and never answered; frames for other units, with a wrong CRC
+//! or a length that does not fit their function, are not answered.
 //!
-//! rmodbus's own context trait (`ModbusContext`) answers every failed
-//! write with exception 02; the gateway needs 01, 03 and 06 too, so it
-//! serves through rmodbus's external read and write calls, with
-//! [`Registers`] as its context.
+//! One handler answers both transports alike, function by function:
+//! reads (01 to 04) through rmodbus's external read calls with
+//! [`Registers`] as their context; writes (05, 06, 15, 16: quantity and
+//! byte count checked against each other first) and Read Device
+//! Identification ([`ident`]) by the gateway itself, since rmodbus
+//! answers every failed write with 02 (the gateway needs 01, 03 and 06
+//! too) and parses no Modbus TCP ADU shorter than 6 bytes; every other
+//! function is exception 01.
 
 pub mod cache;
 pub mod command;
+pub mod ident;
 pub mod line;
 pub mod map;
 pub mod poll;
@@ -190,7 +195,8 @@ impl Gateway {
 /// Answers one checked frame into `resp` (left empty: no answer): an RTU
 /// frame (checked by [`rtu::check`], its CRC at the end) or a Modbus TCP
 /// ADU (checked by [`tcp::check`], its MBAP header in front). The one
-/// request handler of both transports: the same map, cache and handshake.
+/// request handler of both transports: the same map, cache, handshake and
+/// exceptions.
 fn answer<const N: usize>(
     frame: &[u8],
     proto: ModbusProto,
@@ -199,105 +205,216 @@ fn answer<const N: usize>(
     stats: &mut ModbusStats,
     now: u32,
 ) {
-    let unit = regs.cfg.unit;
+    resp.clear();
+    let tcp = proto == ModbusProto::TcpUdp;
     // Where the unit ID is (after the MBAP header's first six bytes), and
     // what follows the PDU (the RTU CRC).
-    let (start, tail) = match proto {
-        ModbusProto::TcpUdp => (tcp::UNIT_AT, 0),
-        _ => (0, 2),
-    };
-    let mut f = ModbusFrame::new(unit, frame, proto, resp);
-    if f.parse().is_err() {
-        f.response.clear();
+    let (start, tail) = if tcp { (tcp::UNIT_AT, 0) } else { (0, 2) };
+    let end = frame.len().saturating_sub(tail);
+    let (Some(&unit), Some(pdu)) = (frame.get(start), frame.get(start + 1..end)) else {
         stats.dropped = stats.dropped.wrapping_add(1);
         return;
-    }
-    if f.processing_required || f.response_required {
-        // Addressed (its unit or a broadcast): polling starts.
-        regs.active = true;
-    }
-    if f.processing_required {
-        let done = if f.readonly {
-            let inputs = f.func == ModbusFunction::GetInputs;
-            let discretes = f.func == ModbusFunction::GetDiscretes;
-            match f.get_external_read() {
-                Ok(Read::Words(r)) => {
-                    let res = regs.read_words(r.address, r.count, inputs, r.buf, now);
-                    f.process_external_read(res)
-                }
-                Ok(Read::Bits(r)) => {
-                    let space = if discretes {
-                        map::Space::Discretes
-                    } else {
-                        map::Space::Coils
-                    };
-                    r.buf.fill(0);
-                    let res = regs.read_bits(space, r.address, r.count, r.buf);
-                    f.process_external_read(res)
-                }
-                Err(e) => Err(e),
-            }
-        } else {
-            // The write is read from the frame here (checked by
-            // `rtu::check` or `tcp::check`): rmodbus's own write helpers
-            // index the frame where the optimiser cannot see its length
-            // checks.
-            let field = |at: usize| {
-                let hi = frame.get(at).copied().unwrap_or(0);
-                u16::from_be_bytes([hi, frame.get(at + 1).copied().unwrap_or(0)])
-            };
-            let data = frame
-                .get(start + 7..frame.len().saturating_sub(tail))
-                .unwrap_or(&[]);
-            let value = frame.get(start + 4..start + 6).unwrap_or(&[]);
-            let res = match f.func {
-                ModbusFunction::SetHolding => regs.write_words(f.reg, 1, value),
-                ModbusFunction::SetHoldingsBulk => regs.write_words(f.reg, f.count, data),
-                ModbusFunction::SetCoil => match field(start + 4) {
-                    0xFF00 => regs.write_bits(f.reg, 1, &[1]),
-                    0x0000 => regs.write_bits(f.reg, 1, &[0]),
-                    _ => Err(ErrorKind::IllegalDataValue),
-                },
-                ModbusFunction::SetCoilsBulk => regs.write_bits(f.reg, f.count, data),
-                _ => Err(ErrorKind::IllegalFunction),
-            };
-            // The echo: unit, function, address and value or count (after
-            // the transaction and protocol IDs rmodbus copied and the
-            // length, 6, for TCP).
-            let echo = frame.get(start..start + 6).unwrap_or(&[]);
-            let length: &[u8] = match proto {
-                ModbusProto::TcpUdp => &[0, 6],
-                _ => &[],
-            };
-            match res {
-                Ok(()) => f
-                    .response
-                    .extend_from_slice(length)
-                    .and_then(|()| f.response.extend_from_slice(echo))
-                    .map_err(|_| ErrorKind::OOB),
-                Err(e) => f.set_modbus_error_if_unset(&e),
-            }
-        };
-        if done.is_err() {
-            f.response.clear();
-            stats.dropped = stats.dropped.wrapping_add(1);
-            return;
-        }
-    }
-    if !f.response_required {
-        f.response.clear();
+    };
+    let Some(&function) = pdu.first() else {
+        stats.dropped = stats.dropped.wrapping_add(1);
+        return;
+    };
+    let to_me = unit == regs.cfg.unit || (tcp && unit == tcp::GATEWAY_UNIT);
+    let write = matches!(function, 5 | 6 | 15 | 16);
+    let broadcast_write = unit == 0 && write;
+    if !(to_me || broadcast_write) {
+        // Another unit, or a broadcast that is not a write.
         stats.unanswered = stats.unanswered.wrapping_add(1);
         return;
     }
-    if f.error.is_some() {
-        stats.exceptions = stats.exceptions.wrapping_add(1);
+    // Addressed: polling starts.
+    regs.active = true;
+    let reply = Reply { frame, proto, unit };
+    let result = match function {
+        1..=4 => read(frame, proto, unit, regs, resp, now),
+        5 | 6 | 15 | 16 => {
+            let res = write_pdu(regs, pdu);
+            if !to_me {
+                stats.unanswered = stats.unanswered.wrapping_add(1);
+                return;
+            }
+            res.and_then(|()| {
+                // The echo: function, address, value or quantity.
+                let echo = pdu.get(..5).unwrap_or(&[]);
+                reply.send(resp, |r| r.extend_from_slice(echo).map_err(|_| 4))
+            })
+        }
+        ident::FUNCTION => {
+            let version = regs.cache.version.as_ref();
+            reply.send(resp, |r| ident::answer(pdu, version, r))
+        }
+        _ => Err(1),
+    };
+    match result {
+        Ok(()) => {}
+        Err(code) => {
+            stats.exceptions = stats.exceptions.wrapping_add(1);
+            let sent = reply.send(resp, |r| {
+                r.extend_from_slice(&[function | 0x80, code]).map_err(|_| 4)
+            });
+            if sent.is_err() {
+                resp.clear();
+                stats.dropped = stats.dropped.wrapping_add(1);
+                return;
+            }
+        }
     }
-    if f.finalize_response().is_err() {
-        f.response.clear();
+    if resp.is_empty() {
+        stats.dropped = stats.dropped.wrapping_add(1);
         return;
     }
     stats.answered = stats.answered.wrapping_add(1);
 }
+
+/// How a response is framed: after the request's MBAP header (its
+/// transaction and protocol IDs, the new length, the unit) or the unit,
+/// and on RTU with the CRC after it.
+struct Reply<'a> {
+    frame: &'a [u8],
+    proto: ModbusProto,
+    unit: u8,
+}
+
+impl Reply<'_> {
+    /// Frames the PDU `pdu` appends into `resp` (emptied first); `Err`
+    /// (`resp` left empty) with the exception code `pdu` gave.
+    fn send<const N: usize>(
+        &self,
+        resp: &mut heapless::Vec<u8, N>,
+        pdu: impl FnOnce(&mut heapless::Vec<u8, N>) -> Result<(), u8>,
+    ) -> Result<(), u8> {
+        resp.clear();
+        let tcp = self.proto == ModbusProto::TcpUdp;
+        let head = if tcp {
+            resp.extend_from_slice(self.frame.get(..4).unwrap_or(&[0; 4]))
+                .and_then(|()| resp.extend_from_slice(&[0, 0, self.unit]))
+                .map_err(|_| ())
+        } else {
+            resp.push(self.unit).map_err(|_| ())
+        };
+        let body = head.map_err(|_| 4).and_then(|()| pdu(resp));
+        let framed = body.and_then(|()| {
+            if tcp {
+                let n = u16::try_from(resp.len() - tcp::UNIT_AT).map_err(|_| 4)?;
+                if let Some(len) = resp.get_mut(4..6) {
+                    len.copy_from_slice(&n.to_be_bytes());
+                }
+                Ok(())
+            } else {
+                let crc = rtu::crc16(resp);
+                resp.extend_from_slice(&crc.to_le_bytes()).map_err(|_| 4)
+            }
+        });
+        if framed.is_err() {
+            resp.clear();
+        }
+        framed
+    }
+}
+
+/// The exception code of a refusal.
+fn code(e: ErrorKind) -> u8 {
+    e.to_modbus_error().map_or(4, |c| c.byte())
+}
+
+/// A read (functions 01 to 04) answered by rmodbus into `resp` from the
+/// registers; `Err` with the exception code.
+fn read<const N: usize>(
+    frame: &[u8],
+    proto: ModbusProto,
+    unit: u8,
+    regs: &Registers,
+    resp: &mut heapless::Vec<u8, N>,
+    now: u32,
+) -> Result<(), u8> {
+    // The unit the request named (the configured one, or 255 on TCP) is
+    // the one answered.
+    let mut f = ModbusFrame::new(unit, frame, proto, resp);
+    if f.parse().is_err() || !f.response_required {
+        f.response.clear();
+        return Ok(());
+    }
+    if f.processing_required {
+        let inputs = f.func == ModbusFunction::GetInputs;
+        let discretes = f.func == ModbusFunction::GetDiscretes;
+        let done = match f.get_external_read() {
+            Ok(Read::Words(r)) => {
+                let res = regs.read_words(r.address, r.count, inputs, r.buf, now);
+                f.process_external_read(res)
+            }
+            Ok(Read::Bits(r)) => {
+                let space = if discretes {
+                    map::Space::Discretes
+                } else {
+                    map::Space::Coils
+                };
+                r.buf.fill(0);
+                let res = regs.read_bits(space, r.address, r.count, r.buf);
+                f.process_external_read(res)
+            }
+            Err(e) => Err(e),
+        };
+        if done.is_err() {
+            f.response.clear();
+            return Ok(());
+        }
+    }
+    if let Some(e) = f.error {
+        f.response.clear();
+        return Err(e.byte());
+    }
+    if f.finalize_response().is_err() {
+        f.response.clear();
+    }
+    Ok(())
+}
+
+/// A write (functions 05, 06, 15, 16; the PDU `pdu`, function code first,
+/// its length checked by [`rtu::check`] or [`tcp::check`]) carried out on
+/// the registers; `Err` with the exception code. Functions 15 and 16
+/// check the quantity and the byte count against each other first
+/// (Modbus application protocol 6.11, 6.12: 03 when they disagree).
+fn write_pdu(regs: &mut Registers, pdu: &[u8]) -> Result<(), u8> {
+    let word = |at: usize| {
+        let hi = pdu.get(at).copied().unwrap_or(0);
+        u16::from_be_bytes([hi, pdu.get(at + 1).copied().unwrap_or(0)])
+    };
+    let (function, addr, value) = (pdu.first().copied().unwrap_or(0), word(1), word(3));
+    let data = pdu.get(6..).unwrap_or(&[]);
+    let bytes = usize::from(pdu.get(5).copied().unwrap_or(0));
+    let res = match function {
+        5 => match value {
+            0xFF00 => regs.write_bits(addr, 1, &[1]),
+            0x0000 => regs.write_bits(addr, 1, &[0]),
+            _ => Err(ErrorKind::IllegalDataValue),
+        },
+        6 => regs.write_words(addr, 1, pdu.get(3..5).unwrap_or(&[])),
+        15 => {
+            if !(1..=MAX_WRITE_COILS).contains(&value) || bytes != usize::from(value).div_ceil(8) {
+                return Err(3);
+            }
+            regs.write_bits(addr, value, data)
+        }
+        16 => {
+            if !(1..=MAX_WRITE_REGISTERS).contains(&value) || bytes != 2 * usize::from(value) {
+                return Err(3);
+            }
+            regs.write_words(addr, value, data)
+        }
+        _ => Err(ErrorKind::IllegalFunction),
+    };
+    res.map_err(code)
+}
+
+/// Most coils function 15 writes (Modbus application protocol 6.11).
+const MAX_WRITE_COILS: u16 = 0x07B0;
+/// Most registers function 16 writes (6.12).
+const MAX_WRITE_REGISTERS: u16 = 0x007B;
 
 impl Guest for Gateway {
     fn holds_line(&self) -> bool {

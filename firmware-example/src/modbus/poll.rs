@@ -3,7 +3,9 @@
 //! 216H, the ports and flags, the integer variables). A round that takes
 //! longer than the period (a controller that stops answering: 3 s per
 //! query) is followed by the next at once. After a motion command the
-//! axes are asked first, so that PEND and HEND catch up soon.
+//! axes are asked first, so that PEND and HEND catch up soon. The
+//! controller's version (201H, for the device identification) is asked
+//! once each time the line comes up, before the rest of the round.
 
 use iai_protocol_b::catalogue::{self, MessageInfo};
 
@@ -26,6 +28,9 @@ pub enum Query {
     Flags,
     /// 20EH, the mapped global integer variables.
     Integers,
+    /// 201H, the controller's version (asked out of turn, once the line
+    /// is up).
+    Version,
 }
 
 impl Query {
@@ -52,6 +57,7 @@ impl Query {
             Query::Outputs => &catalogue::OUTPUT_PORT_QUERY,
             Query::Flags => &catalogue::FLAG_QUERY,
             Query::Integers => &catalogue::INTEGER_VARIABLE_QUERY,
+            Query::Version => &catalogue::VERSION_QUERY,
         }
     }
 }
@@ -66,6 +72,8 @@ pub struct Schedule {
     started: Option<u32>,
     /// Ask the axes next, out of turn.
     axes_first: bool,
+    /// Ask the version next, out of turn (after the axes).
+    version_first: bool,
 }
 
 impl Schedule {
@@ -76,6 +84,7 @@ impl Schedule {
             next: 0,
             started: None,
             axes_first: false,
+            version_first: false,
         }
     }
 
@@ -89,6 +98,12 @@ impl Schedule {
         self.axes_first = true;
     }
 
+    /// Ask the controller's version before the rest of the round (the
+    /// line came up).
+    pub fn version_soon(&mut self) {
+        self.version_first = true;
+    }
+
     /// The next query due at `now` that `allowed` permits, and marks it
     /// asked; `None` until the next round is due ([`Schedule::due_at`]).
     pub fn next(&mut self, now: u32, allowed: impl Fn(Query) -> bool) -> Option<Query> {
@@ -96,6 +111,12 @@ impl Schedule {
             self.axes_first = false;
             if allowed(Query::Axes) {
                 return Some(Query::Axes);
+            }
+        }
+        if self.version_first {
+            self.version_first = false;
+            if allowed(Query::Version) {
+                return Some(Query::Version);
             }
         }
         loop {
@@ -120,7 +141,7 @@ impl Schedule {
 
     /// When the next query is due (`None`: now).
     pub fn due_at(&self) -> Option<u32> {
-        if self.axes_first || self.next < Query::ROUND.len() {
+        if self.axes_first || self.version_first || self.next < Query::ROUND.len() {
             return None;
         }
         self.started.map(|s| s.wrapping_add(self.period_ms))
@@ -150,5 +171,14 @@ mod tests {
         assert_eq!(rest.len(), 6);
         // A round longer than the period: the next starts at once.
         assert_eq!(s.next(5_000, all), Some(Query::Axes));
+        // The line came up: the version once, then the round goes on.
+        s.version_soon();
+        assert_eq!(s.due_at(), None);
+        assert_eq!(s.next(5_001, all), Some(Query::Version));
+        assert_eq!(s.next(5_002, all), Some(Query::System));
+        // A policy that refuses 201H: not asked.
+        s.version_soon();
+        let no_version = |q| q != Query::Version;
+        assert_eq!(s.next(5_003, no_version), Some(Query::Program));
     }
 }

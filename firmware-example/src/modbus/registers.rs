@@ -256,7 +256,8 @@ impl Registers {
             Item::NumericMove => self.write_numeric_move(b, axis, at.offset, values),
             Item::Integers => self.write_integers(at.offset, values),
             Item::WindowHead => {
-                if first > u16::MAX - WINDOW_RECORDS as u16 {
+                // The window's last position must exist: N + 4 ≤ 65535.
+                if first > u16::MAX - (WINDOW_RECORDS as u16 - 1) {
                     return Err(ErrorKind::IllegalDataValue);
                 }
                 self.command(Job::ReadWindow { head: first })?;

@@ -10,12 +10,21 @@
 //! protocol ID is not 0 (not Modbus), or whose length does not fit its
 //! function code, is dropped without an answer ([`check`]), and the next
 //! one is read.
+//!
+//! Units: the configured unit ID (as on RTU) and [`GATEWAY_UNIT`] both
+//! address the gateway itself, and the answer carries the unit the
+//! request named; unit 0 is a broadcast (writes carried out, nothing
+//! answered); other units get no answer.
 
 /// Longest ADU: the MBAP header (7 bytes) and a PDU of up to 253.
 pub const MAX_ADU: usize = 260;
 /// Bytes of the header before the unit ID (transaction ID, protocol ID,
 /// length): the unit ID is at this offset.
 pub const UNIT_AT: usize = 6;
+/// Unit 255 (FFH): the Modbus TCP implementation guide's unit ID for a
+/// server addressed by its IP address alone, accepted beside the
+/// configured unit over TCP only (on an RTU line 255 is no unit of ours).
+pub const GATEWAY_UNIT: u8 = 0xFF;
 /// Smallest length field: the unit ID and a function code.
 pub const MIN_LENGTH: usize = 2;
 /// Largest length field: the unit ID and a PDU of 253 bytes.

@@ -6,7 +6,7 @@ use std::vec::Vec;
 
 use super::*;
 use crate::config::ModbusConfig;
-use crate::modbus::map::{CMD_BUSY, HEND, PEND, PWR, SV};
+use crate::modbus::map::{CMD_BUSY, CMD_DONE, HEND, MOVE, PEND, PWR, SV};
 
 /// A Modbus port over byte vectors.
 #[derive(Default)]
@@ -74,9 +74,12 @@ const READ_PNOW_1: [u8; 8] = [0x01, 0x03, 0x90, 0x00, 0x00, 0x02, 0xE9, 0x0B];
 const PNOW_1: [u8; 9] = [0x01, 0x03, 0x04, 0xFF, 0xFF, 0x9C, 0x64, 0x92, 0xFC];
 const READ_9006: [u8; 8] = [0x01, 0x03, 0x90, 0x06, 0x00, 0x01, 0x49, 0x0B];
 const EXCEPTION_03_02: [u8; 5] = [0x01, 0x83, 0x02, 0xC0, 0xF1];
-/// Function 2BH (read device identification): not served.
+/// Function 2BH, MEI type 14: read device identification, basic stream
+/// from object 0.
 const FUNCTION_2B: [u8; 7] = [0x01, 0x2B, 0x0E, 0x01, 0x00, 0x70, 0x77];
-const EXCEPTION_2B_01: [u8; 5] = [0x01, 0xAB, 0x01, 0x9E, 0xF0];
+/// Function 11H (report server ID): not served.
+const FUNCTION_11: [u8; 4] = [0x01, 0x11, 0xC0, 0x2C];
+const EXCEPTION_11_01: [u8; 5] = [0x01, 0x91, 0x01, 0x8C, 0x50];
 /// DRG1 of axis 1 := SON.
 const SERVO_ON_1: [u8; 8] = [0x01, 0x06, 0x0D, 0x00, 0x10, 0x00, 0x86, 0xA6];
 /// DRG1 of axis 1 := SON | HOME.
@@ -112,7 +115,14 @@ fn dss1_waits_for_a_poll_after_a_confirmed_motion_command() {
     assert_eq!(c.dss1(0), PWR | SV | HEND);
     c.axes[0].axis_status = 0b1_1100;
     c.stale = 1;
-    assert_eq!(c.dss1(0), PWR | SV);
+    assert_eq!(c.dss1(0), PWR | SV | MOVE);
+    // Moving (212H bit 0): MOVE, no PEND.
+    c.stale = 0;
+    c.axes[0].axis_status = 0b1_1101;
+    assert_eq!(c.dss1(0), PWR | SV | HEND | MOVE);
+    // At rest after a stop: neither MOVE nor PEND (bit 4 clear).
+    c.axes[0].axis_status = 0b0_1100;
+    assert_eq!(c.dss1(0), PWR | SV | HEND);
 }
 
 #[test]
@@ -121,7 +131,8 @@ fn refusals_by_exception_code() {
     // An address outside the map: 02.
     assert_eq!(ask(&mut gw, &READ_9006), EXCEPTION_03_02);
     // A function the gateway does not serve: 01.
-    assert_eq!(ask(&mut gw, &FUNCTION_2B), EXCEPTION_2B_01);
+    assert_eq!(rtu(&FUNCTION_11[..2]), FUNCTION_11);
+    assert_eq!(ask(&mut gw, &FUNCTION_11), EXCEPTION_11_01);
     // A read of no registers: 03.
     assert_eq!(
         ask(&mut gw, &rtu(&[1, 3, 0x90, 0, 0, 0]))[..3],
@@ -184,8 +195,8 @@ fn silence_for_broadcasts_other_units_and_broken_frames() {
     // Another unit.
     assert_eq!(ask(&mut gw, &rtu(&[2, 3, 0x90, 0, 0, 2])), []);
     // A wrong CRC, even with a function the gateway would refuse.
-    let mut bad = FUNCTION_2B;
-    bad[6] ^= 0x80;
+    let mut bad = FUNCTION_11;
+    bad[3] ^= 0x80;
     assert_eq!(ask(&mut gw, &bad), []);
     // Function 16 whose byte count disagrees with its length.
     assert_eq!(ask(&mut gw, &rtu(&[1, 16, 0x0D, 3, 0, 1, 4, 0, 9])), []);
@@ -316,16 +327,16 @@ fn malformed_tcp_requests_are_dropped_or_end_the_connection() {
     let mut unit0 = good.clone();
     unit0[6] = 0;
     assert_eq!(ask_tcp(&mut gw, &unit0), []);
-    // An unknown function: exception 01, with the transaction ID.
+    // An unknown function: exception 01, with the transaction ID, whatever
+    // its length.
     assert_eq!(
-        ask_tcp(&mut gw, &mbap(0x55AA, &[1, 0x2B, 0x0E, 0x01, 0x00, 0x00])),
-        [0x55, 0xAA, 0, 0, 0, 3, 1, 0xAB, 1]
+        ask_tcp(&mut gw, &mbap(0x55AA, &[1, 0x11])),
+        [0x55, 0xAA, 0, 0, 0, 3, 1, 0x91, 1]
     );
-    // rmodbus parses no Modbus TCP ADU shorter than 6 bytes after the
-    // length field: dropped unanswered.
-    let dropped = gw.stats().dropped;
-    assert_eq!(ask_tcp(&mut gw, &mbap(0x55AA, &FUNCTION_2B[..5])), []);
-    assert_eq!(gw.stats().dropped, dropped + 1);
+    assert_eq!(
+        ask_tcp(&mut gw, &mbap(0x55AB, &[1, 0x41, 0, 0, 0, 0, 0, 0])),
+        [0x55, 0xAB, 0, 0, 0, 3, 1, 0xC1, 1]
+    );
     // The good request still answers.
     assert_eq!(ask_tcp(&mut gw, &good)[..9], [0, 1, 0, 0, 0, 7, 1, 3, 4]);
     // Every byte pattern of a short ADU is handled without a panic.
@@ -434,4 +445,226 @@ fn one_upstream_port_speaks_what_the_block_chooses() {
     let reply = one_upstream(UpstreamProtocol::ProtocolB, status);
     assert!(reply.starts_with(b"#BBB00"), "{reply:?}");
     assert!(one_upstream(UpstreamProtocol::ProtocolB, &READ_9006).is_empty());
+}
+
+/// `pdu` (unit ID first) asked over RTU and over TCP: the two answers'
+/// unit and PDU, which must be the same (`None`: no answer on either). A
+/// command the RTU request started is taken as confirmed before the TCP
+/// one, which then starts it again.
+fn both(gw: &mut Gateway, pdu: &[u8]) -> Option<Vec<u8>> {
+    let on_rtu = ask(gw, &rtu(pdu));
+    if gw.regs.hs.take().is_some() {
+        gw.regs.hs.finish(Ok(()));
+    }
+    let on_tcp = ask_tcp(gw, &mbap(0x0A0B, pdu));
+    if on_rtu.is_empty() {
+        assert_eq!(on_tcp, [], "answered over TCP only: {pdu:02X?}");
+        return None;
+    }
+    assert_eq!(rtu::crc16(&on_rtu), 0, "the RTU answer's CRC");
+    let rtu_pdu = on_rtu[..on_rtu.len() - 2].to_vec();
+    assert_eq!(
+        on_tcp[..4],
+        [0x0A, 0x0B, 0, 0],
+        "transaction and protocol IDs"
+    );
+    assert_eq!(
+        usize::from(u16::from_be_bytes([on_tcp[4], on_tcp[5]])),
+        on_tcp.len() - 6,
+        "the MBAP length"
+    );
+    assert_eq!(
+        on_tcp[6..],
+        rtu_pdu[..],
+        "RTU and TCP answer alike: {pdu:02X?}"
+    );
+    Some(rtu_pdu)
+}
+
+#[test]
+fn fc15_and_fc16_check_the_byte_count_against_the_quantity() {
+    let mut gw = gateway(Policy::ForwardAll);
+    // Coil 300 (output port 300), quantity 1: one byte of coils.
+    assert_eq!(
+        both(&mut gw, &[1, 15, 0x01, 0x2C, 0, 1, 1, 1]),
+        Some(std::vec![1, 15, 0x01, 0x2C, 0, 1])
+    );
+    assert_eq!(gw.regs.hs.words()[2], 0x24A);
+    let seq = gw.regs.hs.words()[0] & 0xFF;
+    // Quantity 1 with two bytes, quantity 9 with one, quantity 0: 03, and
+    // nothing carried out (the sequence number stays).
+    for pdu in [
+        &[1, 15, 0x01, 0x2C, 0, 1, 2, 1, 0][..],
+        &[1, 15, 0x01, 0x2C, 0, 9, 1, 0xFF],
+        &[1, 15, 0x01, 0x2C, 0, 0, 0],
+        &[1, 15, 0x01, 0x2C, 0x07, 0xB1, 0],
+    ] {
+        assert_eq!(
+            both(&mut gw, pdu),
+            Some(std::vec![1, 0x8F, 3]),
+            "{pdu:02X?}"
+        );
+    }
+    // POSR of axis 1: quantity 1 with four bytes, quantity 2 with two.
+    for pdu in [
+        &[1, 16, 0x0D, 3, 0, 1, 4, 0, 9, 0, 9][..],
+        &[1, 16, 0x0D, 3, 0, 2, 2, 0, 9],
+        &[1, 16, 0x0D, 3, 0, 0x7C, 0],
+    ] {
+        assert_eq!(
+            both(&mut gw, pdu),
+            Some(std::vec![1, 0x90, 3]),
+            "{pdu:02X?}"
+        );
+    }
+    assert_eq!(gw.regs.posr[0], 0);
+    assert_eq!(gw.regs.hs.words()[0] & 0xFF, seq, "no command started");
+    // The same write with its byte count right.
+    assert_eq!(
+        both(&mut gw, &[1, 16, 0x0D, 3, 0, 1, 2, 0, 9]),
+        Some(std::vec![1, 16, 0x0D, 3, 0, 1])
+    );
+    assert_eq!(gw.regs.posr[0], 9);
+}
+
+#[test]
+fn device_identification_is_answered_alike_on_rtu_and_tcp() {
+    use crate::modbus::ident::{FIRMWARE, PRODUCT, VENDOR};
+    let mut gw = gateway(Policy::ForwardAll);
+    // The recorded request of a common meter's manual: basic, stream.
+    assert_eq!(rtu(&FUNCTION_2B[..5]), FUNCTION_2B);
+    let mut want = std::vec![1, 0x2B, 0x0E, 1, 0x81, 0, 0, 3];
+    for (id, text) in [(0u8, VENDOR), (1, PRODUCT), (2, FIRMWARE)] {
+        want.extend([id, text.len() as u8]);
+        want.extend(text.as_bytes());
+    }
+    assert_eq!(both(&mut gw, &FUNCTION_2B[..5]), Some(want));
+    // Once the controller's 201H reply is in, object 2 carries it too.
+    gw.regs.cache.version = Some(iai_protocol_b::message::VersionResponse {
+        version_number: 0x0107,
+        ..Default::default()
+    });
+    let one = both(&mut gw, &[1, 0x2B, 0x0E, 4, 2]).unwrap();
+    let text = std::str::from_utf8(&one[10..]).unwrap();
+    assert!(
+        text.starts_with(&std::format!("{FIRMWARE}; controller 0107 ")),
+        "{text}"
+    );
+    // What is not served: 01 on both, alike; a misused 43/14: 02 or 03.
+    for (pdu, code) in [
+        (&[1, 0x2B, 0x0D, 1, 0][..], 1),
+        (&[1, 0x2B][..], 1),
+        (&[1, 0x2B, 0x0E, 4, 9][..], 2),
+        (&[1, 0x2B, 0x0E, 7, 0][..], 3),
+        (&[1, 0x11][..], 1),
+        (&[1, 0x08, 0, 0, 0x12, 0x34][..], 1),
+        (&[1, 0x17, 0, 0, 0, 1, 0, 0, 0, 1, 2, 0, 0][..], 1),
+    ] {
+        assert_eq!(
+            both(&mut gw, pdu),
+            Some(std::vec![1, pdu[1] | 0x80, code]),
+            "{pdu:02X?}"
+        );
+    }
+    // Broadcast or another unit: no answer on either.
+    assert_eq!(both(&mut gw, &[0, 0x2B, 0x0E, 1, 0]), None);
+    assert_eq!(both(&mut gw, &[2, 0x11]), None);
+}
+
+#[test]
+fn unit_255_over_tcp_is_the_gateway_itself() {
+    let mut gw = gateway(Policy::ForwardAll);
+    gw.regs.cache.axes[0].current_position = -25_500;
+    // Over TCP, 255 reads what the configured unit (1) reads, and the
+    // answer carries 255.
+    assert_eq!(
+        ask_tcp(&mut gw, &mbap(5, &[0xFF, 3, 0x90, 0, 0, 2])),
+        [0, 5, 0, 0, 0, 7, 0xFF, 3, 4, 0xFF, 0xFF, 0x9C, 0x64]
+    );
+    assert_eq!(
+        ask_tcp(&mut gw, &mbap(6, &[0xFF, 0x2B, 0x0E, 4, 0]))[6..9],
+        [0xFF, 0x2B, 0x0E]
+    );
+    assert_eq!(
+        ask_tcp(&mut gw, &mbap(7, &[0xFF, 0x11])),
+        [0, 7, 0, 0, 0, 3, 0xFF, 0x91, 1]
+    );
+    // A write through 255: the same handshake, echoed with 255.
+    let servo = mbap(8, &[0xFF, 6, 0x0D, 0, 0x10, 0]);
+    assert_eq!(ask_tcp(&mut gw, &servo), servo);
+    assert_eq!(gw.regs.hs.words()[2], 0x232);
+    // On an RTU line 255 is nobody's unit here: no answer.
+    assert_eq!(ask(&mut gw, &rtu(&[0xFF, 3, 0x90, 0, 0, 2])), []);
+}
+
+#[test]
+fn cmdst_counts_accepted_commands_only() {
+    let mut gw = gateway(Policy::ForwardAll);
+    let seq = |gw: &Gateway| gw.regs.hs.words()[0] & 0xFF;
+    assert_eq!(ask(&mut gw, &SERVO_ON_1), SERVO_ON_1);
+    assert_eq!(seq(&gw), 1);
+    // Busy (06), two commands in one write (03), a policy refusal (01
+    // elsewhere): the sequence number stays.
+    assert_eq!(ask(&mut gw, &HOME_1), EXCEPTION_06_06);
+    assert_eq!(seq(&gw), 1);
+    gw.regs.hs.take();
+    gw.regs.hs.finish(Ok(()));
+    assert_eq!(gw.regs.hs.words()[0], CMD_DONE | 1);
+    assert_eq!(
+        ask(&mut gw, &rtu(&[1, 6, 0x0D, 0, 0x01, 0x18]))[..3],
+        [1, 0x86, 3]
+    );
+    assert_eq!(seq(&gw), 1);
+    // A setting is no command: POSR and PRGNO leave it.
+    assert_eq!(ask(&mut gw, &rtu(&[1, 6, 0x0D, 3, 0, 4])).len(), 8);
+    assert_eq!(seq(&gw), 1);
+    // The next accepted command: 2.
+    assert_eq!(ask(&mut gw, &HOME_1), HOME_1);
+    assert_eq!(seq(&gw), 2);
+}
+
+#[test]
+fn window_misuses_by_exception_code() {
+    let mut gw = gateway(Policy::ForwardAll);
+    // A first position above 65531 (the window would pass 65535): 03.
+    assert_eq!(
+        ask(&mut gw, &rtu(&[1, 6, 0x21, 0xF0, 0xFF, 0xFC]))[..3],
+        [1, 0x86, 3]
+    );
+    assert_eq!(ask(&mut gw, &rtu(&[1, 6, 0x21, 0xF0, 0xFF, 0xFB])).len(), 8);
+    gw.regs.hs.take();
+    gw.regs.hs.finish(Ok(()));
+    // A record with axis pattern 0 (no meaning in 26DH; read back it means
+    // "not defined") or above FFH: 03, nothing staged.
+    for pattern in [0u16, 0x100] {
+        let mut one = std::vec![1, 16, 0x22, 0x00, 0, 21, 42];
+        let words: [u16; 21] = [
+            3, pattern, 30, 30, 100, 0, 1000, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+        ];
+        for w in words {
+            one.extend(w.to_be_bytes());
+        }
+        assert_eq!(
+            ask(&mut gw, &rtu(&one))[..3],
+            [1, 0x90, 3],
+            "pattern {pattern}"
+        );
+    }
+    assert_eq!(gw.regs.window[0], 0);
+    // Gaps inside an axis block (9006H..900FH) and FC 04 on a holding
+    // register: 02.
+    for addr in [0x9006u16, 0x900F, 0x9906] {
+        let [a, b] = addr.to_be_bytes();
+        let r = ask(&mut gw, &rtu(&[1, 4, a, b, 0, 1]));
+        assert_eq!(r[..3], [1, 0x84, 2], "{addr:04X}");
+    }
+    assert_eq!(
+        ask(&mut gw, &rtu(&[1, 4, 0x21, 0xF0, 0, 1]))[..3],
+        [1, 0x84, 2]
+    );
+    // A read that runs from a block into its gap: 02.
+    assert_eq!(
+        ask(&mut gw, &rtu(&[1, 3, 0x90, 0x05, 0, 2]))[..3],
+        [1, 0x83, 2]
+    );
 }

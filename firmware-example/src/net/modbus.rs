@@ -12,7 +12,10 @@
 //! ID other than 0 is dropped unanswered.
 //!
 //! A connection without a request for [`IDLE_MS`] is closed (a client that
-//! connects and says nothing); one that hears nothing from its peer (keep-
+//! connects and says nothing); one whose client closed its side (FIN) is
+//! closed as soon as its whole requests are answered, a partial request
+//! dropped; one the client reset is free at once; one that hears nothing
+//! from its peer (keep-
 //! alives unanswered: a client that vanished) is reset by the stack as on
 //! the protocol-B port, after [`super::host::SILENCE_LIMIT_MS`].
 //! While all [`CLIENTS`] sockets are taken, one more connection is reset
@@ -261,10 +264,13 @@ impl ModbusClients {
             // Fits: checked above.
             let _ = socket.send_slice(&resp);
         }
-        if !socket.may_recv() && drained {
-            // The client closed its side: what it sent was answered (a
-            // partial request is dropped); our answers go out before our
-            // close.
+        // The client closed its side (its FIN came: CLOSE-WAIT; smoltcp's
+        // `may_recv` stays true while a partial request is still in the
+        // buffer, so it cannot tell): what it sent whole was answered, a
+        // partial request is dropped, and our answers go out before our
+        // close. The socket is free for the next client at once.
+        let peer_closed = !socket.may_recv() || socket.state() == State::CloseWait;
+        if peer_closed && drained {
             socket.close();
             return Slot::Closing { since: now };
         }

@@ -6,6 +6,7 @@
 #![allow(dead_code)]
 
 pub mod mbpoll;
+pub mod standard;
 
 use std::io::Read;
 use std::path::{Path, PathBuf};

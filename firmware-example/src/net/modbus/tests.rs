@@ -221,3 +221,48 @@ fn a_client_that_vanishes_is_reset_after_the_silence_limit() {
     rig.run(50, 1);
     assert_eq!(rig.received(CLIENTS), pnow_12000(99));
 }
+
+#[test]
+fn a_client_that_closes_or_resets_mid_request_frees_its_socket_at_once() {
+    let mut rig = rig();
+    rig.gateway.regs.cache.axes[0].current_position = 12_000;
+    rig.run(10, 1);
+    for n in 0..CLIENTS {
+        rig.connect(n, MODBUS_PORT, 40_000 + n as u16);
+    }
+    rig.run(20, 1);
+    // Client 0: a whole request and half of the next, then FIN; clients 1
+    // and 2: half a request, then FIN; client 3: half a request, then RST.
+    let mut first = read_pnow(1);
+    first.extend(&read_pnow(2)[..7]);
+    rig.client(0).send_slice(&first).unwrap();
+    for n in 1..CLIENTS {
+        let half = read_pnow(n as u16 + 10);
+        rig.client(n).send_slice(&half[..7]).unwrap();
+    }
+    rig.run(10, 1);
+    let t0 = rig.now;
+    for n in 0..3 {
+        rig.client(n).close();
+    }
+    rig.client(3).abort();
+    // Every socket is let go within a few rounds, not after the idle time.
+    let freed = rig.run_until(1_000, 1, |r| {
+        (0..CLIENTS).all(|n| !matches!(r.net.modbus().unwrap().slot(n), Some(Slot::Open { .. })))
+    });
+    let after = rig.now - t0;
+    std::eprintln!("four clients closed or reset mid-request: their sockets let go in {after} ms");
+    assert!(freed, "still held {after} ms after their FIN or RST");
+    // Client 0 got the answer to its whole request, then our FIN.
+    rig.run(50, 1);
+    assert_eq!(rig.received(0), pnow_12000(1));
+    assert!(!rig.client(0).may_recv(), "{}", rig.client(0).state());
+    // A new client is served at once.
+    rig.client(CLIENTS).abort();
+    rig.connect(CLIENTS, MODBUS_PORT, 40_020);
+    rig.send_when_connected(CLIENTS, &read_pnow(99), 100);
+    rig.run(20, 1);
+    assert_eq!(rig.received(CLIENTS), pnow_12000(99));
+    let stats = rig.net.modbus().map(ModbusClients::stats).unwrap();
+    assert_eq!((stats.requests, stats.idle_closed), (2, 0));
+}
