@@ -290,7 +290,7 @@ pub fn command<'a, R: Request<'a>>(
     req: &R,
     hooks: &Hooks<'_>,
 ) -> Result<Vec<u8>, TableError> {
-    let mut client: Box<Client> = Box::new(Client::new());
+    let mut client: Box<Client> = Box::new(Client::new().with_proof());
     let now = link.now();
     client
         .start(link.line_mut(), req, now)

@@ -22,6 +22,12 @@
 //! then parses the reply as the command's typed response. The timing,
 //! resends and what may still arrive are the line's ([`crate::line`]).
 //!
+//! With [`Client::with_proof`] a reply counts only once a fence sent after
+//! it proved the order ([`Line::start_proof`]): if the line heard a frame
+//! it could not place meanwhile (it repeats frames), the reply may be a
+//! copy of an earlier one; a query is asked again (the line now expects
+//! copies), anything else ends [`Failure::Unconfirmed`].
+//!
 //! An error response becomes [`Failure::Controller`] with its code. With
 //! [`Client::with_error_detail`] the client then asks 216H for the latest
 //! system error and returns its detail with the code (**inferred**: that
@@ -51,10 +57,17 @@ enum Phase {
     Running {
         detail_for: Option<u16>,
     },
+    /// The reply is taken; a fence proves no copy stood in for it.
+    Proving {
+        started: bool,
+    },
     /// Over: `Ok(true)` with a reply, `Ok(false)` for a command without
     /// normal response.
     Done(Result<bool, Failure>),
 }
+
+/// Times a query is asked again when its reply could not be proved.
+const PROOF_ASKS: u8 = 2;
 
 /// Sends commands and matches their replies.
 pub struct Client<
@@ -70,6 +83,12 @@ pub struct Client<
     phase: Phase,
     /// The ID of the command started last.
     id: u16,
+    /// Prove each reply before it counts.
+    prove: bool,
+    /// The line's count of unplaced frames when the command started.
+    unplaced_at_start: u32,
+    /// Times the command was asked again for want of a proof.
+    asked_again: u8,
 }
 
 impl<const CMD: usize, const REPLY: usize> Default for Client<CMD, REPLY> {
@@ -88,7 +107,17 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
             fetch_error_detail: None,
             phase: Phase::Idle,
             id: 0,
+            prove: false,
+            unplaced_at_start: 0,
+            asked_again: 0,
         }
+    }
+
+    /// This client, proving each reply before it counts (see the module
+    /// docs): one fence more per command.
+    pub const fn with_proof(mut self) -> Self {
+        self.prove = true;
+        self
     }
 
     /// This client, asking 216H for the detail of every error response.
@@ -118,7 +147,7 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
         self.command_len = req.emit_with(cfg.station, cfg.checksum, &mut self.command)?;
         line.start(R::INFO, now);
         self.id = R::ID;
-        self.phase = Phase::Running { detail_for: None };
+        self.began(line);
         Ok(())
     }
 
@@ -137,7 +166,7 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
         self.command_len = req.emit_with(cfg.station, cfg.checksum, &mut self.command)?;
         line.start_raw(R::ID, max_sends, now);
         self.id = R::ID;
-        self.phase = Phase::Running { detail_for: None };
+        self.began(line);
         Ok(())
     }
 
@@ -163,8 +192,14 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
         let max_sends = line.config().max_sends;
         line.start_raw(f.code(), max_sends, now);
         self.id = f.code();
-        self.phase = Phase::Running { detail_for: None };
+        self.began(line);
         Ok(())
+    }
+
+    fn began(&mut self, line: &Line) {
+        self.unplaced_at_start = line.stats().unplaced;
+        self.asked_again = 0;
+        self.phase = Phase::Running { detail_for: None };
     }
 
     /// Decides the next step at tick `now`.
@@ -173,6 +208,23 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
             let detail_for = match self.phase {
                 Phase::Idle => return Step::Idle,
                 Phase::Done(r) => return Step::Done(r.map(|_| ())),
+                Phase::Proving { started: false } => {
+                    line.start_proof(now);
+                    self.phase = Phase::Proving { started: true };
+                    continue;
+                }
+                Phase::Proving { started: true } => {
+                    match line.poll(now) {
+                        Due::Fence => return Step::Transmit(line.fence_bytes()),
+                        Due::WaitUntil(t) => return Step::WaitUntil(t),
+                        Due::Done(Ok(())) => self.proved(line, now),
+                        Due::Done(Err(e)) => self.phase = Phase::Done(Err(e)),
+                        Due::Send { .. } | Due::Idle => {
+                            self.phase = Phase::Proving { started: false }
+                        }
+                    }
+                    continue;
+                }
                 Phase::Running { detail_for } => detail_for,
             };
             match line.poll(now) {
@@ -221,7 +273,32 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
             }
             (Err(e), None) => Err(e),
         };
-        self.phase = Phase::Done(result);
+        self.phase = if self.prove && result == Ok(true) && detail_for.is_none() {
+            Phase::Proving { started: false }
+        } else {
+            Phase::Done(result)
+        };
+    }
+
+    /// The proof's echo is back: the reply counts if nothing unplaced came
+    /// since the command started; else a query is asked again.
+    fn proved(&mut self, line: &mut Line, now: u32) {
+        let unplaced = line.stats().unplaced;
+        if unplaced == self.unplaced_at_start {
+            self.phase = Phase::Done(Ok(true));
+            return;
+        }
+        let safe = catalogue::request_rules(self.id)
+            .is_some_and(|(resend, _)| resend == catalogue::Resend::Safe);
+        if safe && self.asked_again < PROOF_ASKS {
+            self.asked_again += 1;
+            self.unplaced_at_start = unplaced;
+            let max_sends = line.config().max_sends;
+            line.start_raw(self.id, max_sends, now);
+            self.phase = Phase::Running { detail_for: None };
+        } else {
+            self.phase = Phase::Done(Err(Failure::Unconfirmed { unplaced }));
+        }
     }
 
     fn has_normal_response(&self, line: &Line) -> bool {

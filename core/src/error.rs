@@ -244,6 +244,15 @@ pub enum Failure<E = core::convert::Infallible> {
         /// Why.
         error: Error,
     },
+    /// The line repeats frames or answers out of order (it heard frames
+    /// it could not place, [`crate::line::Heard::Unplaced`]) and asking
+    /// again did not give a reply that a proof of order confirmed: the
+    /// reply taken may be a copy of an earlier one. Declare the line's
+    /// duplicate window (`LineConfig::duplicate_window_ms`).
+    Unconfirmed {
+        /// Frames the line could not place.
+        unplaced: u32,
+    },
     /// A command could not be emitted, a reply not parsed as the type
     /// asked for, or the configuration cannot work.
     Protocol(Error),
@@ -276,6 +285,7 @@ impl Failure {
                 records,
             },
             Failure::InvalidRecord { index, error } => Failure::InvalidRecord { index, error },
+            Failure::Unconfirmed { unplaced } => Failure::Unconfirmed { unplaced },
             Failure::Protocol(e) => Failure::Protocol(e),
             Failure::Closed => Failure::Closed,
             Failure::Io(never) => match never {},
@@ -314,6 +324,10 @@ impl<E: core::fmt::Debug> core::fmt::Display for Failure<E> {
             Failure::InvalidRecord { index, error } => {
                 write!(f, "record {index} cannot be encoded: {error}")
             }
+            Failure::Unconfirmed { unplaced } => write!(
+                f,
+                "the line repeats frames ({unplaced} it could not place) and no reply could be confirmed: declare its duplicate window"
+            ),
             Failure::Protocol(e) => write!(f, "{e}"),
             Failure::Closed => f.write_str("the link closed"),
             Failure::Io(e) => write!(f, "I/O error: {e:?}"),

@@ -153,6 +153,9 @@ pub(crate) fn table_read(a: &ReadArgs) -> Run {
         r.map(|_| ())
     };
     let bytes = csv_bytes(&recs, a.axes);
+    if let Some(note) = link.repeats_note() {
+        eprintln!("{note}");
+    }
     if let Err(e) = result {
         return Err(keep_partial(
             a,

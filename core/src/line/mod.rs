@@ -315,6 +315,9 @@ pub struct Line {
     taken_next: usize,
     /// The copy window the line learned from unplaced frames, ms.
     learned_copy_ms: u32,
+    /// The longest time, ms, between a reply taken and an earlier one with
+    /// the same bytes (a copy may have stood in for a reply).
+    repeat_ms: u32,
     /// A proof of order was asked for ([`Line::start_proof`]).
     proving: bool,
     /// Frames heard while the owner holds its reply, or no engine runs.
@@ -379,6 +382,7 @@ impl Line {
             taken: [None; TAKEN],
             taken_next: 0,
             learned_copy_ms: 0,
+            repeat_ms: 0,
             proving: false,
             overheard: overheard::Overheard::new(),
             stats: LineStats {
@@ -594,15 +598,18 @@ impl Line {
                         let fence_ok = self.cfg.fences
                             && self.no_fence_until.is_none_or(|t| self.over(now, t));
                         if !fence_ok {
-                            match owed {
-                                Some(t) => return Due::WaitUntil(t),
-                                None => {
-                                    // No fence: the replies are waited out.
-                                    self.proving = false;
-                                    self.phase = Phase::Finished(Ok(()));
-                                    continue;
-                                }
+                            if let Some(t) = owed {
+                                return Due::WaitUntil(t);
                             }
+                            // No fence proves the order: the replies to the
+                            // last command are waited out instead.
+                            let until = self.late_horizon(self.last_sent);
+                            if !self.over(now, until) {
+                                return Due::WaitUntil(until);
+                            }
+                            self.proving = false;
+                            self.phase = Phase::Finished(Ok(()));
+                            continue;
                         }
                         self.fence.next(self.cfg.station, self.cfg.checksum);
                         self.stats.fences += 1;
@@ -791,6 +798,14 @@ impl Line {
 
     /// Remembers a reply taken at `now`.
     fn took(&mut self, print: u32, id: u16, values: Span, now: u32) {
+        let same = self
+            .taken
+            .iter()
+            .flatten()
+            .filter(|t| t.fingerprint == print);
+        if let Some(after) = same.map(|t| now.wrapping_sub(t.at)).min() {
+            self.repeat_ms = self.repeat_ms.max(after);
+        }
         if let Some(slot) = self.taken.get_mut(self.taken_next) {
             *slot = Some(Taken {
                 fingerprint: print,
@@ -803,9 +818,11 @@ impl Line {
     }
 
     /// A frame nothing explains arrived at `now`: the line repeats frames.
-    /// It learns a copy window (twice the lateness of a copy whose original
-    /// it took, or the time a reply may take, late window included), and
-    /// every reply taken within it may still be copied.
+    /// It learns a copy window: twice the lateness of a copy whose original
+    /// it took, or of the latest reply taken with the bytes of an earlier
+    /// one (a copy may have stood in for it: this frame is then the reply
+    /// displaced), or else the time a reply may take; every reply taken
+    /// within it may still be copied.
     fn unplaced(&mut self, print: Option<u32>, now: u32) {
         self.stats.unplaced += 1;
         let late = self
@@ -815,8 +832,9 @@ impl Line {
             .filter(|t| Some(t.fingerprint) == print)
             .map(|t| now.wrapping_sub(t.at))
             .min();
+        let late = late.or((self.repeat_ms > 0).then_some(self.repeat_ms));
         let window = match late {
-            Some(l) => l.saturating_mul(2).max(self.cfg.timeout_ms),
+            Some(l) => l.saturating_mul(2).max(1),
             None => self.cfg.timeout_ms.saturating_add(self.cfg.late_window_ms),
         }
         .min(MAX_HORIZON_MS / 2);
