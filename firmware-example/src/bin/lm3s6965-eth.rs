@@ -39,9 +39,11 @@ use firmware_example::bridge::Bridge;
 use firmware_example::modbus::Gateway;
 use firmware_example::net::config::{NetConfig, NetSource, BLOCK_LEN, BLOCK_OFFSET};
 use firmware_example::net::modbus::{ModbusBuffers, MODBUS_PORT};
+use firmware_example::net::sparkplug::config::{self as sparkplug_config, SparkplugConfig};
+use firmware_example::net::sparkplug::{self, SparkplugBuffers};
 use firmware_example::net::stellaris::{self, Mmio, Regs, Stellaris, FRAME_CAP};
 use firmware_example::net::{self, AddressSource, Buffers, Net, NetEvent, SocketSlots};
-use firmware_example::serial::{DownstreamRings, FlowControl, IsrEnd, Line, DOWNSTREAM_MARKS};
+use firmware_example::serial::{DownstreamRings, FlowControl, IsrEnd, UartRings, DOWNSTREAM_MARKS};
 use lm3s6965::{interrupt, Interrupt};
 use runtime::{Handoff, Out};
 
@@ -52,7 +54,7 @@ const CORE_CLOCK_HZ: u32 = 12_000_000;
 /// Watchdog period: a loop stalled for 2 to 4 s resets the MCU.
 const WATCHDOG_MS: u32 = 2_000;
 
-static mut DOWN_LINE: DownstreamRings = Line::new();
+static mut DOWN_LINE: DownstreamRings = UartRings::new();
 /// The bridge and the network side, written once at start (kept out of
 /// `.data`).
 static mut BRIDGE: MaybeUninit<Bridge> = MaybeUninit::uninit();
@@ -63,6 +65,7 @@ static mut SLOTS: MaybeUninit<SocketSlots<'static>> = MaybeUninit::uninit();
 /// Zeroed: `.bss`.
 static mut BUFFERS: Buffers = Buffers::new();
 static mut MODBUS_BUFFERS: ModbusBuffers = ModbusBuffers::new();
+static mut SPARKPLUG_BUFFERS: SparkplugBuffers = SparkplugBuffers::new();
 static mut RX_FRAME: [u8; FRAME_CAP] = [0; FRAME_CAP];
 static mut TX_FRAME: [u8; FRAME_CAP] = [0; FRAME_CAP];
 
@@ -199,6 +202,14 @@ fn load_net_config() -> (NetConfig, NetSource) {
     NetConfig::from_block(page.get(BLOCK_OFFSET..).unwrap_or(&[]))
 }
 
+/// The Sparkplug settings from their block in the configuration page.
+fn load_sparkplug_config() -> SparkplugConfig {
+    // SAFETY: the memory map reserves the configuration page; only read.
+    let page = unsafe { &*addr_of!(_bridge_config) };
+    let block = page.get(sparkplug_config::BLOCK_OFFSET..).unwrap_or(&[]);
+    SparkplugConfig::from_block(block).0
+}
+
 /// What `main` sets up.
 struct Parts {
     bridge: &'static mut Bridge,
@@ -242,6 +253,8 @@ fn setup(now: u32) -> Parts {
             now,
         ));
         net.add_modbus(&mut *addr_of_mut!(MODBUS_BUFFERS), MODBUS_PORT);
+        let sparkplug_buffers = &mut *addr_of_mut!(SPARKPLUG_BUFFERS);
+        net.add_sparkplug(load_sparkplug_config(), mac, sparkplug_buffers, now);
         let line = &mut *addr_of_mut!(DOWN_LINE);
         let (down_isr, down) = line.split(FlowControl::None, DOWNSTREAM_MARKS, &pend_down);
         cortex_m::interrupt::free(|cs| DOWN_END.borrow(cs).set(Some(down_isr)));
@@ -263,6 +276,19 @@ fn setup(now: u32) -> Parts {
         hex_byte(&mut out, *b);
     }
     out.str("\n");
+    if let Some(node) = net.sparkplug() {
+        let cfg = node.config();
+        let mut out = Out::new();
+        out.str("firmware-example: sparkplug ")
+            .str(sparkplug::NAMESPACE)
+            .str("/")
+            .str(&cfg.group)
+            .str("/NBIRTH/")
+            .str(node.node_id())
+            .str(" via broker ");
+        dotted(&mut out, cfg.broker);
+        out.str(":").dec(u64::from(cfg.port)).str("\n");
+    }
     Parts {
         bridge,
         gateway,
@@ -309,6 +335,20 @@ fn report(event: NetEvent) {
         }
         NetEvent::AddressLost => {
             out.str("firmware-example: DHCP lease lost\n");
+        }
+        NetEvent::Sparkplug(e) => {
+            out.str("firmware-example: sparkplug ");
+            match e {
+                sparkplug::Event::Connected => out.str("connected"),
+                sparkplug::Event::Born { bd_seq } => {
+                    out.str("NBIRTH out, bdSeq ").dec(u64::from(bd_seq))
+                }
+                sparkplug::Event::Refused(code) => {
+                    out.str("refused, CONNACK ").dec(u64::from(code))
+                }
+                sparkplug::Event::Lost => out.str("connection lost"),
+            };
+            out.str("\n");
         }
     }
 }
