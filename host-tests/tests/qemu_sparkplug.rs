@@ -1,0 +1,551 @@
+//! The Ethernet build as a Sparkplug B 3.0 edge node on a real broker, end
+//! to end: Debian's Mosquitto (user names and passwords, anonymous
+//! clients refused), the `lm3s6965-eth` firmware under QEMU with the
+//! simulated controller behind it, its Sparkplug block pointing at the
+//! broker through QEMU's user network (10.0.2.2), and a Sparkplug host in
+//! Python (`host-tests/sparkplug/sparkplug_host.py`: paho-mqtt, the
+//! payload decoded with `sparkplug_b.proto` compiled by protoc) that
+//! checks every message on its own (types, aliases, seq, DATA by
+//! exception) and prints it as JSON for the checks here. Two boots:
+//!
+//! 1. a primary host configured, commands allowed, the policy forwarding
+//!    all: no BIRTH before the host's STATE says online; NBIRTH then
+//!    DBIRTH with the metrics and valid types; DCMD servo on, home, a move
+//!    of 200 mm, each done only once the controller confirmed, DDATA
+//!    while the axis moves, its last position equal to `iai send 212`'s;
+//!    a rebirth on NCMD with the same aliases; DDEATH when the controller
+//!    stops answering, DBIRTH when it answers again; NDEATH from the
+//!    broker, with the last NBIRTH's bdSeq, when QEMU is killed;
+//! 2. the read-only policy: NBIRTH without waiting (no primary host), a
+//!    DCMD servo refused (`Command/State` refused, code B06, message
+//!    232H) and the servo as it was.
+//!
+//! Mosquitto, protoc and the venv's paho-mqtt and protobuf come from
+//! `tools/setup.sh`.
+
+use std::collections::HashMap;
+use std::io::{BufRead, BufReader, Write};
+use std::net::TcpListener;
+use std::path::PathBuf;
+use std::process::{Child, ChildStdin, Command, Stdio};
+use std::sync::mpsc::{channel, Receiver};
+use std::time::{Duration, Instant};
+
+use firmware_example::config::{Config, Policy};
+use firmware_example::net::sparkplug::config::{text_of, SparkplugConfig};
+use host_tests::gateway::{self, EthernetGateway, Options, QEMU_HOST};
+use serde_json::{json, Value};
+
+const GROUP: &str = "Plant";
+const HOST_ID: &str = "scada";
+
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// Mosquitto on a free port of 127.0.0.1 with a password file; killed
+/// when dropped.
+struct Broker {
+    child: Child,
+    port: u16,
+    _dir: PathBuf,
+}
+
+impl Broker {
+    fn start() -> Broker {
+        let port = free_port();
+        let dir = host_tests::qemu::target_dir().join(format!("mosquitto-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let passwd = dir.join("passwd");
+        for (i, (user, pass)) in [("gw", "gw-secret"), ("host", "host-secret")]
+            .iter()
+            .enumerate()
+        {
+            let mut cmd = Command::new("mosquitto_passwd");
+            cmd.arg("-b");
+            if i == 0 {
+                cmd.arg("-c");
+            }
+            let st = cmd.arg(&passwd).args([user, pass]).status();
+            assert!(
+                st.is_ok_and(|s| s.success()),
+                "mosquitto_passwd (tools/setup.sh)"
+            );
+        }
+        let conf = dir.join("mosquitto.conf");
+        std::fs::write(
+            &conf,
+            format!(
+                "listener {port} 127.0.0.1\nallow_anonymous false\npassword_file {}\n",
+                passwd.display()
+            ),
+        )
+        .unwrap();
+        let child = Command::new("mosquitto")
+            .arg("-c")
+            .arg(&conf)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("mosquitto (tools/setup.sh installs it)");
+        let end = Instant::now() + Duration::from_secs(10);
+        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+            assert!(Instant::now() < end, "mosquitto did not listen on {port}");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        Broker {
+            child,
+            port,
+            _dir: dir,
+        }
+    }
+}
+
+impl Drop for Broker {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// The Python host: its messages, and the values of the controller's
+/// metrics as its BIRTH and DATA left them.
+struct Host {
+    child: Child,
+    stdin: ChildStdin,
+    lines: Receiver<Value>,
+    log: Vec<Value>,
+    device: HashMap<String, Value>,
+}
+
+impl Host {
+    fn start(port: u16) -> Host {
+        let py = host_tests::qemu::workspace_root().join(".venv/bin/python");
+        let script =
+            host_tests::qemu::workspace_root().join("host-tests/sparkplug/sparkplug_host.py");
+        let mut child = Command::new(py)
+            .arg(script)
+            .args([
+                "--port",
+                &port.to_string(),
+                "--group",
+                GROUP,
+                "--host-id",
+                HOST_ID,
+            ])
+            .args(["--username", "host", "--password", "host-secret"])
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .spawn()
+            .expect("the venv's python (tools/setup.sh)");
+        let stdin = child.stdin.take().unwrap();
+        let stdout = child.stdout.take().unwrap();
+        let (tx, lines) = channel();
+        std::thread::spawn(move || {
+            for l in BufReader::new(stdout).lines() {
+                let Ok(l) = l else { break };
+                if let Ok(v) = serde_json::from_str::<Value>(&l) {
+                    if tx.send(v).is_err() {
+                        break;
+                    }
+                }
+            }
+        });
+        let mut h = Host {
+            child,
+            stdin,
+            lines,
+            log: Vec::new(),
+            device: HashMap::new(),
+        };
+        h.wait_for("the host ready", 20, |m| m["ready"] == true);
+        h
+    }
+
+    fn send(&mut self, cmd: Value) {
+        writeln!(self.stdin, "{cmd}").unwrap();
+        self.stdin.flush().unwrap();
+        self.wait_for("the host's command done", 10, |m| m.get("done").is_some());
+    }
+
+    /// Takes the host's lines until `pred` holds for one (the first
+    /// such), at most `secs`; every message's own checks must pass.
+    fn wait_for(&mut self, what: &str, secs: u64, pred: impl Fn(&Value) -> bool) -> Value {
+        let end = Instant::now() + Duration::from_secs(secs);
+        loop {
+            let left = end.saturating_duration_since(Instant::now());
+            let m = self.lines.recv_timeout(left).unwrap_or_else(|_| {
+                panic!(
+                    "no {what} within {secs} s; the host saw:\n{}\nthe controller's metrics: {:?}",
+                    self.tail(),
+                    self.device
+                )
+            });
+            let errors = m["errors"].as_array().cloned().unwrap_or_default();
+            assert!(errors.is_empty(), "the host found {errors:?} in {m}");
+            if m["device"] == "controller" {
+                if m["kind"] == "DBIRTH" {
+                    self.device.clear();
+                }
+                for metric in m["metrics"].as_array().into_iter().flatten() {
+                    let name = metric["name"].as_str().unwrap_or_default().to_owned();
+                    self.device.insert(name, metric["value"].clone());
+                }
+            }
+            self.log.push(m.clone());
+            if pred(&m) {
+                return m;
+            }
+        }
+    }
+
+    /// Waits until the controller's metrics satisfy `pred`.
+    fn wait_device(
+        &mut self,
+        what: &str,
+        secs: u64,
+        pred: impl Fn(&HashMap<String, Value>) -> bool,
+    ) {
+        if pred(&self.device) {
+            return;
+        }
+        let end = Instant::now() + Duration::from_secs(secs);
+        while !pred(&self.device) {
+            let left = end
+                .saturating_duration_since(Instant::now())
+                .as_secs()
+                .max(1);
+            assert!(Instant::now() < end, "{what}: {:?}", self.device);
+            self.wait_for(what, left, |m| {
+                m["kind"] == "DDATA" || m["kind"] == "DBIRTH"
+            });
+        }
+    }
+
+    fn tail(&self) -> String {
+        let n = self.log.len().saturating_sub(8);
+        self.log[n..]
+            .iter()
+            .map(|m| {
+                format!("{} {}", m["topic"], m["metrics"])
+                    .chars()
+                    .take(300)
+                    .collect::<String>()
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+
+    fn seen(&self, kind: &str) -> usize {
+        self.log.iter().filter(|m| m["kind"] == kind).count()
+    }
+
+    /// A DCMD to the controller with one metric; waits until its command
+    /// is done (or `expect` other than done).
+    fn dcmd(&mut self, node: &str, name: &str, ty: &str, value: Value) {
+        let metrics = json!([{ "name": name, "type": ty, "value": value }]);
+        self.send(json!({ "dcmd": node, "metrics": metrics }));
+    }
+}
+
+impl Drop for Host {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn names(m: &Value) -> Vec<(String, u64, u64)> {
+    m["metrics"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| {
+            (
+                x["name"].as_str().unwrap_or_default().to_owned(),
+                x["alias"].as_u64().unwrap_or(u64::MAX),
+                x["datatype"].as_u64().unwrap_or(0),
+            )
+        })
+        .collect()
+}
+
+fn metric<'a>(m: &'a Value, name: &str) -> &'a Value {
+    m["metrics"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|x| x["name"] == name)
+        .map(|x| &x["value"])
+        .unwrap_or_else(|| panic!("no {name} in {m}"))
+}
+
+fn node_config(primary: bool) -> SparkplugConfig {
+    SparkplugConfig {
+        enabled: true,
+        commands: true,
+        broker: QEMU_HOST,
+        port: 0,
+        deadband: 0,
+        keep_alive_s: 10,
+        group: text_of(GROUP),
+        username: text_of("gw"),
+        password: text_of("gw-secret"),
+        primary_host: if primary {
+            text_of(HOST_ID)
+        } else {
+            text_of("")
+        },
+        ..SparkplugConfig::default()
+    }
+}
+
+fn boot(broker: &Broker, primary: bool, policy: Policy) -> EthernetGateway {
+    let mut sp = node_config(primary);
+    sp.port = broker.port;
+    let opts = Options {
+        ethernet: true,
+        sparkplug: Some(sp),
+        bridge_config: Some(Config {
+            policy,
+            ..gateway::config(115_200, 115_200)
+        }),
+        ..Options::default()
+    };
+    EthernetGateway::start(&opts).expect("the Ethernet gateway")
+}
+
+#[test]
+fn the_gateway_is_a_sparkplug_edge_node_on_mosquitto() {
+    let broker = Broker::start();
+    let mut host = Host::start(broker.port);
+    let iai = host_tests::qemu::iai_binary().expect("the iai binary");
+
+    // Boot 1: a primary host is configured; nothing is born before its
+    // STATE says online.
+    let gw = boot(&broker, true, Policy::ForwardAll);
+    let t0 = Instant::now();
+    assert!(
+        gw.qemu.wait_for_stdout(
+            "sparkplug connected",
+            Instant::now() + Duration::from_secs(30)
+        ),
+        "the node did not connect:\n{}",
+        gw.qemu.stdout_so_far()
+    );
+    std::thread::sleep(Duration::from_secs(3));
+    while let Ok(m) = host.lines.try_recv() {
+        assert!(
+            m.get("kind").is_none() || m["kind"] == "STATE",
+            "before STATE: {m}"
+        );
+    }
+    host.send(json!({ "state": true }));
+    let nbirth = host.wait_for("NBIRTH", 20, |m| m["kind"] == "NBIRTH");
+    let node = nbirth["node"].as_str().unwrap().to_owned();
+    assert!(
+        node.starts_with("gw-"),
+        "a node ID from the MAC address: {node}"
+    );
+    let bd_seq = metric(&nbirth, "bdSeq").clone();
+    let n = names(&nbirth);
+    assert_eq!(n[0], ("bdSeq".into(), u64::MAX, 4), "bdSeq first, Int64");
+    for (name, ty) in [
+        ("Node Control/Rebirth", 11),
+        ("Node Info/Firmware", 12),
+        ("Node Info/Uptime ms", 8),
+        ("Controller Line/Up", 11),
+        ("Host Line/Host Connected", 11),
+        ("Bridge/Forwarded", 7),
+        ("Config/Policy", 5),
+    ] {
+        assert!(
+            n.iter().any(|(m, _, t)| m == name && *t == ty),
+            "{name} ({ty}) in NBIRTH"
+        );
+    }
+    assert_eq!(metric(&nbirth, "Node Control/Rebirth"), false);
+    let dbirth = host.wait_for("DBIRTH", 20, |m| m["kind"] == "DBIRTH");
+    println!(
+        "NBIRTH after STATE, DBIRTH {:.1} s after boot: {} node and {} device metrics",
+        t0.elapsed().as_secs_f64(),
+        n.len(),
+        names(&dbirth).len()
+    );
+    let d = names(&dbirth);
+    for axis in 1..=8 {
+        for (what, ty) in [
+            ("Position", 3),
+            ("Status", 5),
+            ("Status Bits", 6),
+            ("Alarm", 6),
+            ("Servo", 11),
+        ] {
+            let name = format!("Axis {axis}/{what}");
+            assert!(
+                d.iter().any(|(m, _, t)| *m == name && *t == ty),
+                "{name} ({ty}) in DBIRTH"
+            );
+        }
+    }
+    for (name, ty) in [
+        ("Error/Number", 6),
+        ("Error/Detail 1", 7),
+        ("Program/Status", 6),
+        ("System/Mode", 6),
+        ("Table/Window", 17),
+        ("Table/Records Written", 7),
+        ("Command/State", 12),
+    ] {
+        assert!(
+            d.iter().any(|(m, _, t)| m == name && *t == ty),
+            "{name} ({ty}) in DBIRTH"
+        );
+    }
+    assert_eq!(host.device["Command/State"], "idle");
+
+    // Commands: each done only once the controller confirmed it.
+    let done = |seq: u64| {
+        move |d: &HashMap<String, Value>| d["Command/Seq"] == seq && d["Command/State"] == "done"
+    };
+    host.dcmd(&node, "Axis 1/Servo", "Boolean", json!(true));
+    host.wait_device("servo on done", 10, done(1));
+    host.wait_device("servo on seen", 10, |d| d["Axis 1/Servo"] == true);
+    host.dcmd(&node, "Axis 1/Home", "Boolean", json!(true));
+    host.wait_device("home done", 10, done(2));
+    // Homed and at rest (212H status: homing done, operation completed),
+    // as a DDATA after the command says.
+    let at_rest = |m: &Value| {
+        m["kind"] == "DDATA"
+            && m["metrics"].as_array().unwrap().iter().any(|x| {
+                let s = x["value"].as_u64().unwrap_or(0);
+                x["name"] == "Axis 1/Status" && (s >> 1) & 3 == 2 && s & 0x10 != 0
+            })
+    };
+    host.wait_for("homed and at rest", 20, at_rest);
+    assert_eq!(host.device["Axis 1/Home"], true);
+    let before = host.seen("DDATA");
+    host.dcmd(&node, "Axis 1/Move To", "Int32", json!(200_000));
+    host.wait_device("move done", 10, done(3));
+    host.wait_device("at 200 mm", 30, |d| d["Axis 1/Position"] == 200_000);
+    let moving: Vec<i64> = host.log[before..]
+        .iter()
+        .filter(|m| m["kind"] == "DDATA")
+        .filter_map(|m| m["metrics"].as_array())
+        .flatten()
+        .filter(|x| x["name"] == "Axis 1/Position")
+        .filter_map(|x| x["value"].as_i64())
+        .collect();
+    assert!(
+        moving.iter().filter(|p| (1..200_000).contains(*p)).count() >= 2,
+        "DDATA while the axis moves: {moving:?}"
+    );
+    let out = Command::new(&iai)
+        .args([
+            "send",
+            "212",
+            "query_axis_pattern=1",
+            "--tcp",
+            &gw.addr.to_string(),
+        ])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    let pos: i64 = text
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("axes[0].current_position = "))
+        .and_then(|v| v.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("iai send 212: {text}"));
+    assert_eq!(
+        json!(pos),
+        host.device["Axis 1/Position"],
+        "the last DDATA position is 212H's"
+    );
+    println!(
+        "DDATA positions while moving: {} ({:?} ...)",
+        moving.len(),
+        &moving[..moving.len().min(4)]
+    );
+
+    // Rebirth on NCMD: the same aliases.
+    let aliases = |m: &Value| {
+        names(m)
+            .into_iter()
+            .map(|(n, a, _)| (n, a))
+            .collect::<Vec<_>>()
+    };
+    let births = host.seen("NBIRTH");
+    host.send(json!({ "rebirth": node }));
+    let again = host.wait_for("NBIRTH after NCMD", 10, |m| m["kind"] == "NBIRTH");
+    assert_eq!(host.seen("NBIRTH"), births + 1);
+    assert_eq!(metric(&again, "bdSeq"), &bd_seq, "same session, same bdSeq");
+    assert_eq!(aliases(&again), aliases(&nbirth));
+    let dbirth2 = host.wait_for("DBIRTH after NCMD", 10, |m| m["kind"] == "DBIRTH");
+    assert_eq!(aliases(&dbirth2), aliases(&dbirth));
+
+    // The controller stops answering: DDEATH; answers again: DBIRTH.
+    gw.set_controller_silent(true);
+    let t = Instant::now();
+    host.wait_for("DDEATH", 30, |m| m["kind"] == "DDEATH");
+    println!(
+        "DDEATH {:.1} s after the controller went silent",
+        t.elapsed().as_secs_f64()
+    );
+    gw.set_controller_silent(false);
+    let t = Instant::now();
+    host.wait_for("DBIRTH again", 30, |m| m["kind"] == "DBIRTH");
+    println!(
+        "DBIRTH {:.1} s after it answered again",
+        t.elapsed().as_secs_f64()
+    );
+
+    // QEMU killed: the broker delivers the Will, the last NBIRTH's bdSeq.
+    let pid = gw.qemu.pid();
+    let _ = Command::new("kill")
+        .args(["-KILL", &pid.to_string()])
+        .status();
+    let ndeath = host.wait_for("NDEATH", 30, |m| m["kind"] == "NDEATH");
+    assert_eq!(metric(&ndeath, "bdSeq"), &bd_seq);
+    drop(gw);
+
+    // Boot 2: the read-only policy; no primary host, so no STATE awaited.
+    host.send(json!({ "state": false }));
+    let gw = boot(&broker, false, Policy::ReadOnly);
+    host.wait_for("NBIRTH, boot 2", 30, |m| m["kind"] == "NBIRTH");
+    host.wait_for("DBIRTH, boot 2", 30, |m| m["kind"] == "DBIRTH");
+    let servo = host.device["Axis 1/Servo"].clone();
+    let flip = !servo.as_bool().unwrap();
+    host.dcmd(&node, "Axis 1/Servo", "Boolean", json!(flip));
+    host.wait_device("refused", 10, |d| d["Command/State"] == "refused");
+    assert_eq!(host.device["Command/Code"], 0xB06);
+    assert_eq!(host.device["Command/Message"], 0x232);
+    // A second later the servo is as it was.
+    let end = Instant::now() + Duration::from_secs(1);
+    while let Ok(m) = host
+        .lines
+        .recv_timeout(end.saturating_duration_since(Instant::now()))
+    {
+        host.log.push(m);
+    }
+    let servo_now = host
+        .log
+        .iter()
+        .rev()
+        .filter(|m| m["kind"] == "DBIRTH" || m["kind"] == "DDATA")
+        .filter_map(|m| m["metrics"].as_array())
+        .flatten()
+        .find(|x| x["name"] == "Axis 1/Servo")
+        .map(|x| x["value"].clone());
+    assert_eq!(
+        servo_now,
+        Some(servo),
+        "nothing reached the controller:\n{}",
+        host.tail()
+    );
+    drop(gw);
+}
