@@ -643,8 +643,9 @@ impl<'a> EdgeNode<'a> {
             Ok(p) => self.handle(p, gateway, now),
             Err(_) => return Err(()),
         };
-        inbox.copy_within(total..self.in_len, 0);
-        self.in_len -= total;
+        // What follows the packet moves to the front.
+        mqtt::shift_down(inbox, total..self.in_len, total);
+        self.in_len = self.in_len.saturating_sub(total);
         Ok(Some(event))
     }
 

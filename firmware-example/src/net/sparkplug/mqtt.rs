@@ -213,12 +213,12 @@ impl<'a> Writer<'a> {
         if by == 0 || self.overflow {
             return;
         }
-        if by <= from && from <= self.len && self.len <= self.buf.len() {
-            self.buf.copy_within(from..self.len, from - by);
-            self.len -= by;
-        } else {
+        if by > from || from > self.len {
             self.overflow = true;
+            return;
         }
+        shift_down(self.buf, from..self.len, by);
+        self.len -= by;
     }
 
     /// Writes `bytes` at `at` over what was written there.
@@ -226,6 +226,17 @@ impl<'a> Writer<'a> {
         match self.buf.get_mut(at..at + bytes.len()) {
             Some(dst) if at + bytes.len() <= self.len => dst.copy_from_slice(bytes),
             _ => self.overflow = true,
+        }
+    }
+}
+
+/// Moves the bytes of `buf` in `range` `by` places towards the start, one
+/// at a time (`copy_within` would keep a bounds panic in the image).
+pub fn shift_down(buf: &mut [u8], range: core::ops::Range<usize>, by: usize) {
+    for i in range {
+        let b = buf.get(i).copied().unwrap_or(0);
+        if let Some(dst) = buf.get_mut(i.wrapping_sub(by)) {
+            *dst = b;
         }
     }
 }
