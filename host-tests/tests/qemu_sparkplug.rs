@@ -259,6 +259,43 @@ impl Drop for Host {
     }
 }
 
+/// Protocol-B replies timed while the node publishes: `n` 212H queries
+/// of axis 1, one after the other, on one connection to `addr`; the time
+/// from each command's last byte to its reply's end.
+fn protocol_b_latencies(addr: std::net::SocketAddr, n: usize) -> Vec<Duration> {
+    use iai_protocol_b::frame::{emit_frame, Header, Station};
+    use std::io::Read;
+    let mut buf = [0u8; 64];
+    let len = emit_frame(
+        &mut buf,
+        Header::Command,
+        Station(0x99),
+        0x212,
+        Default::default(),
+        |w| w.put(b"01"),
+    )
+    .unwrap();
+    let mut c = std::net::TcpStream::connect(addr).unwrap();
+    c.set_nodelay(true).unwrap();
+    c.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    let mut times = Vec::new();
+    let mut byte = [0u8; 1];
+    for _ in 0..n {
+        c.write_all(&buf[..len]).unwrap();
+        let t = Instant::now();
+        let mut last = 0u8;
+        loop {
+            assert_eq!(c.read(&mut byte).unwrap(), 1, "the bridge closed");
+            if last == b'\r' && byte[0] == b'\n' {
+                break;
+            }
+            last = byte[0];
+        }
+        times.push(t.elapsed());
+    }
+    times
+}
+
 fn names(m: &Value) -> Vec<(String, u64, u64)> {
     m["metrics"]
         .as_array()
@@ -429,7 +466,11 @@ fn the_gateway_is_a_sparkplug_edge_node_on_mosquitto() {
     host.wait_for("homed and at rest", 20, at_rest);
     assert_eq!(host.device["Axis 1/Home"], true);
     let before = host.seen("DDATA");
+    // Protocol B while the node publishes the move (and a rebirth).
+    let addr = gw.addr;
+    let timing = std::thread::spawn(move || protocol_b_latencies(addr, 150));
     host.dcmd(&node, "Axis 1/Move To", "Int32", json!(200_000));
+    host.send(json!({ "rebirth": node }));
     host.wait_device("move done", 10, done(3));
     host.wait_device("at 200 mm", 30, |d| d["Axis 1/Position"] == 200_000);
     let moving: Vec<i64> = host.log[before..]
@@ -443,6 +484,16 @@ fn the_gateway_is_a_sparkplug_edge_node_on_mosquitto() {
     assert!(
         moving.iter().filter(|p| (1..200_000).contains(*p)).count() >= 2,
         "DDATA while the axis moves: {moving:?}"
+    );
+    let mut times = timing.join().unwrap();
+    times.sort();
+    println!(
+        "protocol-B 212H replies during the move with MQTT on: {} replies, median {:.1} ms, \
+         99th {:.1} ms, worst {:.1} ms",
+        times.len(),
+        times[times.len() / 2].as_secs_f64() * 1e3,
+        times[times.len() * 99 / 100].as_secs_f64() * 1e3,
+        times[times.len() - 1].as_secs_f64() * 1e3
     );
     let out = Command::new(&iai)
         .args([
