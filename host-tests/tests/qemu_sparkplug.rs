@@ -341,11 +341,12 @@ fn node_config(primary: bool) -> SparkplugConfig {
     }
 }
 
-fn boot(broker: &Broker, primary: bool, policy: Policy) -> EthernetGateway {
+fn boot(broker: &Broker, primary: bool, policy: Policy, quit: bool) -> EthernetGateway {
     let mut sp = node_config(primary);
     sp.port = broker.port;
     let opts = Options {
         ethernet: true,
+        quit_sequence: quit,
         sparkplug: Some(sp),
         bridge_config: Some(Config {
             policy,
@@ -364,7 +365,7 @@ fn the_gateway_is_a_sparkplug_edge_node_on_mosquitto() {
 
     // Boot 1: a primary host is configured; nothing is born before its
     // STATE says online.
-    let gw = boot(&broker, true, Policy::ForwardAll);
+    let gw = boot(&broker, true, Policy::ForwardAll, false);
     let t0 = Instant::now();
     assert!(
         gw.qemu.wait_for_stdout(
@@ -566,7 +567,7 @@ fn the_gateway_is_a_sparkplug_edge_node_on_mosquitto() {
 
     // Boot 2: the read-only policy; no primary host, so no STATE awaited.
     host.send(json!({ "state": false }));
-    let gw = boot(&broker, false, Policy::ReadOnly);
+    let gw = boot(&broker, false, Policy::ReadOnly, true);
     host.wait_for("NBIRTH, boot 2", 30, |m| m["kind"] == "NBIRTH");
     host.wait_for("DBIRTH, boot 2", 30, |m| m["kind"] == "DBIRTH");
     let servo = host.device["Axis 1/Servo"].clone();
@@ -598,5 +599,14 @@ fn the_gateway_is_a_sparkplug_edge_node_on_mosquitto() {
         "nothing reached the controller:\n{}",
         host.tail()
     );
-    drop(gw);
+    // The firmware's own end (the quit sequence): its stack peak after
+    // a session of the edge node, for the size report.
+    let (out, _) = gw.quit(Duration::from_secs(10)).expect("the quit sequence");
+    let peak = out
+        .stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("firmware-example: stack peak "))
+        .and_then(|l| l.split_whitespace().next())
+        .unwrap_or_else(|| panic!("no stack peak in:\n{}", out.stdout));
+    println!("stack lm3s6965-eth {peak} (a Sparkplug session)");
 }
