@@ -6,8 +6,8 @@ with sparkplug_b.proto (compiled at start with protoc, package `protobuf`),
 checks what a host can check on its own and prints each message as one JSON
 line on stdout:
 
-  {"topic": T, "kind": "NBIRTH", "seq": S, "metrics": [{"name", "alias",
-   "datatype", "value"}...], "errors": [...]}
+  {"topic": T, "kind": "NBIRTH", "seq": S, "bytes": payload length,
+   "metrics": [{"name", "alias", "datatype", "value"}...], "errors": [...]}
 
 Checks, reported in "errors" (an empty list: none):
 - BIRTH metrics carry a name, an alias and a data type, and the value field
@@ -98,7 +98,7 @@ class Host:
 
     def on_message(self, client, userdata, msg):
         parts = msg.topic.split("/")
-        out = {"topic": msg.topic, "t": time.time(), "errors": []}
+        out = {"topic": msg.topic, "t": time.time(), "bytes": len(msg.payload), "errors": []}
         if len(parts) >= 3 and parts[1] == "STATE":
             out["kind"] = "STATE"
             out["state"] = msg.payload.decode(errors="replace")
