@@ -277,3 +277,118 @@ fn no_birth_before_the_primary_host_is_online_then_births_data_commands_and_a_ne
     let s = rig.net.sparkplug().unwrap().stats();
     assert_eq!((s.sessions, s.births, s.refusals), (1, 2, 1));
 }
+
+/// The broker's side of the model: answers CONNECT, SUBSCRIBE and
+/// PINGREQ, counts the PUBLISH packets and every byte the node sent.
+#[derive(Default)]
+struct BrokerModel {
+    pending: Vec<u8>,
+    publishes: u64,
+    bytes: u64,
+}
+
+impl BrokerModel {
+    fn serve(&mut self, rig: &mut Rig<'static>) {
+        let got = rig.received(0);
+        self.bytes += got.len() as u64;
+        self.pending.extend(got);
+        while let Ok(Some(n)) = mqtt::frame_len(&self.pending) {
+            if n > self.pending.len() {
+                break;
+            }
+            let p: Vec<u8> = self.pending.drain(..n).collect();
+            let body_at = 2 + p[1..].iter().position(|b| b & 0x80 == 0).unwrap();
+            let answer: &[u8] = match p[0] >> 4 {
+                1 => &[0x20, 2, 0, 0],
+                8 => &[0x90, 4, p[body_at], p[body_at + 1], 1, 1],
+                12 => &[0xD0, 0],
+                3 => {
+                    self.publishes += 1;
+                    &[]
+                }
+                _ => &[],
+            };
+            if !answer.is_empty() {
+                rig.client(0).send_slice(answer).unwrap();
+            }
+        }
+    }
+}
+
+/// Axis 1 of a controller in the model: 200 mm out at 100 mm/s, 2 s at
+/// rest, back, 2 s at rest (an 8 s cycle), from `phase` ms on.
+fn profile(t: u32, phase: u32) -> i32 {
+    let c = (t + phase) % 8_000;
+    match c {
+        0..2_000 => (c * 100) as i32,
+        2_000..4_000 => 200_000,
+        4_000..6_000 => 200_000 - ((c - 4_000) * 100) as i32,
+        _ => 0,
+    }
+}
+
+#[test]
+fn a_fleet_of_200_nodes_in_the_host_model_prints_its_load() {
+    // `IAI_FLEET_NODES` and `IAI_FLEET_SECONDS` change the run's size.
+    let env = |k: &str, d: u32| {
+        std::env::var(k)
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(d)
+    };
+    let nodes = env("IAI_FLEET_NODES", 200);
+    let secs = env("IAI_FLEET_SECONDS", 24);
+    let step = 5;
+    let poll = crate::config::ModbusConfig::DEFAULT.poll_period_ms as u32;
+    let wall = std::time::Instant::now();
+    let mut per_node = Vec::new();
+    for n in 0..nodes {
+        let mut rig = Rig::new(net_config(Addressing::Static));
+        let mut cfg = config();
+        cfg.primary_host = text_of("");
+        cfg.deadband = SparkplugConfig::default().deadband;
+        rig.add_sparkplug(cfg);
+        rig.client(0).listen(BROKER_PORT).unwrap();
+        let mut broker = BrokerModel::default();
+        let phase = n * 8_000 / nodes.max(1);
+        let mut next_poll = 0;
+        while rig.now < secs * 1_000 {
+            if rig.now >= next_poll {
+                // The gateway's poll round: the controller answers.
+                let now = rig.now;
+                let c = &mut rig.gateway.regs.cache;
+                c.link_up = true;
+                c.polls_ok = c.polls_ok.wrapping_add(8);
+                c.axes[0].current_position = profile(now, phase);
+                c.axes_at.set(now);
+                next_poll += poll;
+            }
+            rig.run(step, step);
+            broker.serve(&mut rig);
+            if !rig.client(0).is_open() {
+                rig.client(0).listen(BROKER_PORT).unwrap();
+            }
+        }
+        let s = rig.net.sparkplug().unwrap().stats();
+        assert_eq!(s.sessions, 1, "node {n}: one session throughout");
+        per_node.push((
+            broker.publishes as f64 / secs as f64,
+            broker.bytes as f64 / secs as f64,
+        ));
+    }
+    let mean =
+        |f: fn(&(f64, f64)) -> f64| per_node.iter().map(f).sum::<f64>() / per_node.len() as f64;
+    let max = |f: fn(&(f64, f64)) -> f64| per_node.iter().map(f).fold(0.0, f64::max);
+    let (m, b) = (mean(|p| p.0), mean(|p| p.1));
+    std::println!(
+        "fleet model: {nodes} nodes, {secs} s, polling every {poll} ms, axis 1 of each moving half \
+         the time at 100 mm/s: per node {m:.2} messages/s ({:.2} at most) and {b:.0} bytes/s \
+         ({:.0} at most) of MQTT; the fleet {:.0} messages/s, {:.1} kB/s into the broker \
+         (run took {:.1} s)",
+        max(|p| p.0),
+        max(|p| p.1),
+        m * nodes as f64,
+        b * nodes as f64 / 1e3,
+        wall.elapsed().as_secs_f64()
+    );
+}
