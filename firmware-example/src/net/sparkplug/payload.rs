@@ -350,6 +350,30 @@ mod tests {
     }
 
     #[test]
+    fn bytes_take_a_two_byte_key_and_a_two_byte_length() {
+        let words = [0x1234u16; 70];
+        let mut buf = [0u8; 200];
+        let mut w = Writer::new(&mut buf);
+        metric(
+            &mut w,
+            None,
+            Some(175),
+            DataType::Bytes,
+            Value::Words(&words),
+        );
+        let out = w.written();
+        // Metric (field 2), 147 bytes: alias 175, then field 16 (key
+        // 0x82 0x01), 140 bytes.
+        assert_eq!(out[..3], [0x12, 0x93, 0x01]);
+        assert_eq!(out[3..6], [0x10, 0xAF, 0x01]);
+        assert_eq!(out[6..9], [0x82, 0x01, 0x8C]);
+        assert_eq!(out[9..11], [0x01, 0x12]);
+        let m = metrics(out).next().unwrap().unwrap();
+        assert_eq!(m.alias, Some(175));
+        assert!(matches!(m.value, Received::Bytes(b) if b.len() == 140 && b[..2] == [0x12, 0x34]));
+    }
+
+    #[test]
     fn broken_payloads_end_with_an_error() {
         // A metric whose length runs past the end; a group wire type.
         assert_eq!(metrics(&[0x12, 9, 0x10]).next(), Some(Err(BadPayload)));

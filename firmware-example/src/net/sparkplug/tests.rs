@@ -42,6 +42,8 @@ enum Got {
 /// The broker's side: bytes from the node, cut into packets.
 struct Broker {
     pending: Vec<u8>,
+    /// Packets taken and not yet looked at.
+    ready: Vec<Got>,
 }
 
 impl Broker {
@@ -92,13 +94,19 @@ impl Broker {
 
     /// Runs until the node has sent a packet, at most `ms`.
     fn next(&mut self, rig: &mut Rig<'static>, ms: u32) -> Got {
-        let mut got = Vec::new();
-        rig.run_until(ms, 1, |r| {
-            got = self.take(r);
-            !got.is_empty()
-        });
-        assert!(!got.is_empty(), "nothing from the node within {ms} ms");
-        got.remove(0)
+        if self.ready.is_empty() {
+            let mut got = Vec::new();
+            rig.run_until(ms, 1, |r| {
+                got = self.take(r);
+                !got.is_empty()
+            });
+            self.ready = got;
+        }
+        assert!(
+            !self.ready.is_empty(),
+            "nothing from the node within {ms} ms"
+        );
+        self.ready.remove(0)
     }
 }
 
@@ -126,12 +134,14 @@ fn publish_to(rig: &mut Rig<'static>, topic: &str, qos: u8, body: impl FnOnce(&m
 }
 
 #[test]
-fn no_birth_before_the_primary_host_is_online_then_births_data_commands_and_a_new_session() {
+fn no_birth_before_the_primary_host_is_online_then_births_data_commands_ndeath_when_it_leaves_and_new_sessions(
+) {
     let mut rig = Rig::new(net_config(Addressing::Static));
     rig.add_sparkplug(config());
     rig.client(0).listen(BROKER_PORT).unwrap();
     let mut broker = Broker {
         pending: Vec::new(),
+        ready: Vec::new(),
     };
     // CONNECT: clean session, Will QoS 1 on NDEATH with bdSeq 0.
     let Got::Connect(c) = broker.next(&mut rig, 3_000) else {
@@ -263,8 +273,35 @@ fn no_birth_before_the_primary_host_is_online_then_births_data_commands_and_a_ne
     let aliases = |p: &[u8]| -> Vec<_> { metrics_of(p).iter().map(|m| m.alias).collect() };
     assert_eq!(aliases(&dbirth2), aliases(&dbirth));
 
+    // The primary host goes offline: NDEATH (bdSeq 0) and DISCONNECT,
+    // then a new session whose Will has bdSeq 1.
+    publish_to(&mut rig, "spBv1.0/STATE/scada", 1, |w| {
+        w.put(br#"{"online":false,"timestamp":1700000001000}"#)
+    });
+    assert_eq!(broker.next(&mut rig, 500), Got::PubAck(7));
+    let Got::Publish(topic, ndeath) = broker.next(&mut rig, 500) else {
+        panic!()
+    };
+    assert_eq!(topic, "spBv1.0/Plant/NDEATH/gw1");
+    assert_eq!(metrics_of(&ndeath)[0].value, Received::Int(0));
+    assert_eq!(broker.next(&mut rig, 500), Got::Disconnect);
+    rig.client(0).close();
+    assert!(
+        rig.run_until(1_000, 1, |r| !r.client(0).is_open()),
+        "the node closes"
+    );
+    rig.client(0).listen(BROKER_PORT).unwrap();
+    broker.pending.clear();
+    let Got::Connect(c) = broker.next(&mut rig, BACKOFF_MIN_MS + 3_000) else {
+        panic!()
+    };
+    let will = &c[at + will_topic.len() + 2..];
+    assert_eq!(metrics_of(will)[0].value, Received::Int(1));
+    Broker::send(&mut rig, |w| w.put(&[0x20, 2, 0, 0]));
+    assert!(matches!(broker.next(&mut rig, 500), Got::Subscribe(_)));
+
     // The broker vanishes (a reset): a new session after the backoff,
-    // its Will with bdSeq 1.
+    // its Will with bdSeq 2.
     rig.client(0).abort();
     rig.run(5, 1);
     rig.client(0).listen(BROKER_PORT).unwrap();
@@ -273,9 +310,9 @@ fn no_birth_before_the_primary_host_is_online_then_births_data_commands_and_a_ne
         panic!()
     };
     let will = &c[at + will_topic.len() + 2..];
-    assert_eq!(metrics_of(will)[0].value, Received::Int(1));
+    assert_eq!(metrics_of(will)[0].value, Received::Int(2));
     let s = rig.net.sparkplug().unwrap().stats();
-    assert_eq!((s.sessions, s.births, s.refusals), (1, 2, 1));
+    assert_eq!((s.sessions, s.births, s.refusals), (2, 2, 1));
 }
 
 /// The broker's side of the model: answers CONNECT, SUBSCRIBE and
