@@ -253,8 +253,6 @@ fn setup(now: u32) -> Parts {
             now,
         ));
         net.add_modbus(&mut *addr_of_mut!(MODBUS_BUFFERS), MODBUS_PORT);
-        let sparkplug_buffers = &mut *addr_of_mut!(SPARKPLUG_BUFFERS);
-        net.add_sparkplug(load_sparkplug_config(), mac, sparkplug_buffers, now);
         let line = &mut *addr_of_mut!(DOWN_LINE);
         let (down_isr, down) = line.split(FlowControl::None, DOWNSTREAM_MARKS, &pend_down);
         cortex_m::interrupt::free(|cs| DOWN_END.borrow(cs).set(Some(down_isr)));
@@ -276,6 +274,24 @@ fn setup(now: u32) -> Parts {
         hex_byte(&mut out, *b);
     }
     out.str("\n");
+    Parts {
+        bridge,
+        gateway,
+        net,
+        eth,
+        down,
+    }
+}
+
+/// Runs the Sparkplug edge node if its block enables it, and prints its
+/// NBIRTH topic and broker. Called from `main` after [`setup`], not from
+/// it: its frame (the node built on the way into the interface) does not
+/// add to setup's.
+#[inline(never)]
+fn setup_sparkplug(net: &mut Net<'static>, mac: [u8; 6], now: u32) {
+    // SAFETY: called once, from `main`: the only reference to the static.
+    let buffers = unsafe { &mut *addr_of_mut!(SPARKPLUG_BUFFERS) };
+    net.add_sparkplug(load_sparkplug_config(), mac, buffers, now);
     if let Some(node) = net.sparkplug() {
         let cfg = node.config();
         let mut out = Out::new();
@@ -288,13 +304,6 @@ fn setup(now: u32) -> Parts {
             .str(" via broker ");
         dotted(&mut out, cfg.broker);
         out.str(":").dec(u64::from(cfg.port)).str("\n");
-    }
-    Parts {
-        bridge,
-        gateway,
-        net,
-        eth,
-        down,
     }
 }
 
@@ -384,6 +393,8 @@ fn main() -> ! {
         eth,
         mut down,
     } = setup(runtime::now_ms());
+    let mac = stellaris::mac_from_user(read(SYSCTL_USER0), read(SYSCTL_USER1));
+    setup_sparkplug(net, mac, runtime::now_ms());
     if let Some((address, source)) = net.address() {
         report(NetEvent::Listening {
             address,

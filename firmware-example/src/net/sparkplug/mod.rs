@@ -83,6 +83,16 @@ pub struct SparkplugBuffers {
     out: [u8; OUT_BUFFER],
     inbox: [u8; IN_BUFFER],
     window: [u16; WINDOW_WORDS],
+    published: Published,
+}
+
+/// What the node last published: fingerprints of the values
+/// ([`metrics::fingerprint`]) and the positions (the deadband's
+/// reference). Kept with the buffers, in the board's static.
+pub struct Published {
+    node: [u32; NODE.len()],
+    device: [u32; MAX_DEVICE],
+    positions: [i32; 8],
 }
 
 impl SparkplugBuffers {
@@ -94,6 +104,11 @@ impl SparkplugBuffers {
             out: [0; OUT_BUFFER],
             inbox: [0; IN_BUFFER],
             window: [0; WINDOW_WORDS],
+            published: Published {
+                node: [0; NODE.len()],
+                device: [0; MAX_DEVICE],
+                positions: [0; 8],
+            },
         }
     }
 }
@@ -203,11 +218,8 @@ pub struct EdgeNode<'a> {
     last_tx: u32,
     next_ndata: u32,
     next_ddata: u32,
-    /// Fingerprints of the values last published (node, device).
-    node_last: [u32; NODE.len()],
-    device_last: [u32; MAX_DEVICE],
-    /// Positions last published, per axis (the deadband's reference).
-    positions: [i32; 8],
+    /// What was last published.
+    published: &'a mut Published,
     /// The table window as published (taken out while it is read).
     window: Option<&'a mut [u16; WINDOW_WORDS]>,
     motion: (u16, u16),
@@ -239,6 +251,7 @@ impl<'a> EdgeNode<'a> {
             out,
             inbox,
             window,
+            published,
         } = buffers;
         let mut socket = tcp::Socket::new(
             tcp::SocketBuffer::new(rx.as_mut_slice()),
@@ -273,9 +286,7 @@ impl<'a> EdgeNode<'a> {
             last_tx: now,
             next_ndata: now,
             next_ddata: now,
-            node_last: [0; NODE.len()],
-            device_last: [0; MAX_DEVICE],
-            positions: [0; 8],
+            published,
             window: Some(window),
             motion: (0, 0),
             targets: [0; 8],
@@ -948,7 +959,7 @@ impl<'a> EdgeNode<'a> {
                 );
                 for (i, d) in NODE.iter().enumerate() {
                     let v = view.node(i);
-                    if let Some(slot) = me.node_last.get_mut(i) {
+                    if let Some(slot) = me.published.node.get_mut(i) {
                         *slot = metrics::fingerprint(v);
                     }
                     let name = |w: &mut Writer<'_>| w.put(d.name.as_bytes());
@@ -997,11 +1008,15 @@ impl<'a> EdgeNode<'a> {
 
     /// Notes `v` as the value of device metric `m` (index `i`) published.
     fn remember(&mut self, m: DeviceMetric, i: usize, v: Value<'_>) {
-        if let Some(slot) = self.device_last.get_mut(i) {
+        if let Some(slot) = self.published.device.get_mut(i) {
             *slot = metrics::fingerprint(v);
         }
         if let (DeviceMetric::Axis(axis, metrics::POSITION), Value::Int(p)) = (m, v) {
-            if let Some(slot) = self.positions.get_mut(usize::from(axis.wrapping_sub(1))) {
+            if let Some(slot) = self
+                .published
+                .positions
+                .get_mut(usize::from(axis.wrapping_sub(1)))
+            {
                 *slot = p as i32;
             }
         }
@@ -1012,6 +1027,7 @@ impl<'a> EdgeNode<'a> {
     fn changed(&self, m: DeviceMetric, i: usize, v: Value<'_>) -> bool {
         if let (DeviceMetric::Axis(axis, metrics::POSITION), Value::Int(p)) = (m, v) {
             let last = self
+                .published
                 .positions
                 .get(usize::from(axis.wrapping_sub(1)))
                 .copied()
@@ -1019,7 +1035,7 @@ impl<'a> EdgeNode<'a> {
             let moved = (p as i32).abs_diff(last);
             return moved > 0 && moved >= self.cfg.deadband;
         }
-        self.device_last.get(i).copied() != Some(metrics::fingerprint(v))
+        self.published.device.get(i).copied() != Some(metrics::fingerprint(v))
     }
 
     /// DDATA (`device`) or NDATA of the metrics that changed, by alias;
@@ -1055,8 +1071,8 @@ impl<'a> EdgeNode<'a> {
                     for (i, d) in NODE.iter().enumerate().skip(1) {
                         let v = view.node(i);
                         let f = metrics::fingerprint(v);
-                        if me.node_last.get(i) != Some(&f) {
-                            if let Some(slot) = me.node_last.get_mut(i) {
+                        if me.published.node.get(i) != Some(&f) {
+                            if let Some(slot) = me.published.node.get_mut(i) {
                                 *slot = f;
                             }
                             payload::metric(w, None, Some(1 + i as u16), d.datatype, v);
