@@ -17,6 +17,9 @@ Checks, reported in "errors" (an empty list: none):
 - seq: NBIRTH 0, then one more per message of the node (DEATH excepted),
   wrapping at 256;
 - NDEATH carries bdSeq (Int64).
+A node whose NBIRTH the host has not seen since it connected (to the broker,
+or again after the broker restarted) is asked for a rebirth (NCMD), as a
+Sparkplug host does, and its messages are not judged until its NBIRTH.
 
 Commands, one JSON object per line on stdin:
   {"state": true|false}          publish spBv1.0/STATE/HOST (retained, QoS 1)
@@ -85,6 +88,7 @@ class Host:
             self.client.username_pw_set(args.username, args.password)
         self.client.on_connect = self.on_connect
         self.client.on_message = self.on_message
+        self.rebirth_asked = set()
         self.subscribed = threading.Event()
         self.client.on_subscribe = lambda *a: self.subscribed.set()
 
@@ -94,6 +98,9 @@ class Host:
             sys.stdout.flush()
 
     def on_connect(self, client, userdata, flags, reason, props):
+        # A new session with the broker: what came before it is unknown.
+        self.types, self.values, self.seq = {}, {}, {}
+        self.rebirth_asked = set()
         client.subscribe("spBv1.0/#", qos=1)
 
     def on_message(self, client, userdata, msg):
@@ -118,6 +125,16 @@ class Host:
             return
         errs = out["errors"]
         out["seq"] = p.seq if p.HasField("seq") else None
+        if kind in ("NDATA", "DDATA", "DBIRTH", "DDEATH") and node not in self.seq:
+            # A node whose NBIRTH this session has not seen (the host
+            # connected after it): ask for a rebirth, as a host does, and
+            # judge nothing of it until then.
+            if node not in self.rebirth_asked:
+                self.rebirth_asked.add(node)
+                self.command({"rebirth": node}, wait=False)
+            out["awaiting_rebirth"] = True
+            self.emit(out)
+            return
         out["timestamp"] = p.timestamp if p.HasField("timestamp") else None
         if out["timestamp"] is None:
             errs.append("no timestamp")
@@ -187,7 +204,9 @@ class Host:
                 self.seq[node] = seq
         self.emit(out)
 
-    def command(self, cmd):
+    def command(self, cmd, wait=True):
+        """Publishes what `cmd` asks; `wait`: until it is out (not from
+        paho's own thread, which sends it)."""
         g = self.args.group
         if "state" in cmd:
             body = json.dumps({"online": bool(cmd["state"]), "timestamp": int(time.time() * 1000)})
@@ -214,7 +233,9 @@ class Host:
                 else:
                     m.int_value = v & 0xFFFFFFFF
             topic = f"spBv1.0/{g}/DCMD/{cmd['dcmd']}/controller"
-        self.client.publish(topic, p.SerializeToString(), qos=0).wait_for_publish(5)
+        info = self.client.publish(topic, p.SerializeToString(), qos=0)
+        if wait:
+            info.wait_for_publish(5)
 
 
 def main():

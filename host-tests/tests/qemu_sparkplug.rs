@@ -18,7 +18,8 @@
 //!    broker, with the last NBIRTH's bdSeq, when QEMU is killed;
 //! 2. the read-only policy: NBIRTH without waiting (no primary host), a
 //!    DCMD servo refused (`Command/State` refused, code B06, message
-//!    232H) and the servo as it was.
+//!    232H) and the servo as it was; the broker restarted, the node born
+//!    again with bdSeq 1.
 //!
 //! Mosquitto, protoc and the venv's paho-mqtt and protobuf come from
 //! `tools/setup.sh`.
@@ -136,7 +137,7 @@ fn boot(broker: &Broker, primary: bool, policy: Policy, quit: bool) -> EthernetG
 
 #[test]
 fn the_gateway_is_a_sparkplug_edge_node_on_mosquitto() {
-    let broker = Broker::start();
+    let mut broker = Broker::start();
     let mut host = Host::start(broker.port);
     let iai = host_tests::qemu::iai_binary().expect("the iai binary");
 
@@ -376,6 +377,22 @@ fn the_gateway_is_a_sparkplug_edge_node_on_mosquitto() {
         "nothing reached the controller:\n{}",
         host.tail()
     );
+    // The broker restarts: the node connects again with bdSeq 1 and is
+    // born again (the host, back later than the node, asks a rebirth).
+    let t = Instant::now();
+    broker.restart();
+    let nbirth = host.wait_for("NBIRTH after the broker restarted", 60, |m| {
+        m["kind"] == "NBIRTH"
+    });
+    assert_eq!(metric(&nbirth, "bdSeq"), 1);
+    host.wait_for("DBIRTH after the broker restarted", 30, |m| {
+        m["kind"] == "DBIRTH"
+    });
+    println!(
+        "born again {:.1} s after the broker restarted",
+        t.elapsed().as_secs_f64()
+    );
+
     // The firmware's own end (the quit sequence): its stack peak after
     // a session of the edge node, for the size report.
     // The controller falls silent first: a reply on its way when QEMU

@@ -30,6 +30,7 @@ pub fn free_port() -> u16 {
 /// when dropped.
 pub struct Broker {
     child: Child,
+    conf: PathBuf,
     /// Its port on 127.0.0.1.
     pub port: u16,
     _dir: PathBuf,
@@ -65,24 +66,39 @@ impl Broker {
             ),
         )
         .unwrap();
-        let child = Command::new("mosquitto")
-            .arg("-c")
-            .arg(&conf)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("mosquitto (tools/setup.sh installs it)");
-        let end = Instant::now() + Duration::from_secs(10);
-        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-            assert!(Instant::now() < end, "mosquitto did not listen on {port}");
-            std::thread::sleep(Duration::from_millis(50));
-        }
+        let child = spawn(&conf, port);
         Broker {
             child,
+            conf,
             port,
             _dir: dir,
         }
     }
+
+    /// Stops the broker (as a crash does: no Will is sent for anyone)
+    /// and starts it again on the same port.
+    pub fn restart(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        self.child = spawn(&self.conf, self.port);
+    }
+}
+
+/// Mosquitto on `conf`, once it listens on `port`.
+fn spawn(conf: &std::path::Path, port: u16) -> Child {
+    let child = Command::new("mosquitto")
+        .arg("-c")
+        .arg(conf)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("mosquitto (tools/setup.sh installs it)");
+    let end = Instant::now() + Duration::from_secs(10);
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(Instant::now() < end, "mosquitto did not listen on {port}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    child
 }
 
 impl Drop for Broker {

@@ -144,7 +144,8 @@ pub struct SparkplugStats {
     pub sessions: u32,
     /// Connections the broker refused.
     pub refused: u32,
-    /// Sessions or attempts that ended otherwise (timeout, reset, close).
+    /// Sessions and attempts that ended other than by the node leaving
+    /// (a refusal, a timeout, a reset, a close).
     pub lost: u32,
     /// NBIRTHs published.
     pub births: u32,
@@ -532,7 +533,8 @@ impl<'a> EdgeNode<'a> {
         hosts: (bool, u32),
         now: u32,
     ) -> Option<Event> {
-        if !socket.is_active() || !socket.may_send() {
+        // A broker that closed its side (FIN) has ended the session too.
+        if !socket.is_active() || !socket.may_send() || !socket.may_recv() {
             return self.drop_link(socket, now);
         }
         self.flush(socket);

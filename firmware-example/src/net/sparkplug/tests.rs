@@ -429,3 +429,97 @@ fn a_fleet_of_200_nodes_in_the_host_model_prints_its_load() {
         wall.elapsed().as_secs_f64()
     );
 }
+
+#[test]
+fn a_refused_connect_is_tried_again_after_a_backoff_with_the_same_bd_seq() {
+    let mut rig = Rig::new(net_config(Addressing::Static));
+    let mut cfg = config();
+    cfg.username = text_of("gw");
+    cfg.password = text_of("wrong");
+    rig.add_sparkplug(cfg);
+    rig.client(0).listen(BROKER_PORT).unwrap();
+    let mut broker = Broker {
+        pending: Vec::new(),
+        ready: Vec::new(),
+    };
+    let mut attempts = Vec::new();
+    for _ in 0..3 {
+        let Got::Connect(c) = broker.next(&mut rig, 40_000) else {
+            panic!()
+        };
+        attempts.push(rig.now);
+        // Return code 4: bad user name or password.
+        Broker::send(&mut rig, |w| w.put(&[0x20, 2, 0, 4]));
+        let will_at = 10 + 2 + 3 + 2 + "spBv1.0/Plant/NDEATH/gw1".len() + 2;
+        let will_len = usize::from(u16::from_be_bytes([c[will_at - 2], c[will_at - 1]]));
+        let will = &c[will_at..will_at + will_len];
+        assert_eq!(
+            metrics_of(will)[0].value,
+            Received::Int(0),
+            "no session, no new bdSeq"
+        );
+        assert!(rig.run_until(2_000, 1, |r| !r.client(0).is_open()));
+        rig.client(0).listen(BROKER_PORT).unwrap();
+        broker.pending.clear();
+    }
+    let gaps: Vec<u32> = attempts.windows(2).map(|w| w[1] - w[0]).collect();
+    assert!(
+        gaps[0] >= BACKOFF_MIN_MS && gaps[1] >= 2 * BACKOFF_MIN_MS,
+        "{gaps:?}"
+    );
+    let s = rig.net.sparkplug().unwrap().stats();
+    assert_eq!((s.sessions, s.refused, s.births), (0, 3, 0));
+}
+
+#[test]
+fn a_broker_that_closes_ends_the_session_and_the_next_one_counts_seq_from_nbirth() {
+    let mut rig = Rig::new(net_config(Addressing::Static));
+    let mut cfg = config();
+    cfg.primary_host = text_of("");
+    rig.add_sparkplug(cfg);
+    rig.client(0).listen(BROKER_PORT).unwrap();
+    let mut broker = Broker {
+        pending: Vec::new(),
+        ready: Vec::new(),
+    };
+    for session in 0..2u8 {
+        let Got::Connect(_) = broker.next(&mut rig, 40_000) else {
+            panic!()
+        };
+        Broker::send(&mut rig, |w| w.put(&[0x20, 2, 0, 0]));
+        // 4 s of a controller whose axis 1 moves: every message's seq is
+        // the one before's plus one, from NBIRTH's 0.
+        let mut seqs = Vec::new();
+        let mut kinds = Vec::new();
+        for _ in 0..80 {
+            let now = rig.now;
+            let c = &mut rig.gateway.regs.cache;
+            c.link_up = true;
+            c.axes_at.set(now);
+            c.axes[0].current_position = 10 * now as i32;
+            rig.run(50, 5);
+            for g in broker.take(&mut rig) {
+                if let Got::Publish(t, p) = g {
+                    assert_eq!(&p[..1], [0x08], "timestamp first");
+                    let (_, rest) =
+                        p[1..].split_at(p[1..].iter().position(|b| b & 0x80 == 0).unwrap() + 1);
+                    assert_eq!(rest[0], 0x18, "then seq");
+                    seqs.push(rest[1]);
+                    kinds.push(String::from(t.split('/').nth(2).unwrap()));
+                }
+            }
+        }
+        assert_eq!(&kinds[..2], ["NBIRTH", "DBIRTH"], "session {session}");
+        assert!(kinds.iter().filter(|k| *k == "DDATA").count() >= 30);
+        let expected: Vec<u8> = (0..seqs.len() as u8).collect();
+        assert_eq!(seqs, expected, "session {session}");
+        // The broker closes its side (a FIN): the session is over.
+        rig.client(0).close();
+        assert!(rig.run_until(3_000, 5, |r| !r.client(0).is_open()));
+        rig.client(0).listen(BROKER_PORT).unwrap();
+        broker.pending.clear();
+        broker.ready.clear();
+    }
+    let s = rig.net.sparkplug().unwrap().stats();
+    assert_eq!((s.sessions, s.births), (2, 2));
+}
