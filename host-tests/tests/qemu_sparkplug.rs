@@ -13,7 +13,8 @@
 //!    DBIRTH with the metrics and valid types; DCMD servo on, home, a move
 //!    of 200 mm, each done only once the controller confirmed, DDATA
 //!    while the axis moves, its last position equal to `iai send 212`'s;
-//!    a rebirth on NCMD with the same aliases; DDEATH when the controller
+//!    a record written through the table window and read back; a rebirth
+//!    on NCMD with the same aliases; DDEATH when the controller
 //!    stops answering, DBIRTH when it answers again; NDEATH from the
 //!    broker, with the last NBIRTH's bdSeq, when QEMU is killed;
 //! 2. the read-only policy: NBIRTH without waiting (no primary host), a
@@ -301,6 +302,22 @@ fn the_gateway_is_a_sparkplug_edge_node_on_mosquitto() {
         moving.len(),
         &moving[..moving.len().min(4)]
     );
+
+    // The table window as in the Modbus map: one record written (26DH,
+    // read back), then the window read from its position (21FH).
+    let mut record = [0u16; 21];
+    record[..5].copy_from_slice(&[5, 0b1, 30, 30, 100]);
+    record[5..7].copy_from_slice(&[0, 12_345]);
+    let hex: String = record.iter().map(|w| format!("{w:04x}")).collect();
+    host.dcmd(&node, "Table/Window", "Bytes", json!(hex));
+    host.wait_device("the window written", 10, done(4));
+    host.dcmd(&node, "Table/Window Head", "UInt16", json!(5));
+    host.wait_device("the window read", 10, done(5));
+    let window = host.device["Table/Window"]
+        .as_str()
+        .unwrap_or_default()
+        .to_owned();
+    assert_eq!(&window[..hex.len()], hex, "position 5 read back as written");
 
     // Rebirth on NCMD: the same aliases.
     let aliases = |m: &Value| {
