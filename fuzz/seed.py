@@ -304,6 +304,13 @@ def main():
             with open(os.path.join(reg, target, name), "rb") as f:
                 write(target, "regression-" + name, f.read())
     print(f"seeded {len(gen)} generated frames, {len(pos_frames)} fixture position frames")
+    # sparkplug: broker behaviour (see its header). A whole session with
+    # the primary host, commands, a rebirth and a reset; broken packets.
+    write("sparkplug", "session", bytes([0x01, 0x00, 0x02, 0x03, 0x0A, 0x09, 0x05, 0x06, 0x00,
+                                         0x06, 0x02, 0x05, 0x0A, 0x09, 0x05, 0x04, 0x08, 0x09, 0x14, 0x00]))
+    write("sparkplug", "broken", bytes([0x00, 0x00, 0x02, 0x0A, 0x03, 0x06, 0x05, 0x06, 0x04,
+                                        0x07, 0x05, 0x30, 0x03, 0x00, 0x01, 0x61, 0x09, 0x64]))
+    write("sparkplug", "refused", bytes([0x00, 0x01, 0x05, 0x09, 0x20, 0x00, 0x02, 0x03]))
     print(f"seeded {len(frames)} fixture frames into {os.path.join(HERE, 'corpus')}")
 
 

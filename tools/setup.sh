@@ -3,7 +3,10 @@
 # QEMU for Cortex-M and the ARM binutils used for size reports, the
 # Windows target with mingw-w64 for the iai tool's cross-build, and the
 # Modbus clients the gateway's end-to-end test runs: mbpoll and socat
-# (Debian) and pymodbus (PyPI, pinned) in the venv .venv of the checkout.
+# (Debian) and pymodbus (PyPI, pinned) in the venv .venv of the checkout;
+# for the Sparkplug B test, the Mosquitto broker and its clients and
+# protoc (Debian), paho-mqtt and protobuf (PyPI, pinned: protobuf 4.21
+# reads what Debian's protoc 3.21 generates) in the same venv.
 # Idempotent: does nothing that is already done.
 set -euo pipefail
 
@@ -22,6 +25,9 @@ command -v arm-none-eabi-size >/dev/null || need+=(binutils-arm-none-eabi)
 command -v x86_64-w64-mingw32-gcc >/dev/null || need+=(gcc-mingw-w64-x86-64)
 command -v mbpoll >/dev/null || need+=(mbpoll)
 command -v socat >/dev/null || need+=(socat)
+command -v mosquitto >/dev/null || [ -x /usr/sbin/mosquitto ] || need+=(mosquitto)
+command -v mosquitto_sub >/dev/null || need+=(mosquitto-clients)
+command -v protoc >/dev/null || need+=(protobuf-compiler)
 command -v python3 >/dev/null || need+=(python3)
 # Debian's python3 makes venvs only with python3-venv (ensurepip).
 python3 -c 'import ensurepip, venv' 2>/dev/null || need+=(python3-venv)
@@ -41,6 +47,14 @@ if ! "$venv/bin/python" -c "import pymodbus, sys; sys.exit(pymodbus.__version__ 
     python3 -m venv --clear "$venv"
   fi
   "$venv/bin/python" -m pip install -q --disable-pip-version-check "pymodbus==$PYMODBUS"
+fi
+# paho-mqtt and protobuf for the Sparkplug host (host-tests/sparkplug/).
+PAHO=2.1.0
+PROTOBUF=4.21.12
+if ! "$venv/bin/python" -c "
+import sys, paho.mqtt, google.protobuf as p
+sys.exit(paho.mqtt.__version__ != '$PAHO' or p.__version__ != '$PROTOBUF')" 2>/dev/null; then
+  "$venv/bin/python" -m pip install -q --disable-pip-version-check "paho-mqtt==$PAHO" "protobuf==$PROTOBUF"
 fi
 if ! command -v cargo-nextest >/dev/null; then
   cargo install --locked cargo-nextest

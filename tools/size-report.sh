@@ -137,8 +137,8 @@ echo "goal (Cortex-M3/M4 boards): total RAM <= 12288 with the gateway (lm3s6965)
 # state, the interface with the protocol-B hosts and the Modbus clients,
 # the driver), the Modbus gateway's state, and the stack peak: the deeper
 # of the QEMU test that streams a 26DH over TCP and ends the run with the
-# quit sequence (it prints `stack lm3s6965-eth N`) and a PLC's session
-# over Modbus TCP (modbus_stack ... tcp).
+# quit sequence (it prints `stack lm3s6965-eth N`), a PLC's session
+# over Modbus TCP (modbus_stack ... tcp) and a Sparkplug session.
 # Not held to the 8 KiB goal: the LM3S6965 has 64 KiB of RAM.
 eth_elf=$target/thumbv7m-none-eabi/firmware/lm3s6965-eth
 cargo build -q -p firmware-example --profile firmware --target thumbv7m-none-eabi \
@@ -155,6 +155,9 @@ sym() { # size in bytes of the board's static NAME (decimal)
 }
 buffers=$(( $(sym BUFFERS) + $(sym MODBUS_BUFFERS) )); frames=$(( $(sym RX_FRAME) + $(sym TX_FRAME) ))
 gateway=$(sym GATEWAY)
+# The Sparkplug edge node: its buffers (socket, packets, table window) and
+# its state inside the interface's static (NET).
+sparkplug=$(sym SPARKPLUG_BUFFERS)
 slots=$(sym SLOTS); iface=$(sym NET); driver=$(sym ETH)
 eth_stack=$(cargo test -q -p host-tests --test qemu_ethernet a_26dh_over_tcp -- --nocapture 2>/dev/null |
   awk '$1=="stack" && $2=="lm3s6965-eth" {print $3}')
@@ -165,6 +168,17 @@ if [ -n "$peak" ]; then
   echo "stack lm3s6965-eth after a PLC's Modbus TCP session (pymodbus): $peak bytes"
   [ "$peak" -gt "$eth_stack" ] && eth_stack=$peak
 fi
+# The stack after a session of the Sparkplug edge node on Mosquitto (its
+# end-to-end test ends its second boot with the quit sequence).
+sp_stack=$(cargo test -q -p host-tests --test qemu_sparkplug -- --nocapture 2>/dev/null |
+  awk '$1=="stack" && $2=="lm3s6965-eth" {print $3}')
+if [ -n "$sp_stack" ]; then
+  echo "stack lm3s6965-eth after a Sparkplug session (qemu_sparkplug): $sp_stack bytes"
+  [ "$sp_stack" -gt "$eth_stack" ] && eth_stack=$sp_stack
+else
+  echo "size-report: the Sparkplug run failed (mosquitto, tools/setup.sh): its stack not measured" >&2
+fi
 echo "ram lm3s6965-eth static $static stack $eth_stack total $((static + eth_stack))"
 echo "ram lm3s6965-eth network $((buffers + frames + slots + iface + driver)): socket buffers $buffers, frame buffers $frames, socket slots $slots, interface and hosts $iface, driver $driver; modbus gateway $gateway"
+echo "ram lm3s6965-eth sparkplug buffers $sparkplug (socket, packets, table window; its state is in the interface's)"
 echo "flash lm3s6965-eth $flash"

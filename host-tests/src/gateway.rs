@@ -46,6 +46,7 @@ use crate::qemu::{
 use crate::rtu_relay::RtuRelay;
 use firmware_example::net::config::{NetConfig, BLOCK_OFFSET, DEFAULT_PORT};
 use firmware_example::net::modbus::MODBUS_PORT;
+use firmware_example::net::sparkplug::config::SparkplugConfig;
 use iai_simulator::{Faults, Simulator};
 
 /// What the gateway runs.
@@ -88,7 +89,19 @@ pub struct Options {
     /// forwards to; a static address must be QEMU's guest address,
     /// 10.0.2.15.
     pub network: Option<NetConfig>,
+    /// Ethernet only: a Sparkplug block written into the configuration
+    /// page (`None`: blank, the edge node off). Its broker is seen from
+    /// the guest: QEMU's user network maps 10.0.2.2 to this machine's
+    /// loopback ([`QEMU_HOST`]).
+    pub sparkplug: Option<SparkplugConfig>,
+    /// Ethernet only: the bridge's configuration block, if not the
+    /// gateway's own ([`config`]).
+    pub bridge_config: Option<Config>,
 }
+
+/// The address of this machine's loopback as QEMU's user network shows
+/// it to the guest.
+pub const QEMU_HOST: [u8; 4] = [10, 0, 2, 2];
 
 impl Default for Options {
     fn default() -> Self {
@@ -106,6 +119,8 @@ impl Default for Options {
             ethernet: false,
             quit_sequence: false,
             network: None,
+            sparkplug: None,
+            bridge_config: None,
         }
     }
 }
@@ -138,7 +153,7 @@ pub fn config(baud: u32, modbus_baud: u32) -> Config {
 }
 
 /// Where the gateway listens, once it is ready.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct Ready {
     /// The protocol-B host side: the relay's port, or with `--ethernet`
     /// the port QEMU forwards to the firmware's own TCP stack.
@@ -150,6 +165,8 @@ pub struct Ready {
     pub modbus_rtu: Option<SocketAddr>,
     /// Modbus TCP straight to the firmware (the Ethernet build).
     pub modbus_tcp: Option<SocketAddr>,
+    /// The NBIRTH topic, once the Sparkplug edge node has published it.
+    pub sparkplug: Option<String>,
 }
 
 fn log(line: &str) {
@@ -270,6 +287,7 @@ pub fn run(opts: &Options, stop: &AtomicBool, on_ready: impl FnOnce(Ready)) -> R
                 over_ethernet: false,
                 modbus_tcp: None,
                 modbus_rtu: modbus_addr,
+                sparkplug: None,
             });
             serve(&listener, &link, &mut qemu, stop, cfg.bridge_station)
         }
@@ -673,6 +691,11 @@ pub const TCP_LISTENING: &str = "protocol-b-tcp listening on ";
 /// What the Ethernet firmware prints once Modbus TCP listens (followed by
 /// `A.B.C.D:502`), right after [`TCP_LISTENING`]'s line.
 pub const MODBUS_TCP_LISTENING: &str = "modbus-tcp listening on ";
+/// What the Ethernet firmware prints at start when its Sparkplug edge
+/// node runs (followed by `spBv1.0/GROUP/NBIRTH/NODE via broker A:P`).
+pub const SPARKPLUG_NODE: &str = "firmware-example: sparkplug spBv1.0/";
+/// What it prints once NBIRTH is out (followed by `bdSeq N`).
+pub const SPARKPLUG_BORN: &str = "sparkplug NBIRTH out, ";
 /// How long the Ethernet firmware may take to get an address (DHCP, or
 /// its fallback address after `DHCP_FALLBACK_MS`).
 const ADDRESS_TIMEOUT: Duration = Duration::from_secs(30);
@@ -725,17 +748,36 @@ impl EthernetGateway {
         };
         let cfg = Config {
             quit_sequence: opts.quit_sequence || opts.stack_report,
-            ..config(opts.baud, opts.modbus_baud)
+            ..opts
+                .bridge_config
+                .unwrap_or_else(|| config(opts.baud, opts.modbus_baud))
         };
         let guest_port = opts.network.map_or(DEFAULT_PORT, |n| n.port);
+        // With a broker the guest must reach this machine's loopback
+        // (10.0.2.2); otherwise it reaches nothing (`restrict=on`).
+        let restrict = if opts.sparkplug.is_some() {
+            "off"
+        } else {
+            "on"
+        };
         let nic = format!(
-            "user,model=stellaris,restrict=on,hostfwd=tcp:127.0.0.1:{port}-:{guest_port},\
+            "user,model=stellaris,restrict={restrict},hostfwd=tcp:127.0.0.1:{port}-:{guest_port},\
              hostfwd=tcp:127.0.0.1:{modbus_port}-:{MODBUS_PORT}"
         );
         let mut args = vec!["-nic".to_owned(), nic];
         if let Some(net) = &opts.network {
             args.push("-device".to_owned());
-            args.push(network_loader_arg(&elf, net)?);
+            args.push(block_loader_arg(
+                &elf,
+                "net",
+                BLOCK_OFFSET,
+                &net.to_block(),
+            )?);
+        }
+        if let Some(sp) = &opts.sparkplug {
+            args.push("-device".to_owned());
+            let at = firmware_example::net::sparkplug::config::BLOCK_OFFSET;
+            args.push(block_loader_arg(&elf, "sparkplug", at, &sp.to_block())?);
         }
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
         let qemu = QemuSession::start_tied(
@@ -805,6 +847,24 @@ impl EthernetGateway {
         self.sim.records()
     }
 
+    /// Switches the simulated controller off (`true`) or on again.
+    pub fn set_controller_silent(&self, silent: bool) {
+        self.sim.set_silent(silent);
+    }
+
+    /// The Sparkplug NBIRTH topic the firmware announced at start, once
+    /// it says NBIRTH is out ([`SPARKPLUG_BORN`]; waits until `deadline`).
+    pub fn sparkplug_birth(&self, deadline: Instant) -> Option<String> {
+        if !self.qemu.wait_for_stdout(SPARKPLUG_BORN, deadline) {
+            return None;
+        }
+        let out = self.qemu.stdout_so_far();
+        out.lines()
+            .find_map(|l| l.strip_prefix(SPARKPLUG_NODE))
+            .and_then(|l| l.split_whitespace().next())
+            .map(str::to_owned)
+    }
+
     /// Ends the run the firmware's way (it must have been started with
     /// `quit_sequence`): the quit sequence on a new connection after
     /// [`QUIT_GUARD`] of silence; QEMU's exit (with the firmware's last
@@ -863,11 +923,25 @@ pub fn run_ethernet(
         config(opts.baud, opts.modbus_baud).controller_station.0,
         opts.baud
     ));
+    let sparkplug = match &opts.sparkplug {
+        None => None,
+        Some(_) => {
+            let topic = gw.sparkplug_birth(Instant::now() + Duration::from_secs(60));
+            let topic = topic.ok_or_else(|| {
+                format!(
+                    "the edge node published no NBIRTH within 60 s (is the broker up?)\n{}",
+                    gw.qemu.stdout_so_far()
+                )
+            })?;
+            Some(format!("spBv1.0/{topic}"))
+        }
+    };
     on_ready(Ready {
         protocol_b: gw.addr,
         over_ethernet: true,
         modbus_rtu: None,
         modbus_tcp: Some(gw.modbus_addr),
+        sparkplug,
     });
     let result = watch(&mut gw.qemu, stop);
     let ended = if opts.stack_report && result.is_ok() {
@@ -892,21 +966,20 @@ pub fn run_ethernet(
     result
 }
 
-/// QEMU's `-device loader` argument that puts `net`'s block where the
-/// Ethernet firmware reads it: [`BLOCK_OFFSET`] bytes past
-/// `_bridge_config`.
-fn network_loader_arg(elf: &Path, net: &NetConfig) -> Result<String, String> {
+/// QEMU's `-device loader` argument that puts `block` (the network
+/// block, the Sparkplug block) where the Ethernet firmware reads it:
+/// `offset` bytes past `_bridge_config`.
+fn block_loader_arg(elf: &Path, name: &str, offset: usize, block: &[u8]) -> Result<String, String> {
     static SERIAL: AtomicU64 = AtomicU64::new(0);
-    let addr =
-        symbol_address(elf, "_bridge_config").map_err(|e| e.to_string())? + BLOCK_OFFSET as u64;
+    let addr = symbol_address(elf, "_bridge_config").map_err(|e| e.to_string())? + offset as u64;
     let dir = target_dir().join("qemu-config");
     let file = dir.join(format!(
-        "net-{}-{}.bin",
+        "{name}-{}-{}.bin",
         std::process::id(),
         SERIAL.fetch_add(1, Ordering::Relaxed)
     ));
     std::fs::create_dir_all(&dir)
-        .and_then(|()| std::fs::write(&file, net.to_block()))
+        .and_then(|()| std::fs::write(&file, block))
         .map_err(|e| format!("writing {}: {e}", file.display()))?;
     Ok(format!("loader,file={},addr={addr:#x}", file.display()))
 }

@@ -39,6 +39,8 @@ use firmware_example::bridge::Bridge;
 use firmware_example::modbus::Gateway;
 use firmware_example::net::config::{NetConfig, NetSource, BLOCK_LEN, BLOCK_OFFSET};
 use firmware_example::net::modbus::{ModbusBuffers, MODBUS_PORT};
+use firmware_example::net::sparkplug::config::{self as sparkplug_config, SparkplugConfig};
+use firmware_example::net::sparkplug::{self, SparkplugBuffers};
 use firmware_example::net::stellaris::{self, Mmio, Regs, Stellaris, FRAME_CAP};
 use firmware_example::net::{self, AddressSource, Buffers, Net, NetEvent, SocketSlots};
 use firmware_example::serial::{DownstreamRings, FlowControl, IsrEnd, UartRings, DOWNSTREAM_MARKS};
@@ -63,6 +65,7 @@ static mut SLOTS: MaybeUninit<SocketSlots<'static>> = MaybeUninit::uninit();
 /// Zeroed: `.bss`.
 static mut BUFFERS: Buffers = Buffers::new();
 static mut MODBUS_BUFFERS: ModbusBuffers = ModbusBuffers::new();
+static mut SPARKPLUG_BUFFERS: SparkplugBuffers = SparkplugBuffers::new();
 static mut RX_FRAME: [u8; FRAME_CAP] = [0; FRAME_CAP];
 static mut TX_FRAME: [u8; FRAME_CAP] = [0; FRAME_CAP];
 
@@ -199,6 +202,14 @@ fn load_net_config() -> (NetConfig, NetSource) {
     NetConfig::from_block(page.get(BLOCK_OFFSET..).unwrap_or(&[]))
 }
 
+/// The Sparkplug settings from their block in the configuration page.
+fn load_sparkplug_config() -> SparkplugConfig {
+    // SAFETY: the memory map reserves the configuration page; only read.
+    let page = unsafe { &*addr_of!(_bridge_config) };
+    let block = page.get(sparkplug_config::BLOCK_OFFSET..).unwrap_or(&[]);
+    SparkplugConfig::from_block(block).0
+}
+
 /// What `main` sets up.
 struct Parts {
     bridge: &'static mut Bridge,
@@ -272,6 +283,30 @@ fn setup(now: u32) -> Parts {
     }
 }
 
+/// Runs the Sparkplug edge node if its block enables it, and prints its
+/// NBIRTH topic and broker. Called from `main` after [`setup`], not from
+/// it: its frame (the node built on the way into the interface) does not
+/// add to setup's.
+#[inline(never)]
+fn setup_sparkplug(net: &mut Net<'static>, mac: [u8; 6], now: u32) {
+    // SAFETY: called once, from `main`: the only reference to the static.
+    let buffers = unsafe { &mut *addr_of_mut!(SPARKPLUG_BUFFERS) };
+    net.add_sparkplug(load_sparkplug_config(), mac, buffers, now);
+    if let Some(node) = net.sparkplug() {
+        let cfg = node.config();
+        let mut out = Out::new();
+        out.str("firmware-example: sparkplug ")
+            .str(sparkplug::NAMESPACE)
+            .str("/")
+            .str(&cfg.group)
+            .str("/NBIRTH/")
+            .str(node.node_id())
+            .str(" via broker ");
+        dotted(&mut out, cfg.broker);
+        out.str(":").dec(u64::from(cfg.port)).str("\n");
+    }
+}
+
 /// Two lower-case hex digits.
 fn hex_byte(out: &mut Out, b: u8) {
     let digits = b"0123456789abcdef";
@@ -310,6 +345,20 @@ fn report(event: NetEvent) {
         NetEvent::AddressLost => {
             out.str("firmware-example: DHCP lease lost\n");
         }
+        NetEvent::Sparkplug(e) => {
+            out.str("firmware-example: sparkplug ");
+            match e {
+                sparkplug::Event::Connected => out.str("connected"),
+                sparkplug::Event::Born { bd_seq } => {
+                    out.str("NBIRTH out, bdSeq ").dec(u64::from(bd_seq))
+                }
+                sparkplug::Event::Refused(code) => {
+                    out.str("refused, CONNACK ").dec(u64::from(code))
+                }
+                sparkplug::Event::Lost => out.str("connection lost"),
+            };
+            out.str("\n");
+        }
     }
 }
 
@@ -344,6 +393,8 @@ fn main() -> ! {
         eth,
         mut down,
     } = setup(runtime::now_ms());
+    let mac = stellaris::mac_from_user(read(SYSCTL_USER0), read(SYSCTL_USER1));
+    setup_sparkplug(net, mac, runtime::now_ms());
     if let Some((address, source)) = net.address() {
         report(NetEvent::Listening {
             address,

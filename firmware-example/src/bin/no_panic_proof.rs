@@ -484,19 +484,24 @@ mod net {
     static mut BUFFERS: Buffers = Buffers::new();
     #[cfg(feature = "no-panic-audit")]
     static mut MODBUS: ModbusBuffers = ModbusBuffers::new();
+    #[cfg(feature = "no-panic-audit")]
+    static mut SPARKPLUG: firmware_example::net::sparkplug::SparkplugBuffers =
+        firmware_example::net::sparkplug::SparkplugBuffers::new();
 
     /// The whole network side, as `net::run` drives it: smoltcp's
     /// interface and sockets on the driver, DHCP or a static address from
     /// the block, the protocol-B hosts over the bridge and the Modbus TCP
-    /// clients over the gateway (audit builds only: see the module docs).
+    /// clients over the gateway, the Sparkplug edge node with the block
+    /// read from the input (audit builds only: see the module docs).
     #[cfg(feature = "no-panic-audit")]
     fn stack(input: &'static [u8], eth: &mut Eth<'_>, bridge: &mut Bridge, gateway: &mut Gateway) {
         // SAFETY: `stack` runs once, from `prove`: the only references.
-        let (slots, buffers, modbus) = unsafe {
+        let (slots, buffers, modbus, sparkplug) = unsafe {
             (
                 &mut *addr_of_mut!(SLOTS),
                 &mut *addr_of_mut!(BUFFERS),
                 &mut *addr_of_mut!(MODBUS),
+                &mut *addr_of_mut!(SPARKPLUG),
             )
         };
         let (cfg, _) = NetConfig::from_block(input);
@@ -512,12 +517,19 @@ mod net {
             black_box(0),
         );
         net.add_modbus(modbus, black_box(502));
+        let (sp, _) = firmware_example::net::sparkplug::config::SparkplugConfig::from_block(input);
+        net.add_sparkplug(sp, black_box([2, 0, 0, 0, 0, 1]), sparkplug, black_box(0));
         let mut down = Wire(input);
         for tick in 0..black_box(64u32) {
             black_box(net.poll_with(eth, bridge, Some(&mut *gateway), black_box(tick)));
             let mut up = net.host_port();
             let _ = black_box(bridge.poll_with(&mut up, &mut down, &mut *gateway, black_box(tick)));
             black_box(net.address());
+            if let Some(node) = net.sparkplug_mut() {
+                if black_box(tick) == 63 {
+                    node.leave();
+                }
+            }
         }
     }
 }

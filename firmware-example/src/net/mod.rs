@@ -32,10 +32,15 @@
 //! [`modbus::MODBUS_PORT`] (502), added by [`Net::add_modbus`] and served
 //! in [`Net::poll_with`] by the gateway ([`crate::modbus`]) that shares the
 //! controller line with the bridge.
+//!
+//! Sparkplug B ([`sparkplug`]): one client socket to an MQTT broker, added
+//! by [`Net::add_sparkplug`] and served in [`Net::poll_with`] from the
+//! same gateway's cache and command handshake.
 
 pub mod config;
 pub mod host;
 pub mod modbus;
+pub mod sparkplug;
 pub mod stellaris;
 #[cfg(test)]
 mod testkit;
@@ -58,6 +63,8 @@ use crate::status::Stats;
 use config::{Addressing, Ipv4Setting, NetConfig, DHCP_FALLBACK_MS};
 use host::{HostPort, Hosts, SOCKETS};
 use modbus::{ModbusBuffers, ModbusClients, CLIENTS};
+use sparkplug::config::SparkplugConfig;
+use sparkplug::{EdgeNode, SparkplugBuffers};
 
 /// Bytes of each socket buffer (receive and transmit, per socket). The
 /// receive buffer is the TCP window: the most a host can send ahead of
@@ -90,12 +97,12 @@ impl Default for Buffers {
     }
 }
 
-/// The slots of the socket set: the protocol-B sockets, DHCP and the
-/// Modbus TCP sockets.
-pub type SocketSlots<'a> = [SocketStorage<'a>; SOCKETS + 1 + CLIENTS];
+/// The slots of the socket set: the protocol-B sockets, DHCP, the
+/// Modbus TCP sockets and the Sparkplug node's.
+pub type SocketSlots<'a> = [SocketStorage<'a>; SOCKETS + 1 + CLIENTS + 1];
 
 /// Empty socket slots.
-pub const EMPTY_SLOTS: SocketSlots<'static> = [SocketStorage::EMPTY; SOCKETS + 1 + CLIENTS];
+pub const EMPTY_SLOTS: SocketSlots<'static> = [SocketStorage::EMPTY; SOCKETS + 1 + CLIENTS + 1];
 
 /// Where the interface's address came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -124,6 +131,8 @@ pub enum NetEvent {
     },
     /// The DHCP lease was lost; no address until the next.
     AddressLost,
+    /// News of the Sparkplug edge node.
+    Sparkplug(sparkplug::Event),
 }
 
 /// A wrapping millisecond tick as smoltcp's clock.
@@ -151,6 +160,7 @@ pub struct Net<'a> {
     dhcp: Option<SocketHandle>,
     hosts: Hosts,
     modbus: Option<ModbusClients>,
+    sparkplug: Option<EdgeNode<'a>>,
     cfg: NetConfig,
     clock: Clock,
     address: Option<(Ipv4Setting, AddressSource)>,
@@ -198,6 +208,7 @@ impl<'a> Net<'a> {
             dhcp,
             hosts: Hosts::new(handles, cfg.port),
             modbus: None,
+            sparkplug: None,
             cfg,
             clock,
             address: None,
@@ -234,6 +245,32 @@ impl<'a> Net<'a> {
     /// The Modbus TCP clients, if Modbus TCP is served.
     pub fn modbus(&self) -> Option<&ModbusClients> {
         self.modbus.as_ref()
+    }
+
+    /// Runs the Sparkplug edge node with `cfg` (if it is enabled) on a
+    /// socket over `buffers`; `mac` names it when `cfg` gives no node ID.
+    /// Once only: a second call changes nothing.
+    pub fn add_sparkplug(
+        &mut self,
+        cfg: SparkplugConfig,
+        mac: [u8; 6],
+        buffers: &'a mut SparkplugBuffers,
+        now: u32,
+    ) {
+        if self.sparkplug.is_none() && cfg.enabled {
+            let node = EdgeNode::new(cfg, mac, buffers, &mut self.sockets, now);
+            self.sparkplug = Some(node);
+        }
+    }
+
+    /// The Sparkplug edge node, if it runs.
+    pub fn sparkplug(&self) -> Option<&EdgeNode<'a>> {
+        self.sparkplug.as_ref()
+    }
+
+    /// The Sparkplug edge node, to end its session ([`EdgeNode::leave`]).
+    pub fn sparkplug_mut(&mut self) -> Option<&mut EdgeNode<'a>> {
+        self.sparkplug.as_mut()
     }
 
     /// The settings in force.
@@ -285,8 +322,28 @@ impl<'a> Net<'a> {
         let event = self.poll_address(now);
         self.hosts
             .service(&mut self.sockets, bridge, self.station, now);
-        if let (Some(clients), Some(gateway)) = (self.modbus.as_mut(), gateway) {
+        let mut gateway = gateway;
+        if let (Some(clients), Some(gateway)) = (self.modbus.as_mut(), gateway.as_deref_mut()) {
             clients.service(&mut self.sockets, gateway, now);
+        }
+        if let (Some(node), Some(gateway)) = (self.sparkplug.as_mut(), gateway) {
+            let hosts = (self.hosts.host_handle().is_some(), self.hosts.stats().hosts);
+            let news = node.service(
+                &mut self.iface,
+                &mut self.sockets,
+                bridge,
+                gateway,
+                hosts,
+                now,
+            );
+            if let Some(news) = news {
+                // One event a round: the address's first, the node's kept.
+                if event.is_some() {
+                    node.defer(news);
+                } else {
+                    return Some(NetEvent::Sparkplug(news));
+                }
+            }
         }
         event
     }

@@ -25,7 +25,11 @@
 //! and log its stack peak: for the size report; a client's bytes could
 //! end the firmware too; with `--ethernet` the sequence goes over the
 //! protocol-B port), `--ethernet` (protocol B over TCP: the
-//! `lm3s6965-eth` build, lm3s6965 only).
+//! `lm3s6965-eth` build, lm3s6965 only), `--broker 127.0.0.1:PORT` (with
+//! `--ethernet`: the firmware's Sparkplug B edge node on the MQTT broker
+//! at that port of this machine, group `IAI`, the node ID made from the
+//! MAC address, DCMD commands off; prints `sparkplug
+//! spBv1.0/IAI/NBIRTH/NODE` once NBIRTH is out).
 
 use std::io::{self, Write};
 use std::path::PathBuf;
@@ -33,13 +37,14 @@ use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
+use firmware_example::net::sparkplug::config::SparkplugConfig;
 use host_tests::gateway::{self, Options, Ready};
 use host_tests::qemu::Board;
 
 const USAGE: &str = "usage: gateway [--port P] [--baud B] [--modbus-port P] [--modbus-baud B] \
                      [--board lm3s6965|mps2-an386] \
                      [--reply-delay-ms MS] [--faults SPEC] [--seed S] [--elf PATH] \
-                     [--stack-report] [--ethernet]";
+                     [--stack-report] [--ethernet] [--broker 127.0.0.1:PORT]";
 
 fn parse_args() -> Result<Options, String> {
     let mut o = Options::default();
@@ -92,6 +97,24 @@ fn parse_args() -> Result<Options, String> {
             }
             "--elf" => o.elf = Some(PathBuf::from(value()?)),
             "--ethernet" => o.ethernet = true,
+            "--broker" => {
+                let v = value()?;
+                let port = v
+                    .strip_prefix("127.0.0.1:")
+                    .or_else(|| v.strip_prefix("localhost:"))
+                    .and_then(|p| p.parse::<u16>().ok())
+                    .filter(|p| *p != 0)
+                    .ok_or(format!(
+                        "--broker takes 127.0.0.1:PORT (a broker on this machine, which the \
+                         guest reaches as 10.0.2.2), not {v:?}"
+                    ))?;
+                o.sparkplug = Some(SparkplugConfig {
+                    enabled: true,
+                    broker: gateway::QEMU_HOST,
+                    port,
+                    ..SparkplugConfig::default()
+                });
+            }
             "-h" | "--help" => return Err(USAGE.to_owned()),
             other => return Err(format!("unknown argument {other:?}\n{USAGE}")),
         }
@@ -101,6 +124,12 @@ fn parse_args() -> Result<Options, String> {
 
 fn main() -> ExitCode {
     let opts = match parse_args() {
+        Ok(o) if o.sparkplug.is_some() && !o.ethernet => {
+            eprintln!(
+                "gateway: --broker needs --ethernet (the edge node is in the Ethernet build)"
+            );
+            return ExitCode::from(2);
+        }
         Ok(o) => o,
         Err(e) => {
             eprintln!("gateway: {e}");
@@ -126,6 +155,9 @@ fn main() -> ExitCode {
         }
         if let Some(m) = at.modbus_tcp {
             let _ = writeln!(out, "modbus-tcp {m}");
+        }
+        if let Some(topic) = &at.sparkplug {
+            let _ = writeln!(out, "sparkplug {topic}");
         }
         let _ = out.flush();
     };
