@@ -202,3 +202,64 @@ fn a_fence_echo_in_pieces_is_still_its_echo() {
         assert_eq!(l.stats().fences_failed, 0);
     }
 }
+
+/// The echo of a 200H command `cmd` (`#` for `!`, SC again).
+fn echo_of(cmd: &[u8]) -> Vec<u8> {
+    let body = &cmd[1..cmd.len() - 4];
+    let mut e = std::vec![b'#'];
+    e.extend_from_slice(body);
+    let sum = e.iter().fold(0u8, |s, &b| s.wrapping_add(b));
+    e.extend_from_slice(std::format!("{sum:02X}\r\n").as_bytes());
+    e
+}
+
+/// Issue "never wrong when the line breaks its rules": a program
+/// restarted with the same seed while its first fence's echo is still on
+/// the way. The new run's first fence has the same text: the old echo
+/// settles it (by order, everything before it has arrived), and the new
+/// fence's own echo then comes while a test call waits. A 200H reply is
+/// taken only if it carries the call's own text: the fence's echo is not
+/// the answer to `HELLO-0042`.
+#[test]
+fn a_restart_with_the_same_seed_never_answers_a_test_call_with_a_fence_echo() {
+    let seed = 0x4A_7C15;
+    let first_run_fence = {
+        let mut l = Line::new(LineConfig::new(ST), seed);
+        let mut c: Client<64, 128> = Client::new();
+        c.start(&mut l, &AxisStatusQuery::of(&[1]).unwrap(), 0)
+            .unwrap();
+        let Step::Transmit(f) = c.poll(&mut l, 0) else {
+            panic!("a fence first")
+        };
+        f.to_vec()
+        // The program stops here; the controller echoes the fence later.
+    };
+    let mut l = Line::new(LineConfig::new(ST), seed);
+    let mut c: Client<64, 128> = Client::new();
+    let call = crate::message::TestCall {
+        test_string: *b"HELLO-0042",
+    };
+    c.start(&mut l, &call, 100).unwrap();
+    let Step::Transmit(f) = c.poll(&mut l, 100) else {
+        panic!("a fence first")
+    };
+    assert_eq!(f, &first_run_fence[..], "the same seed gives the same text");
+    c.sent(&mut l, 101);
+    // The first run's echo: it settles this fence (same text, and by order).
+    crate::engine::feed(&mut c, &mut l, &echo_of(&first_run_fence), 110);
+    let Step::Transmit(cmd) = c.poll(&mut l, 112) else {
+        panic!("the test call")
+    };
+    assert!(cmd.starts_with(b"!99200HELLO-0042"));
+    let cmd = cmd.to_vec();
+    c.sent(&mut l, 113);
+    // This run's own fence echo arrives while the call waits: not its reply.
+    crate::engine::feed(&mut c, &mut l, &echo_of(&first_run_fence), 120);
+    assert!(matches!(c.poll(&mut l, 121), Step::WaitUntil(_)));
+    // Then the call's own echo.
+    crate::engine::feed(&mut c, &mut l, &echo_of(&cmd), 130);
+    assert_eq!(c.poll(&mut l, 131), Step::Done(Ok(())));
+    let r = c.response::<crate::message::TestCall>().unwrap();
+    assert_eq!(&r.test_string, b"HELLO-0042");
+    assert_eq!(l.stats().mismatches, 1);
+}

@@ -133,6 +133,11 @@ impl Bridge {
         let is_header = Header::from_byte(b).is_some();
         match self.mode {
             Mode::Idle | Mode::Head if is_header => {
+                // When a host's frame starts varies from boot to boot (a
+                // QEMU run's RAM starts zeroed, a board's may not be
+                // random): the fences to come take it in.
+                self.line
+                    .stir(now ^ (self.stats.upstream_in as u32).rotate_left(16));
                 self.up.head[0] = b;
                 self.up.head_len = 1;
                 self.mode = Mode::Head;
