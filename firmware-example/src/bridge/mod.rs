@@ -51,6 +51,7 @@ use iai_protocol_b::transfer::{packed_len, RecordBuffer, Transfer};
 use iai_protocol_b::{line::LineConfig, profile::Profile, transfer::TransferConfig};
 
 use crate::config::{Config, Source};
+use crate::log;
 use crate::serial::{Counted, Port};
 use crate::status::{self, LastError, Stats};
 
@@ -297,6 +298,8 @@ pub struct Bridge {
     /// The guest holds the line in this poll: the bridge's own paths
     /// leave the downstream alone.
     guest_holds: bool,
+    /// Since when the host's XOFF holds the upstream transmitter.
+    xoff_since: Option<u32>,
 }
 
 /// The line to the controller for `cfg`.
@@ -329,6 +332,7 @@ impl Bridge {
             last_error: None,
             forward_pending: None,
             guest_holds: false,
+            xoff_since: None,
         }
     }
 
@@ -389,6 +393,7 @@ impl Bridge {
         guest: &mut G,
         now: u32,
     ) -> Result<Poll, Error<U::Error, D::Error>> {
+        let xoff_until = self.watch_xoff(up, now);
         let mut guest_moved = false;
         let host_waits = self.forward_pending.is_some() || matches!(self.mode, Mode::Stream { .. });
         if host_waits && guest.holds_line() && guest.may_yield() {
@@ -425,6 +430,7 @@ impl Bridge {
             Poll::Busy
         } else {
             let mut w = self.wait(now);
+            w.deadline = earliest(now, w.deadline, xoff_until);
             let g = guest.wait(now);
             if self.guest_holds {
                 w.interest.down_read = true;
@@ -435,6 +441,27 @@ impl Bridge {
             }
             Poll::Wait(w)
         })
+    }
+
+    /// Lets the host's XOFF hold the upstream transmitter at most
+    /// [`Config::xoff_hold_ms`]: an XOFF that line noise made, or a host
+    /// that never sends XON, must not silence the bridge for good. The
+    /// tick by which to look again while it holds.
+    fn watch_xoff<U: Port>(&mut self, up: &mut U, now: u32) -> Option<u32> {
+        if !up.peer_stopped() {
+            self.xoff_since = None;
+            return None;
+        }
+        let since = *self.xoff_since.get_or_insert(now);
+        let until = since.wrapping_add(self.cfg.xoff_hold_ms);
+        if iai_protocol_b::clock::reached(now, until) {
+            log::warning!("XOFF from the host held the transmitter too long: let go");
+            up.release_peer_stop();
+            self.stats.xoff_released = self.stats.xoff_released.wrapping_add(1);
+            self.xoff_since = None;
+            return None;
+        }
+        Some(until)
     }
 
     /// What the bridge waits for in its current mode.

@@ -24,6 +24,8 @@ struct Fake {
     output: Vec<u8>,
     echo_fences: bool,
     fences: u32,
+    /// The peer sent XOFF (and no XON since).
+    stopped: bool,
 }
 
 impl Fake {
@@ -75,7 +77,14 @@ impl Write for Fake {
         Ok(())
     }
 }
-impl Port for Fake {}
+impl Port for Fake {
+    fn peer_stopped(&mut self) -> bool {
+        self.stopped
+    }
+    fn release_peer_stop(&mut self) {
+        self.stopped = false;
+    }
+}
 
 fn frame(header: Header, station: u8, code: u16, body: &[u8]) -> Vec<u8> {
     let mut buf = [0u8; 64];
@@ -489,4 +498,30 @@ fn a_restarted_bridge_never_relays_its_own_fence_echo() {
     settle(&mut b, &mut up, &mut down, 30);
     settle(&mut b, &mut up, &mut down, 31);
     assert_eq!(up.output, echo(&call));
+}
+
+/// Issue "never wrong when the line breaks its rules": an XOFF in noise
+/// (and no XON) holds the bridge's transmitter at most
+/// `Config::xoff_hold_ms`; the bridge wakes for it, lets go, counts it.
+#[test]
+fn an_xoff_holds_the_transmitter_at_most_the_configured_time() {
+    let mut b = bridge(Policy::ForwardAll);
+    let (mut up, mut down) = (Fake::default(), Fake::controller());
+    up.stopped = true;
+    let hold = Config::DEFAULT.xoff_hold_ms;
+    match b.poll(&mut up, &mut down, 100).unwrap() {
+        Poll::Wait(w) => assert_eq!(w.deadline, Some(100 + hold)),
+        other => panic!("{other:?}"),
+    }
+    settle(&mut b, &mut up, &mut down, 100 + hold - 1);
+    assert!(up.stopped, "held until the limit");
+    settle(&mut b, &mut up, &mut down, 100 + hold);
+    assert!(!up.stopped, "let go at the limit");
+    assert_eq!(b.stats().xoff_released, 1);
+    // An XOFF the host lifts itself is not counted.
+    up.stopped = true;
+    settle(&mut b, &mut up, &mut down, 200 + hold);
+    up.stopped = false;
+    settle(&mut b, &mut up, &mut down, 300 + 2 * hold);
+    assert_eq!(b.stats().xoff_released, 1);
 }
