@@ -6,7 +6,8 @@
 //! hex fields, split by the firmware's own [`status::parse`] and named
 //! here with what they mean ([`describe_status`]).
 //!
-//! **A table through the bridge** ([`messages`]): the bridge takes a 26DH
+//! **A table through the bridge** ([`parts`], sent each by the core's
+//! upload engine, `table::upload`): the bridge takes a 26DH
 //! of any legal size (up to 20,000 records), writes it to the controller
 //! in 2,051-byte commands, reads each back with 21FH before it takes more,
 //! and answers once: `#` with the count means the controller holds every
@@ -16,19 +17,18 @@
 //! whole message again puts every one of its records right). See the
 //! README, "What a 26DH reply tells the host".
 
-use std::io;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use firmware_example::codes as bridge_codes;
 use firmware_example::status;
 use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
-use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 use iai_protocol_b::frame::{emit_frame, Frame, Header, Station};
+use iai_protocol_b::line::LineConfig;
 use iai_protocol_b::position::{PositionRecord, PositionStream};
-use iai_protocol_b::table::PositionStreamEncoder;
 
 use crate::codes;
 use crate::link::Link;
+use crate::table::{self, Hooks, TableError};
 
 /// The bridge's own station by default (its configuration block's
 /// default, `firmware-example/src/config.rs`).
@@ -201,100 +201,36 @@ pub fn status_json(s: &BridgeStatus) -> serde_json::Value {
     })
 }
 
-/// Waits until `deadline` for a frame `accept` takes, reading the link
-/// (and first what it holds already); `stop` ends the wait early. The
-/// frame's bytes, or `None`.
-pub fn await_frame(
-    link: &mut Link,
-    deadline: Instant,
-    stop: &dyn Fn() -> bool,
-    mut accept: impl FnMut(&Frame<'_>) -> bool,
-) -> io::Result<Option<Vec<u8>>> {
-    let mut dec: Box<FrameDecoder<4096>> =
-        Box::new(FrameDecoder::with_policy(BypassPolicy::Reject));
-    let mut input = link.take_pending();
-    let mut buf = [0u8; 4096];
-    loop {
-        let mut rest = input.as_slice();
-        while !rest.is_empty() {
-            let r = dec.decode(rest);
-            rest = rest.get(r.consumed..).unwrap_or(&[]);
-            if let Status::Complete(Event::Frame(f)) = r.status {
-                if accept(&f) {
-                    return Ok(Some(f.as_bytes().to_vec()));
-                }
-            }
-            if r.consumed == 0 {
-                break;
-            }
-        }
-        let now = Instant::now();
-        if now >= deadline || stop() {
-            return Ok(None);
-        }
-        let wait = (deadline - now).min(Duration::from_millis(100));
-        let n = link.read_for(&mut buf, wait)?;
-        input = buf.get(..n).unwrap_or(&[]).to_vec();
-    }
-}
-
-/// Asks the bridge at `station` for its status: up to `sends` queries,
-/// each answered within `wait`. `Ok(None)` when none was answered.
+/// Asks the bridge at `station` for its status over `link`, on a line of
+/// its own to that station (the core's client: fence, resends, reply
+/// matching), each send answered within `wait`, at most `sends` sends:
+/// the reply frame; an `&` is `Engine(Failure::Controller)`, no answer
+/// `Engine(Failure::Timeout)`.
 pub fn query_status(
     link: &mut Link,
     station: u8,
     wait: Duration,
     sends: u8,
-    stop: &dyn Fn() -> bool,
-) -> io::Result<Option<Vec<u8>>> {
-    let q = status_query(station);
-    for _ in 0..sends.max(1) {
-        link.write_all(&q)?;
-        let got = await_frame(link, Instant::now() + wait, stop, |f| {
-            f.station().0 == station
-                && (f.header() == Header::Error
-                    || (f.header() == Header::Response && f.code() == bridge_codes::STATUS_QUERY))
-        })?;
-        if got.is_some() || stop() {
-            return Ok(got);
-        }
-    }
-    Ok(None)
+    hooks: &Hooks<'_>,
+) -> Result<Vec<u8>, TableError> {
+    let cfg = LineConfig {
+        timeout_ms: u32::try_from(wait.as_millis()).unwrap_or(u32::MAX),
+        max_sends: sends.max(1),
+        // The bridge answers its own station at once: a line to it waits
+        // for nothing late.
+        late_window_ms: 0,
+        ..LineConfig::new(Station(station))
+    };
+    table::command_to(link, cfg, &status_query(station), hooks)
 }
 
 /// Records per 26DH message at most (its format's limit, TTA p. 60).
 pub const MAX_RECORDS: usize = PositionStream::CHANGE_2.max_records as usize;
 
-/// The table as 26DH messages to `station` of at most [`MAX_RECORDS`]
-/// records each (one message for any table the format allows); each with
-/// its record count.
-pub fn messages(records: &[PositionRecord], station: u8) -> Result<Vec<(Vec<u8>, u16)>, String> {
-    records
-        .chunks(MAX_RECORDS.max(1))
-        .map(|part| {
-            let count = u16::try_from(part.len()).map_err(|_| "too many records".to_string())?;
-            let mut enc = PositionStreamEncoder::new(
-                PositionStream::CHANGE_2,
-                Station(station),
-                0,
-                count,
-                part.iter(),
-            )
-            .map_err(|e| format!("26DH cannot be built: {e}"))?;
-            let mut out = Vec::with_capacity(part.len() * 82 + 16);
-            let mut buf = [0u8; 4096];
-            loop {
-                let n = enc
-                    .read(&mut buf)
-                    .map_err(|e| format!("26DH cannot be built: {e}"))?;
-                if n == 0 {
-                    break;
-                }
-                out.extend_from_slice(buf.get(..n).unwrap_or(&[]));
-            }
-            Ok((out, count))
-        })
-        .collect()
+/// The table as 26DH messages of at most [`MAX_RECORDS`] records each (one
+/// message for any table the format allows).
+pub fn parts(records: &[PositionRecord]) -> std::slice::Chunks<'_, PositionRecord> {
+    records.chunks(MAX_RECORDS.max(1))
 }
 
 /// How a 26DH through the bridge ended.
@@ -438,22 +374,12 @@ mod tests {
     fn a_table_is_one_26dh_up_to_its_format_s_limit() {
         let rec = |n: u16| PositionRecord::new(n, 30, 30, 100, &[(1, i32::from(n))]).unwrap();
         let recs: Vec<PositionRecord> = (0..3).map(rec).collect();
-        let m = messages(&recs, 0x99).unwrap();
-        assert_eq!(m.len(), 1);
-        assert_eq!(m[0].1, 3);
-        assert!(
-            m[0].0.starts_with(b"!9926D0003"),
-            "{:?}",
-            String::from_utf8_lossy(&m[0].0)
-        );
-        assert!(m[0].0.ends_with(b"\r\n"));
+        assert_eq!(parts(&recs).map(<[_]>::len).collect::<Vec<_>>(), [3]);
         let many: Vec<PositionRecord> = (0..=20_000).map(|i| rec((i % 60_000) as u16)).collect();
-        let m = messages(&many, 0x99).unwrap();
         assert_eq!(
-            m.iter().map(|(_, n)| *n as usize).collect::<Vec<_>>(),
+            parts(&many).map(<[_]>::len).collect::<Vec<_>>(),
             vec![20_000, 1]
         );
-        assert!(m[0].0.len() > 2_051);
         assert!(worth_resending(bridge_codes::UPSTREAM_OVERRUN));
         assert!(!worth_resending(bridge_codes::REFUSED));
         assert!(verdict_text(&Verdict::Refused(0xB07), 3).contains("corrupted bytes"));

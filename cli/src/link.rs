@@ -352,6 +352,16 @@ impl Link {
         })
     }
 
+    /// Runs `f` with a line of its own to `cfg.station` over this link (a
+    /// bridge's own station), then puts this link's line back (see
+    /// `hosted::StdLink::replace_line`).
+    pub fn with_line<T>(&mut self, cfg: LineConfig, f: impl FnOnce(&mut Link) -> T) -> T {
+        let own = self.link.replace_line(cfg);
+        let r = f(self);
+        self.link.put_back_line(own);
+        r
+    }
+
     /// The core's memory of this line, to start a command on it.
     pub fn line_mut(&mut self) -> &mut Line {
         self.link.line_mut()

@@ -206,6 +206,9 @@ pub const DATA_LEN: usize = {
 /// Bytes of the whole reply, header through LF.
 pub const REPLY_LEN: usize = ENVELOPE_LEN + DATA_LEN + 4;
 
+/// Digits of `xoff_released`, the field layout 2 added.
+const XOFF_WIDTH: usize = 8;
+
 /// Layout version sent in the first field.
 pub const LAYOUT: u8 = 2;
 
@@ -290,13 +293,19 @@ impl Report<'_> {
 /// Splits a status reply's data (the frame body) into `(name, value)`
 /// pairs in [`FIELDS`] order; `None` if the length is wrong or a digit is
 /// not hex.
+/// A reply of layout 1 (before `xoff_released`) reads with that field 0.
 pub fn parse(body: &[u8]) -> Option<[(&'static str, u64); FIELDS.len()]> {
-    if body.len() != DATA_LEN {
+    let layout_1 = body.get(..2) == Some(b"01") && body.len() == DATA_LEN - XOFF_WIDTH;
+    if body.len() != DATA_LEN && !layout_1 {
         return None;
     }
     let mut out = [("", 0u64); FIELDS.len()];
     let mut at = 0;
     for (slot, &(name, width)) in out.iter_mut().zip(FIELDS.iter()) {
+        if layout_1 && name == "xoff_released" {
+            *slot = (name, 0);
+            continue;
+        }
         let w = usize::from(width);
         let digits = body.get(at..at + w)?;
         let v = iai_protocol_b::field::decode_unsigned(FieldSpec::hex(width), digits, at).ok()?;

@@ -5,18 +5,17 @@
 use std::io::{self, Write};
 use std::process::ExitCode;
 use std::sync::atomic::Ordering;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use iai_cli::bridge::{
-    await_frame, decode_status, describe_status, messages, query_status, status_json, verdict_text,
+    decode_status, describe_status, parts, query_status, status_json, verdict_text,
     worth_resending, BridgeStatus, Verdict,
 };
 use iai_cli::link::{Flow, Link, Target};
-use iai_cli::probe::nonce;
-use iai_cli::table::{self, Hooks};
+use iai_cli::table::{self, Hooks, TableError};
+use iai_protocol_b::error::Failure as CoreFailure;
 use iai_protocol_b::frame::{Header, Station};
 use iai_protocol_b::line::LineConfig;
-use iai_protocol_b::message::TestCall;
 use iai_protocol_b::position::{PositionRecord, PositionStream};
 
 use super::{out_err, progress_bar, stop_flag, table_failure, Failure, Run, EXIT_INTERRUPTED};
@@ -29,25 +28,45 @@ fn status_of(
     station: u8,
     wait: Duration,
     sends: u8,
-    stop: &dyn Fn() -> bool,
+    hooks: &Hooks<'_>,
 ) -> Result<BridgeStatus, Failure> {
     let target = link.target().clone();
-    let reply = query_status(link, station, wait, sends, stop)
-        .map_err(|e| format!("{target}: the line failed: {e}"))?;
-    if stop() {
-        return Err(Failure::Exit(EXIT_INTERRUPTED, "interrupted".into()));
-    }
-    let Some(reply) = reply else {
-        let mut m = format!(
-            "{target}: no bridge answered its status query (B00H to station {station:02X}, {} send(s)); is the bridge firmware on this line, at this station (--bridge-station)?",
-            sends.max(1)
-        );
-        if let Some(h) = link.hint() {
-            m.push_str(&format!("\n  hint: {h}"));
+    match query_status(link, station, wait, sends, hooks) {
+        Ok(reply) => decode_status(&reply).map_err(|e| Failure::Failed(format!("{target}: {e}"))),
+        Err(TableError::Interrupted) => Err(Failure::Exit(EXIT_INTERRUPTED, "interrupted".into())),
+        Err(TableError::Engine(CoreFailure::Controller { code, .. })) => Err(format!(
+            "{target}: {}",
+            decode_status(&error_frame(station, code))
+                .err()
+                .unwrap_or_default()
+        )
+        .into()),
+        Err(TableError::Engine(CoreFailure::Timeout { sends })) => {
+            let mut m = format!(
+                "{target}: no bridge answered its status query (B00H to station {station:02X}, {sends} send(s)); is the bridge firmware on this line, at this station (--bridge-station)?"
+            );
+            if let Some(h) = link.hint() {
+                m.push_str(&format!("\n  hint: {h}"));
+            }
+            Err(m.into())
         }
-        return Err(m.into());
-    };
-    decode_status(&reply).map_err(|e| Failure::Failed(format!("{target}: {e}")))
+        Err(e) => Err(format!("{target}: the status query failed: {e}").into()),
+    }
+}
+
+/// The `&` frame the bridge at `station` answered with `code`, as sent.
+fn error_frame(station: u8, code: u16) -> Vec<u8> {
+    let mut buf = [0u8; 16];
+    let n = iai_protocol_b::frame::emit_frame(
+        &mut buf,
+        Header::Error,
+        Station(station),
+        code,
+        Default::default(),
+        |_| Ok(()),
+    )
+    .unwrap_or(0);
+    buf[..n].to_vec()
 }
 
 pub(crate) fn status_cmd(a: &BridgeStatusArgs) -> Run {
@@ -55,13 +74,18 @@ pub(crate) fn status_cmd(a: &BridgeStatusArgs) -> Run {
     let mut link = Link::open(&target, LineConfig::new(Station(a.bridge_station)))?;
     let stop = stop_flag();
     let stopped = || stop.load(Ordering::SeqCst);
+    let note = |m: &str| eprintln!("{m}");
+    let hooks = Hooks {
+        note: &note,
+        stop: &stopped,
+    };
     let wait = Duration::from_millis(u64::from(a.timeout));
     let s = status_of(
         &mut link,
         a.bridge_station,
         wait,
         a.retries.saturating_add(1),
-        &stopped,
+        &hooks,
     )?;
     let mut out = io::stdout().lock();
     if a.json {
@@ -79,32 +103,24 @@ pub(crate) fn status_cmd(a: &BridgeStatusArgs) -> Run {
 /// fifth leaves a margin.
 const INTAKE_DIVISOR: u64 = 5;
 
-/// How long to wait for the bridge's answer after a write of `bytes` that
-/// started at `start` and ended at `end`: the reply timeout after the
-/// last byte left, or, where the link may hold the bytes back (a TCP
-/// server or gateway that buffers them), after the time the bridge needs
-/// to take them all in at `baud`.
-fn deadline(
-    start: Instant,
-    end: Instant,
-    bytes: usize,
-    baud: u64,
-    timeout: Duration,
-    tcp: bool,
-) -> Instant {
-    let after_end = end + timeout;
+/// How long the bridge may take to take in a message of `bytes` after its
+/// first byte left, ms: nothing on a serial line (the bytes reach it at
+/// the rate they leave); over TCP (a gateway that buffers them) the time
+/// it needs to take them in at `baud` (each chunk is written and read back
+/// before it takes more).
+fn intake_ms(bytes: usize, baud: u64, tcp: bool) -> u32 {
     if !tcp {
-        return after_end;
+        return 0;
     }
     let wire_ms = (bytes as u64) * 10 * 1000 / baud.max(1) * INTAKE_DIVISOR;
-    after_end.max(start + timeout + Duration::from_millis(wire_ms))
+    u32::try_from(wire_ms).unwrap_or(u32::MAX)
 }
 
 /// `table write --bridge`: the bridge must answer its status query (for
-/// this controller station, a policy that takes 26DH), a 200H through it
-/// fences the line, then each 26DH goes out whole and its `#` or `&` is
-/// awaited; a transport failure or no answer sends it again, up to
-/// `--retries` times.
+/// this controller station, a policy that takes 26DH), then each 26DH goes
+/// out whole on the link's line (the core's upload engine: fenced first,
+/// its reply matched, resent after a timeout within `--retries`); an `&`
+/// the bridge gives for a transport failure sends it again, as often.
 pub(crate) fn write_table(
     a: &WriteArgs,
     records: &[PositionRecord],
@@ -116,7 +132,7 @@ pub(crate) fn write_table(
     let tcp = matches!(target, Target::Tcp { .. });
     let wait = Duration::from_millis(u64::from(line.timeout));
     let sends = line.retries.saturating_add(1);
-    let st = status_of(link, a.bridge_station, wait, sends, hooks.stop)?;
+    let st = status_of(link, a.bridge_station, wait, sends, hooks)?;
     let controller = st.get("controller_station");
     if controller != u64::from(line.station) {
         return Err(format!(
@@ -143,106 +159,81 @@ pub(crate) fn write_table(
             _ => "RTS/CTS",
         }
     );
-    // Settles what the line may still owe, and shows the controller answers.
-    let text = nonce(u64::from(link.now()) ^ u64::from(std::process::id()) << 16);
-    table::command(link, &TestCall { test_string: text }, hooks)
-        .map_err(|e| table_failure(link, e, " (200H through the bridge); nothing was written"))?;
-    let msgs = messages(records, line.station)?;
-    let total: usize = msgs.iter().map(|(m, _)| m.len()).sum();
+    let stream = PositionStream::CHANGE_2;
+    let sizes: Vec<usize> = parts(records).map(|p| stream.frame_len(p.iter())).collect();
+    let total: usize = sizes.iter().sum();
     let bar = progress_bar(total as u64, "26DH to the bridge", "bytes");
     let mut base = 0usize;
     let mut written = 0usize;
-    for (k, (msg, count)) in msgs.iter().enumerate() {
+    let count = parts(records).count();
+    for (k, (part, &size)) in parts(records).zip(&sizes).enumerate() {
+        let n = part.len() as u16;
         let mut attempt = 0u8;
         let verdict = loop {
             attempt += 1;
             bar.set_message(format!(
-                "26DH {} of {}{}",
+                "26DH {} of {count}{}",
                 k + 1,
-                msgs.len(),
                 if attempt > 1 {
                     format!(", send {attempt}")
                 } else {
                     String::new()
                 }
             ));
-            let start = Instant::now();
-            for (i, piece) in msg.chunks(4096).enumerate() {
-                if (hooks.stop)() {
+            let sent = table::upload(
+                link,
+                stream,
+                part,
+                intake_ms(size, baud, tcp),
+                |b| bar.set_position((base as u64 + b).min((base + size) as u64)),
+                hooks,
+            );
+            let verdict = match sent {
+                Ok(got) => Verdict::Written(got),
+                Err(TableError::Engine(CoreFailure::Controller { code, .. })) => {
+                    Verdict::Refused(code)
+                }
+                Err(TableError::Engine(CoreFailure::Timeout { .. })) => Verdict::NoAnswer,
+                Err(TableError::Interrupted) => {
                     bar.abandon();
                     return Err(Failure::Exit(
                         EXIT_INTERRUPTED,
-                        format!("interrupted in the middle of a 26DH: the bridge answers it & B01 or B04; {written} records were confirmed before it, how far this one went is unknown"),
+                        format!("interrupted in the middle of a 26DH: the bridge answers it & B01 or B04; {written} records were confirmed before it, how far this one went is unknown; position writes are idempotent, so sending the table again puts it right"),
                     ));
                 }
-                link.write_all(piece)
-                    .map_err(|e| format!("{target}: the line failed: {e}"))?;
-                bar.set_position((base + i * 4096 + piece.len()) as u64);
-            }
-            bar.set_message(format!(
-                "26DH {} of {}: waiting for the bridge's answer",
-                k + 1,
-                msgs.len()
-            ));
-            let until = deadline(start, Instant::now(), msg.len(), baud, wait, tcp);
-            let st = Station(line.station);
-            let reply = await_frame(link, until, hooks.stop, |f| {
-                f.station() == st
-                    && (f.header() == Header::Error
-                        || (f.header() == Header::Response
-                            && f.code() == PositionStream::CHANGE_2.id))
-            })
-            .map_err(|e| format!("{target}: the line failed: {e}"))?;
-            let verdict = match reply.as_deref().map(|r| {
-                iai_protocol_b::frame::Frame::new_checked(
-                    r,
-                    iai_protocol_b::checksum::BypassPolicy::Reject,
-                )
-            }) {
-                Some(Ok(f)) if f.header() == Header::Error => Verdict::Refused(f.code()),
-                Some(Ok(f)) => Verdict::Written(
-                    std::str::from_utf8(f.body())
-                        .ok()
-                        .and_then(|b| u16::from_str_radix(b, 16).ok())
-                        .unwrap_or(0),
-                ),
-                _ if (hooks.stop)() => {
+                Err(e) => {
                     bar.abandon();
-                    return Err(Failure::Exit(
-                        EXIT_INTERRUPTED,
-                        "interrupted while the bridge was writing: how far it went is unknown; position writes are idempotent, so sending the table again puts it right".into(),
+                    return Err(table_failure(
+                        link,
+                        e,
+                        &format!(
+                            "; {written} records were confirmed by the bridge before this message"
+                        ),
                     ));
                 }
-                _ => Verdict::NoAnswer,
             };
-            let again = match &verdict {
-                Verdict::Refused(code) => worth_resending(*code),
-                Verdict::NoAnswer => true,
-                Verdict::Written(_) => false,
-            };
+            let again = matches!(&verdict, Verdict::Refused(code) if worth_resending(*code));
             if !again || attempt >= sends {
                 break verdict;
             }
             bar.suspend(|| {
                 eprintln!(
                     "{}; sending the message again ({} of {sends})",
-                    verdict_text(&verdict, *count),
+                    verdict_text(&verdict, n),
                     attempt + 1
                 )
             });
-            // A late answer to this send is let pass before the next.
-            let _ = await_frame(link, Instant::now() + wait, hooks.stop, |_| false);
         };
         match verdict {
-            Verdict::Written(n) if n == *count => {
-                bar.suspend(|| eprintln!("{}", verdict_text(&verdict, *count)));
-                written += usize::from(n);
+            Verdict::Written(got) if got == n => {
+                bar.suspend(|| eprintln!("{}", verdict_text(&verdict, n)));
+                written += usize::from(got);
             }
             v => {
                 bar.abandon();
                 let mut m = format!(
                     "{target}: {}; {written} records were confirmed by the bridge before this message; send the table again (position writes are idempotent)",
-                    verdict_text(&v, *count)
+                    verdict_text(&v, n)
                 );
                 if v == Verdict::NoAnswer {
                     if let Some(h) = link.hint() {
@@ -252,12 +243,14 @@ pub(crate) fn write_table(
                 return Err(m.into());
             }
         }
-        base += msg.len();
+        base += size;
     }
     bar.finish_and_clear();
+    if let Some(note) = link.repeats_note() {
+        eprintln!("{note}");
+    }
     println!(
-        "verified by the bridge: the controller holds all {written} records ({} 26DH message(s) of {total} bytes; the bridge wrote each in 2,051-byte commands, read every one back with 21FH and compared it, and answered # with the count)",
-        msgs.len()
+        "verified by the bridge: the controller holds all {written} records ({count} 26DH message(s) of {total} bytes; the bridge wrote each in 2,051-byte commands, read every one back with 21FH and compared it, and answered # with the count)"
     );
     Ok(())
 }

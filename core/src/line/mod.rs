@@ -320,6 +320,10 @@ pub struct Line {
     repeat_ms: u32,
     /// A proof of order was asked for ([`Line::start_proof`]).
     proving: bool,
+    /// How much longer than `timeout_ms` the current command's reply may
+    /// take after its last byte (a receiver that takes a long frame in at
+    /// a slower line's rate: [`crate::upload`]).
+    reply_extra_ms: u32,
     /// Frames heard while the owner holds its reply, or no engine runs.
     overheard: overheard::Overheard,
     stats: LineStats,
@@ -384,6 +388,7 @@ impl Line {
             learned_copy_ms: 0,
             repeat_ms: 0,
             proving: false,
+            reply_extra_ms: 0,
             overheard: overheard::Overheard::new(),
             stats: LineStats {
                 commands: 0,
@@ -492,6 +497,7 @@ impl Line {
     pub(crate) fn begin(&mut self, cmd: Command, now: u32) {
         self.abandon(now);
         self.proving = false;
+        self.reply_extra_ms = 0;
         if core::mem::take(&mut self.opened) {
             // The past is unknown: a reply to anything sent before may
             // still come, and a copy of anything received before.
@@ -674,8 +680,24 @@ impl Line {
     /// The first tick after which no reply to a send at `sent` can arrive.
     fn late_horizon(&self, sent: u32) -> u32 {
         sent.wrapping_add(self.cfg.timeout_ms)
+            .wrapping_add(self.reply_extra_ms)
             .wrapping_add(self.cfg.late_window_ms)
             .wrapping_add(1)
+    }
+
+    /// [`Line::sent`] for a command whose reply may take `extra_ms` longer
+    /// than the timeout after its last byte (cut to the line's longest
+    /// hold); it and its late replies are owed that much longer.
+    pub(crate) fn sent_allowing(&mut self, now: u32, extra_ms: u32) {
+        let extra = extra_ms.min(MAX_HORIZON_MS / 4);
+        self.reply_extra_ms = extra;
+        let cfg = LineConfig {
+            timeout_ms: self.cfg.timeout_ms.saturating_add(extra),
+            ..self.cfg
+        };
+        self.horizon = self.horizon.max(cfg.horizon());
+        self.ledger.set_horizon(self.horizon);
+        self.sent(now);
     }
 
     /// The command (or fence) was completely transmitted at tick `now`:
@@ -691,7 +713,9 @@ impl Line {
             Phase::Sending => {
                 self.last_sent = now;
                 self.phase = Phase::Await {
-                    deadline: now.wrapping_add(self.cfg.timeout_ms),
+                    deadline: now
+                        .wrapping_add(self.cfg.timeout_ms)
+                        .wrapping_add(self.reply_extra_ms),
                 };
                 if let Reply::None { ready_after_ms } = self.cmd.reply {
                     // The controller restarts: nothing before it is ready.

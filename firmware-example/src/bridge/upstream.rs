@@ -2,6 +2,7 @@
 //! the bridge's own station, other stations, refused commands, 26DH, and
 //! the pass-through; and the bridge's own answers going up.
 
+use iai_protocol_b::catalogue;
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameSkipper, Skipped, Status};
 use iai_protocol_b::frame::{emit_frame, read_envelope, Frame, Header, Station, ENVELOPE_LEN};
@@ -311,6 +312,22 @@ impl Bridge {
                 last_error: self.last_error,
             };
             self.resp_len = report.emit(station, &mut self.resp).unwrap_or(0);
+            self.out_off = 0;
+            self.mode = Mode::Respond;
+        } else if id == catalogue::TEST_CALL.id {
+            // The echo, as a controller gives it (2003 p. 15): a host can
+            // fence its line to the bridge's own station.
+            let frames = self.job.idle_decoder();
+            let text = frames.last_frame().map_or(&[][..], |f| f.body());
+            self.resp_len = emit_frame(
+                &mut self.resp,
+                Header::Response,
+                station,
+                catalogue::TEST_CALL.id,
+                Default::default(),
+                |w| w.put(text),
+            )
+            .unwrap_or(0);
             self.out_off = 0;
             self.mode = Mode::Respond;
         } else {
