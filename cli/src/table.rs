@@ -241,10 +241,49 @@ pub fn read(
     plan: &Plan,
     first: u16,
     last: u16,
+    window: impl FnMut(Window) -> bool,
+    hooks: &Hooks<'_>,
+) -> Result<ReadBackStats, TableError> {
+    read_with(link, plan.read_config(first, last), window, hooks)
+}
+
+/// Reads positions `first..=last` once per window (each reply proved,
+/// not confirmed by a second): the records they hold. What a resumed
+/// read checks its kept records against: together with the confirmed
+/// read that kept them, two replies agree.
+pub fn read_once(
+    link: &mut Link,
+    plan: &Plan,
+    first: u16,
+    last: u16,
+    hooks: &Hooks<'_>,
+) -> Result<BTreeMap<u16, PositionRecord>, TableError> {
+    let cfg = ReadBackConfig {
+        confirm: false,
+        ..plan.read_config(first, last)
+    };
+    let mut got = BTreeMap::new();
+    read_with(
+        link,
+        cfg,
+        |w| {
+            got.extend(w.records.into_iter().map(|r| (r.number, r)));
+            true
+        },
+        hooks,
+    )?;
+    Ok(got)
+}
+
+/// [`read`] with the read-back's settings given.
+fn read_with(
+    link: &mut Link,
+    cfg: ReadBackConfig,
     mut window: impl FnMut(Window) -> bool,
     hooks: &Hooks<'_>,
 ) -> Result<ReadBackStats, TableError> {
-    let mut rb: ReadBack<FRAME> = ReadBack::new(plan.read_config(first, last));
+    let last = cfg.last;
+    let mut rb: ReadBack<FRAME> = ReadBack::new(cfg);
     let mut refusals = 0;
     let enough = Cell::new(false);
     let stop = || enough.get() || (hooks.stop)();

@@ -537,3 +537,47 @@ fn a_read_on_a_line_that_repeats_frames_is_never_wrong() {
     assert!(equal >= 25, "{equal} of 30 read equal");
     assert!(said > 0);
 }
+
+/// Issue "never wrong when the line breaks its rules": a read interrupted,
+/// the table changed (positions 1..50 cleared), then `--resume`: what the
+/// read kept is read once more and found changed, so it reads the table
+/// again from its start; the output is what the controller holds, as
+/// 208H counts it (it used to list positions 1..50 and say "1500").
+#[cfg(unix)]
+#[test]
+fn a_resumed_read_checks_what_it_kept() {
+    let sim = Sim::tcp(&["--quiet", "--reply-delay-ms", "15"]);
+    let line = ["--tcp", sim.at.as_str()];
+    let csv = csv_table(1_500, 3, 47);
+    let path = temp("resume-check.csv", csv.as_bytes());
+    let out = with_line(
+        &["table", "write", path.to_str().unwrap(), "--verify", "off"],
+        &line,
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let got = temp("resume-check-out.csv", b"");
+    let o = got.to_str().unwrap();
+    let mut read = vec!["table", "read", "--all", "-o", o];
+    read.extend_from_slice(&line);
+    let out = signalled(&read, 2_000, libc::SIGINT);
+    assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
+    let kept = std::fs::read_to_string(&got).unwrap().lines().count() - 1;
+    assert!(kept > 50, "the interrupted read kept {kept} records");
+    let out = with_line(&["table", "clear", "--first", "1", "--count", "50"], &line);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let mut resume = read.clone();
+    resume.push("--resume");
+    let out = iai(&resume);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let e = stderr(&out);
+    assert!(e.contains("changed since the interrupted read"), "{e}");
+    assert!(e.contains("all 1450 defined position(s)"), "{e}");
+    let want: String = csv
+        .lines()
+        .enumerate()
+        .filter(|(i, _)| *i == 0 || *i > 50)
+        .map(|(_, l)| format!("{l}\n"))
+        .collect();
+    assert_eq!(std::fs::read_to_string(&got).unwrap(), want);
+    sim.stop();
+}
