@@ -6,7 +6,7 @@
 //! chunk takes the rest); everything after that is the byte stream.
 //!
 //! Two decoders run side by side on the same stream: one fed in those
-//! chunks through `decode` (called until `NeedMore`, including with the
+//! chunks through `decode` (called until `Partial`, including with the
 //! empty rest of a chunk), the other fed byte by byte through `push` and
 //! drained with `decode(&[])` after each byte. Every event of one is
 //! compared with the next event of the other as it comes, so no event is
@@ -15,7 +15,7 @@
 //! Checked:
 //! - no panic; both decoders give the same events, the same stats and the
 //!   same `pending()` at the end (the events do not depend on the chunking);
-//! - `decode` consumes at most its input; `NeedMore` only with all of it
+//! - `decode` consumes at most its input; `Partial` only with all of it
 //!   consumed; an event with `consumed == 0` only while bytes are held
 //!   (`pending() > 0` before the call: bytes of a failed text frame being
 //!   decoded again);
@@ -32,7 +32,7 @@
 //! - `decoder::FrameSkipper` (a frame passed over without a buffer): every
 //!   frame the decoder returns but a 216H reply (whose counted text the
 //!   skipper does not know), skipped from its envelope on, gives
-//!   `NeedMore` for each byte and `End { checksum_ok: true }` at its LF;
+//!   `Partial` for each byte and `End { checksum_ok: true }` at its LF;
 //!   the whole stream scanned with the skipper alone (`skip_scan`) ends
 //!   frames only at an LF, `checksum_ok` agreeing with the decoder's check
 //!   (`skipped_frame`).
@@ -43,9 +43,11 @@ mod common;
 
 use iai_protocol_b::catalogue::text_span;
 use iai_protocol_b::checksum::{BypassPolicy, Checksum, ChecksumField};
-use iai_protocol_b::decoder::{Event, FrameDecoder, FrameSkipper, Skipped, DEFAULT_CAPACITY};
-use iai_protocol_b::frame::{Frame, Header, ENVELOPE_LEN};
+use iai_protocol_b::decoder::{
+    Event, FrameDecoder, FrameSkipper, Skipped, Status, DEFAULT_CAPACITY,
+};
 use iai_protocol_b::error::Error;
+use iai_protocol_b::frame::{Frame, Header, ENVELOPE_LEN};
 use libfuzzer_sys::fuzz_target;
 
 /// The byte-by-byte decoder, producing one event at a time.
@@ -64,8 +66,8 @@ impl<'s, const N: usize> ByByte<'s, N> {
             if self.draining {
                 let d = self.dec.decode(&[]);
                 assert_eq!(d.consumed, 0);
-                if d.event != Event::NeedMore {
-                    f(d.event);
+                if let Status::Complete(ev) = d.status {
+                    f(ev);
                     return true;
                 }
                 self.draining = false;
@@ -75,8 +77,7 @@ impl<'s, const N: usize> ByByte<'s, N> {
                 return false;
             };
             self.rest = rest;
-            let e = self.dec.push(b);
-            if e != Event::NeedMore {
+            if let Status::Complete(e) = self.dec.push(b) {
                 self.draining = true;
                 f(e);
                 return true;
@@ -106,13 +107,13 @@ fn check_frame<const N: usize>(f: &Frame<'_>, policy: BypassPolicy) {
         for &b in body {
             assert_eq!(
                 sk.push(b),
-                Skipped::NeedMore,
+                Status::Partial,
                 "the skipper broke a valid frame"
             );
         }
         assert_eq!(
             sk.push(*last),
-            Skipped::End { checksum_ok: true },
+            Status::Complete(Skipped::End { checksum_ok: true }),
             "the skipper refused a valid frame"
         );
     }
@@ -187,13 +188,13 @@ fn skip_scan(policy: BypassPolicy, stream: &[u8]) {
             let b = stream[i];
             i += 1;
             match sk.push(b) {
-                Skipped::NeedMore => {}
-                Skipped::End { checksum_ok } => {
+                Status::Partial => {}
+                Status::Complete(Skipped::End { checksum_ok }) => {
                     assert_eq!(b, b'\n');
                     skipped_frame(&stream[start..i], checksum_ok, policy);
                     continue 'hunt;
                 }
-                Skipped::Broken => {
+                Status::Complete(Skipped::Broken) => {
                     if is_header(b) {
                         i -= 1;
                     }
@@ -230,12 +231,12 @@ fn check<const N: usize>(policy: BypassPolicy, cuts: &[u8], stream: &[u8]) {
             assert!(d.consumed <= chunk.len());
             consumed_total += d.consumed;
             chunk = &chunk[d.consumed..];
-            let k = match d.event {
-                Event::NeedMore => {
-                    assert!(chunk.is_empty(), "NeedMore with input left");
+            let k = match d.status {
+                Status::Partial => {
+                    assert!(chunk.is_empty(), "Partial with input left");
                     None
                 }
-                ev => {
+                Status::Complete(ev) => {
                     assert!(d.consumed > 0 || held > 0, "an event from nothing: {ev:?}");
                     let mut k = None;
                     let ran = other.next(|theirs| match (&ev, &theirs) {

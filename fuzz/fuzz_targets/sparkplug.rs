@@ -32,12 +32,12 @@ use firmware_example::bridge::Bridge;
 use firmware_example::config::{Config, Policy, Source};
 use firmware_example::modbus::Gateway;
 use firmware_example::net::config::{Addressing, Ipv4Setting, NetConfig};
+use firmware_example::net::modbus::ModbusBuffers;
 use firmware_example::net::sparkplug::config::{text_of, SparkplugConfig};
 use firmware_example::net::sparkplug::mqtt::{self, Writer};
 use firmware_example::net::sparkplug::payload::{self, DataType, Value};
 use firmware_example::net::sparkplug::SparkplugBuffers;
 use firmware_example::net::{Buffers, Net, EMPTY_SLOTS};
-use firmware_example::net::modbus::ModbusBuffers;
 use libfuzzer_sys::fuzz_target;
 use smoltcp::iface::{Config as IfaceConfig, Interface, SocketSet, SocketStorage};
 use smoltcp::phy::{Device, DeviceCapabilities, Medium, RxToken, TxToken};
@@ -101,7 +101,13 @@ fn one_metric(name: Option<&str>, alias: Option<u16>, t: DataType, v: Value<'_>)
     let mut w = Writer::new(&mut buf);
     payload::header(&mut w, 1, None);
     match name {
-        Some(n) => payload::metric(&mut w, Some(&|w: &mut Writer<'_>| w.put(n.as_bytes())), alias, t, v),
+        Some(n) => payload::metric(
+            &mut w,
+            Some(&|w: &mut Writer<'_>| w.put(n.as_bytes())),
+            alias,
+            t,
+            v,
+        ),
         None => payload::metric(&mut w, None, alias, t, v),
     }
     let n = w.len();
@@ -174,20 +180,55 @@ fuzz_target!(|data: &[u8]| {
         words
     };
     let canned: Vec<Vec<u8>> = vec![
-        one_metric(Some("Axis 1/Servo"), None, DataType::Boolean, Value::Bool(true)),
-        one_metric(Some("Axis 1/Home"), None, DataType::Boolean, Value::Bool(true)),
-        one_metric(Some("Axis 1/Move To"), None, DataType::Int32, Value::Int(25_500)),
-        one_metric(Some("Alarm Reset"), None, DataType::Boolean, Value::Bool(true)),
-        one_metric(Some("Table/Window Head"), None, DataType::UInt16, Value::Int(10)),
+        one_metric(
+            Some("Axis 1/Servo"),
+            None,
+            DataType::Boolean,
+            Value::Bool(true),
+        ),
+        one_metric(
+            Some("Axis 1/Home"),
+            None,
+            DataType::Boolean,
+            Value::Bool(true),
+        ),
+        one_metric(
+            Some("Axis 1/Move To"),
+            None,
+            DataType::Int32,
+            Value::Int(25_500),
+        ),
+        one_metric(
+            Some("Alarm Reset"),
+            None,
+            DataType::Boolean,
+            Value::Bool(true),
+        ),
+        one_metric(
+            Some("Table/Window Head"),
+            None,
+            DataType::UInt16,
+            Value::Int(10),
+        ),
         {
             let ws: Vec<u16> = window
                 .chunks(2)
                 .map(|c| u16::from_be_bytes([c[0], c[1]]))
                 .collect();
-            one_metric(Some("Table/Window"), None, DataType::Bytes, Value::Words(&ws))
+            one_metric(
+                Some("Table/Window"),
+                None,
+                DataType::Bytes,
+                Value::Words(&ws),
+            )
         },
         one_metric(None, Some(104), DataType::Boolean, Value::Bool(false)),
-        one_metric(Some("Axis 9/Servo"), None, DataType::Boolean, Value::Bool(true)),
+        one_metric(
+            Some("Axis 9/Servo"),
+            None,
+            DataType::Boolean,
+            Value::Bool(true),
+        ),
     ];
 
     let net_cfg = NetConfig {
@@ -247,7 +288,10 @@ fuzz_target!(|data: &[u8]| {
         tcp::SocketBuffer::new(vec![0u8; 2048]),
         tcp::SocketBuffer::new(vec![0u8; 2048]),
     ));
-    sockets.get_mut::<tcp::Socket>(handle).listen(BROKER_PORT).unwrap();
+    sockets
+        .get_mut::<tcp::Socket>(handle)
+        .listen(BROKER_PORT)
+        .unwrap();
     // What the node sent on each connection.
     let mut streams: Vec<Vec<u8>> = vec![Vec::new()];
 
@@ -298,7 +342,11 @@ fuzz_target!(|data: &[u8]| {
             ),
             4 => send(
                 &mut sockets,
-                &publication("spBv1.0/STATE/host", 1, br#"{"online":false,"timestamp":2}"#),
+                &publication(
+                    "spBv1.0/STATE/host",
+                    1,
+                    br#"{"online":false,"timestamp":2}"#,
+                ),
             ),
             5 => {
                 let m = one_metric(
@@ -307,7 +355,10 @@ fuzz_target!(|data: &[u8]| {
                     DataType::Boolean,
                     Value::Bool(true),
                 );
-                send(&mut sockets, &publication(&format!("spBv1.0/{group}/NCMD/{node}"), 0, &m));
+                send(
+                    &mut sockets,
+                    &publication(&format!("spBv1.0/{group}/NCMD/{node}"), 0, &m),
+                );
             }
             6 => {
                 let k = usize::from(ops.next().unwrap_or(0)) % canned.len();
@@ -328,7 +379,16 @@ fuzz_target!(|data: &[u8]| {
                 let t = u32::from(ops.next().unwrap_or(1)) * 100;
                 for _ in 0..t / 10 {
                     now = now.wrapping_add(9);
-                    round(&mut now, &mut net, &mut gateway, &mut iface, &mut sockets, &mut node_wire, &mut broker_wire, &mut streams);
+                    round(
+                        &mut now,
+                        &mut net,
+                        &mut gateway,
+                        &mut iface,
+                        &mut sockets,
+                        &mut node_wire,
+                        &mut broker_wire,
+                        &mut streams,
+                    );
                 }
             }
             10 => {
@@ -340,7 +400,16 @@ fuzz_target!(|data: &[u8]| {
             _ => {}
         }
         for _ in 0..4 {
-            round(&mut now, &mut net, &mut gateway, &mut iface, &mut sockets, &mut node_wire, &mut broker_wire, &mut streams);
+            round(
+                &mut now,
+                &mut net,
+                &mut gateway,
+                &mut iface,
+                &mut sockets,
+                &mut node_wire,
+                &mut broker_wire,
+                &mut streams,
+            );
         }
         // A new connection of the node after the broker's socket closed.
         let s = sockets.get_mut::<tcp::Socket>(handle);
