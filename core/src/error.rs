@@ -89,6 +89,14 @@ pub enum Error {
         /// The ID found.
         id: u16,
     },
+    /// No reply was taken for the request with this ID: it failed, had
+    /// none to take, or is not over.
+    NoReply {
+        /// The request's ID.
+        id: u16,
+    },
+    /// An engine was run before anything was started on it.
+    NotStarted,
     /// The message body ended before all its fields were read.
     BodyTooShort {
         /// Offset (in the frame) where the next field should have started.
@@ -173,6 +181,8 @@ impl core::fmt::Display for Error {
                 write!(f, "expected station {expected:02X}, found {found:02X}")
             }
             Error::UnknownMessageId { id } => write!(f, "unknown message ID {id:03X}H"),
+            Error::NoReply { id } => write!(f, "no reply was taken for {id:03X}H"),
+            Error::NotStarted => f.write_str("nothing was started on the engine"),
             Error::BodyTooShort { offset } => write!(f, "body ends early at offset {offset}"),
             Error::TrailingBytes { offset } => write!(f, "unexpected bytes from offset {offset}"),
             Error::ValueOutOfRange { offset } => {

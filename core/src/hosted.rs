@@ -226,9 +226,9 @@ impl<S: WaitRead> StdLink<S> {
         R::Response<'c>: Default,
     {
         let now = self.now();
-        client.start(&mut self.line, req, now)?;
+        let pending = client.start(&mut self.line, req, now)?;
         self.run(client)?;
-        Ok(client.response::<R>()?)
+        Ok(client.response(&pending)?)
     }
 
     /// Runs a started engine to its result.

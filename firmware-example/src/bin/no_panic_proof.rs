@@ -301,10 +301,11 @@ fn main() -> ! {
     black_box(driver.listen(&mut line, &mut port, &mut clock).is_ok());
     line.start_proof(now);
     black_box(line.poll(now));
-    let mut c: Client = Client::new().with_error_detail();
+    let mut c: Client = Client::new().with_error_detail().with_proof();
     let _ = black_box(c.start_frame(&mut line, input, now));
+    let mut ticket = None;
     if let Ok(q) = AxisStatusQuery::of(black_box(&[1, 2])) {
-        let _ = black_box(c.start(&mut line, &q, now));
+        ticket = c.start(&mut line, &q, now).ok();
     }
     if let Step::Transmit(b) = c.poll(&mut line, now) {
         black_box(b);
@@ -312,7 +313,9 @@ fn main() -> ! {
     c.sent(&mut line, now);
     feed(&mut c, &mut line, input, now);
     black_box(c.poll(&mut line, now.wrapping_add(black_box(3_000))));
-    let _ = black_box(c.response::<AxisStatusQuery>().map(|r| r.axes.len()));
+    if let Some(t) = ticket {
+        let _ = black_box(c.response(&t).map(|r| r.axes.len()));
+    }
     let mut rb: ReadBack = ReadBack::new(ReadBackConfig::new(Profile::TTA, 1, 100));
     if let Step::Transmit(b) = rb.poll(&mut line, now) {
         black_box(b);
