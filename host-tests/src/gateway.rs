@@ -52,7 +52,7 @@
 use std::collections::VecDeque;
 use std::io::{self, Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::thread::{self, JoinHandle};
@@ -65,11 +65,11 @@ use iai_protocol_b::frame::Station;
 
 use crate::bridge::{status_query, status_query_frame, HostLink, SimThread};
 use crate::qemu::{
-    build_ethernet_firmware, build_firmware, symbol_address, target_dir, Board, ExitOutcome,
+    build_ethernet_firmware, build_firmware, image_loader_arg, page_image, Board, ExitOutcome,
     QemuSession, QUIT_GUARD, QUIT_SEQUENCE, READY_MARKER,
 };
 use crate::rtu_relay::RtuRelay;
-use firmware_example::net::config::{NetConfig, BLOCK_OFFSET, DEFAULT_PORT};
+use firmware_example::net::config::{NetConfig, DEFAULT_PORT};
 use firmware_example::net::modbus::MODBUS_PORT;
 use iai_simulator::{Faults, Simulator};
 
@@ -734,19 +734,17 @@ impl EthernetGateway {
             "user,model=stellaris,restrict=on,hostfwd=tcp:127.0.0.1:{port}-:{guest_port},\
              hostfwd=tcp:127.0.0.1:{modbus_port}-:{MODBUS_PORT}"
         );
-        let mut args = vec!["-nic".to_owned(), nic];
-        if let Some(net) = &opts.network {
-            args.push("-device".to_owned());
-            args.push(network_loader_arg(&elf, net)?);
-        }
-        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        // The bridge's block and the network block in one page.
+        let image = page_image(&cfg, opts.network.as_ref());
+        let loader = image_loader_arg(&elf, &image).map_err(|e| e.to_string())?;
+        let args = ["-nic", nic.as_str(), "-device", loader.as_str()];
         let qemu = QemuSession::start_tied(
             Board::Lm3s6965,
             &elf,
             BOOT_TIMEOUT,
             Some(READY_MARKER),
             &args,
-            Some(&cfg),
+            None,
             false,
         )
         .map_err(|e| format!("starting QEMU: {e}"))?;
@@ -892,25 +890,6 @@ pub fn run_ethernet(
         Err(e) => log(&format!("stopped; {e}")),
     }
     result
-}
-
-/// QEMU's `-device loader` argument that puts `net`'s block where the
-/// Ethernet firmware reads it: [`BLOCK_OFFSET`] bytes past
-/// `_bridge_config`.
-fn network_loader_arg(elf: &Path, net: &NetConfig) -> Result<String, String> {
-    static SERIAL: AtomicU64 = AtomicU64::new(0);
-    let addr =
-        symbol_address(elf, "_bridge_config").map_err(|e| e.to_string())? + BLOCK_OFFSET as u64;
-    let dir = target_dir().join("qemu-config");
-    let file = dir.join(format!(
-        "net-{}-{}.bin",
-        std::process::id(),
-        SERIAL.fetch_add(1, Ordering::Relaxed)
-    ));
-    std::fs::create_dir_all(&dir)
-        .and_then(|()| std::fs::write(&file, net.to_block()))
-        .map_err(|e| format!("writing {}: {e}", file.display()))?;
-    Ok(format!("loader,file={},addr={addr:#x}", file.display()))
 }
 
 /// A port on 127.0.0.1 free a moment ago.

@@ -6,10 +6,11 @@
 //! smoltcp; the controller stays on UART1 (PD2/PD3, a PL011 driven by its
 //! interrupt as in the serial board). UART0 is not used. The watchdog
 //! resets the MCU if the loop stops feeding it for two periods of
-//! [`WATCHDOG_MS`]. The bridge's configuration comes from the block at
-//! `_bridge_config`, the network's from the block [`BLOCK_OFFSET`] bytes
-//! further on (see `net/config.rs`); the bridge's flow control setting
-//! does not apply (TCP's window holds the host back).
+//! [`WATCHDOG_MS`]. The bridge's configuration comes from its block in the
+//! configuration page in force (`runtime.rs`, `config/store.rs`), the
+//! network's from the block [`BLOCK_OFFSET`] bytes further on (see
+//! `net/config.rs`); the bridge's flow control setting does not apply
+//! (TCP's window holds the host back).
 //!
 //! The Modbus gateway ([`firmware_example::modbus`]) serves Modbus TCP on
 //! port 502 ([`firmware_example::net::modbus`]) and shares the controller
@@ -31,7 +32,7 @@
 mod runtime;
 
 use core::mem::MaybeUninit;
-use core::ptr::{addr_of, addr_of_mut, read_volatile, write_volatile};
+use core::ptr::{addr_of_mut, read_volatile, write_volatile};
 
 use cortex_m::peripheral::NVIC;
 use cortex_m_rt::entry;
@@ -41,7 +42,7 @@ use firmware_example::net::config::{NetConfig, NetSource, BLOCK_LEN, BLOCK_OFFSE
 use firmware_example::net::modbus::{ModbusBuffers, MODBUS_PORT};
 use firmware_example::net::stellaris::{self, Mmio, Regs, Stellaris, FRAME_CAP};
 use firmware_example::net::{self, AddressSource, Buffers, Net, NetEvent, SocketSlots};
-use firmware_example::serial::{DownstreamRings, FlowControl, IsrEnd, Line, DOWNSTREAM_MARKS};
+use firmware_example::serial::{DownstreamRings, FlowControl, IsrEnd, UartRings, DOWNSTREAM_MARKS};
 use lm3s6965::{interrupt, Interrupt};
 use runtime::{Handoff, Out};
 
@@ -52,7 +53,7 @@ const CORE_CLOCK_HZ: u32 = 12_000_000;
 /// Watchdog period: a loop stalled for 2 to 4 s resets the MCU.
 const WATCHDOG_MS: u32 = 2_000;
 
-static mut DOWN_LINE: DownstreamRings = Line::new();
+static mut DOWN_LINE: DownstreamRings = UartRings::new();
 /// The bridge and the network side, written once at start (kept out of
 /// `.data`).
 static mut BRIDGE: MaybeUninit<Bridge> = MaybeUninit::uninit();
@@ -109,12 +110,6 @@ const INT_RX: u32 = 1 << 4;
 const INT_TX: u32 = 1 << 5;
 const INT_RT: u32 = 1 << 6;
 const INT_ALL: u32 = 0x7FF;
-
-extern "C" {
-    /// The configuration page (root memory map): the bridge's block, and
-    /// the network block `BLOCK_OFFSET` bytes on.
-    static _bridge_config: [u8; BLOCK_OFFSET + BLOCK_LEN];
-}
 
 fn read(addr: usize) -> u32 {
     // SAFETY: every address used is a register of this device.
@@ -194,9 +189,9 @@ fn init_clocks_and_pins() {
 
 /// The network settings from their block in the configuration page.
 fn load_net_config() -> (NetConfig, NetSource) {
-    // SAFETY: the memory map reserves the configuration page; only read.
-    let page = unsafe { &*addr_of!(_bridge_config) };
-    NetConfig::from_block(page.get(BLOCK_OFFSET..).unwrap_or(&[]))
+    let mut block = [0u8; BLOCK_LEN];
+    runtime::read_page(BLOCK_OFFSET, &mut block);
+    NetConfig::from_block(&block)
 }
 
 /// What `main` sets up.
@@ -223,6 +218,7 @@ fn setup(now: u32) -> Parts {
     // end was handed over.
     let (bridge, gateway, net, eth, down) = unsafe {
         let bridge = (*addr_of_mut!(BRIDGE)).write(Bridge::new(cfg, source, seed));
+        bridge.attach_editor(runtime::editor(runtime::boot_seed()));
         let gateway = (*addr_of_mut!(GATEWAY)).write(Gateway::new(cfg.modbus, cfg.policy));
         let eth = (*addr_of_mut!(ETH)).write(Stellaris::new(
             Mmio,

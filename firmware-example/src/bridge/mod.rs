@@ -31,6 +31,7 @@
 //! between 26DHs it is lent out as the pass-through's frame decoder
 //! ([`Transfer::idle_decoder`]), which holds the command, then the reply.
 
+pub mod history;
 mod passthrough;
 pub mod pipeline;
 mod session;
@@ -47,6 +48,7 @@ use iai_protocol_b::position::PositionStream;
 use iai_protocol_b::transfer::{packed_len, RecordBuffer, Transfer};
 use iai_protocol_b::{line::LineConfig, profile::Profile, transfer::TransferConfig};
 
+use crate::config::editor::Editor;
 use crate::config::{Config, Source};
 use crate::serial::Port;
 use crate::status::{self, LastError, Stats};
@@ -295,6 +297,11 @@ pub struct Bridge {
     /// The guest holds the line in this poll: the bridge's own paths
     /// leave the downstream alone.
     guest_holds: bool,
+    /// The configuration page's writes, if the board keeps a page it can
+    /// write (the configuration messages, see `upstream`).
+    editor: Option<&'static mut Editor<'static>>,
+    /// The last frames through the bridge.
+    history: history::History,
 }
 
 /// The line to the controller for `cfg`.
@@ -326,7 +333,26 @@ impl Bridge {
             last_error: None,
             forward_pending: None,
             guest_holds: false,
+            editor: None,
+            history: history::History::new(),
         }
+    }
+
+    /// Answers the configuration messages with `editor` (see
+    /// [`crate::config::wire`]); without one they are refused
+    /// [`crate::codes::STORE_FAILED`].
+    pub fn attach_editor(&mut self, editor: &'static mut Editor<'static>) {
+        self.editor = Some(editor);
+    }
+
+    /// The configuration page's writes, if attached.
+    pub fn editor(&mut self) -> Option<&mut Editor<'static>> {
+        self.editor.as_deref_mut()
+    }
+
+    /// The last frames through the bridge.
+    pub fn history(&self) -> &history::History {
+        &self.history
     }
 
     /// Sets the configuration (at start, before the first [`Bridge::poll`]):
@@ -421,7 +447,7 @@ impl Bridge {
                 self.poll_passthrough(up, down, now)?
             }
             Mode::Stream { .. } => self.poll_stream(up, down, now)?,
-            Mode::Respond => self.poll_respond(up).map_err(Error::Upstream)?,
+            Mode::Respond => self.poll_respond(up, now).map_err(Error::Upstream)?,
         };
         Ok(if moved || guest_moved {
             Poll::Busy

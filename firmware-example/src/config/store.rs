@@ -102,6 +102,36 @@ pub fn check_slot(mut read: impl FnMut(usize, &mut [u8]) -> bool) -> Option<u32>
     (seq != u32::MAX && sum == u32::from_le_bytes([c0, c1, c2, c3])).then_some(seq)
 }
 
+/// Writes `page`'s trailer: sequence number `seq` and the CRC-32 of all
+/// that comes before it (what a programmed image of the page needs).
+pub fn seal(page: &mut [u8; PAGE_LEN], seq: u32) {
+    let seq = seq.to_le_bytes();
+    let sum = Crc32::new()
+        .update(page.get(..TRAILER_AT).unwrap_or(&[]))
+        .update(&seq)
+        .finish();
+    if let Some(t) = page.get_mut(TRAILER_AT..TRAILER_AT + 4) {
+        t.copy_from_slice(&seq);
+    }
+    if let Some(t) = page.get_mut(TRAILER_AT + 4..) {
+        t.copy_from_slice(&sum.to_le_bytes());
+    }
+}
+
+/// Fills `image` (both slots, `slot_len` bytes each) with what a
+/// programmer writes: `page` in slot A as sequence 1, the rest erased
+/// (slot B too, so that no older page there is newer).
+pub fn image(page: &[u8; PAGE_LEN], slot_len: usize, image: &mut [u8]) {
+    image.fill(0xFF);
+    let mut sealed = *page;
+    seal(&mut sealed, 1);
+    if slot_len >= PAGE_LEN {
+        if let Some(a) = image.get_mut(..PAGE_LEN) {
+            a.copy_from_slice(&sealed);
+        }
+    }
+}
+
 /// The page in force in two slots laid out in memory one after the other
 /// (`slots`: both, `slot_len` bytes each), for a board that reads its
 /// flash as memory at start; `None` if neither slot is valid.

@@ -248,3 +248,16 @@ fn mem_flash_writes_only_clear_bits() {
     assert_eq!(flash.erase(0, 512), Err(NorFlashErrorKind::NotAligned));
     assert_eq!(flash.write(1, &[0; 4]), Err(NorFlashErrorKind::NotAligned));
 }
+
+#[test]
+fn a_sealed_page_is_in_force_as_programmed() {
+    let mut page = [0xFFu8; PAGE_LEN];
+    page[..4].copy_from_slice(b"IAIB");
+    seal(&mut page, 1);
+    let mut slots = vec![0xFF; 2 * 2048];
+    slots[..PAGE_LEN].copy_from_slice(&page);
+    let (read, slot) = page_in(&slots, 2048).unwrap();
+    assert_eq!((read, slot), (&page[..], Slot { index: 0, seq: 1 }));
+    let store = Store::open(MemFlash::<2048, 8>::new(&mut slots), 0);
+    assert_eq!(store.current(), Some(Slot { index: 0, seq: 1 }));
+}
