@@ -113,6 +113,24 @@ pub struct Options {
     /// forwards to; a static address must be QEMU's guest address,
     /// 10.0.2.15.
     pub network: Option<NetConfig>,
+    /// The configuration page the firmware boots with.
+    pub page: PageSource,
+}
+
+/// Where the firmware's configuration page comes from.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub enum PageSource {
+    /// The gateway's own: the bridge block of [`config`] (and
+    /// [`Options::network`]).
+    #[default]
+    Built,
+    /// This image of both slots (`iai bridge config block`, or `iai
+    /// bridge config get --image` from an earlier run), loaded at
+    /// `_bridge_config`.
+    Image(PathBuf),
+    /// Nothing loaded: a blank page, every default (the quit sequence
+    /// off).
+    Blank,
 }
 
 impl Default for Options {
@@ -131,7 +149,31 @@ impl Default for Options {
             ethernet: false,
             quit_sequence: false,
             network: None,
+            page: PageSource::Built,
         }
+    }
+}
+
+/// The QEMU arguments that load `opts`' configuration page, and the
+/// configuration to load instead ([`QemuSession::start_tied`]'s).
+fn page_args(
+    opts: &Options,
+    elf: &std::path::Path,
+    cfg: &Config,
+) -> Result<(Vec<String>, Option<Config>), String> {
+    match &opts.page {
+        PageSource::Built if opts.ethernet => {
+            let image = page_image(cfg, opts.network.as_ref());
+            let loader = image_loader_arg(elf, &image).map_err(|e| e.to_string())?;
+            Ok((vec!["-device".into(), loader], None))
+        }
+        PageSource::Built => Ok((Vec::new(), Some(*cfg))),
+        PageSource::Image(file) => {
+            let image = std::fs::read(file).map_err(|e| format!("{}: {e}", file.display()))?;
+            let loader = image_loader_arg(elf, &image).map_err(|e| e.to_string())?;
+            Ok((vec!["-device".into(), loader], None))
+        }
+        PageSource::Blank => Ok((Vec::new(), None)),
     }
 }
 
@@ -221,14 +263,16 @@ pub fn run(opts: &Options, stop: &AtomicBool, on_ready: impl FnOnce(Ready)) -> R
     };
     let mut cfg = config(opts.baud, opts.modbus_baud);
     cfg.quit_sequence = opts.stack_report;
+    let (args, loaded) = page_args(opts, &elf, &cfg)?;
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
     // Tied: QEMU goes with this thread even if the process is killed.
     let mut qemu = QemuSession::start_tied(
         opts.board,
         &elf,
         BOOT_TIMEOUT,
         Some(READY_MARKER),
-        &[],
-        Some(&cfg),
+        &args,
+        loaded.as_ref(),
         modbus_listener.is_some(),
     )
     .map_err(|e| format!("starting QEMU: {e}"))?;
@@ -735,9 +779,9 @@ impl EthernetGateway {
              hostfwd=tcp:127.0.0.1:{modbus_port}-:{MODBUS_PORT}"
         );
         // The bridge's block and the network block in one page.
-        let image = page_image(&cfg, opts.network.as_ref());
-        let loader = image_loader_arg(&elf, &image).map_err(|e| e.to_string())?;
-        let args = ["-nic", nic.as_str(), "-device", loader.as_str()];
+        let (page, _) = page_args(opts, &elf, &cfg)?;
+        let mut args = vec!["-nic", nic.as_str()];
+        args.extend(page.iter().map(String::as_str));
         let qemu = QemuSession::start_tied(
             Board::Lm3s6965,
             &elf,

@@ -13,7 +13,7 @@ use super::history::Dir::{FromHost, ToHost};
 use super::{write_some, Bridge, Error, Mode, Port, STREAM};
 use crate::codes;
 use crate::config::editor::Editor;
-use crate::config::page::WINDOW;
+use crate::config::page::{ACCESS_AT, WINDOW};
 use crate::config::wire::{self, PageInfo, Request};
 use crate::config::Policy;
 use crate::log;
@@ -398,11 +398,17 @@ fn config_answer(
     let mut password = [0u8; wire::PASSWORD_MAX];
     let mut new = [0u8; wire::PASSWORD_MAX];
     let emitted = match r {
-        Request::Read { at } => {
+        Request::Read { at, password: p } => {
             let len = wire::window_at(at).ok_or(codes::MALFORMED)?;
             let mut window = [0u8; WINDOW];
-            let bytes = window.get_mut(..len).ok_or(codes::MALFORMED)?;
-            e.read_host(at, bytes).map_err(refused)?;
+            if at == ACCESS_AT {
+                let p = wire::unhex(p, &mut password).ok_or(codes::MALFORMED)?;
+                e.read_verifier(p, now, &mut window).map_err(refused)?;
+            } else {
+                let bytes = window.get_mut(..len).ok_or(codes::MALFORMED)?;
+                e.read_host(at, bytes).map_err(refused)?;
+            }
+            let bytes = window.get(..len).ok_or(codes::MALFORMED)?;
             let info = PageInfo {
                 seq: e.sequence(),
                 password_set: e.verifier().is_some(),

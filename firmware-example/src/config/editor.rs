@@ -21,7 +21,7 @@ use super::access::{Check, Gate, PasswordError, Verifier, WebConfig, ACCESS_LEN,
 use super::page::{ACCESS_AT, BRIDGE_AT, HOST_LEN, NET_AT, WEB_AT, WINDOW};
 use super::settings::{copy_into, Block, SetError, Settings};
 use super::store::{PageStore, StoreError};
-use super::{crc32, Config, Crc32, MAGIC as BRIDGE_MAGIC};
+use super::{Config, Crc32, MAGIC as BRIDGE_MAGIC};
 use crate::net::config::{NetConfig, BLOCK_LEN as NET_LEN, MAGIC as NET_MAGIC};
 
 /// How long after a granted restart the gateway restarts, ms.
@@ -160,6 +160,18 @@ impl<'a> Editor<'a> {
         Ok(self.store.read(at, buf)?)
     }
 
+    /// Reads the verifier block of the page in force, for a host that
+    /// gives `password`.
+    pub fn read_verifier(
+        &mut self,
+        password: &[u8],
+        now: u32,
+        buf: &mut [u8; ACCESS_LEN],
+    ) -> Result<(), Refusal> {
+        self.grant(password, now)?;
+        Ok(self.store.read(ACCESS_AT, buf)?)
+    }
+
     /// Stages `bytes` of a host's new page at `at`: in order from 0 (which
     /// starts the page), within the first [`HOST_LEN`] bytes. Where the
     /// next bytes go.
@@ -191,11 +203,11 @@ impl<'a> Editor<'a> {
         if self.staged != Some(HOST_LEN) {
             return Err(Refusal::Staging);
         }
-        if self.host_crc_of(true, false)? != crc {
+        if self.staged_crc()? != crc {
             return Err(Refusal::Staging);
         }
         self.check_staged()?;
-        let restart_needed = self.host_crc_of(true, true)? != self.host_crc_of(false, true)?;
+        let restart_needed = self.differs_outside_web()?;
         self.copy_verifier(None)?;
         self.staged = None;
         let seq = self.store.commit()?;
@@ -226,28 +238,42 @@ impl<'a> Editor<'a> {
         Ok(())
     }
 
-    /// The CRC-32 of the host part of the new page (`new`) or of the page
-    /// in force, with the web block zeroed if `skip_web` (what takes
-    /// effect only at the next start).
-    fn host_crc_of(&mut self, new: bool, skip_web: bool) -> Result<u32, Refusal> {
-        let mut sum = Crc32::new();
+    /// [`host_crc`] of the staged page.
+    fn staged_crc(&mut self) -> Result<u32, Refusal> {
+        let mut sum = Crc32::castagnoli();
         let mut window = [0u8; WINDOW];
         let mut at = 0;
         while at < HOST_LEN {
             let n = WINDOW.min(HOST_LEN - at);
             let w = window.get_mut(..n).ok_or(Refusal::Staging)?;
-            if new {
-                self.store.read_new(at, w)?;
-            } else {
-                self.store.read(at, w)?;
-            }
-            if skip_web {
-                copy_into(at, w, WEB_AT, &[0; WEB_LEN]);
-            }
+            self.store.read_new(at, w)?;
             sum = sum.update(w);
             at += n;
         }
         Ok(sum.finish())
+    }
+
+    /// Whether the staged page differs from the page in force outside the
+    /// web block (what takes effect only at the next start).
+    fn differs_outside_web(&mut self) -> Result<bool, Refusal> {
+        let mut new = [0u8; WINDOW];
+        let mut old = [0u8; WINDOW];
+        let mut at = 0;
+        while at < HOST_LEN {
+            let n = WINDOW.min(HOST_LEN - at);
+            let (Some(a), Some(b)) = (new.get_mut(..n), old.get_mut(..n)) else {
+                return Err(Refusal::Staging);
+            };
+            self.store.read_new(at, a)?;
+            self.store.read(at, b)?;
+            copy_into(at, a, WEB_AT, &[0; WEB_LEN]);
+            copy_into(at, b, WEB_AT, &[0; WEB_LEN]);
+            if a != b {
+                return Ok(true);
+            }
+            at += n;
+        }
+        Ok(false)
     }
 
     /// Writes the verifier block of the new page: `new`, or the one in
@@ -375,9 +401,13 @@ impl<'a> Editor<'a> {
     }
 }
 
-/// The CRC-32 of a page's host part, as [`Editor::apply`] expects it.
+/// The CRC-32C of a page's host part ([`Crc32::castagnoli`]: a CRC-32
+/// could not tell one valid block from another), as [`Editor::apply`]
+/// expects it.
 pub fn host_crc(page: &[u8]) -> u32 {
-    crc32(page.get(..HOST_LEN).unwrap_or(page))
+    Crc32::castagnoli()
+        .update(page.get(..HOST_LEN).unwrap_or(page))
+        .finish()
 }
 
 #[cfg(test)]

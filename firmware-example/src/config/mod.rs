@@ -543,23 +543,43 @@ pub fn crc32(bytes: &[u8]) -> u32 {
     Crc32::new().update(bytes).finish()
 }
 
-/// [`crc32`] over bytes that come in pieces.
+/// [`crc32`] over bytes that come in pieces, or CRC-32C
+/// ([`Crc32::castagnoli`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Crc32(u32);
+pub struct Crc32 {
+    sum: u32,
+    poly: u32,
+}
 
 impl Crc32 {
-    /// Nothing summed yet.
+    /// CRC-32 (IEEE 802.3), nothing summed yet.
     pub const fn new() -> Self {
-        Crc32(!0)
+        Crc32 {
+            sum: !0,
+            poly: 0xEDB8_8320,
+        }
+    }
+
+    /// CRC-32C (Castagnoli, as iSCSI's), nothing summed yet: the check
+    /// over a run of blocks that each end in their own CRC-32. A CRC is
+    /// linear: a block followed by its own CRC-32 adds the same to any
+    /// CRC-32 run over it, whatever the block holds, so a CRC-32 over the
+    /// page could not tell one valid block from another; a CRC of another
+    /// polynomial can.
+    pub const fn castagnoli() -> Self {
+        Crc32 {
+            sum: !0,
+            poly: 0x82F6_3B78,
+        }
     }
 
     /// Sums `bytes`.
     pub fn update(mut self, bytes: &[u8]) -> Self {
         for &b in bytes {
-            self.0 ^= u32::from(b);
+            self.sum ^= u32::from(b);
             for _ in 0..8 {
-                let mask = (self.0 & 1).wrapping_neg();
-                self.0 = (self.0 >> 1) ^ (0xEDB8_8320 & mask);
+                let mask = (self.sum & 1).wrapping_neg();
+                self.sum = (self.sum >> 1) ^ (self.poly & mask);
             }
         }
         self
@@ -567,7 +587,7 @@ impl Crc32 {
 
     /// The CRC of everything summed.
     pub const fn finish(self) -> u32 {
-        !self.0
+        !self.sum
     }
 }
 
@@ -582,8 +602,12 @@ mod tests {
     use super::*;
 
     #[test]
-    fn crc32_check_value() {
+    fn crc32_check_values() {
         assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+        assert_eq!(
+            Crc32::castagnoli().update(b"123456789").finish(),
+            0xE306_9283
+        );
     }
 
     #[test]

@@ -4,8 +4,9 @@
 //! a write leaves the old page or the new one, never neither.
 //!
 //! Each slot holds a page whose last 8 bytes are a sequence number and the
-//! CRC-32 of everything before it; a slot whose CRC fails (never written,
-//! erased, or cut short) does not count. The page in force is the valid
+//! CRC-32C of everything before it (Castagnoli's polynomial, not the
+//! blocks' own: see [`Crc32::castagnoli`]); a slot whose CRC fails (never
+//! written, erased, or cut short) does not count. The page in force is the valid
 //! slot with the newer sequence number; none valid means a blank page
 //! (every block at its defaults). A write goes to the other slot: erase it,
 //! write the page, then the trailer last, read it all back; only then is
@@ -80,7 +81,12 @@ pub fn newest(a: Option<u32>, b: Option<u32>) -> Option<Slot> {
 /// The sequence number a slot's trailer holds if the slot is valid:
 /// `read(offset, buf)` reads the slot's bytes (`false`: it cannot).
 pub fn check_slot(mut read: impl FnMut(usize, &mut [u8]) -> bool) -> Option<u32> {
-    let mut crc = Crc32::new();
+    let mut trailer = [0u8; 8];
+    if !read(TRAILER_AT, &mut trailer) {
+        return None;
+    }
+    let [s0, s1, s2, s3, c0, c1, c2, c3] = trailer;
+    let mut crc = Crc32::castagnoli();
     let mut buf = [0u8; WINDOW];
     let mut at = 0;
     while at < TRAILER_AT {
@@ -92,21 +98,16 @@ pub fn check_slot(mut read: impl FnMut(usize, &mut [u8]) -> bool) -> Option<u32>
         crc = crc.update(chunk);
         at += n;
     }
-    let mut trailer = [0u8; 8];
-    if !read(TRAILER_AT, &mut trailer) {
-        return None;
-    }
-    let [s0, s1, s2, s3, c0, c1, c2, c3] = trailer;
     let seq = u32::from_le_bytes([s0, s1, s2, s3]);
     let sum = crc.update(&[s0, s1, s2, s3]).finish();
     (seq != u32::MAX && sum == u32::from_le_bytes([c0, c1, c2, c3])).then_some(seq)
 }
 
-/// Writes `page`'s trailer: sequence number `seq` and the CRC-32 of all
+/// Writes `page`'s trailer: sequence number `seq` and the CRC-32C of all
 /// that comes before it (what a programmed image of the page needs).
 pub fn seal(page: &mut [u8; PAGE_LEN], seq: u32) {
     let seq = seq.to_le_bytes();
-    let sum = Crc32::new()
+    let sum = Crc32::castagnoli()
         .update(page.get(..TRAILER_AT).unwrap_or(&[]))
         .update(&seq)
         .finish();
@@ -296,7 +297,8 @@ impl<F: NorFlash> PageStore for Store<F> {
         if seq == u32::MAX {
             seq = 0;
         }
-        let mut crc = Crc32::new();
+        let seq_bytes = seq.to_le_bytes();
+        let mut crc = Crc32::castagnoli();
         let mut buf = [0u8; WINDOW];
         let mut at = 0;
         while at < TRAILER_AT {
@@ -306,7 +308,6 @@ impl<F: NorFlash> PageStore for Store<F> {
             crc = crc.update(chunk);
             at += n;
         }
-        let seq_bytes = seq.to_le_bytes();
         let sum = crc.update(&seq_bytes).finish().to_le_bytes();
         let [s0, s1, s2, s3] = seq_bytes;
         let [c0, c1, c2, c3] = sum;

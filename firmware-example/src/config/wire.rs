@@ -6,23 +6,25 @@
 //!
 //! | ID | command body | reply body |
 //! |---|---|---|
-//! | B20 read | offset (3) | offset (3), sequence (8; `FFFFFFFF`: no page), flags (1: bit 0 password set, bit 1 restart pending), the 64 bytes at offset (fewer at the end of the host part) |
+//! | B20 read | offset (3), and for the verifier block the password | offset (3), sequence (8; `FFFFFFFF`: no page), flags (1: bit 0 password set, bit 1 restart pending), the 64 bytes at offset (fewer at the end of the host part) |
 //! | B21 stage | offset (3), 8 to 64 bytes (a multiple of 8) | the next offset (3) |
-//! | B22 apply | CRC-32 of the staged host part (8), password | sequence (8), restart needed (1) |
+//! | B22 apply | CRC-32C of the staged host part (8, `config::editor::host_crc`), password | sequence (8), restart needed (1) |
 //! | B23 restart | password | none; the gateway restarts 200 ms later |
 //! | B24 password | current password's length in bytes (2; 00 when none is set), current password, new password | sequence (8) |
 //!
 //! Offsets are within the page's host part ([`HOST_LEN`] bytes), 64 bytes
 //! apart ([`WINDOW`]); a host stages the whole host part in order from 0
-//! and applies it. Refusals are `&` codes: [`codes::WRONG_PASSWORD`],
+//! and applies it. B20 also reads the verifier block ([`ACCESS_AT`]) for a
+//! host that gives the password (to carry a whole page to a programmer). Refusals are `&` codes: [`codes::WRONG_PASSWORD`],
 //! [`codes::NO_PASSWORD`], [`codes::STAGING`], [`codes::INVALID_PAGE`],
 //! [`codes::STORE_FAILED`], [`codes::MALFORMED`].
 
 use iai_protocol_b::field::{FieldSpec, Writer};
 use iai_protocol_b::frame::{emit_frame, Header, Station};
 
+use super::access::ACCESS_LEN;
 use super::editor::Refusal;
-use super::page::{HOST_LEN, WINDOW};
+use super::page::{ACCESS_AT, HOST_LEN, WINDOW};
 use crate::codes;
 
 /// Bytes of a password at most.
@@ -33,8 +35,10 @@ pub const PASSWORD_MAX: usize = 64;
 pub enum Request<'a> {
     /// Read the page at this offset.
     Read {
-        /// Offset within the host part.
+        /// Offset within the host part, or of the verifier block.
         at: usize,
+        /// The password's hex digits (needed for the verifier block).
+        password: &'a [u8],
     },
     /// Stage these bytes (as hex digits) at this offset.
     Stage {
@@ -80,9 +84,10 @@ impl<'a> Request<'a> {
             (d.len().is_multiple_of(2) && d.len() <= 2 * PASSWORD_MAX && hex(d)).then_some(d)
         };
         let r = match id {
-            codes::CONFIG_READ => offset()
-                .filter(|_| body.len() == 3)
-                .map(|at| Request::Read { at }),
+            codes::CONFIG_READ => match (offset(), password(body.get(3..).unwrap_or(&[]))) {
+                (Some(at), Some(password)) => Some(Request::Read { at, password }),
+                _ => None,
+            },
             codes::CONFIG_STAGE => {
                 let digits = body.get(3..).unwrap_or(&[]);
                 let whole =
@@ -192,8 +197,12 @@ pub fn emit_reply(
     )
 }
 
-/// The window read at `at`: its length ([`WINDOW`], fewer at the end).
+/// The window read at `at`: its length ([`WINDOW`], fewer at the end of
+/// the host part; the verifier block at [`ACCESS_AT`]).
 pub fn window_at(at: usize) -> Option<usize> {
+    if at == ACCESS_AT {
+        return Some(ACCESS_LEN);
+    }
     (at < HOST_LEN && at.is_multiple_of(WINDOW)).then(|| WINDOW.min(HOST_LEN - at))
 }
 
@@ -220,9 +229,25 @@ mod tests {
     fn request_bodies() {
         assert_eq!(
             Request::parse(codes::CONFIG_READ, b"040"),
-            Some(Ok(Request::Read { at: 0x40 }))
+            Some(Ok(Request::Read {
+                at: 0x40,
+                password: b""
+            }))
+        );
+        assert_eq!(
+            Request::parse(codes::CONFIG_READ, b"3B83132"),
+            Some(Ok(Request::Read {
+                at: 0x3B8,
+                password: b"3132"
+            }))
         );
         assert_eq!(Request::parse(codes::CONFIG_READ, b"04"), Some(Err(())));
+        assert_eq!(Request::parse(codes::CONFIG_READ, b"0401"), Some(Err(())));
+        assert_eq!(window_at(0), Some(64));
+        assert_eq!(window_at(896), Some(56));
+        assert_eq!(window_at(952), Some(64));
+        assert_eq!(window_at(960), None);
+        assert_eq!(window_at(65), None);
         assert_eq!(Request::parse(codes::STATUS_QUERY, b""), None);
         let stage = b"0400123456789ABCDEF";
         assert_eq!(

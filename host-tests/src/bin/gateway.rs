@@ -25,7 +25,10 @@
 //! and log its stack peak: for the size report; a client's bytes could
 //! end the firmware too; with `--ethernet` the sequence goes over the
 //! protocol-B port), `--ethernet` (protocol B over TCP: the
-//! `lm3s6965-eth` build, lm3s6965 only).
+//! `lm3s6965-eth` build, lm3s6965 only), `--config-image FILE` (boot with
+//! this image of the configuration page's slots, as `iai bridge config
+//! block` or `iai bridge config get --image` writes it), `--blank-config`
+//! (boot with no page loaded: every default).
 
 use std::io::{self, Write};
 use std::path::PathBuf;
@@ -33,13 +36,13 @@ use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-use host_tests::gateway::{self, Options, Ready};
+use host_tests::gateway::{self, Options, PageSource, Ready};
 use host_tests::qemu::Board;
 
 const USAGE: &str = "usage: gateway [--port P] [--baud B] [--modbus-port P] [--modbus-baud B] \
                      [--board lm3s6965|mps2-an386] \
                      [--reply-delay-ms MS] [--faults SPEC] [--seed S] [--elf PATH] \
-                     [--stack-report] [--ethernet]";
+                     [--stack-report] [--ethernet] [--config-image FILE | --blank-config]";
 
 fn parse_args() -> Result<Options, String> {
     let mut o = Options::default();
@@ -92,6 +95,8 @@ fn parse_args() -> Result<Options, String> {
             }
             "--elf" => o.elf = Some(PathBuf::from(value()?)),
             "--ethernet" => o.ethernet = true,
+            "--config-image" => o.page = PageSource::Image(PathBuf::from(value()?)),
+            "--blank-config" => o.page = PageSource::Blank,
             "-h" | "--help" => return Err(USAGE.to_owned()),
             other => return Err(format!("unknown argument {other:?}\n{USAGE}")),
         }

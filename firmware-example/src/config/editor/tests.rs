@@ -132,7 +132,7 @@ fn a_block_that_does_not_check_is_refused_and_nothing_changes() {
     });
     // Same stations on both sides, the block's CRC made right.
     page[6] = 0xBB;
-    let crc = crc32(&page[..crate::config::BLOCK_LEN - 4]);
+    let crc = crate::config::crc32(&page[..crate::config::BLOCK_LEN - 4]);
     page[crate::config::BLOCK_LEN - 4..crate::config::BLOCK_LEN]
         .copy_from_slice(&crc.to_le_bytes());
     stage_all(&mut e, &page).unwrap();
@@ -218,4 +218,22 @@ fn a_restart_comes_200_ms_after_it_was_granted() {
     assert_eq!(e.restarts, 1);
     e.poll(9_000);
     assert_eq!(e.restarts, 1);
+}
+
+#[test]
+fn a_changed_bridge_block_over_one_in_force_waits_for_a_restart() {
+    let mut mem = vec![0xFF; 2048];
+    let mut store = Store::open(MemFlash::<1024, 4>::new(&mut mem), 0);
+    let mut e = Editor::new(&mut store, no_restart, 1);
+    let mut s = e.settings();
+    s.set("bridge.policy", "allow-list").unwrap();
+    e.commit_settings(&s, b"", Some(b"plant-1234"), 0).unwrap();
+    let mut host = vec![0xFF; HOST_LEN];
+    e.read_host(0, &mut host).unwrap();
+    let mut s = Settings::from_page(&host, true);
+    s.set("bridge.policy", "read-only").unwrap();
+    s.overlay(0, &mut host);
+    stage_all(&mut e, &host).unwrap();
+    let applied = e.apply(b"plant-1234", host_crc(&host), 0).unwrap();
+    assert!(applied.restart_needed);
 }

@@ -261,3 +261,20 @@ fn a_sealed_page_is_in_force_as_programmed() {
     let store = Store::open(MemFlash::<2048, 8>::new(&mut slots), 0);
     assert_eq!(store.current(), Some(Slot { index: 0, seq: 1 }));
 }
+
+#[test]
+fn the_slot_crc_tells_apart_two_valid_bridge_blocks_at_the_page_start() {
+    // Each block ends in its own CRC-32: a CRC-32 over them would reach the
+    // same value for both.
+    let mut a = [0xFFu8; PAGE_LEN];
+    let mut b = [0xFFu8; PAGE_LEN];
+    let mut cfg = crate::config::Config::DEFAULT;
+    a[..crate::config::BLOCK_LEN].copy_from_slice(&cfg.to_block());
+    cfg.modbus.unit = 2;
+    b[..crate::config::BLOCK_LEN].copy_from_slice(&cfg.to_block());
+    let plain = |p: &[u8]| crate::config::crc32(&p[..crate::config::BLOCK_LEN]);
+    assert_eq!(plain(&a), plain(&b));
+    seal(&mut a, 5);
+    seal(&mut b, 5);
+    assert_ne!(a[TRAILER_AT..], b[TRAILER_AT..]);
+}
