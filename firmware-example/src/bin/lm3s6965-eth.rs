@@ -15,14 +15,17 @@
 //! The Modbus gateway ([`firmware_example::modbus`]) serves Modbus TCP on
 //! port 502 ([`firmware_example::net::modbus`]) and shares the controller
 //! line with the bridge, as the serial board's gateway does; its settings
-//! (unit ID, poll period, axes) come from the bridge's block.
+//! (unit ID, poll period, axes) come from the bridge's block. The web page
+//! ([`firmware_example::net::http`]) is served on port 80 (the web block's
+//! port).
 //!
 //! Under QEMU: `-nic user,model=stellaris,hostfwd=tcp:127.0.0.1:HOSTPORT-:5020`
 //! (and `hostfwd=tcp:127.0.0.1:MBPORT-:502` for Modbus TCP; `restrict=on`
 //! keeps the guest from reaching anything else). Once the interface has an
 //! address the firmware prints
 //! `firmware-example: protocol-b-tcp listening on A.B.C.D:PORT (SOURCE)`
-//! and `firmware-example: modbus-tcp listening on A.B.C.D:502`.
+//! `firmware-example: modbus-tcp listening on A.B.C.D:502` and
+//! `firmware-example: http listening on A.B.C.D:80`.
 #![no_std]
 #![no_main]
 
@@ -39,6 +42,7 @@ use cortex_m_rt::entry;
 use firmware_example::bridge::Bridge;
 use firmware_example::modbus::Gateway;
 use firmware_example::net::config::{NetConfig, NetSource, BLOCK_LEN, BLOCK_OFFSET};
+use firmware_example::net::http::HttpBuffers;
 use firmware_example::net::modbus::{ModbusBuffers, MODBUS_PORT};
 use firmware_example::net::stellaris::{self, Mmio, Regs, Stellaris, FRAME_CAP};
 use firmware_example::net::{self, AddressSource, Buffers, Net, NetEvent, SocketSlots};
@@ -64,6 +68,7 @@ static mut SLOTS: MaybeUninit<SocketSlots<'static>> = MaybeUninit::uninit();
 /// Zeroed: `.bss`.
 static mut BUFFERS: Buffers = Buffers::new();
 static mut MODBUS_BUFFERS: ModbusBuffers = ModbusBuffers::new();
+static mut HTTP_BUFFERS: HttpBuffers = HttpBuffers::new();
 static mut RX_FRAME: [u8; FRAME_CAP] = [0; FRAME_CAP];
 static mut TX_FRAME: [u8; FRAME_CAP] = [0; FRAME_CAP];
 
@@ -187,6 +192,14 @@ fn init_clocks_and_pins() {
     write(GPIO_D + GPIO_DEN, read(GPIO_D + GPIO_DEN) | 0b1100);
 }
 
+/// The web page's port from the web block in the configuration page.
+fn web_port() -> u16 {
+    use firmware_example::config::access::{WebConfig, WEB_LEN};
+    let mut block = [0u8; WEB_LEN];
+    runtime::read_page(firmware_example::config::page::WEB_AT, &mut block);
+    WebConfig::from_block(&block).port
+}
+
 /// The network settings from their block in the configuration page.
 fn load_net_config() -> (NetConfig, NetSource) {
     let mut block = [0u8; BLOCK_LEN];
@@ -238,6 +251,7 @@ fn setup(now: u32) -> Parts {
             now,
         ));
         net.add_modbus(&mut *addr_of_mut!(MODBUS_BUFFERS), MODBUS_PORT);
+        net.add_http(&mut *addr_of_mut!(HTTP_BUFFERS), web_port());
         let line = &mut *addr_of_mut!(DOWN_LINE);
         let (down_isr, down) = line.split(FlowControl::None, DOWNSTREAM_MARKS, &pend_down);
         cortex_m::interrupt::free(|cs| DOWN_END.borrow(cs).set(Some(down_isr)));
@@ -287,6 +301,7 @@ fn report(event: NetEvent) {
             source,
             port,
             modbus_port,
+            http_port,
         } => {
             out.str("firmware-example: protocol-b-tcp listening on ");
             dotted(&mut out, address.address);
@@ -301,6 +316,11 @@ fn report(event: NetEvent) {
                 out.str("firmware-example: modbus-tcp listening on ");
                 dotted(&mut out, address.address);
                 out.str(":").dec(u64::from(mb)).str("\n");
+            }
+            if let Some(web) = http_port {
+                out.str("firmware-example: http listening on ");
+                dotted(&mut out, address.address);
+                out.str(":").dec(u64::from(web)).str("\n");
             }
         }
         NetEvent::AddressLost => {
@@ -346,6 +366,7 @@ fn main() -> ! {
             source,
             port: net.config().port,
             modbus_port: net.modbus().map(|m| m.port()),
+            http_port: net.http().map(|h| h.port()),
         });
     }
     // SAFETY: the handlers only touch their own state, handed over above.

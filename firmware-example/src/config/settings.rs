@@ -624,10 +624,19 @@ impl Settings {
         Ok(s)
     }
 
-    /// Sets `setting` to `value` (of its kind, checked) and marks its block.
+    /// Sets `setting` to `value` (of its kind, checked) and marks its block
+    /// if that changed it.
     pub fn set_value(&mut self, setting: &Setting, value: Value) {
+        let before = (setting.get)(self);
         (setting.set)(self, value);
-        self.changed |= setting.block.bit();
+        if (setting.get)(self) != before {
+            self.changed |= setting.block.bit();
+        }
+    }
+
+    /// Whether any block was changed.
+    pub fn any_changed(&self) -> bool {
+        self.changed != 0
     }
 
     /// Whether a block of `block`'s settings was changed.

@@ -35,6 +35,7 @@
 
 pub mod config;
 pub mod host;
+pub mod http;
 pub mod modbus;
 pub mod stellaris;
 #[cfg(test)]
@@ -56,8 +57,9 @@ use crate::modbus::Gateway;
 use crate::serial::Port;
 use crate::status::Stats;
 use config::{Addressing, Ipv4Setting, NetConfig, DHCP_FALLBACK_MS};
-use host::{HostPort, Hosts, SOCKETS};
-use modbus::{ModbusBuffers, ModbusClients, CLIENTS};
+use host::{HostPort, HostStats, Hosts, Session, SOCKETS};
+use http::{Http, HttpBuffers};
+use modbus::{ModbusBuffers, ModbusClients, ModbusTcpStats, CLIENTS};
 
 /// Bytes of each socket buffer (receive and transmit, per socket). The
 /// receive buffer is the TCP window: the most a host can send ahead of
@@ -90,12 +92,28 @@ impl Default for Buffers {
     }
 }
 
-/// The slots of the socket set: the protocol-B sockets, DHCP and the
-/// Modbus TCP sockets.
-pub type SocketSlots<'a> = [SocketStorage<'a>; SOCKETS + 1 + CLIENTS];
+/// The slots of the socket set: the protocol-B sockets, DHCP, the Modbus
+/// TCP sockets and the web sockets.
+pub type SocketSlots<'a> = [SocketStorage<'a>; SOCKETS + 1 + CLIENTS + http::SOCKETS];
 
 /// Empty socket slots.
-pub const EMPTY_SLOTS: SocketSlots<'static> = [SocketStorage::EMPTY; SOCKETS + 1 + CLIENTS];
+pub const EMPTY_SLOTS: SocketSlots<'static> =
+    [SocketStorage::EMPTY; SOCKETS + 1 + CLIENTS + http::SOCKETS];
+
+/// What the network side shows the web page.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NetView {
+    /// The interface's address and where it came from.
+    pub address: Option<(Ipv4Setting, AddressSource)>,
+    /// Protocol B's TCP port.
+    pub port: u16,
+    /// The protocol-B hosts' counters.
+    pub hosts: HostStats,
+    /// Whether a protocol-B host is connected.
+    pub host_connected: bool,
+    /// The Modbus TCP side's counters, if it is served.
+    pub modbus: Option<ModbusTcpStats>,
+}
 
 /// Where the interface's address came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -121,6 +139,8 @@ pub enum NetEvent {
         port: u16,
         /// The Modbus TCP port, if Modbus TCP is served.
         modbus_port: Option<u16>,
+        /// The web page's port, if it is served.
+        http_port: Option<u16>,
     },
     /// The DHCP lease was lost; no address until the next.
     AddressLost,
@@ -151,6 +171,7 @@ pub struct Net<'a> {
     dhcp: Option<SocketHandle>,
     hosts: Hosts,
     modbus: Option<ModbusClients>,
+    http: Option<Http>,
     cfg: NetConfig,
     clock: Clock,
     address: Option<(Ipv4Setting, AddressSource)>,
@@ -198,6 +219,7 @@ impl<'a> Net<'a> {
             dhcp,
             hosts: Hosts::new(handles, cfg.port),
             modbus: None,
+            http: None,
             cfg,
             clock,
             address: None,
@@ -236,6 +258,21 @@ impl<'a> Net<'a> {
         self.modbus.as_ref()
     }
 
+    /// Serves the web page ([`http`]) on `port` on sockets over `buffers`;
+    /// they listen from the next [`Net::poll_with`]. Once only.
+    pub fn add_http(&mut self, buffers: &'a mut HttpBuffers, port: u16) {
+        if self.http.is_some() {
+            return;
+        }
+        let handles = buffers.add_sockets(&mut self.sockets);
+        self.http = Some(Http::new(handles, port));
+    }
+
+    /// The web side, if the web page is served.
+    pub fn http(&self) -> Option<&Http> {
+        self.http.as_ref()
+    }
+
     /// The settings in force.
     pub fn config(&self) -> &NetConfig {
         &self.cfg
@@ -259,7 +296,8 @@ impl<'a> Net<'a> {
     }
 
     /// [`Net::poll`], and then the Modbus TCP clients, answered by
-    /// `gateway` (if Modbus TCP was added and a gateway is given).
+    /// `gateway` (if Modbus TCP was added and a gateway is given), and the
+    /// web page's connections (if it was added).
     pub fn poll_with<D: Device>(
         &mut self,
         device: &mut D,
@@ -285,8 +323,19 @@ impl<'a> Net<'a> {
         let event = self.poll_address(now);
         self.hosts
             .service(&mut self.sockets, bridge, self.station, now);
-        if let (Some(clients), Some(gateway)) = (self.modbus.as_mut(), gateway) {
+        let mut gateway = gateway;
+        if let (Some(clients), Some(gateway)) = (self.modbus.as_mut(), gateway.as_deref_mut()) {
             clients.service(&mut self.sockets, gateway, now);
+        }
+        if let Some(web) = self.http.as_mut() {
+            let view = NetView {
+                address: self.address,
+                port: self.cfg.port,
+                hosts: self.hosts.stats(),
+                host_connected: matches!(self.hosts.session(), Session::Host(_)),
+                modbus: self.modbus.as_ref().map(ModbusClients::stats),
+            };
+            web.service(&mut self.sockets, bridge, gateway, view, now);
         }
         event
     }
@@ -347,6 +396,7 @@ impl<'a> Net<'a> {
                 source,
                 port: self.cfg.port,
                 modbus_port: self.modbus.as_ref().map(ModbusClients::port),
+                http_port: self.http.as_ref().map(Http::port),
             },
             None => NetEvent::AddressLost,
         }

@@ -97,6 +97,10 @@ fn a_blank_page_is_every_default_and_unchanged_blocks_keep_their_bytes() {
     assert_eq!(shown(&Settings::DEFAULT, "net.gateway"), "none");
     assert_eq!(shown(&Settings::DEFAULT, "access.password"), "not set");
     assert_eq!(shown(&Settings::DEFAULT, "bridge.xoff_hold_ms"), "5000");
+    // A value set to what it is changes nothing.
+    let mut s = Settings::DEFAULT;
+    s.set("modbus.unit", "1").unwrap();
+    assert!(!s.any_changed());
     // Only the changed block is written.
     let mut s = Settings::DEFAULT;
     s.set("modbus.unit", "5").unwrap();
