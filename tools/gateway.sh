@@ -20,9 +20,12 @@
 # the simulator on the controller UART; prints `protocol-b-tcp
 # 127.0.0.1:PORT` once the bridge answers over TCP, then `modbus-tcp
 # 127.0.0.1:PORT` (forwarded to the firmware's Modbus TCP port 502; set
-# with --modbus-port). No relay: clients talk to the firmware's TCP
-# stack, one protocol-B host at a time (others get & B0B), two Modbus TCP
-# clients at once.
+# with --modbus-port), then `http 127.0.0.1:PORT` (the web page, forwarded
+# to the firmware's port 80; set with --http-port; open it in a browser).
+# No relay: clients talk to the firmware's TCP stack, one protocol-B host
+# at a time (others get & B0B), four Modbus TCP clients at once.
+# --config-image FILE boots with that configuration page (`iai bridge
+# config block`), --blank-config with none (every default).
 # Also builds the iai tool (target/release/iai).
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -3,7 +3,9 @@
 # QEMU for Cortex-M and the ARM binutils used for size reports, the
 # Windows target with mingw-w64 for the iai tool's cross-build, and the
 # Modbus clients the gateway's end-to-end test runs: mbpoll and socat
-# (Debian) and pymodbus (PyPI, pinned) in the venv .venv of the checkout.
+# (Debian) and pymodbus (PyPI, pinned) in the venv .venv of the checkout;
+# for the web page's browser test, Chromium and its WebDriver (Debian's
+# chromium and chromium-driver) and Selenium (PyPI, pinned, in .venv).
 # Idempotent: does nothing that is already done.
 set -euo pipefail
 
@@ -23,6 +25,8 @@ command -v x86_64-w64-mingw32-gcc >/dev/null || need+=(gcc-mingw-w64-x86-64)
 command -v mbpoll >/dev/null || need+=(mbpoll)
 command -v socat >/dev/null || need+=(socat)
 command -v python3 >/dev/null || need+=(python3)
+command -v chromium >/dev/null || need+=(chromium)
+command -v chromedriver >/dev/null || need+=(chromium-driver)
 # Debian's python3 makes venvs only with python3-venv (ensurepip).
 python3 -c 'import ensurepip, venv' 2>/dev/null || need+=(python3-venv)
 SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO=sudo
@@ -41,6 +45,11 @@ if ! "$venv/bin/python" -c "import pymodbus, sys; sys.exit(pymodbus.__version__ 
     python3 -m venv --clear "$venv"
   fi
   "$venv/bin/python" -m pip install -q --disable-pip-version-check "pymodbus==$PYMODBUS"
+fi
+# Selenium for the web page's browser test (host-tests/tests/qemu_web.rs).
+SELENIUM=4.51.0
+if ! "$venv/bin/python" -c "import selenium, sys; sys.exit(selenium.__version__ != '$SELENIUM')" 2>/dev/null; then
+  "$venv/bin/python" -m pip install -q --disable-pip-version-check "selenium==$SELENIUM"
 fi
 if ! command -v cargo-nextest >/dev/null; then
   cargo install --locked cargo-nextest

@@ -69,6 +69,7 @@ use crate::qemu::{
     QemuSession, QUIT_GUARD, QUIT_SEQUENCE, READY_MARKER,
 };
 use crate::rtu_relay::RtuRelay;
+use firmware_example::config::access::DEFAULT_WEB_PORT;
 use firmware_example::net::config::{NetConfig, DEFAULT_PORT};
 use firmware_example::net::modbus::MODBUS_PORT;
 use iai_simulator::{Faults, Simulator};
@@ -108,6 +109,9 @@ pub struct Options {
     /// Ethernet only: the bridge honours the quit sequence (for test runs
     /// that end with [`EthernetGateway::quit`]).
     pub quit_sequence: bool,
+    /// Ethernet only: TCP port on 127.0.0.1 forwarded to the web page (0:
+    /// a free one).
+    pub http_port: u16,
     /// Ethernet only: a network block written into the configuration page
     /// (`None`: blank, so DHCP and port 5020). Its port is the one QEMU
     /// forwards to; a static address must be QEMU's guest address,
@@ -148,6 +152,7 @@ impl Default for Options {
             elf: None,
             ethernet: false,
             quit_sequence: false,
+            http_port: 0,
             network: None,
             page: PageSource::Built,
         }
@@ -214,6 +219,8 @@ pub struct Ready {
     pub modbus_rtu: Option<SocketAddr>,
     /// Modbus TCP straight to the firmware (the Ethernet build).
     pub modbus_tcp: Option<SocketAddr>,
+    /// The web page (the Ethernet build).
+    pub http: Option<SocketAddr>,
 }
 
 fn log(line: &str) {
@@ -326,6 +333,7 @@ pub fn run(opts: &Options, stop: &AtomicBool, on_ready: impl FnOnce(Ready)) -> R
                 over_ethernet: false,
                 modbus_tcp: None,
                 modbus_rtu: modbus_addr,
+                http: None,
             });
             serve(&listener, &link, &mut qemu, stop, cfg.bridge_station)
         }
@@ -719,6 +727,9 @@ pub const TCP_LISTENING: &str = "protocol-b-tcp listening on ";
 /// What the Ethernet firmware prints once Modbus TCP listens (followed by
 /// `A.B.C.D:502`), right after [`TCP_LISTENING`]'s line.
 pub const MODBUS_TCP_LISTENING: &str = "modbus-tcp listening on ";
+/// What the Ethernet firmware prints once the web page listens (followed
+/// by `A.B.C.D:80`), right after [`MODBUS_TCP_LISTENING`]'s line.
+pub const HTTP_LISTENING: &str = "http listening on ";
 /// How long the Ethernet firmware may take to get an address (DHCP, or
 /// its fallback address after `DHCP_FALLBACK_MS`).
 const ADDRESS_TIMEOUT: Duration = Duration::from_secs(30);
@@ -737,6 +748,9 @@ pub struct EthernetGateway {
     /// Where Modbus TCP is reached (127.0.0.1, forwarded by QEMU to the
     /// firmware's port 502).
     pub modbus_addr: SocketAddr,
+    /// Where the web page is reached (127.0.0.1, forwarded by QEMU to the
+    /// firmware's port 80, the web block's default).
+    pub http_addr: SocketAddr,
     /// The firmware's [`TCP_LISTENING`] line.
     pub listening: String,
     sim: SimThread,
@@ -764,6 +778,11 @@ impl EthernetGateway {
             p => p,
         };
         let modbus_addr = SocketAddr::from(([127, 0, 0, 1], modbus_port));
+        let http_port = match opts.http_port {
+            0 => free_port()?,
+            p => p,
+        };
+        let http_addr = SocketAddr::from(([127, 0, 0, 1], http_port));
         let elf = match &opts.elf {
             Some(p) => p.clone(),
             None => build_ethernet_firmware()
@@ -776,7 +795,8 @@ impl EthernetGateway {
         let guest_port = opts.network.map_or(DEFAULT_PORT, |n| n.port);
         let nic = format!(
             "user,model=stellaris,restrict=on,hostfwd=tcp:127.0.0.1:{port}-:{guest_port},\
-             hostfwd=tcp:127.0.0.1:{modbus_port}-:{MODBUS_PORT}"
+             hostfwd=tcp:127.0.0.1:{modbus_port}-:{MODBUS_PORT},\
+             hostfwd=tcp:127.0.0.1:{http_port}-:{DEFAULT_WEB_PORT}"
         );
         // The bridge's block and the network block in one page.
         let (page, _) = page_args(opts, &elf, &cfg)?;
@@ -805,6 +825,7 @@ impl EthernetGateway {
             qemu,
             addr,
             modbus_addr,
+            http_addr,
             listening: String::new(),
             sim,
         };
@@ -836,6 +857,15 @@ impl EthernetGateway {
         {
             return Err(format!(
                 "the firmware did not print {MODBUS_TCP_LISTENING:?}\n{}",
+                gw.qemu.stdout_so_far()
+            ));
+        }
+        if !gw
+            .qemu
+            .wait_for_stdout(HTTP_LISTENING, Instant::now() + BOOT_TIMEOUT)
+        {
+            return Err(format!(
+                "the firmware did not print {HTTP_LISTENING:?}\n{}",
                 gw.qemu.stdout_so_far()
             ));
         }
@@ -912,6 +942,7 @@ pub fn run_ethernet(
         over_ethernet: true,
         modbus_rtu: None,
         modbus_tcp: Some(gw.modbus_addr),
+        http: Some(gw.http_addr),
     });
     let result = watch(&mut gw.qemu, stop);
     let ended = if opts.stack_report && result.is_ok() {

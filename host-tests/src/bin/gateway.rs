@@ -8,7 +8,8 @@
 //! `protocol-b-tcp 127.0.0.1:PORT` once the Ethernet build answers over
 //! TCP, QEMU's user network forwarding that port to the firmware's, then
 //! `modbus-tcp 127.0.0.1:PORT`, forwarded to the firmware's Modbus TCP
-//! port 502);
+//! port 502, then `http 127.0.0.1:PORT`, forwarded to its web page on port
+//! 80);
 //! nothing else goes to stdout.
 //! Runs until SIGINT, SIGTERM or SIGHUP (Ctrl-C), then stops QEMU and the
 //! simulator. Exit code 0 after such a stop, 1 if anything failed (QEMU
@@ -26,6 +27,7 @@
 //! end the firmware too; with `--ethernet` the sequence goes over the
 //! protocol-B port), `--ethernet` (protocol B over TCP: the
 //! `lm3s6965-eth` build, lm3s6965 only), `--config-image FILE` (boot with
+//! `--http-port P` (with `--ethernet`: the host port of the web page),
 //! this image of the configuration page's slots, as `iai bridge config
 //! block` or `iai bridge config get --image` writes it), `--blank-config`
 //! (boot with no page loaded: every default).
@@ -42,7 +44,8 @@ use host_tests::qemu::Board;
 const USAGE: &str = "usage: gateway [--port P] [--baud B] [--modbus-port P] [--modbus-baud B] \
                      [--board lm3s6965|mps2-an386] \
                      [--reply-delay-ms MS] [--faults SPEC] [--seed S] [--elf PATH] \
-                     [--stack-report] [--ethernet] [--config-image FILE | --blank-config]";
+                     [--stack-report] [--ethernet] [--http-port P] \
+                     [--config-image FILE | --blank-config]";
 
 fn parse_args() -> Result<Options, String> {
     let mut o = Options::default();
@@ -95,6 +98,11 @@ fn parse_args() -> Result<Options, String> {
             }
             "--elf" => o.elf = Some(PathBuf::from(value()?)),
             "--ethernet" => o.ethernet = true,
+            "--http-port" => {
+                o.http_port = value()?
+                    .parse()
+                    .map_err(|_| "--http-port takes 0..=65535 (0: a free port)".to_owned())?;
+            }
             "--config-image" => o.page = PageSource::Image(PathBuf::from(value()?)),
             "--blank-config" => o.page = PageSource::Blank,
             "-h" | "--help" => return Err(USAGE.to_owned()),
@@ -131,6 +139,9 @@ fn main() -> ExitCode {
         }
         if let Some(m) = at.modbus_tcp {
             let _ = writeln!(out, "modbus-tcp {m}");
+        }
+        if let Some(h) = at.http {
+            let _ = writeln!(out, "http {h}");
         }
         let _ = out.flush();
     };
