@@ -41,8 +41,10 @@ impl Entry {
 
 /// The last frames.
 pub struct History {
+    /// Oldest first. A `Deque` rather than a `HistoryBuf`: the latter's
+    /// indexing keeps bounds checks (and their panics) in the image.
     #[cfg(feature = "frame-history")]
-    frames: heapless::HistoryBuf<Entry, FRAMES>,
+    frames: heapless::Deque<Entry, FRAMES>,
 }
 
 impl History {
@@ -50,7 +52,7 @@ impl History {
     pub const fn new() -> Self {
         History {
             #[cfg(feature = "frame-history")]
-            frames: heapless::HistoryBuf::new(),
+            frames: heapless::Deque::new(),
         }
     }
 
@@ -65,7 +67,10 @@ impl History {
             if let (Some(dst), Some(src)) = (kept.get_mut(..n), frame.get(..n)) {
                 dst.copy_from_slice(src);
             }
-            self.frames.write(Entry {
+            if self.frames.is_full() {
+                self.frames.pop_front();
+            }
+            let _ = self.frames.push_back(Entry {
                 at_ms: now,
                 dir,
                 len: u32::try_from(len).unwrap_or(u32::MAX),
@@ -78,7 +83,7 @@ impl History {
     pub fn oldest_first(&self) -> impl Iterator<Item = &Entry> {
         #[cfg(feature = "frame-history")]
         {
-            self.frames.oldest_ordered()
+            self.frames.iter()
         }
         #[cfg(not(feature = "frame-history"))]
         {
