@@ -140,7 +140,7 @@ fn config_page(input: &[u8]) {
             let _ = black_box(settings::parse(setting.kind, v));
         }
     }
-    black_box(s.check());
+    let _ = black_box(s.check());
     let mut window = [0u8; 64];
     s.overlay(black_box(0), &mut window);
     black_box(window);
