@@ -355,6 +355,13 @@ impl Bridge {
         &self.history
     }
 
+    /// Records `frame` in the history, as the bridge does (tests only).
+    #[cfg(test)]
+    pub(crate) fn history_for_tests(&mut self, frame: &[u8], now: u32) {
+        self.history
+            .record(history::Dir::FromHost, frame, frame.len(), now);
+    }
+
     /// Sets the configuration (at start, before the first [`Bridge::poll`]):
     /// lets a board build the bridge before its configuration is read.
     pub fn configure(&mut self, cfg: Config, source: Source) {

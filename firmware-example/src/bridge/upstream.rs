@@ -303,19 +303,13 @@ impl Bridge {
         }
     }
 
-    /// A command to the bridge's own station.
+    /// A command to the bridge's own station. Not inlined: the
+    /// configuration messages' buffers (passwords, a window) stay off the
+    /// stack of every other command.
+    #[inline(never)]
     fn own_query(&mut self, station: Station, id: u16, body_empty: bool, now: u32) {
         if id == codes::STATUS_QUERY && body_empty {
-            let report = status::Report {
-                now_ms: now,
-                config: &self.cfg,
-                source: self.source,
-                stats: &self.stats,
-                last_error: self.last_error,
-            };
-            self.resp_len = report.emit(station, &mut self.resp).unwrap_or(0);
-            self.out_off = 0;
-            self.mode = Mode::Respond;
+            self.status_reply(station, now);
             return;
         }
         let Bridge {
@@ -339,6 +333,21 @@ impl Bridge {
             }
             Err(code) => self.respond_error(station, code, now),
         }
+    }
+
+    /// The status reply goes up next.
+    #[inline(never)]
+    fn status_reply(&mut self, station: Station, now: u32) {
+        let report = status::Report {
+            now_ms: now,
+            config: &self.cfg,
+            source: self.source,
+            stats: &self.stats,
+            last_error: self.last_error,
+        };
+        self.resp_len = report.emit(station, &mut self.resp).unwrap_or(0);
+        self.out_off = 0;
+        self.mode = Mode::Respond;
     }
 
     /// The Respond mode: the bridge's own reply goes up.
@@ -387,6 +396,7 @@ impl Bridge {
 
 /// Carries out configuration request `r` with `e` and writes its reply
 /// into `resp`: the reply's length, or the `&` code.
+#[inline(never)]
 fn config_answer(
     e: &mut Editor<'static>,
     r: Request<'_>,

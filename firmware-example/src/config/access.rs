@@ -39,7 +39,7 @@
 
 use core::ops::RangeInclusive;
 
-use sha2::{Digest, Sha256};
+use sha2::digest::generic_array::GenericArray;
 
 use super::{crc32, BlockError};
 
@@ -170,12 +170,11 @@ impl Verifier {
     /// A salt from `entropy` (what the gateway has that differs between
     /// boots and moments: it need not be secret, only not repeat).
     pub fn salt_from(entropy: &[u8]) -> [u8; 16] {
-        let d = Sha256::new()
-            .chain_update(b"iai-gateway salt")
-            .chain_update(entropy)
-            .finalize();
+        let d = sha256(&[b"iai-gateway salt", entropy]);
         let mut salt = [0u8; 16];
-        salt.copy_from_slice(d.get(..16).unwrap_or(&[0; 16]));
+        for (s, h) in salt.iter_mut().zip(d) {
+            *s = h;
+        }
         salt
     }
 
@@ -215,19 +214,74 @@ impl Verifier {
 /// SHA-256 of the salt and the password, then `rounds - 1` more times of
 /// the last hash and the salt.
 fn stretch(password: &[u8], salt: &[u8; 16], rounds: u16) -> [u8; 32] {
-    let mut h: [u8; 32] = Sha256::new()
-        .chain_update(salt)
-        .chain_update(password)
-        .finalize()
-        .into();
+    let mut h = sha256(&[salt, password]);
     for _ in 1..rounds {
-        h = Sha256::new()
-            .chain_update(h)
-            .chain_update(salt)
-            .finalize()
-            .into();
+        h = sha256(&[&h, salt]);
     }
     h
+}
+
+/// SHA-256's initial hash value (FIPS 180-4, 5.3.3).
+const IV: [u32; 8] = [
+    0x6a09_e667,
+    0xbb67_ae85,
+    0x3c6e_f372,
+    0xa54f_f53a,
+    0x510e_527f,
+    0x9b05_688c,
+    0x1f83_d9ab,
+    0x5be0_cd19,
+];
+
+/// SHA-256 of `parts` one after the other: sha2's compression, with the
+/// message padded here (FIPS 180-4, 5.1.1), which keeps about 250 bytes
+/// of the digest wrapper's frames off the stack; the check runs deep in
+/// the bridge's loop.
+fn sha256(parts: &[&[u8]]) -> [u8; 32] {
+    let mut h = Blocks {
+        state: IV,
+        block: GenericArray::default(),
+        at: 0,
+    };
+    let mut bits = 0u64;
+    for part in parts {
+        for &b in *part {
+            h.push(b);
+            bits = bits.wrapping_add(8);
+        }
+    }
+    h.push(0x80);
+    while h.at != 56 {
+        h.push(0);
+    }
+    for b in bits.to_be_bytes() {
+        h.push(b);
+    }
+    let mut out = [0u8; 32];
+    for (o, w) in out.chunks_exact_mut(4).zip(h.state) {
+        o.copy_from_slice(&w.to_be_bytes());
+    }
+    out
+}
+
+/// The hash state and the block being filled.
+struct Blocks {
+    state: [u32; 8],
+    block: GenericArray<u8, sha2::digest::consts::U64>,
+    at: usize,
+}
+
+impl Blocks {
+    fn push(&mut self, b: u8) {
+        if let Some(slot) = self.block.get_mut(self.at) {
+            *slot = b;
+        }
+        self.at += 1;
+        if self.at == 64 {
+            sha2::compress256(&mut self.state, core::slice::from_ref(&self.block));
+            self.at = 0;
+        }
+    }
 }
 
 /// The checks of the password, shut for [`LOCKOUT_MS`] after a wrong one.
@@ -314,6 +368,7 @@ fn seal(b: &mut [u8]) {
 
 #[cfg(test)]
 mod tests {
+    extern crate std;
     use super::*;
 
     #[test]
@@ -340,6 +395,17 @@ mod tests {
             Verifier::new(b"line\r\nbreak", salt),
             Err(PasswordError::Control)
         );
+    }
+
+    #[test]
+    fn the_short_sha256_is_sha2_s() {
+        use sha2::{Digest, Sha256};
+        for len in [0usize, 1, 55, 56, 63, 64, 65, 80, 119, 200] {
+            let msg: std::vec::Vec<u8> = (0..len).map(|i| i as u8).collect();
+            let (a, b) = msg.split_at(len / 3);
+            let want: [u8; 32] = Sha256::digest(&msg).into();
+            assert_eq!(sha256(&[a, b]), want, "{len} bytes");
+        }
     }
 
     #[test]

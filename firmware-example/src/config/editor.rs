@@ -142,6 +142,11 @@ impl<'a> Editor<'a> {
         self.gate.check(v.as_ref(), password, now)
     }
 
+    /// Whether `password` may write. Not inlined, and called before the
+    /// work of a write is set up: the password's check (SHA-256) is the
+    /// deepest thing the bridge's loop calls, so no write's buffers are on
+    /// the stack under it.
+    #[inline(never)]
     fn grant(&mut self, password: &[u8], now: u32) -> Result<(), Refusal> {
         match self.check(password, now) {
             Check::Granted => Ok(()),
@@ -169,7 +174,8 @@ impl<'a> Editor<'a> {
         buf: &mut [u8; ACCESS_LEN],
     ) -> Result<(), Refusal> {
         self.grant(password, now)?;
-        Ok(self.store.read(ACCESS_AT, buf)?)
+        self.store.read(ACCESS_AT, buf)?;
+        Ok(())
     }
 
     /// Stages `bytes` of a host's new page at `at`: in order from 0 (which
@@ -200,6 +206,11 @@ impl<'a> Editor<'a> {
     /// CRC-32 of the [`HOST_LEN`] bytes staged.
     pub fn apply(&mut self, password: &[u8], crc: u32, now: u32) -> Result<Applied, Refusal> {
         self.grant(password, now)?;
+        self.apply_granted(crc)
+    }
+
+    #[inline(never)]
+    fn apply_granted(&mut self, crc: u32) -> Result<Applied, Refusal> {
         if self.staged != Some(HOST_LEN) {
             return Err(Refusal::Staging);
         }
@@ -290,7 +301,9 @@ impl<'a> Editor<'a> {
         Ok(())
     }
 
-    /// A verifier of `password` with a fresh salt.
+    /// A verifier of `password` with a fresh salt. Not inlined, as
+    /// [`Editor::grant`].
+    #[inline(never)]
     fn new_verifier(&mut self, password: &[u8], now: u32) -> Result<Verifier, Refusal> {
         self.entropy = self.entropy.wrapping_mul(0x9E37_79B1).wrapping_add(now);
         let mut e = [0u8; 8];
@@ -310,6 +323,10 @@ impl<'a> Editor<'a> {
             Ok(()) | Err(Refusal::NoPassword) => {}
             Err(e) => return Err(e),
         }
+        self.set_password_granted(new, now)
+    }
+
+    fn set_password_granted(&mut self, new: &[u8], now: u32) -> Result<Applied, Refusal> {
         let v = self.new_verifier(new, now)?;
         self.write_page(None, Some(&v))
     }
@@ -329,6 +346,15 @@ impl<'a> Editor<'a> {
             (Ok(()), _) | (Err(Refusal::NoPassword), Some(_)) => {}
             (Err(e), _) => return Err(e),
         }
+        self.commit_granted(settings, new_password, now)
+    }
+
+    fn commit_granted(
+        &mut self,
+        settings: &Settings,
+        new_password: Option<&[u8]>,
+        now: u32,
+    ) -> Result<Applied, Refusal> {
         settings.check().map_err(Refusal::Setting)?;
         let v = match new_password {
             Some(p) => Some(self.new_verifier(p, now)?),
@@ -345,6 +371,7 @@ impl<'a> Editor<'a> {
 
     /// Writes a new page: the page in force, with `settings`' changed
     /// blocks over it and `verifier` (or the one in force).
+    #[inline(never)]
     fn write_page(
         &mut self,
         settings: Option<&Settings>,

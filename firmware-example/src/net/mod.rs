@@ -171,7 +171,7 @@ pub struct Net<'a> {
     dhcp: Option<SocketHandle>,
     hosts: Hosts,
     modbus: Option<ModbusClients>,
-    http: Option<Http>,
+    http: Option<Http<'a>>,
     cfg: NetConfig,
     clock: Clock,
     address: Option<(Ipv4Setting, AddressSource)>,
@@ -264,12 +264,12 @@ impl<'a> Net<'a> {
         if self.http.is_some() {
             return;
         }
-        let handles = buffers.add_sockets(&mut self.sockets);
-        self.http = Some(Http::new(handles, port));
+        let (handles, form) = buffers.add_sockets(&mut self.sockets);
+        self.http = Some(Http::new(handles, form, port));
     }
 
     /// The web side, if the web page is served.
-    pub fn http(&self) -> Option<&Http> {
+    pub fn http(&self) -> Option<&Http<'a>> {
         self.http.as_ref()
     }
 

@@ -74,6 +74,16 @@ impl FormParser {
         }
     }
 
+    /// Back to nothing read.
+    pub fn clear(&mut self) {
+        self.key.clear();
+        self.value.clear();
+        self.in_value = false;
+        self.escape = Escape::None;
+        self.error = None;
+        self.handed = false;
+    }
+
     fn clear_handed(&mut self) {
         if self.handed {
             self.key.clear();

@@ -53,8 +53,10 @@ use request::{Head, Origin, Parsed, Route};
 pub const SOCKETS: usize = 3;
 /// Receive buffer per socket: a request's head must fit in it.
 pub const RX: usize = 1024;
-/// Transmit buffer per socket: the largest part of a page fits in it.
-pub const TX: usize = 1024;
+/// Transmit buffer per socket: the longest part of a page fits in it (695
+/// bytes: a configuration row with an allow-list of every other ID; see
+/// the test `every_part_of_every_page_fits_the_transmit_buffer`).
+pub const TX: usize = 768;
 /// A form's body at most.
 pub const BODY_MAX: u32 = 2048;
 /// A request's head, or its body, must arrive within this.
@@ -147,28 +149,36 @@ impl Status {
     }
 }
 
-/// The web sockets' buffers, in a static of the board.
+/// The web sockets' buffers and the form being read, in a static of the
+/// board (the form is kept there, not in the network side's state, which
+/// the board builds on its stack at start).
 pub struct HttpBuffers {
     rx: [[u8; RX]; SOCKETS],
     tx: [[u8; TX]; SOCKETS],
+    /// At most one form. A `Vec` rather than an `Option`: empty, it is
+    /// all zero bytes, so the static takes no flash (an `Option`'s `None`
+    /// is not, and would put 6 KiB of zeros in `.data`).
+    form: Vec<FormJob, 1>,
 }
 
 impl HttpBuffers {
-    /// Zeroed buffers (a `static` of them takes no flash).
+    /// Zeroed buffers.
     pub const fn new() -> Self {
         HttpBuffers {
             rx: [[0; RX]; SOCKETS],
             tx: [[0; TX]; SOCKETS],
+            form: Vec::new(),
         }
     }
 
     /// Adds a socket on each of these buffers to `set`, one at a time (as
-    /// the Modbus sockets, to keep the stack small); their handles.
+    /// the Modbus sockets, to keep the stack small); their handles, and the
+    /// form's place.
     pub(super) fn add_sockets<'a>(
         &'a mut self,
         set: &mut SocketSet<'a>,
-    ) -> [SocketHandle; SOCKETS] {
-        let HttpBuffers { rx, tx } = self;
+    ) -> ([SocketHandle; SOCKETS], &'a mut Vec<FormJob, 1>) {
+        let HttpBuffers { rx, tx, form } = self;
         let mut handles = [SocketHandle::default(); SOCKETS];
         for ((handle, rx), tx) in handles.iter_mut().zip(rx.iter_mut()).zip(tx.iter_mut()) {
             let mut socket = tcp::Socket::new(
@@ -178,7 +188,7 @@ impl HttpBuffers {
             super::host::configure(&mut socket);
             *handle = set.add(socket);
         }
-        handles
+        (handles, form)
     }
 }
 
@@ -239,9 +249,8 @@ pub struct HttpStats {
     pub stalled: u32,
 }
 
-/// A form being read.
-struct FormJob {
-    socket: usize,
+/// A form being read: the parser and what it said so far.
+pub struct FormJob {
     parser: FormParser,
     fields: Fields,
 }
@@ -311,26 +320,32 @@ fn bad(reason: &'static str, key: Option<&'static str>) -> Refusal {
 }
 
 /// The web side: its sockets and the form being read.
-pub struct Http {
+pub struct Http<'a> {
     handles: [SocketHandle; SOCKETS],
     conns: [Conn; SOCKETS],
     port: u16,
     /// The page's sequence number when the port was last read from it.
     seen: Option<Option<u32>>,
-    form: Option<FormJob>,
+    /// The form being read (its place is the board's static: a form is
+    /// over 700 bytes).
+    form: &'a mut Vec<FormJob, 1>,
+    /// The socket reading it.
+    form_socket: Option<usize>,
     stats: HttpStats,
 }
 
-impl Http {
-    /// The sockets `handles` (from [`HttpBuffers`]) on `port`; they listen
-    /// from the first [`Http::service`].
-    pub fn new(handles: [SocketHandle; SOCKETS], port: u16) -> Self {
+impl<'a> Http<'a> {
+    /// The sockets `handles` and the form's place `form` (from
+    /// [`HttpBuffers`]) on `port`; they listen from the first
+    /// [`Http::service`].
+    pub fn new(handles: [SocketHandle; SOCKETS], form: &'a mut Vec<FormJob, 1>, port: u16) -> Self {
         Http {
             handles,
             conns: [Conn::Reset; SOCKETS],
             port,
             seen: None,
-            form: None,
+            form,
+            form_socket: None,
             stats: HttpStats::default(),
         }
     }
@@ -398,10 +413,8 @@ impl Http {
                     settle(sockets.get_mut::<tcp::Socket>(handle), since, now)
                 }
             };
-            if self.form.as_ref().is_some_and(|f| f.socket == n)
-                && !matches!(next, Conn::Body { .. })
-            {
-                self.form = None;
+            if self.form_socket == Some(n) && !matches!(next, Conn::Body { .. }) {
+                self.form_socket = None;
             }
             let socket = sockets.get_mut::<tcp::Socket>(handle);
             if next == Conn::Listen && !socket.is_open() {
@@ -632,15 +645,16 @@ impl Http {
                 now,
             );
         }
-        if self.form.is_some() {
+        if self.form_socket.is_some() {
             return self.refuse(
                 Status::Conflict,
                 "another change is being read: try again in a moment",
                 now,
             );
         }
-        self.form = Some(FormJob {
-            socket: n,
+        self.form.clear();
+        // Cannot fail: the vector was just emptied.
+        let _ = self.form.push(FormJob {
             parser: FormParser::new(),
             fields: Fields {
                 route: head.route,
@@ -651,6 +665,7 @@ impl Http {
                 error: None,
             },
         });
+        self.form_socket = Some(n);
         if len == 0 {
             return self.finish_form(view, now);
         }
@@ -669,9 +684,12 @@ impl Http {
         left: u32,
         now: u32,
     ) -> Conn {
-        let Some(job) = self.form.as_mut().filter(|f| f.socket == n) else {
-            socket.abort();
-            return Conn::Reset;
+        let job = match self.form.first_mut() {
+            Some(job) if self.form_socket == Some(n) => job,
+            _ => {
+                socket.abort();
+                return Conn::Reset;
+            }
         };
         let want = (left as usize).min(BODY_BYTES_PER_ROUND);
         let FormJob { parser, fields, .. } = job;
@@ -708,7 +726,8 @@ impl Http {
 
     /// The whole form came: check and carry it out.
     fn finish_form(&mut self, view: &mut View<'_>, now: u32) -> Conn {
-        let Some(FormJob { fields: job, .. }) = self.form.take() else {
+        self.form_socket = None;
+        let Some(FormJob { fields: job, .. }) = self.form.first() else {
             return self.refuse(Status::InternalError, "the form was lost", now);
         };
         if let Some(r) = job.error {
@@ -738,14 +757,14 @@ impl Http {
                 }
             } else {
                 match editor.commit_settings(&job.settings, &job.password, new, now) {
-                    Ok(a) => {
-                        self.stats.saved = self.stats.saved.wrapping_add(1);
-                        Page::Saved(a)
-                    }
+                    Ok(a) => Page::Saved(a),
                     Err(e) => refusal_page(e),
                 }
             }
         };
+        if let Page::Saved(_) = page {
+            self.stats.saved = self.stats.saved.wrapping_add(1);
+        }
         self.answer(page, now)
     }
 

@@ -415,3 +415,86 @@ fn the_last_frames_download_as_text() {
     assert!(a.contains(" < #BBB0001"), "{a}");
     assert!(a.contains("bytes)\n"), "{a}");
 }
+
+/// Every part of every page fits the transmit buffer at its longest (a
+/// part is rendered only when it fits whole): counters at their maximum,
+/// an allow-list of every other ID, eight axes in alarm, long frames.
+#[test]
+fn every_part_of_every_page_fits_the_transmit_buffer() {
+    let mut rig = rig();
+    with_password(&mut rig);
+    let mut s = rig.bridge.editor().unwrap().settings();
+    let every_other: std::string::String = (0..128)
+        .map(|i| std::format!("{:03X}", 0x200 + 2 * i))
+        .collect::<Vec<_>>()
+        .join(",");
+    s.set("bridge.allow", &every_other).unwrap();
+    s.set("bridge.policy", "allow-list").unwrap();
+    rig.bridge
+        .editor()
+        .unwrap()
+        .commit_settings(&s, b"plant-1234", None, 0)
+        .unwrap();
+    for a in rig.gateway.regs.cache.axes.iter_mut() {
+        a.current_position = i32::MIN;
+        a.error_code = 0xFFF;
+        a.axis_status = 0xFF;
+    }
+    rig.gateway.regs.cache.error = (0xFFF, [u32::MAX; 4]);
+    rig.gateway.regs.cache.polls_ok = u16::MAX;
+    let long = [b'!'; 2_000];
+    for _ in 0..20 {
+        rig.bridge.history_for_tests(&long, u32::MAX);
+    }
+    let net = NetView {
+        address: None,
+        port: u16::MAX,
+        hosts: crate::net::host::HostStats {
+            hosts: u32::MAX,
+            refused: u32::MAX,
+            cut_short: u32::MAX,
+            stalled: u32::MAX,
+        },
+        host_connected: true,
+        modbus: Some(crate::net::modbus::ModbusTcpStats {
+            connections: u32::MAX,
+            requests: u32::MAX,
+            idle_closed: u32::MAX,
+            framing_reset: u32::MAX,
+        }),
+    };
+    let mut view = View {
+        bridge: &mut rig.bridge,
+        gateway: Some(&mut rig.gateway),
+        net,
+        now: u32::MAX,
+    };
+    let mut longest = (0, "");
+    for (page, name) in [
+        (Page::Status, "status"),
+        (Page::Config, "config"),
+        (Page::Frames, "frames"),
+        (
+            Page::refused(
+                Status::HeadersTooLarge,
+                "the request's head is over 1,024 bytes",
+            ),
+            "refused",
+        ),
+    ] {
+        let mut n = 0;
+        loop {
+            let mut buf = vec![0u8; 4096];
+            let mut out = crate::text::Buf::new(&mut buf);
+            if !pages::part(page, n, &mut view, &mut out) {
+                break;
+            }
+            if out.len() > longest.0 {
+                longest = (out.len(), name);
+            }
+            n += 1;
+        }
+    }
+    std::println!("longest part: {} bytes ({})", longest.0, longest.1);
+    assert!(longest.0 <= TX, "{longest:?}");
+}
