@@ -355,8 +355,9 @@ impl Bridge {
         &self.history
     }
 
-    /// Records `frame` in the history, as the bridge does (tests only).
-    #[cfg(test)]
+    /// Records `frame` in the history, as the bridge does (the web page's
+    /// tests only).
+    #[cfg(all(test, feature = "ethernet"))]
     pub(crate) fn history_for_tests(&mut self, frame: &[u8], now: u32) {
         self.history
             .record(history::Dir::FromHost, frame, frame.len(), now);
