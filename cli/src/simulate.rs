@@ -37,7 +37,7 @@ impl FrameLog for InspectorLog {
     }
 }
 
-/// What `iai simulate` gives [`Shared::with_frame_log`].
+/// What `iai simulate` gives [`iai_simulator::server::Shared::with_frame_log`].
 pub fn inspector_log() -> FrameLogMaker {
     Arc::new(|dir| Box::new(InspectorLog::new(dir)) as Box<dyn FrameLog>)
 }

@@ -2,7 +2,7 @@
 //! blocking, allocation-free and panic-free, so that the same code runs on
 //! a Cortex-M board and in the host model of `host-tests` (virtual time).
 //!
-//! - [`bridge`]: the bridge itself ([`Bridge::poll`]) and a board loop
+//! - [`bridge`]: the bridge itself ([`bridge::Bridge::poll`]) and a board loop
 //!   ([`bridge::run`]);
 //! - [`serial`]: the rings between a UART interrupt handler and the bridge,
 //!   overrun counting and receive-side flow control (XON/XOFF, RTS/CTS);
