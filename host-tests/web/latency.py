@@ -3,7 +3,10 @@
 web page busy: the bridge's status query (B00H, answered by the bridge
 itself) and a 212H through it to the controller, asked one after the
 other on one connection, first alone, then while web clients fetch the
-status page (and its live part) as fast as they can.
+status page (and its live part) as fast as they can. The status page is
+read once first in both cases, so that the Modbus gateway polls the
+controller in both (a page looked at starts the polling, as a PLC does):
+what differs is the web page's own work.
 
 Usage: latency.py PROTOCOL_B HTTP [QUERIES] [WEB_CLIENTS]
 
@@ -79,6 +82,9 @@ def main():
     pb, http = sys.argv[1], sys.argv[2]
     n = int(sys.argv[3]) if len(sys.argv) > 3 else 200
     clients = int(sys.argv[4]) if len(sys.argv) > 4 else 2
+    with urllib.request.urlopen(f"http://{http}/live", timeout=10) as r:
+        r.read()
+    time.sleep(1.0)
     show("web idle", round_trips(pb, n))
     stop = threading.Event()
     count = [0]

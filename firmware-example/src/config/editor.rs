@@ -157,10 +157,10 @@ impl<'a> Editor<'a> {
     }
 
     /// Reads the page in force at `at` (within its first [`HOST_LEN`]
-    /// bytes).
+    /// bytes; past them, [`StoreError::Range`]).
     pub fn read_host(&mut self, at: usize, buf: &mut [u8]) -> Result<(), Refusal> {
         if at.checked_add(buf.len()).is_none_or(|end| end > HOST_LEN) {
-            return Err(Refusal::Staging);
+            return Err(Refusal::Store(StoreError::Range));
         }
         Ok(self.store.read(at, buf)?)
     }

@@ -499,16 +499,7 @@ impl<'a> Http<'a> {
     }
 
     fn answer(&mut self, page: Page, now: u32) -> Conn {
-        if !matches!(
-            page,
-            Page::Status
-                | Page::Live
-                | Page::Config
-                | Page::Frames
-                | Page::Saved(_)
-                | Page::Unchanged
-                | Page::Restarting
-        ) {
+        if let Page::Refused(_) = page {
             self.stats.refused = self.stats.refused.wrapping_add(1);
         }
         Conn::Reply {
