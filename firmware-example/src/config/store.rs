@@ -43,7 +43,6 @@ pub const fn slot_len(erase: usize) -> usize {
 
 /// Why the store could not read or write.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum StoreError {
     /// The flash refused an operation.
     Flash(NorFlashErrorKind),
