@@ -72,7 +72,7 @@ fn main() {
         // than a board's flash, so it gets the 4 MiB of mps2-an386.
         fs::write(
             dir.join("board-memory.x"),
-            "CONFIG_PAGE = 1K;\nMEMORY\n{\n  FLASH : ORIGIN = 0x00000000, LENGTH = 4096K - 1K\n  \
+            "CONFIG_PAGE = 2K;\nMEMORY\n{\n  FLASH : ORIGIN = 0x00000000, LENGTH = 4096K - 2K\n  \
              RAM   : ORIGIN = 0x20000000, LENGTH = 64K\n}\n",
         )
         .expect("write the proof's memory map");

@@ -20,14 +20,17 @@
 # the simulator on the controller UART; prints `protocol-b-tcp
 # 127.0.0.1:PORT` once the bridge answers over TCP, then `modbus-tcp
 # 127.0.0.1:PORT` (forwarded to the firmware's Modbus TCP port 502; set
-# with --modbus-port). No relay: clients talk to the firmware's TCP
-# stack, one protocol-B host at a time (others get & B0B), four Modbus TCP
-# clients at once.
+# with --modbus-port), then `http 127.0.0.1:PORT` (the web page, forwarded
+# to the firmware's port 80; set with --http-port; open it in a browser).
+# No relay: clients talk to the firmware's TCP stack, one protocol-B host
+# at a time (others get & B0B), four Modbus TCP clients at once.
+# --config-image FILE boots with that configuration page (`iai bridge
+# config block`), --blank-config with none (every default).
 # --ethernet --broker 127.0.0.1:PORT: the firmware's Sparkplug B edge node
 # on the MQTT broker at that port of this machine (the guest reaches it as
 # 10.0.2.2): group IAI, the node ID made from the MAC address, DCMD
 # commands off; prints `sparkplug spBv1.0/IAI/NBIRTH/NODE` once NBIRTH is
-# out (after the modbus-tcp line).
+# out (after the http line).
 # Also builds the iai tool (target/release/iai).
 set -euo pipefail
 cd "$(dirname "$0")/.."

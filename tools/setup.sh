@@ -6,7 +6,9 @@
 # (Debian) and pymodbus (PyPI, pinned) in the venv .venv of the checkout;
 # for the Sparkplug B test, the Mosquitto broker and its clients and
 # protoc (Debian), paho-mqtt and protobuf (PyPI, pinned: protobuf 4.21
-# reads what Debian's protoc 3.21 generates) in the same venv.
+# reads what Debian's protoc 3.21 generates) in the same venv;
+# for the web page's browser test, Chromium and its WebDriver (Debian's
+# chromium and chromium-driver) and Selenium (PyPI, pinned, in .venv).
 # Idempotent: does nothing that is already done.
 set -euo pipefail
 
@@ -29,6 +31,8 @@ command -v mosquitto >/dev/null || [ -x /usr/sbin/mosquitto ] || need+=(mosquitt
 command -v mosquitto_sub >/dev/null || need+=(mosquitto-clients)
 command -v protoc >/dev/null || need+=(protobuf-compiler)
 command -v python3 >/dev/null || need+=(python3)
+command -v chromium >/dev/null || need+=(chromium)
+command -v chromedriver >/dev/null || need+=(chromium-driver)
 # Debian's python3 makes venvs only with python3-venv (ensurepip).
 python3 -c 'import ensurepip, venv' 2>/dev/null || need+=(python3-venv)
 SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO=sudo
@@ -55,6 +59,11 @@ if ! "$venv/bin/python" -c "
 import sys, paho.mqtt, google.protobuf as p
 sys.exit(paho.mqtt.__version__ != '$PAHO' or p.__version__ != '$PROTOBUF')" 2>/dev/null; then
   "$venv/bin/python" -m pip install -q --disable-pip-version-check "paho-mqtt==$PAHO" "protobuf==$PROTOBUF"
+fi
+# Selenium for the web page's browser test (host-tests/tests/qemu_web.rs).
+SELENIUM=4.51.0
+if ! "$venv/bin/python" -c "import selenium, sys; sys.exit(selenium.__version__ != '$SELENIUM')" 2>/dev/null; then
+  "$venv/bin/python" -m pip install -q --disable-pip-version-check "selenium==$SELENIUM"
 fi
 if ! command -v cargo-nextest >/dev/null; then
   cargo install --locked cargo-nextest

@@ -6,6 +6,9 @@
 # board (lm3s6965's stack also after a PLC's session on its Modbus port):
 #   ram <board> static <bytes> stack <bytes> total <bytes>
 #   flash <board> <bytes>
+# (lm3s6965's, and the Ethernet build's, also after a configuration
+# session: iai bridge config through the bridge's own station, and on the
+# Ethernet build the web page read and a form saved)
 # and, for the QEMU (Cortex-M3/M4) boards, whether the goal is met:
 #   goal <board> ram met|missed flash met|missed
 # The lm3s6965 build carries the Modbus gateway beside the bridge (both
@@ -38,6 +41,41 @@ for b in "${boards[@]}"; do
     --no-default-features --features "$feat" --bin "$bin"
 done
 cargo build -q -p host-tests --bin demo --bin gateway
+cargo build -q -p iai-cli --bin iai
+
+# Stack peak of an image after a configuration session
+# (host-tests/web/config_session.py): the gateway with --stack-report on a
+# fresh page, `iai bridge config set` with a new password, `config get`,
+# a change with the password and one refused without it, and with
+# --ethernet the web page's pages read, a form saved and one refused; then
+# a stop that ends the firmware and logs its peak. Prints the peak, or
+# nothing if it could not be measured.
+config_stack() {
+  local elf=$1 mode=$2 dir pid pb http="" ready=protocol-b flags=()
+  [ "$mode" = ethernet ] && ready=http flags=(--ethernet)
+  dir=$(mktemp -d)
+  : >"$dir/out"
+  "$target/debug/gateway" --elf "$elf" --stack-report "${flags[@]}" >"$dir/out" 2>"$dir/err" &
+  pid=$!
+  for _ in $(seq 1 300); do
+    grep -q "^$ready " "$dir/out" && break
+    kill -0 "$pid" 2>/dev/null || break
+    sleep 0.2
+  done
+  pb=$(awk '$1=="protocol-b" || $1=="protocol-b-tcp" {print $2}' "$dir/out")
+  [ "$mode" = ethernet ] && http=$(awk '$1=="http" {print $2}' "$dir/out")
+  if [ -n "$pb" ] && python3 host-tests/web/config_session.py "$target/debug/iai" "$pb" $http >"$dir/session" 2>&1; then
+    kill -TERM "$pid"
+    wait "$pid" || true
+    sed -n 's/.*firmware stack peak \([0-9]*\) bytes.*/\1/p' "$dir/err"
+  else
+    echo "size-report: the configuration session on $(basename "$elf") failed:" >&2
+    cat "$dir/session" "$dir/err" >&2
+    kill -TERM "$pid" 2>/dev/null || true
+    wait "$pid" || true
+  fi
+  rm -rf "$dir"
+}
 
 # Stack peak of an image after a PLC's session on its Modbus port
 # (pymodbus, from tools/setup.sh's venv; host-tests/plc/): the gateway with
@@ -111,6 +149,11 @@ for b in "${boards[@]}"; do
         echo "stack $board after a PLC's Modbus session (pymodbus): $peak bytes"
         [ "$peak" -gt "$stack" ] && stack=$peak
       fi
+      peak=$(config_stack "$elf" serial)
+      if [ -n "$peak" ]; then
+        echo "stack $board after a configuration session (iai bridge config): $peak bytes"
+        [ "$peak" -gt "$stack" ] && stack=$peak
+      fi
     fi
     echo "ram $board static $static stack $stack total $((static + stack))"
     echo "flash $board $flash"
@@ -168,6 +211,11 @@ if [ -n "$peak" ]; then
   echo "stack lm3s6965-eth after a PLC's Modbus TCP session (pymodbus): $peak bytes"
   [ "$peak" -gt "$eth_stack" ] && eth_stack=$peak
 fi
+peak=$(config_stack "$eth_elf" ethernet)
+if [ -n "$peak" ]; then
+  echo "stack lm3s6965-eth after a configuration session (iai bridge config, the web page): $peak bytes"
+  [ "$peak" -gt "$eth_stack" ] && eth_stack=$peak
+fi
 # The stack after a session of the Sparkplug edge node on Mosquitto (its
 # end-to-end test ends its second boot with the quit sequence).
 sp_stack=$(cargo test -q -p host-tests --test qemu_sparkplug -- --nocapture 2>/dev/null |
@@ -181,4 +229,21 @@ fi
 echo "ram lm3s6965-eth static $static stack $eth_stack total $((static + eth_stack))"
 echo "ram lm3s6965-eth network $((buffers + frames + slots + iface + driver)): socket buffers $buffers, frame buffers $frames, socket slots $slots, interface and hosts $iface, driver $driver; modbus gateway $gateway"
 echo "ram lm3s6965-eth sparkplug buffers $sparkplug (socket, packets, table window; its state is in the interface's)"
+# The web page's share of that: its socket buffers and its 3 of the 12
+# slots of the socket set (its connections' state and the form being read
+# are in the interface's figure, the frame history it downloads in the
+# bridge's static; README, "The web page").
+web_buffers=$(sym HTTP_BUFFERS)
+echo "ram lm3s6965-eth web page: socket buffers $web_buffers, socket slots $((3 * slots / 12))"
 echo "flash lm3s6965-eth $flash"
+# The web page's code and tables by symbol (its functions, httparse's):
+# less than its whole cost, as the loop inlines part of it.
+web_flash=$($nm -S -C "$eth_elf" | python3 -c '
+import sys
+n = 0
+for l in sys.stdin:
+    p = l.split(None, 3)
+    if len(p) == 4 and p[2] in "tTrR" and ("net::http" in p[3] or "httparse" in p[3]):
+        n += int(p[1], 16)
+print(n)')
+echo "flash lm3s6965-eth web page (its symbols) $web_flash"

@@ -6,13 +6,17 @@
 //!   ([`bridge::run`]);
 //! - [`serial`]: the rings between a UART interrupt handler and the bridge,
 //!   overrun counting and receive-side flow control (XON/XOFF, RTS/CTS);
-//! - [`config`]: the run-time configuration block and the command policy;
+//! - [`config`]: the configuration page (its blocks, the settings table,
+//!   the two-slot store, the password) and the command policy;
 //! - [`status`]: the status query the bridge answers on its own station;
 //! - [`codes`]: the bridge's own `&` codes and message IDs (B00..BFF);
+//! - [`text`]: numbers as text without `core::fmt`;
 //! - [`modbus`]: the PLC gateway, a Modbus RTU server in front of protocol
 //!   B sharing the bridge's controller line.
 //! - `net` (feature `ethernet`): the bridge's host side on TCP (smoltcp,
-//!   the Stellaris Ethernet MAC).
+//!   the Stellaris Ethernet MAC), and the web page; without the feature
+//!   only its network block ([`net::config`]), which every build's
+//!   configuration page holds.
 //!
 //! The boards are the binaries of this package (`src/bin/*.rs`): each only
 //! moves bytes between UART registers and a [`serial::IsrEnd`], reads the
@@ -45,5 +49,12 @@ pub mod config;
 pub mod modbus;
 #[cfg(feature = "ethernet")]
 pub mod net;
+/// The network block alone (the rest of `net` needs the `ethernet`
+/// feature): the settings table reads and writes it in every build.
+#[cfg(not(feature = "ethernet"))]
+pub mod net {
+    pub mod config;
+}
 pub mod serial;
 pub mod status;
+pub mod text;

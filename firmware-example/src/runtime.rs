@@ -1,6 +1,6 @@
 //! What every board binary shares: the millisecond clock on SysTick, WFI
-//! sleep, the configuration block, the stack peak, semihosting output and
-//! exit, and the fault handlers. Included by each `src/bin/<board>.rs` with
+//! sleep, the configuration page and its store, the restart, the stack
+//! peak, semihosting output and exit, and the fault handlers. Included by each `src/bin/<board>.rs` with
 //! `#[path]` (it is not part of the host-testable library).
 
 use core::cell::Cell;
@@ -14,6 +14,11 @@ use cortex_m::peripheral::SYST;
 use cortex_m_rt::{exception, ExceptionFrame};
 use cortex_m_semihosting::{debug, hio};
 use firmware_example::bridge::{Bridge, Error};
+#[cfg(any(feature = "board-lm3s6965", feature = "board-mps2-an386"))]
+use firmware_example::config::{
+    editor::Editor,
+    store::{MemFlash, PageStore, Store},
+};
 use firmware_example::config::{BlockError, Config, Source, BLOCK_LEN};
 use firmware_example::serial::{
     DownstreamRings, FlowControl, IsrEnd, ThreadEnd, UpstreamRings, DOWNSTREAM_MARKS,
@@ -157,6 +162,8 @@ pub fn setup(
     source: Source,
 ) -> (&'static mut Bridge, ThreadEnd<'static>, ThreadEnd<'static>) {
     let bridge = s.bridge.write(Bridge::new(cfg, source, boot_seed()));
+    #[cfg(any(feature = "board-lm3s6965", feature = "board-mps2-an386"))]
+    bridge.attach_editor(editor(boot_seed()));
     let (up_isr, up) = s.up.split(cfg.flow, UPSTREAM_MARKS, s.pend_up);
     let (down_isr, down) = s
         .down
@@ -196,21 +203,115 @@ pub fn boot_seed() -> u32 {
 }
 
 extern "C" {
-    /// The configuration block's address, defined by the root memory map.
-    static _bridge_config: [u8; BLOCK_LEN];
+    /// The configuration page's two slots in flash, defined by the root
+    /// memory map.
+    static mut _bridge_config: [u8; 2 * SLOT_LEN];
     /// Lowest address the stack may reach (cortex-m-rt).
     static _stack_end: u32;
     /// Initial stack pointer (cortex-m-rt).
     static _stack_start: u32;
 }
 
-/// The configuration from the block in flash (defaults if blank or
-/// invalid).
+/// A slot of the configuration page: a flash erase page (the QEMU boards:
+/// 1 KiB, as the LM3S6965's; the STM32G0: 2 KiB).
+#[cfg(any(feature = "board-stm32g030", feature = "board-stm32g070"))]
+const SLOT_LEN: usize = 2048;
+/// A slot of the configuration page: a flash erase page (the QEMU boards:
+/// 1 KiB, as the LM3S6965's; the STM32G0: 2 KiB).
+#[cfg(not(any(feature = "board-stm32g030", feature = "board-stm32g070")))]
+const SLOT_LEN: usize = 1024;
+
+/// The store of a QEMU board: its slots as memory with flash's rules.
+#[cfg(any(feature = "board-lm3s6965", feature = "board-mps2-an386"))]
+type BoardStore = Store<MemFlash<'static, SLOT_LEN, 4>>;
+
+#[cfg(feature = "board-lm3s6965")]
+extern "C" {
+    /// QEMU's stand-in for the lm3s6965's slots: 2 KiB at the end of RAM
+    /// (memory-qemu.x), kept by a system reset.
+    static mut _config_ram: [u8; 2 * SLOT_LEN];
+}
+
+/// The slots the lm3s6965 writes: QEMU maps its flash read-only, so they
+/// are kept in RAM that a reset leaves as it was; when that RAM holds no
+/// valid page (at power-up, QEMU's RAM is zeroed), the flash's slots are
+/// copied into it (as `-device loader` or a programmer left them).
+#[cfg(feature = "board-lm3s6965")]
+fn writable_slots() -> &'static mut [u8] {
+    // SAFETY: the memory map reserves these 2 KiB of RAM for the slots and
+    // the flash slots are only read; called once, at boot, by `store`.
+    unsafe {
+        let ram = &mut *core::ptr::addr_of_mut!(_config_ram);
+        if firmware_example::config::store::page_in(ram, SLOT_LEN).is_none() {
+            ram.copy_from_slice(&*core::ptr::addr_of!(_bridge_config));
+        }
+        ram
+    }
+}
+
+/// The slots mps2-an386 writes: its "flash" is RAM the CPU can write
+/// (QEMU copies a loaded image there again at a system reset).
+#[cfg(feature = "board-mps2-an386")]
+fn writable_slots() -> &'static mut [u8] {
+    // SAFETY: the memory map reserves the slots; called once, at boot, by
+    // `store`.
+    unsafe { &mut *core::ptr::addr_of_mut!(_bridge_config) }
+}
+
+/// The board's store, opened at the first call (at boot, before the
+/// loop; the editor then holds it).
+#[cfg(any(feature = "board-lm3s6965", feature = "board-mps2-an386"))]
+fn store() -> &'static mut BoardStore {
+    static mut STORE: Option<BoardStore> = None;
+    // SAFETY: boot code only, one call after the other: `load_config`'s
+    // reference ends before `editor` takes the one that lasts.
+    unsafe {
+        let slot = &mut *core::ptr::addr_of_mut!(STORE);
+        slot.get_or_insert_with(|| Store::open(MemFlash::new(writable_slots()), 0))
+    }
+}
+
+/// Reads the page in force at `at` (FFH where there is none).
+pub fn read_page(at: usize, buf: &mut [u8]) {
+    #[cfg(any(feature = "board-lm3s6965", feature = "board-mps2-an386"))]
+    if store().read(at, buf).is_err() {
+        buf.fill(0xFF);
+    }
+    #[cfg(not(any(feature = "board-lm3s6965", feature = "board-mps2-an386")))]
+    {
+        // SAFETY: the memory map reserves the slots; they are only read.
+        let slots = unsafe { &*core::ptr::addr_of!(_bridge_config) };
+        match firmware_example::config::store::page_in(slots, SLOT_LEN)
+            .and_then(|(page, _)| page.get(at..at + buf.len()))
+        {
+            Some(src) => buf.copy_from_slice(src),
+            None => buf.fill(0xFF),
+        }
+    }
+}
+
+/// The configuration from the bridge's block in the page in force
+/// (defaults if blank or invalid).
 pub fn load_config() -> (Config, Source) {
-    // SAFETY: the memory map reserves this flash page for the block; it is
-    // only read.
-    let block = unsafe { &*core::ptr::addr_of!(_bridge_config) };
-    Config::from_block(block)
+    let mut block = [0u8; BLOCK_LEN];
+    read_page(firmware_example::config::page::BRIDGE_AT, &mut block);
+    Config::from_block(&block)
+}
+
+/// Restarts the board (a system reset).
+#[cfg(any(feature = "board-lm3s6965", feature = "board-mps2-an386"))]
+fn restart() {
+    cortex_m::peripheral::SCB::sys_reset();
+}
+
+/// The writes of the configuration page, over the board's store (once,
+/// at boot); `seed` differs at each boot.
+#[cfg(any(feature = "board-lm3s6965", feature = "board-mps2-an386"))]
+pub fn editor(seed: u32) -> &'static mut Editor<'static> {
+    static mut EDITOR: MaybeUninit<Editor<'static>> = MaybeUninit::uninit();
+    let store: &'static mut dyn PageStore = store();
+    // SAFETY: called once, at boot; the only reference to this static.
+    unsafe { (*core::ptr::addr_of_mut!(EDITOR)).write(Editor::new(store, restart, seed)) }
 }
 
 /// Peak stack use since reset, in bytes: cortex-m-rt's `paint-stack`

@@ -149,7 +149,20 @@ fn serve_paced(
             continue;
         }
         let chunk: Vec<u8> = out.drain(..n.min(out.len())).collect();
-        write_all_nonblocking(&mut stream, &chunk)?;
+        match write_all_nonblocking(&mut stream, &chunk) {
+            Ok(()) => {}
+            // QEMU went while a reply was going out: the line's end, as
+            // a read of 0 bytes is.
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::BrokenPipe | io::ErrorKind::ConnectionReset
+                ) =>
+            {
+                return Ok(())
+            }
+            Err(e) => return Err(e),
+        }
         since_base += chunk.len() as u32;
     }
 }

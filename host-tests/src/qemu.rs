@@ -8,8 +8,8 @@
 //! [`QemuSession::start`] boots an ELF with both serial ports wired to Unix
 //! sockets: [`QemuSession::upstream`] is the first serial port (the host
 //! side of the bridge), [`QemuSession::downstream`] the second (the
-//! controller side), and a configuration block (see
-//! `firmware_example::config`) loaded into the flash page at the ELF's
+//! controller side), and a configuration page (see
+//! `firmware_example::config`) loaded into the flash slots at the ELF's
 //! `_bridge_config` symbol. The firmware ends the run through semihosting
 //! `exit`, which becomes QEMU's exit code (0 on success).
 //!
@@ -29,7 +29,11 @@ use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::thread;
 use std::time::{Duration, Instant};
 
+use firmware_example::config::page::{BRIDGE_AT, NET_AT, PAGE_LEN, SPARKPLUG_AT};
+use firmware_example::config::store::image;
 use firmware_example::config::Config;
+use firmware_example::net::config::NetConfig;
+use firmware_example::net::sparkplug::config::SparkplugConfig;
 
 /// Name of the firmware package.
 pub const FIRMWARE_PACKAGE: &str = "firmware-example";
@@ -839,10 +843,45 @@ pub fn symbol_address(elf: &Path, symbol: &str) -> io::Result<u64> {
         })
 }
 
-/// The `-device loader,...` argument that puts `cfg`'s configuration block
-/// at the ELF's `_bridge_config` (the block is written to a file in the
-/// target directory).
+/// The configuration page holding `cfg`'s block and, if given, the
+/// network block `net` and the Sparkplug block `sparkplug`, as a programmer writes it to the QEMU boards'
+/// two 1 KiB slots (`firmware_example::config::store::image`): the page in
+/// slot A as sequence 1, slot B erased.
+pub fn page_image(
+    cfg: &Config,
+    net: Option<&NetConfig>,
+    sparkplug: Option<&SparkplugConfig>,
+) -> Vec<u8> {
+    let mut page = [0xFFu8; PAGE_LEN];
+    page[BRIDGE_AT..BRIDGE_AT + firmware_example::config::BLOCK_LEN]
+        .copy_from_slice(&cfg.to_block());
+    if let Some(net) = net {
+        page[NET_AT..NET_AT + firmware_example::net::config::BLOCK_LEN]
+            .copy_from_slice(&net.to_block());
+    }
+    if let Some(sp) = sparkplug {
+        page[SPARKPLUG_AT..SPARKPLUG_AT + firmware_example::net::sparkplug::config::BLOCK_LEN]
+            .copy_from_slice(&sp.to_block());
+    }
+    let mut out = vec![0u8; 2 * QEMU_SLOT_LEN];
+    image(&page, QEMU_SLOT_LEN, &mut out);
+    out
+}
+
+/// A slot of the QEMU boards' configuration page (a 1 KiB flash page, as
+/// the LM3S6965's; `memory-qemu.x`).
+pub const QEMU_SLOT_LEN: usize = 1024;
+
+/// The `-device loader,...` argument that puts `cfg`'s configuration page
+/// ([`page_image`]) at the ELF's `_bridge_config` (written to a file in
+/// the target directory).
 pub fn config_loader_arg(elf: &Path, cfg: &Config) -> io::Result<String> {
+    image_loader_arg(elf, &page_image(cfg, None, None))
+}
+
+/// The `-device loader,...` argument that puts `image` (both slots of the
+/// configuration page) at the ELF's `_bridge_config`.
+pub fn image_loader_arg(elf: &Path, image: &[u8]) -> io::Result<String> {
     static SERIAL: AtomicU32 = AtomicU32::new(0);
     let addr = symbol_address(elf, "_bridge_config")?;
     let dir = target_dir().join("qemu-config");
@@ -852,7 +891,7 @@ pub fn config_loader_arg(elf: &Path, cfg: &Config) -> io::Result<String> {
         std::process::id(),
         SERIAL.fetch_add(1, Ordering::Relaxed)
     ));
-    std::fs::write(&file, cfg.to_block())?;
+    std::fs::write(&file, image)?;
     Ok(format!("loader,file={},addr={addr:#x}", file.display()))
 }
 

@@ -6,22 +6,26 @@
 //! smoltcp; the controller stays on UART1 (PD2/PD3, a PL011 driven by its
 //! interrupt as in the serial board). UART0 is not used. The watchdog
 //! resets the MCU if the loop stops feeding it for two periods of
-//! [`WATCHDOG_MS`]. The bridge's configuration comes from the block at
-//! `_bridge_config`, the network's from the block [`BLOCK_OFFSET`] bytes
-//! further on (see `net/config.rs`); the bridge's flow control setting
-//! does not apply (TCP's window holds the host back).
+//! [`WATCHDOG_MS`]. The bridge's configuration comes from its block in the
+//! configuration page in force (`runtime.rs`, `config/store.rs`), the
+//! network's from the block [`BLOCK_OFFSET`] bytes further on (see
+//! `net/config.rs`); the bridge's flow control setting does not apply
+//! (TCP's window holds the host back).
 //!
 //! The Modbus gateway ([`firmware_example::modbus`]) serves Modbus TCP on
 //! port 502 ([`firmware_example::net::modbus`]) and shares the controller
 //! line with the bridge, as the serial board's gateway does; its settings
-//! (unit ID, poll period, axes) come from the bridge's block.
+//! (unit ID, poll period, axes) come from the bridge's block. The web page
+//! ([`firmware_example::net::http`]) is served on port 80 (the web block's
+//! port).
 //!
 //! Under QEMU: `-nic user,model=stellaris,hostfwd=tcp:127.0.0.1:HOSTPORT-:5020`
 //! (and `hostfwd=tcp:127.0.0.1:MBPORT-:502` for Modbus TCP; `restrict=on`
 //! keeps the guest from reaching anything else). Once the interface has an
 //! address the firmware prints
 //! `firmware-example: protocol-b-tcp listening on A.B.C.D:PORT (SOURCE)`
-//! and `firmware-example: modbus-tcp listening on A.B.C.D:502`.
+//! `firmware-example: modbus-tcp listening on A.B.C.D:502` and
+//! `firmware-example: http listening on A.B.C.D:80`.
 #![no_std]
 #![no_main]
 
@@ -31,13 +35,14 @@
 mod runtime;
 
 use core::mem::MaybeUninit;
-use core::ptr::{addr_of, addr_of_mut, read_volatile, write_volatile};
+use core::ptr::{addr_of_mut, read_volatile, write_volatile};
 
 use cortex_m::peripheral::NVIC;
 use cortex_m_rt::entry;
 use firmware_example::bridge::Bridge;
 use firmware_example::modbus::Gateway;
 use firmware_example::net::config::{NetConfig, NetSource, BLOCK_LEN, BLOCK_OFFSET};
+use firmware_example::net::http::HttpBuffers;
 use firmware_example::net::modbus::{ModbusBuffers, MODBUS_PORT};
 use firmware_example::net::sparkplug::config::{self as sparkplug_config, SparkplugConfig};
 use firmware_example::net::sparkplug::{self, SparkplugBuffers};
@@ -66,6 +71,7 @@ static mut SLOTS: MaybeUninit<SocketSlots<'static>> = MaybeUninit::uninit();
 static mut BUFFERS: Buffers = Buffers::new();
 static mut MODBUS_BUFFERS: ModbusBuffers = ModbusBuffers::new();
 static mut SPARKPLUG_BUFFERS: SparkplugBuffers = SparkplugBuffers::new();
+static mut HTTP_BUFFERS: HttpBuffers = HttpBuffers::new();
 static mut RX_FRAME: [u8; FRAME_CAP] = [0; FRAME_CAP];
 static mut TX_FRAME: [u8; FRAME_CAP] = [0; FRAME_CAP];
 
@@ -112,12 +118,6 @@ const INT_RX: u32 = 1 << 4;
 const INT_TX: u32 = 1 << 5;
 const INT_RT: u32 = 1 << 6;
 const INT_ALL: u32 = 0x7FF;
-
-extern "C" {
-    /// The configuration page (root memory map): the bridge's block, and
-    /// the network block `BLOCK_OFFSET` bytes on.
-    static _bridge_config: [u8; BLOCK_OFFSET + BLOCK_LEN];
-}
 
 fn read(addr: usize) -> u32 {
     // SAFETY: every address used is a register of this device.
@@ -195,19 +195,26 @@ fn init_clocks_and_pins() {
     write(GPIO_D + GPIO_DEN, read(GPIO_D + GPIO_DEN) | 0b1100);
 }
 
+/// The web page's port from the web block in the configuration page.
+fn web_port() -> u16 {
+    use firmware_example::config::access::{WebConfig, WEB_LEN};
+    let mut block = [0u8; WEB_LEN];
+    runtime::read_page(firmware_example::config::page::WEB_AT, &mut block);
+    WebConfig::from_block(&block).port
+}
+
 /// The network settings from their block in the configuration page.
 fn load_net_config() -> (NetConfig, NetSource) {
-    // SAFETY: the memory map reserves the configuration page; only read.
-    let page = unsafe { &*addr_of!(_bridge_config) };
-    NetConfig::from_block(page.get(BLOCK_OFFSET..).unwrap_or(&[]))
+    let mut block = [0u8; BLOCK_LEN];
+    runtime::read_page(BLOCK_OFFSET, &mut block);
+    NetConfig::from_block(&block)
 }
 
 /// The Sparkplug settings from their block in the configuration page.
 fn load_sparkplug_config() -> SparkplugConfig {
-    // SAFETY: the memory map reserves the configuration page; only read.
-    let page = unsafe { &*addr_of!(_bridge_config) };
-    let block = page.get(sparkplug_config::BLOCK_OFFSET..).unwrap_or(&[]);
-    SparkplugConfig::from_block(block).0
+    let mut block = [0u8; sparkplug_config::BLOCK_LEN];
+    runtime::read_page(firmware_example::config::page::SPARKPLUG_AT, &mut block);
+    SparkplugConfig::from_block(&block).0
 }
 
 /// What `main` sets up.
@@ -234,6 +241,7 @@ fn setup(now: u32) -> Parts {
     // end was handed over.
     let (bridge, gateway, net, eth, down) = unsafe {
         let bridge = (*addr_of_mut!(BRIDGE)).write(Bridge::new(cfg, source, seed));
+        bridge.attach_editor(runtime::editor(runtime::boot_seed()));
         let gateway = (*addr_of_mut!(GATEWAY)).write(Gateway::new(cfg.modbus, cfg.policy));
         let eth = (*addr_of_mut!(ETH)).write(Stellaris::new(
             Mmio,
@@ -253,6 +261,7 @@ fn setup(now: u32) -> Parts {
             now,
         ));
         net.add_modbus(&mut *addr_of_mut!(MODBUS_BUFFERS), MODBUS_PORT);
+        net.add_http(&mut *addr_of_mut!(HTTP_BUFFERS), web_port());
         let line = &mut *addr_of_mut!(DOWN_LINE);
         let (down_isr, down) = line.split(FlowControl::None, DOWNSTREAM_MARKS, &pend_down);
         cortex_m::interrupt::free(|cs| DOWN_END.borrow(cs).set(Some(down_isr)));
@@ -326,6 +335,7 @@ fn report(event: NetEvent) {
             source,
             port,
             modbus_port,
+            http_port,
         } => {
             out.str("firmware-example: protocol-b-tcp listening on ");
             dotted(&mut out, address.address);
@@ -340,6 +350,11 @@ fn report(event: NetEvent) {
                 out.str("firmware-example: modbus-tcp listening on ");
                 dotted(&mut out, address.address);
                 out.str(":").dec(u64::from(mb)).str("\n");
+            }
+            if let Some(web) = http_port {
+                out.str("firmware-example: http listening on ");
+                dotted(&mut out, address.address);
+                out.str(":").dec(u64::from(web)).str("\n");
             }
         }
         NetEvent::AddressLost => {
@@ -401,6 +416,7 @@ fn main() -> ! {
             source,
             port: net.config().port,
             modbus_port: net.modbus().map(|m| m.port()),
+            http_port: net.http().map(|h| h.port()),
         });
     }
     // SAFETY: the handlers only touch their own state, handed over above.

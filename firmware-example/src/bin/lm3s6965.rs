@@ -6,7 +6,8 @@
 //! device crate; the Modbus port stamps each byte with the microsecond
 //! clock for the silence between frames. The watchdog resets the MCU if the loop stops feeding it
 //! for two periods of [`WATCHDOG_MS`]. The configuration comes from the
-//! block at `_bridge_config` (last flash page, see `memory.x`).
+//! bridge's block in the configuration page in force (`runtime.rs`: two
+//! slots at `_bridge_config`, kept in RAM under QEMU, see `memory.x`).
 //!
 //! RTS/CTS: the LM3S6965's UARTs have no modem lines, so with
 //! [`FlowControl::RtsCts`] the board drives RTS on PB0 (high: the host may

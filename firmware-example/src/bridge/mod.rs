@@ -33,6 +33,7 @@
 //! between 26DHs it is lent out as the pass-through's frame decoder
 //! ([`Transfer::idle_decoder`]), which holds the command, then the reply.
 
+pub mod history;
 mod passthrough;
 pub mod pipeline;
 mod session;
@@ -50,6 +51,7 @@ use iai_protocol_b::relay::Relay;
 use iai_protocol_b::transfer::{packed_len, RecordBuffer, Transfer};
 use iai_protocol_b::{line::LineConfig, profile::Profile, transfer::TransferConfig};
 
+use crate::config::editor::Editor;
 use crate::config::{Config, Source};
 use crate::log;
 use crate::serial::{Counted, Port};
@@ -300,6 +302,11 @@ pub struct Bridge {
     guest_holds: bool,
     /// Since when the host's XOFF holds the upstream transmitter.
     xoff_since: Option<u32>,
+    /// The configuration page's writes, if the board keeps a page it can
+    /// write (the configuration messages, see `upstream`).
+    editor: Option<&'static mut Editor<'static>>,
+    /// The last frames through the bridge.
+    history: history::History,
 }
 
 /// The line to the controller for `cfg`.
@@ -333,7 +340,34 @@ impl Bridge {
             forward_pending: None,
             guest_holds: false,
             xoff_since: None,
+            editor: None,
+            history: history::History::new(),
         }
+    }
+
+    /// Answers the configuration messages with `editor` (see
+    /// [`crate::config::wire`]); without one they are refused
+    /// [`crate::codes::STORE_FAILED`].
+    pub fn attach_editor(&mut self, editor: &'static mut Editor<'static>) {
+        self.editor = Some(editor);
+    }
+
+    /// The configuration page's writes, if attached.
+    pub fn editor(&mut self) -> Option<&mut Editor<'static>> {
+        self.editor.as_deref_mut()
+    }
+
+    /// The last frames through the bridge.
+    pub fn history(&self) -> &history::History {
+        &self.history
+    }
+
+    /// Records `frame` in the history, as the bridge does (the web page's
+    /// tests only).
+    #[cfg(all(test, feature = "ethernet"))]
+    pub(crate) fn history_for_tests(&mut self, frame: &[u8], now: u32) {
+        self.history
+            .record(history::Dir::FromHost, frame, frame.len(), now);
     }
 
     /// Sets the configuration (at start, before the first [`Bridge::poll`]):
@@ -424,7 +458,7 @@ impl Bridge {
             }
             Mode::Forward | Mode::RelayReply => self.poll_passthrough(up, down, now)?,
             Mode::Stream { .. } => self.poll_stream(up, down, now)?,
-            Mode::Respond => self.poll_respond(up).map_err(Error::Upstream)?,
+            Mode::Respond => self.poll_respond(up, now).map_err(Error::Upstream)?,
         };
         Ok(if moved || guest_moved {
             Poll::Busy

@@ -8,7 +8,8 @@
 //! `protocol-b-tcp 127.0.0.1:PORT` once the Ethernet build answers over
 //! TCP, QEMU's user network forwarding that port to the firmware's, then
 //! `modbus-tcp 127.0.0.1:PORT`, forwarded to the firmware's Modbus TCP
-//! port 502);
+//! port 502, then `http 127.0.0.1:PORT`, forwarded to its web page on port
+//! 80);
 //! nothing else goes to stdout.
 //! Runs until SIGINT, SIGTERM or SIGHUP (Ctrl-C), then stops QEMU and the
 //! simulator. Exit code 0 after such a stop, 1 if anything failed (QEMU
@@ -29,7 +30,11 @@
 //! `--ethernet`: the firmware's Sparkplug B edge node on the MQTT broker
 //! at that port of this machine, group `IAI`, the node ID made from the
 //! MAC address, DCMD commands off; prints `sparkplug
-//! spBv1.0/IAI/NBIRTH/NODE` once NBIRTH is out).
+//! spBv1.0/IAI/NBIRTH/NODE` once NBIRTH is out), `--http-port P` (with
+//! `--ethernet`: the host port of the web page), `--config-image FILE`
+//! (boot with this image of the configuration page's slots, as `iai bridge
+//! config block` or `iai bridge config get --image` writes it),
+//! `--blank-config` (boot with no page loaded: every default).
 
 use std::io::{self, Write};
 use std::path::PathBuf;
@@ -38,13 +43,14 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use firmware_example::net::sparkplug::config::SparkplugConfig;
-use host_tests::gateway::{self, Options, Ready};
+use host_tests::gateway::{self, Options, PageSource, Ready};
 use host_tests::qemu::Board;
 
 const USAGE: &str = "usage: gateway [--port P] [--baud B] [--modbus-port P] [--modbus-baud B] \
                      [--board lm3s6965|mps2-an386] \
                      [--reply-delay-ms MS] [--faults SPEC] [--seed S] [--elf PATH] \
-                     [--stack-report] [--ethernet] [--broker 127.0.0.1:PORT]";
+                     [--stack-report] [--ethernet] [--broker 127.0.0.1:PORT] [--http-port P] \
+                     [--config-image FILE | --blank-config]";
 
 fn parse_args() -> Result<Options, String> {
     let mut o = Options::default();
@@ -115,6 +121,13 @@ fn parse_args() -> Result<Options, String> {
                     ..SparkplugConfig::default()
                 });
             }
+            "--http-port" => {
+                o.http_port = value()?
+                    .parse()
+                    .map_err(|_| "--http-port takes 0..=65535 (0: a free port)".to_owned())?;
+            }
+            "--config-image" => o.page = PageSource::Image(PathBuf::from(value()?)),
+            "--blank-config" => o.page = PageSource::Blank,
             "-h" | "--help" => return Err(USAGE.to_owned()),
             other => return Err(format!("unknown argument {other:?}\n{USAGE}")),
         }
@@ -155,6 +168,9 @@ fn main() -> ExitCode {
         }
         if let Some(m) = at.modbus_tcp {
             let _ = writeln!(out, "modbus-tcp {m}");
+        }
+        if let Some(h) = at.http {
+            let _ = writeln!(out, "http {h}");
         }
         if let Some(topic) = &at.sparkplug {
             let _ = writeln!(out, "sparkplug {topic}");

@@ -29,10 +29,10 @@
 
 use crate::config::{crc32, BlockError};
 
-/// Where the block starts, in bytes past the bridge's block.
-pub const BLOCK_OFFSET: usize = 256;
+/// Where the block starts in the configuration page.
+pub const BLOCK_OFFSET: usize = crate::config::page::SPARKPLUG_AT;
 /// Size of the block.
-pub const BLOCK_LEN: usize = 256;
+pub const BLOCK_LEN: usize = crate::config::page::SPARKPLUG_LEN;
 /// First bytes of a Sparkplug block.
 pub const MAGIC: [u8; 4] = *b"IAIS";
 /// Layout version this firmware reads.
