@@ -809,7 +809,10 @@ impl Line {
         let heard = if for_command && self.awaiting() {
             self.stats.mismatches += 1;
             Heard::Mismatch
-        } else if self.ledger.owed(now).is_some() || self.ledger.expects(id, values, now) {
+        } else if self.ledger.owed(now).is_some()
+            || self.ledger.expects(id, values, now)
+            || self.fence_refused(header)
+        {
             self.stats.stale += 1;
             Heard::Stale
         } else {
@@ -818,6 +821,13 @@ impl Line {
         };
         self.copy_possible(id, values, now);
         heard
+    }
+
+    /// Whether a frame with `header` may be the fence's own reply: a
+    /// controller that does not answer 200H refuses it with an `&` (its
+    /// echo is matched by its text).
+    fn fence_refused(&self, header: Header) -> bool {
+        header == Header::Error && matches!(self.phase, Phase::FenceAwait { .. })
     }
 
     /// Remembers a reply taken at `now`.
@@ -910,8 +920,9 @@ impl Line {
                 let id = if h == Header::Error { ANY_ID } else { code };
                 let awaited =
                     self.awaiting() && !self.proving && (h == Header::Error || code == self.cmd.id);
-                let fence = code == catalogue::TEST_CALL.id
-                    && matches!(self.phase, Phase::FenceAwait { .. });
+                let fence = (code == catalogue::TEST_CALL.id
+                    && matches!(self.phase, Phase::FenceAwait { .. }))
+                    || self.fence_refused(h);
                 let explained = awaited
                     || fence
                     || self.ledger.owed(now).is_some()

@@ -448,3 +448,26 @@ fn a_line_just_opened_on_a_line_that_repeats_frames_waits_for_copies_of_its_past
     assert_eq!(offer(&mut l, &frame(ECHO_1), true, 110), Heard::Fence);
     assert_eq!(l.poll(112), Due::WaitUntil(601));
 }
+
+/// A controller that does not answer 200H may refuse a fence with an `&`:
+/// that is the fence's own reply, not a frame the line cannot place, even
+/// when the fence proves order with nothing owed.
+#[test]
+fn an_error_reply_to_a_fence_is_the_fences_own_not_unplaced() {
+    let mut l = spec();
+    l.start_proof(0);
+    assert_eq!(l.poll(0), Due::Fence);
+    l.sent(5);
+    assert_eq!(
+        offer(&mut l, &frame(b"&99C7446\r\n"), true, 10),
+        Heard::Stale
+    );
+    // Broken, its code unreadable or not: the same.
+    l.broken(Some((Header::Error, S, 0xC74)), 11);
+    assert_eq!(l.stats().unplaced, 0);
+    assert!(!l.repeats());
+    // No echo by its timeout: the fence failed, its own late reply is
+    // waited out.
+    assert_eq!(l.poll(3_005), Due::WaitUntil(6_006));
+    assert_eq!(l.stats().fences_failed, 1);
+}
