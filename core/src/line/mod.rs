@@ -320,6 +320,8 @@ pub struct Line {
     repeat_ms: u32,
     /// A proof of order was asked for ([`Line::start_proof`]).
     proving: bool,
+    /// The proof's fence got no echo: it waits instead.
+    proof_fence_failed: bool,
     /// How much longer than `timeout_ms` the current command's reply may
     /// take after its last byte (a receiver that takes a long frame in at
     /// a slower line's rate: [`crate::upload`]).
@@ -388,6 +390,7 @@ impl Line {
             learned_copy_ms: 0,
             repeat_ms: 0,
             proving: false,
+            proof_fence_failed: false,
             reply_extra_ms: 0,
             overheard: overheard::Overheard::new(),
             stats: LineStats {
@@ -468,6 +471,7 @@ impl Line {
         self.sends = 0;
         self.faulted = false;
         self.proving = true;
+        self.proof_fence_failed = false;
         self.opened = false;
         self.phase = Phase::Ready;
     }
@@ -601,8 +605,11 @@ impl Line {
                     self.ledger.prune(now);
                     let owed = self.ledger.owed(now);
                     if owed.is_some() || self.proving {
+                        // A proof whose fence failed proves by waiting, as
+                        // without fences, rather than fence again.
                         let fence_ok = self.cfg.fences
-                            && self.no_fence_until.is_none_or(|t| self.over(now, t));
+                            && self.no_fence_until.is_none_or(|t| self.over(now, t))
+                            && !(self.proving && self.proof_fence_failed);
                         if !fence_ok {
                             if let Some(t) = owed {
                                 return Due::WaitUntil(t);
@@ -644,6 +651,7 @@ impl Line {
                     self.stats.timeouts += 1;
                     self.stats.fences_failed += 1;
                     self.faulted = true;
+                    self.proof_fence_failed = self.proving;
                     let until = self.late_horizon(self.fence_sent);
                     self.ledger.owe(until, now);
                     self.no_fence_until = self.ledger.owed(now);
@@ -809,7 +817,11 @@ impl Line {
         let heard = if for_command && self.awaiting() {
             self.stats.mismatches += 1;
             Heard::Mismatch
-        } else if self.ledger.owed(now).is_some() || self.ledger.expects(id, values, now) {
+        } else if self.ledger.owed(now).is_some()
+            || self.ledger.expects(id, values, now)
+            || self.fence_refused(header)
+            || (for_command && self.between_sends())
+        {
             self.stats.stale += 1;
             Heard::Stale
         } else {
@@ -818,6 +830,25 @@ impl Line {
         };
         self.copy_possible(id, values, now);
         heard
+    }
+
+    /// Whether a frame with `header` may be the fence's own reply: a
+    /// controller that does not answer 200H refuses it with an `&` (its
+    /// echo is matched by its text).
+    fn fence_refused(&self, header: Header) -> bool {
+        header == Header::Error && matches!(self.phase, Phase::FenceAwait { .. })
+    }
+
+    /// Whether the command was sent and is not awaited now (its timeout
+    /// passed, it is sent again or waits to be): a reply to an earlier
+    /// send may still come, owed though not yet in the ledger.
+    fn between_sends(&self) -> bool {
+        match self.phase {
+            // The send on the wire is not one of them.
+            Phase::Sending => self.sends > 1,
+            Phase::Ready | Phase::FenceSending | Phase::FenceAwait { .. } => self.sends > 0,
+            Phase::Idle | Phase::Await { .. } | Phase::Finished(_) => false,
+        }
     }
 
     /// Remembers a reply taken at `now`.
@@ -910,10 +941,13 @@ impl Line {
                 let id = if h == Header::Error { ANY_ID } else { code };
                 let awaited =
                     self.awaiting() && !self.proving && (h == Header::Error || code == self.cmd.id);
-                let fence = code == catalogue::TEST_CALL.id
-                    && matches!(self.phase, Phase::FenceAwait { .. });
+                let fence = (code == catalogue::TEST_CALL.id
+                    && matches!(self.phase, Phase::FenceAwait { .. }))
+                    || self.fence_refused(h);
+                let for_command = h == Header::Error || code == self.cmd.id;
                 let explained = awaited
                     || fence
+                    || (for_command && !self.proving && self.between_sends())
                     || self.ledger.owed(now).is_some()
                     || self.ledger.expects(id, Span::UNKNOWN, now);
                 if !explained {
