@@ -37,7 +37,7 @@ use firmware_example::config::{Config, Source, MAGIC};
 use firmware_example::net::config::NetConfig;
 use firmware_example::serial::Port;
 use iai_protocol_b::checksum::BypassPolicy;
-use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 use iai_protocol_b::frame::{emit_frame, Header, Station};
 use libfuzzer_sys::fuzz_target;
 
@@ -210,7 +210,7 @@ fuzz_target!(|data: &[u8]| {
     let mut restarts_granted = 0u32;
     for &b in &up.output {
         match dec.push(b) {
-            Event::Frame(f) => match f.header() {
+            Status::Complete(Event::Frame(f)) => match f.header() {
                 Header::Error => assert!(codes::RANGE.contains(&f.code()), "& {:03X}", f.code()),
                 Header::Response => {
                     assert!(
@@ -224,8 +224,8 @@ fuzz_target!(|data: &[u8]| {
                 }
                 Header::Command => panic!("a command went upstream"),
             },
-            Event::Error(e) => panic!("a broken frame went upstream: {e}"),
-            Event::NeedMore => {}
+            Status::Complete(Event::Error(e)) => panic!("a broken frame went upstream: {e}"),
+            Status::Partial => {}
         }
     }
     let e = bridge.editor().expect("attached");
