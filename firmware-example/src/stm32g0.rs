@@ -17,7 +17,7 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use cortex_m::peripheral::NVIC;
 use firmware_example::bridge::Bridge;
 use firmware_example::config::Parity;
-use firmware_example::serial::{DownstreamRings, FlowControl, IsrEnd, Line, UpstreamRings};
+use firmware_example::serial::{DownstreamRings, FlowControl, IsrEnd, UartRings, UpstreamRings};
 
 #[cfg(feature = "board-stm32g030")]
 use stm32g0::stm32g030 as pac;
@@ -34,9 +34,9 @@ pub const CORE_CLOCK_HZ: u32 = 16_000_000;
 const WATCHDOG_MS: u32 = 2_000;
 
 /// The upstream port's rings.
-static mut UP_LINE: UpstreamRings = Line::new();
+static mut UP_LINE: UpstreamRings = UartRings::new();
 /// The controller port's rings.
-static mut DOWN_LINE: DownstreamRings = Line::new();
+static mut DOWN_LINE: DownstreamRings = UartRings::new();
 /// The bridge's state, written once at start (kept out of `.data`, whose
 /// initial image would cost as much flash as the bridge has bytes).
 static mut BRIDGE: MaybeUninit<Bridge> = MaybeUninit::uninit();

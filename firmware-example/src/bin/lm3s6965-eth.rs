@@ -41,7 +41,7 @@ use firmware_example::net::config::{NetConfig, NetSource, BLOCK_LEN, BLOCK_OFFSE
 use firmware_example::net::modbus::{ModbusBuffers, MODBUS_PORT};
 use firmware_example::net::stellaris::{self, Mmio, Regs, Stellaris, FRAME_CAP};
 use firmware_example::net::{self, AddressSource, Buffers, Net, NetEvent, SocketSlots};
-use firmware_example::serial::{DownstreamRings, FlowControl, IsrEnd, Line, DOWNSTREAM_MARKS};
+use firmware_example::serial::{DownstreamRings, FlowControl, IsrEnd, UartRings, DOWNSTREAM_MARKS};
 use lm3s6965::{interrupt, Interrupt};
 use runtime::{Handoff, Out};
 
@@ -52,7 +52,7 @@ const CORE_CLOCK_HZ: u32 = 12_000_000;
 /// Watchdog period: a loop stalled for 2 to 4 s resets the MCU.
 const WATCHDOG_MS: u32 = 2_000;
 
-static mut DOWN_LINE: DownstreamRings = Line::new();
+static mut DOWN_LINE: DownstreamRings = UartRings::new();
 /// The bridge and the network side, written once at start (kept out of
 /// `.data`).
 static mut BRIDGE: MaybeUninit<Bridge> = MaybeUninit::uninit();

@@ -32,7 +32,7 @@ use cortex_m_rt::entry;
 use firmware_example::bridge::Bridge;
 use firmware_example::modbus::Gateway;
 use firmware_example::serial::{
-    DownstreamRings, FlowControl, IsrEnd, Line, ModbusRings, UpstreamRings, DOWNSTREAM_MARKS,
+    DownstreamRings, FlowControl, IsrEnd, ModbusRings, UartRings, UpstreamRings, DOWNSTREAM_MARKS,
 };
 use lm3s6965::{interrupt, Interrupt};
 use runtime::Handoff;
@@ -45,13 +45,13 @@ const CORE_CLOCK_HZ: u32 = 12_000_000;
 /// second resets the MCU, so a loop stalled for 2 to 4 s resets it.
 const WATCHDOG_MS: u32 = 2_000;
 
-static mut UP_LINE: UpstreamRings = Line::new();
-static mut DOWN_LINE: DownstreamRings = Line::new();
+static mut UP_LINE: UpstreamRings = UartRings::new();
+static mut DOWN_LINE: DownstreamRings = UartRings::new();
 /// The bridge's state, written once at start (kept out of `.data`, whose
 /// initial image would cost as much flash as the bridge has bytes).
 static mut BRIDGE: MaybeUninit<Bridge> = MaybeUninit::uninit();
 /// The Modbus port's rings.
-static mut MODBUS_LINE: ModbusRings = Line::new();
+static mut MODBUS_LINE: ModbusRings = UartRings::new();
 /// The gateway's state, written once at start.
 static mut GATEWAY: MaybeUninit<Gateway> = MaybeUninit::uninit();
 

@@ -24,7 +24,7 @@ use core::ptr::addr_of_mut;
 use cortex_m::peripheral::NVIC;
 use cortex_m_rt::{entry, exception};
 use firmware_example::bridge::Bridge;
-use firmware_example::serial::{DownstreamRings, FlowControl, IsrEnd, Line, UpstreamRings};
+use firmware_example::serial::{DownstreamRings, FlowControl, IsrEnd, UartRings, UpstreamRings};
 use mps2_an386::uart::{self, RegisterBlock};
 use mps2_an386::{interrupt, watchdog, Interrupt};
 use runtime::Handoff;
@@ -36,8 +36,8 @@ pub const CORE_CLOCK_HZ: u32 = 25_000_000;
 /// Watchdog period (see the module docs).
 const WATCHDOG_MS: u32 = 2_000;
 
-static mut UP_LINE: UpstreamRings = Line::new();
-static mut DOWN_LINE: DownstreamRings = Line::new();
+static mut UP_LINE: UpstreamRings = UartRings::new();
+static mut DOWN_LINE: DownstreamRings = UartRings::new();
 /// The bridge's state, written once at start (kept out of `.data`, whose
 /// initial image would cost as much flash as the bridge has bytes).
 static mut BRIDGE: MaybeUninit<Bridge> = MaybeUninit::uninit();
