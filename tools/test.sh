@@ -44,7 +44,7 @@ cargo clippy -q -p firmware-example --target thumbv6m-none-eabi \
 cargo clippy -q -p mps2-an386 --target thumbv7em-none-eabihf --features rt -- -D warnings
 cargo clippy -q -p firmware-example --target thumbv7m-none-eabi --features defmt -- -D warnings
 cargo clippy -q -p firmware-example --target thumbv7em-none-eabihf \
-  --no-default-features --features rt --bin icount_bench -- -D warnings
+  --no-default-features --features icount-bench --bin icount_bench -- -D warnings
 echo "debug build (what a new user types first):"
 cargo build -q -p firmware-example --target thumbv7m-none-eabi
 echo "ok: cargo build -p firmware-example --target thumbv7m-none-eabi"

@@ -2,7 +2,7 @@
 //! blocking, allocation-free and panic-free, so that the same code runs on
 //! a Cortex-M board and in the host model of `host-tests` (virtual time).
 //!
-//! - [`bridge`]: the bridge itself ([`Bridge::poll`]) and a board loop
+//! - [`bridge`]: the bridge itself ([`bridge::Bridge::poll`]) and a board loop
 //!   ([`bridge::run`]);
 //! - [`serial`]: the rings between a UART interrupt handler and the bridge,
 //!   overrun counting and receive-side flow control (XON/XOFF, RTS/CTS);
@@ -12,11 +12,12 @@
 //! - [`modbus`]: the PLC gateway, a Modbus RTU server in front of protocol
 //!   B sharing the bridge's controller line.
 //! - `net` (feature `ethernet`): the bridge's host side on TCP (smoltcp,
-//!   the Stellaris Ethernet MAC).
-//!
-//! The boards are the binaries of this package (`src/bin/*.rs`): each only
-//! moves bytes between UART registers and a [`serial::IsrEnd`], reads the
-//! configuration block and runs [`bridge::run`].
+//!   the Stellaris Ethernet MAC);
+//! - `board` (a Cortex-M target and a `board-*` feature): the boards'
+//!   clock, UART drivers, watchdogs and start-up, one module per family,
+//!   on top of the rest; the binaries (`src/bin/*.rs`) only say which
+//!   UART is which and call their family's `run`.
+//! - `bench` (feature `icount-bench`): the instruction-count bench.
 //!
 //! Every public type has one path, its module's (`bridge::Bridge`,
 //! `serial::Port`); the crate root re-exports nothing, as in the core.
@@ -39,6 +40,19 @@
 
 mod log;
 
+#[cfg(all(target_os = "none", feature = "icount-bench"))]
+pub mod bench;
+#[cfg(all(
+    target_os = "none",
+    not(feature = "no-panic-proof"),
+    any(
+        feature = "board-lm3s6965",
+        feature = "board-mps2-an386",
+        feature = "board-stm32g030",
+        feature = "board-stm32g070"
+    )
+))]
+pub mod board;
 pub mod bridge;
 pub mod codes;
 pub mod config;

@@ -1,6 +1,6 @@
-//! What the STM32G0 boards share (included by `src/bin/stm32g030.rs` and
-//! `src/bin/stm32g070.rs` with `#[path]`): two USARTs, the pins, the
-//! watchdog and the statics of the lines and the bridge.
+//! The STM32G0 boards (`stm32g030`, the bridge alone; `stm32g070`, one
+//! upstream port that speaks what the configuration chooses): two USARTs,
+//! the pins, the watchdog and the statics of the lines and the bridge.
 //!
 //! Pins (the same on both parts): USART2 (PA2 TX, PA3 RX) is the upstream
 //! port, USART1 (PA9 TX, PA10 RX) the controller's. With RTS/CTS, RTS is
@@ -8,16 +8,16 @@
 //! PA0 in its USART function (the USART stops transmitting while it is
 //! high). The core runs from the 16 MHz HSI (the reset clock). The
 //! independent watchdog (IWDG, 32 kHz LSI / 64) resets the MCU if the loop
-//! stops feeding it for [`WATCHDOG_MS`].
+//! stops feeding it for `WATCHDOG_MS`.
 
 use core::mem::MaybeUninit;
 use core::ptr::addr_of_mut;
 use core::sync::atomic::{AtomicBool, Ordering};
 
+use crate::bridge::Bridge;
+use crate::config::Parity;
+use crate::serial::{DownstreamRings, FlowControl, IsrEnd, UartRings, UpstreamRings};
 use cortex_m::peripheral::NVIC;
-use firmware_example::bridge::Bridge;
-use firmware_example::config::Parity;
-use firmware_example::serial::{DownstreamRings, FlowControl, IsrEnd, UartRings, UpstreamRings};
 
 #[cfg(feature = "board-stm32g030")]
 use stm32g0::stm32g030 as pac;
@@ -26,10 +26,15 @@ use stm32g0::stm32g070 as pac;
 
 use pac::{interrupt, Interrupt, GPIOA, IWDG, RCC, USART1, USART2};
 
-use crate::runtime::{self, Handoff};
+use super::clock::{now_us, start_tick};
+use super::image::load_config;
+use super::lines::{handoff, in_handoff, setup, Handoff, Statics};
+use super::run::{serve, serve_one_upstream};
+use crate::config::UpstreamProtocol;
+use crate::modbus::Gateway;
 
 /// Core and USART clock at reset (HSI16).
-pub const CORE_CLOCK_HZ: u32 = 16_000_000;
+const CORE_CLOCK_HZ: u32 = 16_000_000;
 /// Watchdog timeout.
 const WATCHDOG_MS: u32 = 2_000;
 
@@ -42,9 +47,9 @@ static mut DOWN_LINE: DownstreamRings = UartRings::new();
 static mut BRIDGE: MaybeUninit<Bridge> = MaybeUninit::uninit();
 
 /// The interrupt ends, handed from `main` to the handlers.
-static UP_END: Handoff = runtime::handoff();
+static UP_END: Handoff = handoff();
 /// See [`UP_END`].
-static DOWN_END: Handoff = runtime::handoff();
+static DOWN_END: Handoff = handoff();
 
 /// Whether the upstream handler stamps each byte with the microsecond
 /// clock (the port speaks Modbus RTU: frames end at a silence).
@@ -69,13 +74,13 @@ const CR2_STOP_2: u32 = 0b10 << 12;
 const CR3_CTSE: u32 = 1 << 9;
 
 /// The upstream USART.
-pub fn up_regs() -> &'static UsartRegs {
+fn up_regs() -> &'static UsartRegs {
     // SAFETY: USART2 belongs to the upstream port.
     unsafe { &*USART2::ptr() }
 }
 
 /// The controller's USART.
-pub fn down_regs() -> &'static UsartRegs {
+fn down_regs() -> &'static UsartRegs {
     // SAFETY: USART1 belongs to the bridge's downstream.
     unsafe { &*USART1::ptr() }
 }
@@ -84,8 +89,7 @@ pub fn down_regs() -> &'static UsartRegs {
 /// `parity` a parity bit too (`Parity::None`: 2 stop bits instead, as the
 /// Modbus serial line asks).
 #[derive(Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "board-stm32g030", allow(dead_code))]
-pub enum Format {
+enum Format {
     /// 8N1 (protocol B).
     Plain,
     /// The Modbus line's: 8E1, 8O1 or 8N2.
@@ -94,7 +98,7 @@ pub enum Format {
 
 /// Sets a USART to `baud` and `format`, CTS on if asked, receive
 /// interrupts on.
-pub fn init_usart(r: &UsartRegs, baud: u32, format: Format, cts: bool) {
+fn init_usart(r: &UsartRegs, baud: u32, format: Format, cts: bool) {
     r.cr1().write(|w| unsafe { w.bits(0) });
     r.brr()
         .write(|w| unsafe { w.bits(CORE_CLOCK_HZ / baud.max(1)) });
@@ -128,7 +132,7 @@ fn service(r: &UsartRegs, end: &mut IsrEnd<'_>, rts: bool, stamped: bool, parity
         // With parity the ninth bit is the parity bit: dropped by `as u8`.
         let byte = r.rdr().read().bits() as u8;
         if stamped {
-            end.on_receive_at(byte, runtime::now_us());
+            end.on_receive_at(byte, now_us());
         } else {
             end.on_receive(byte);
         }
@@ -170,8 +174,7 @@ fn pend_down() {
 
 #[interrupt]
 fn USART2() {
-    static mut END: Option<IsrEnd<'static>> = None;
-    runtime::with_end(END, &UP_END, |e| {
+    in_handoff(&UP_END, |e| {
         let r = up_regs();
         let rts = e.flow() == FlowControl::RtsCts;
         let stamped = UP_STAMPED.load(Ordering::Relaxed);
@@ -181,22 +184,20 @@ fn USART2() {
 
 #[interrupt]
 fn USART1() {
-    static mut END: Option<IsrEnd<'static>> = None;
-    runtime::with_end(END, &DOWN_END, |e| {
+    in_handoff(&DOWN_END, |e| {
         let r = down_regs();
         service(r, e, false, false, frame_bits(r))
     });
 }
 
 /// The upstream port speaks Modbus RTU: its handler stamps each byte.
-#[cfg_attr(feature = "board-stm32g030", allow(dead_code))]
-pub fn stamp_upstream() {
+fn stamp_upstream() {
     UP_STAMPED.store(true, Ordering::Relaxed);
 }
 
 /// Clocks for GPIOA and both USARTs; PA2/PA3/PA9/PA10 (and PA0 for CTS)
 /// to AF1; PA1 a push-pull output for RTS.
-pub fn init_pins(rts_cts: bool) {
+fn init_pins(rts_cts: bool) {
     // SAFETY: start-up, nothing else uses these registers yet.
     let (rcc, gpioa) = unsafe { (&*RCC::ptr(), &*GPIOA::ptr()) };
     rcc.iopenr().modify(|r, w| unsafe { w.bits(r.bits() | 1) });
@@ -230,7 +231,7 @@ pub fn init_pins(rts_cts: bool) {
 }
 
 /// Starts the independent watchdog.
-pub fn start_watchdog() {
+fn start_watchdog() {
     // SAFETY: only `main` and the feed touch the IWDG.
     let iwdg = unsafe { &*IWDG::ptr() };
     iwdg.kr().write(|w| unsafe { w.bits(0xCCCC as _) });
@@ -243,22 +244,22 @@ pub fn start_watchdog() {
 }
 
 /// Reloads the watchdog.
-pub fn feed_watchdog() {
+fn feed_watchdog() {
     // SAFETY: writing the reload key only.
     unsafe { &*IWDG::ptr() }
         .kr()
         .write(|w| unsafe { w.bits(0xAAAA as _) });
 }
 
-/// The statics `runtime::setup` builds the bridge and the lines in.
+/// The statics `setup` builds the bridge and the lines in.
 ///
 /// # Safety
 /// Call once, from `main`: the statics' only references; unmask the
 /// USARTs' interrupts only after `setup` handed their ends over.
-pub unsafe fn statics() -> runtime::Statics {
+unsafe fn statics() -> Statics {
     // SAFETY: the caller's contract.
     unsafe {
-        runtime::Statics {
+        Statics {
             bridge: &mut *addr_of_mut!(BRIDGE),
             up: &mut *addr_of_mut!(UP_LINE),
             down: &mut *addr_of_mut!(DOWN_LINE),
@@ -271,10 +272,70 @@ pub unsafe fn statics() -> runtime::Statics {
 }
 
 /// Unmasks both USARTs' interrupts (after their ends were handed over).
-pub fn unmask_usarts() {
+fn unmask_usarts() {
     // SAFETY: the handlers only touch their ends, handed over before.
     unsafe {
         NVIC::unmask(Interrupt::USART1);
         NVIC::unmask(Interrupt::USART2);
     }
+}
+
+/// The bridge alone (the STM32G030x8): USART2 faces the host, USART1 the
+/// controller, until the host's quit sequence.
+pub fn run_bridge() -> ! {
+    // SAFETY: called once, before anything else uses the core peripherals.
+    let core = unsafe { cortex_m::Peripherals::steal() };
+    start_tick(core.SYST, CORE_CLOCK_HZ);
+    let (cfg, source) = load_config();
+    let rts_cts = cfg.flow == FlowControl::RtsCts;
+    init_pins(rts_cts);
+    init_usart(up_regs(), cfg.upstream_baud, Format::Plain, rts_cts);
+    init_usart(down_regs(), cfg.downstream_baud, Format::Plain, false);
+    // SAFETY: called once; the interrupts are unmasked after `setup`.
+    let statics = unsafe { statics() };
+    let (bridge, mut up, mut down) = setup(statics, cfg, source);
+    unmask_usarts();
+    start_watchdog();
+    serve(bridge, &mut up, &mut down, feed_watchdog)
+}
+
+/// The gateway's state, written once at start.
+static mut GATEWAY: MaybeUninit<Gateway> = MaybeUninit::uninit();
+
+/// One upstream port (the STM32G070): protocol B through the bridge, or
+/// Modbus RTU through the gateway, as the configuration block chooses
+/// (byte 19, bit 2); on the Modbus line the USART frames 8E1, 8O1 or 8N2
+/// as the block's parity says.
+pub fn run_one_upstream() -> ! {
+    // SAFETY: called once, before anything else uses the core peripherals.
+    let core = unsafe { cortex_m::Peripherals::steal() };
+    start_tick(core.SYST, CORE_CLOCK_HZ);
+    let (mut cfg, source) = load_config();
+    let speaks = cfg.upstream;
+    let modbus = speaks == UpstreamProtocol::ModbusRtu;
+    if modbus {
+        // No flow control on a Modbus line (its bytes are binary).
+        cfg.flow = FlowControl::None;
+        stamp_upstream();
+    }
+    let rts_cts = cfg.flow == FlowControl::RtsCts;
+    init_pins(rts_cts);
+    let (baud, format) = if modbus {
+        (cfg.modbus.baud, Format::Modbus(cfg.modbus.parity))
+    } else {
+        (cfg.upstream_baud, Format::Plain)
+    };
+    init_usart(up_regs(), baud, format, rts_cts);
+    init_usart(down_regs(), cfg.downstream_baud, Format::Plain, false);
+    // SAFETY: called once; the interrupts are unmasked after `setup`.
+    let (statics, gateway) = unsafe {
+        (
+            statics(),
+            (*addr_of_mut!(GATEWAY)).write(Gateway::new(cfg.modbus, cfg.policy)),
+        )
+    };
+    let (bridge, mut up, mut down) = setup(statics, cfg, source);
+    unmask_usarts();
+    start_watchdog();
+    serve_one_upstream(speaks, bridge, gateway, &mut up, &mut down, feed_watchdog)
 }
