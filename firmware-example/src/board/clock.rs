@@ -78,6 +78,8 @@ fn SysTick() {
         EPOCHS.store(e.wrapping_add(1), Ordering::Release);
     }
     TICKS_MS.store(t, Ordering::Release);
+    #[cfg(feature = "embassy")]
+    super::embassy::time::on_tick();
 }
 
 /// Sleeps in WFI unless `ready()` says there is work. `ready` runs with

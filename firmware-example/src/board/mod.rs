@@ -16,7 +16,8 @@
 //!   stack's peak, a seed that differs at each boot;
 //! - [`memory`]: small `memcpy`, `memset` and `memcmp`;
 //! - one module per board family, with its UART driver:
-//!   `lm3s6965` (on `pl011`), `mps2_an386`, `stm32g0`.
+//!   `lm3s6965` (on `pl011`), `mps2_an386`, `stm32g0` (on embassy-stm32),
+//!   `stm32l4`; the STM32 families run [`embassy`] tasks.
 //!
 //! A board binary (`src/bin/<board>.rs`) says which UART is which, its
 //! pins and clock, and calls its family's `run`.
@@ -29,6 +30,8 @@ pub mod memory;
 pub mod report;
 pub mod run;
 
+#[cfg(feature = "embassy")]
+pub mod embassy;
 #[cfg(feature = "board-lm3s6965")]
 pub mod lm3s6965;
 #[cfg(feature = "board-mps2-an386")]

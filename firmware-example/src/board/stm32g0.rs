@@ -1,341 +1,338 @@
-//! The STM32G0 boards (`stm32g030`, the bridge alone; `stm32g070`, one
-//! upstream port that speaks what the configuration chooses): two USARTs,
-//! the pins, the watchdog and the statics of the lines and the bridge.
+//! The STM32G0 boards on embassy-stm32: the bridge alone
+//! ([`run_bridge`], the STM32G030x8) and one upstream port that speaks
+//! what the configuration block chooses ([`run_one_upstream`], the
+//! STM32G070). The binary sets up embassy-stm32's drivers on its pins
+//! (`BufferedUart`s with this module's [`upstream_uart`] and
+//! [`controller_uart`] settings, the RTS and CTS GPIOs, the independent
+//! watchdog) after reading the configuration page through its `Flash`
+//! ([`load_config`]); this module runs each line as a task
+//! ([`super::embassy::line`]) and the bridge's loop as another.
 //!
-//! Pins (the same on both parts): USART2 (PA2 TX, PA3 RX) is the upstream
-//! port, USART1 (PA9 TX, PA10 RX) the controller's. With RTS/CTS, RTS is
-//! PA1 as a GPIO output driven from the receive ring's level, and CTS is
-//! PA0 in its USART function (the USART stops transmitting while it is
-//! high). The core runs from the 16 MHz HSI (the reset clock). The
-//! independent watchdog (IWDG, 32 kHz LSI / 64) resets the MCU if the loop
-//! stops feeding it for `WATCHDOG_MS`.
+//! RTS and CTS are GPIOs ([`GpioModem`]), not the USART's own: the flow
+//! decision is the line ring's level, which the USART's hardware RTS (its
+//! receive register's) cannot show; CTS is read before each chunk handed
+//! to the USART, whose 16-byte buffer may still go out after CTS drops.
+//!
+//! Written by hand: nothing (the SysTick clock is the Cortex-M core's, not
+//! a peripheral of the STM32).
 
 use core::mem::MaybeUninit;
 use core::ptr::addr_of_mut;
 use core::sync::atomic::{AtomicBool, Ordering};
 
+use embassy_executor::Spawner;
+use embassy_stm32::flash::Flash;
+use embassy_stm32::gpio::{Input, Level, Output};
+use embassy_stm32::peripherals::{FLASH, IWDG};
+use embassy_stm32::usart::{
+    self, BufferedUart, BufferedUartRx, BufferedUartTx, DataBits, Parity as UartParity, StopBits,
+};
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_stm32::Peri;
+
+use super::clock::start_tick;
+use super::embassy::line::{self, LinePort, Modem, Wake};
+use super::embassy::{executor, serve};
+use super::image::{boot_seed, config_address};
+use super::run::{finish, stall_if_asked};
 use crate::bridge::Bridge;
-use crate::config::Parity;
-use crate::serial::{DownstreamRings, FlowControl, IsrEnd, UartRings, UpstreamRings};
-use cortex_m::peripheral::NVIC;
-
-#[cfg(feature = "board-stm32g030")]
-use stm32g0::stm32g030 as pac;
-#[cfg(feature = "board-stm32g070")]
-use stm32g0::stm32g070 as pac;
-
-use pac::{interrupt, Interrupt, GPIOA, IWDG, RCC, USART1, USART2};
-
-use super::clock::{now_us, start_tick};
-use super::image::load_config;
-use super::lines::{handoff, in_handoff, setup, Handoff, Statics};
-use super::run::{serve, serve_one_upstream};
-use crate::config::UpstreamProtocol;
+use crate::config::{Config, Parity, Source, UpstreamProtocol};
 use crate::modbus::Gateway;
+use crate::serial::{
+    DownstreamRings, FlowControl, ThreadEnd, UartRings, UpstreamRings, DOWNSTREAM_MARKS,
+    UPSTREAM_MARKS,
+};
 
-/// Core and USART clock at reset (HSI16).
-const CORE_CLOCK_HZ: u32 = 16_000_000;
-/// Watchdog timeout.
-const WATCHDOG_MS: u32 = 2_000;
+/// Core clock: HSI16, embassy-stm32's default.
+pub const CORE_CLOCK_HZ: u32 = 16_000_000;
+/// Watchdog timeout (the IWDG runs from the 32 kHz LSI).
+pub const WATCHDOG_US: u32 = 2_000_000;
 
-/// The upstream port's rings.
+/// The embassy-stm32 settings the boards start with (HSI16).
+pub fn clocks() -> embassy_stm32::Config {
+    embassy_stm32::Config::default()
+}
+
+/// The configuration from the block at the configuration page
+/// (`_bridge_config`), read through embassy-stm32's `Flash`.
+pub fn load_config(flash: Peri<'static, FLASH>) -> (Config, Source) {
+    let offset = config_address().wrapping_sub(embassy_stm32::flash::FLASH_BASE as u32);
+    super::config_page::load(&mut Flash::new_blocking(flash), offset)
+}
+
+/// The upstream USART's settings for what the port speaks: 8N1 at the
+/// upstream rate for protocol B; for Modbus RTU the Modbus rate, with the
+/// block's parity (8E1, 8O1) or two stop bits (8N2).
+pub fn upstream_uart(cfg: &Config, speaks: UpstreamProtocol) -> usart::Config {
+    match speaks {
+        UpstreamProtocol::ProtocolB => uart(cfg.upstream_baud),
+        UpstreamProtocol::ModbusRtu => {
+            let mut c = uart(cfg.modbus.baud);
+            match cfg.modbus.parity {
+                Parity::None => c.stop_bits = StopBits::STOP2,
+                Parity::Even => c.parity = UartParity::ParityEven,
+                Parity::Odd => c.parity = UartParity::ParityOdd,
+            }
+            c
+        }
+    }
+}
+
+/// The controller USART's settings: 8N1 at the downstream rate.
+pub fn controller_uart(cfg: &Config) -> usart::Config {
+    uart(cfg.downstream_baud)
+}
+
+/// 8N1 at `baud`, its task woken at every byte.
+fn uart(baud: u32) -> usart::Config {
+    let mut c = usart::Config::default();
+    c.baudrate = baud;
+    c.data_bits = DataBits::DataBits8;
+    c.eager_reads = Some(1);
+    c
+}
+
+/// RTS and CTS of the upstream port on GPIOs (high: may send).
+pub struct GpioModem {
+    /// RTS, an output.
+    pub rts: Output<'static>,
+    /// CTS, an input.
+    pub cts: Input<'static>,
+}
+
+impl Modem for GpioModem {
+    fn set_rts(&mut self, high: bool) {
+        self.rts
+            .set_level(if high { Level::High } else { Level::Low });
+    }
+    fn cts(&mut self) -> bool {
+        self.cts.is_high()
+    }
+}
+
+/// The buffers of the USARTs' drivers: each only bridges the time until
+/// its line's task runs (the lines' rings are where bytes wait).
+pub struct Buffers {
+    /// The upstream USART's transmit buffer.
+    pub up_tx: &'static mut [u8],
+    /// The upstream USART's receive buffer.
+    pub up_rx: &'static mut [u8],
+    /// The controller USART's transmit buffer.
+    pub down_tx: &'static mut [u8],
+    /// The controller USART's receive buffer.
+    pub down_rx: &'static mut [u8],
+}
+
+static mut UP_TX: [u8; 16] = [0; 16];
+static mut UP_RX: [u8; 32] = [0; 32];
+static mut DOWN_TX: [u8; 16] = [0; 16];
+static mut DOWN_RX: [u8; 32] = [0; 32];
+
+/// The USARTs' buffers. Returns `None` after the first call.
+pub fn buffers() -> Option<Buffers> {
+    static TAKEN: AtomicBool = AtomicBool::new(false);
+    // Load and store in a critical section: Cortex-M0 has no atomic swap.
+    let taken = cortex_m::interrupt::free(|_| {
+        let taken = TAKEN.load(Ordering::Relaxed);
+        TAKEN.store(true, Ordering::Relaxed);
+        taken
+    });
+    if taken {
+        return None;
+    }
+    // SAFETY: handed out once (above); these are the only references.
+    unsafe {
+        Some(Buffers {
+            up_tx: &mut *addr_of_mut!(UP_TX),
+            up_rx: &mut *addr_of_mut!(UP_RX),
+            down_tx: &mut *addr_of_mut!(DOWN_TX),
+            down_rx: &mut *addr_of_mut!(DOWN_RX),
+        })
+    }
+}
+
+/// What a G0 board runs on, set up by its binary.
+pub struct Parts {
+    /// The configuration and where it came from ([`load_config`]).
+    pub config: (Config, Source),
+    /// The upstream USART ([`upstream_uart`]).
+    pub upstream: BufferedUart<'static>,
+    /// The controller's USART ([`controller_uart`]).
+    pub controller: BufferedUart<'static>,
+    /// The upstream port's RTS and CTS.
+    pub modem: GpioModem,
+    /// The independent watchdog, not yet started.
+    pub watchdog: IndependentWatchdog<'static, IWDG>,
+}
+
 static mut UP_LINE: UpstreamRings = UartRings::new();
-/// The controller port's rings.
 static mut DOWN_LINE: DownstreamRings = UartRings::new();
-/// The bridge's state, written once at start (kept out of `.data`, whose
-/// initial image would cost as much flash as the bridge has bytes).
+/// The bridge's and the gateway's state, written once at start.
 static mut BRIDGE: MaybeUninit<Bridge> = MaybeUninit::uninit();
-
-/// The interrupt ends, handed from `main` to the handlers.
-static UP_END: Handoff = handoff();
-/// See [`UP_END`].
-static DOWN_END: Handoff = handoff();
-
-/// Whether the upstream handler stamps each byte with the microsecond
-/// clock (the port speaks Modbus RTU: frames end at a silence).
-static UP_STAMPED: AtomicBool = AtomicBool::new(false);
-
-type UsartRegs = pac::usart1::RegisterBlock;
-
-// USART bits.
-const ISR_PE: u32 = 1 << 0;
-const ISR_ORE: u32 = 1 << 3;
-const ISR_RXNE: u32 = 1 << 5;
-const ISR_TXE: u32 = 1 << 7;
-const CR1_UE: u32 = 1 << 0;
-const CR1_RE: u32 = 1 << 2;
-const CR1_TE: u32 = 1 << 3;
-const CR1_RXNEIE: u32 = 1 << 5;
-const CR1_TXEIE: u32 = 1 << 7;
-const CR1_PS: u32 = 1 << 9;
-const CR1_PCE: u32 = 1 << 10;
-const CR1_M0: u32 = 1 << 12;
-const CR2_STOP_2: u32 = 0b10 << 12;
-const CR3_CTSE: u32 = 1 << 9;
-
-/// The upstream USART.
-fn up_regs() -> &'static UsartRegs {
-    // SAFETY: USART2 belongs to the upstream port.
-    unsafe { &*USART2::ptr() }
-}
-
-/// The controller's USART.
-fn down_regs() -> &'static UsartRegs {
-    // SAFETY: USART1 belongs to the bridge's downstream.
-    unsafe { &*USART1::ptr() }
-}
-
-/// The frame format of a USART: 8 data bits and 1 stop bit, or with
-/// `parity` a parity bit too (`Parity::None`: 2 stop bits instead, as the
-/// Modbus serial line asks).
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum Format {
-    /// 8N1 (protocol B).
-    Plain,
-    /// The Modbus line's: 8E1, 8O1 or 8N2.
-    Modbus(Parity),
-}
-
-/// Sets a USART to `baud` and `format`, CTS on if asked, receive
-/// interrupts on.
-fn init_usart(r: &UsartRegs, baud: u32, format: Format, cts: bool) {
-    r.cr1().write(|w| unsafe { w.bits(0) });
-    r.brr()
-        .write(|w| unsafe { w.bits(CORE_CLOCK_HZ / baud.max(1)) });
-    let (frame, stop) = match format {
-        Format::Plain => (0, 0),
-        Format::Modbus(Parity::None) => (0, CR2_STOP_2),
-        // A 9-bit word: 8 data bits and the parity bit.
-        Format::Modbus(Parity::Even) => (CR1_M0 | CR1_PCE, 0),
-        Format::Modbus(Parity::Odd) => (CR1_M0 | CR1_PCE | CR1_PS, 0),
-    };
-    r.cr2().write(|w| unsafe { w.bits(stop) });
-    r.cr3()
-        .write(|w| unsafe { w.bits(if cts { CR3_CTSE } else { 0 }) });
-    r.cr1()
-        .write(|w| unsafe { w.bits(frame | CR1_UE | CR1_RE | CR1_TE | CR1_RXNEIE) });
-}
-
-/// The interrupt handler body.
-fn service(r: &UsartRegs, end: &mut IsrEnd<'_>, rts: bool, stamped: bool, parity_bits: u32) {
-    end.service();
-    let isr = r.isr().read().bits();
-    if isr & ISR_ORE != 0 {
-        r.icr().write(|w| unsafe { w.bits(ISR_ORE) });
-        end.on_hw_overrun(1);
-    }
-    if isr & ISR_PE != 0 {
-        // The byte is kept: the Modbus frame's CRC rejects it.
-        r.icr().write(|w| unsafe { w.bits(ISR_PE) });
-    }
-    if isr & ISR_RXNE != 0 {
-        // With parity the ninth bit is the parity bit: dropped by `as u8`.
-        let byte = r.rdr().read().bits() as u8;
-        if stamped {
-            end.on_receive_at(byte, now_us());
-        } else {
-            end.on_receive(byte);
-        }
-    }
-    if rts {
-        // SAFETY: PA1 is the RTS output (set in `init_pins`).
-        let gpioa = unsafe { &*GPIOA::ptr() };
-        let bit = if end.rts() { 1 << 1 } else { 1 << 17 };
-        gpioa.bsrr().write(|w| unsafe { w.bits(bit) });
-    }
-    if r.isr().read().bits() & ISR_TXE != 0 {
-        // CTS is handled by the USART itself (CTSE).
-        if let Some(b) = end.next_tx(true) {
-            r.tdr().write(|w| unsafe { w.bits(u32::from(b)) });
-        }
-    }
-    let mut cr1 = parity_bits | CR1_UE | CR1_RE | CR1_TE | CR1_RXNEIE;
-    if end.wants_tx() {
-        cr1 |= CR1_TXEIE;
-    }
-    r.cr1().write(|w| unsafe { w.bits(cr1) });
-}
-
-/// CR1's frame bits as [`init_usart`] set them (kept when the handler
-/// rewrites CR1).
-fn frame_bits(r: &UsartRegs) -> u32 {
-    r.cr1().read().bits() & (CR1_M0 | CR1_PCE | CR1_PS)
-}
-
-/// Pends the upstream USART's interrupt.
-fn pend_up() {
-    NVIC::pend(Interrupt::USART2);
-}
-
-/// Pends the controller USART's interrupt.
-fn pend_down() {
-    NVIC::pend(Interrupt::USART1);
-}
-
-#[interrupt]
-fn USART2() {
-    in_handoff(&UP_END, |e| {
-        let r = up_regs();
-        let rts = e.flow() == FlowControl::RtsCts;
-        let stamped = UP_STAMPED.load(Ordering::Relaxed);
-        service(r, e, rts, stamped, frame_bits(r))
-    });
-}
-
-#[interrupt]
-fn USART1() {
-    in_handoff(&DOWN_END, |e| {
-        let r = down_regs();
-        service(r, e, false, false, frame_bits(r))
-    });
-}
-
-/// The upstream port speaks Modbus RTU: its handler stamps each byte.
-fn stamp_upstream() {
-    UP_STAMPED.store(true, Ordering::Relaxed);
-}
-
-/// Clocks for GPIOA and both USARTs; PA2/PA3/PA9/PA10 (and PA0 for CTS)
-/// to AF1; PA1 a push-pull output for RTS.
-fn init_pins(rts_cts: bool) {
-    // SAFETY: start-up, nothing else uses these registers yet.
-    let (rcc, gpioa) = unsafe { (&*RCC::ptr(), &*GPIOA::ptr()) };
-    rcc.iopenr().modify(|r, w| unsafe { w.bits(r.bits() | 1) });
-    rcc.apbenr1()
-        .modify(|r, w| unsafe { w.bits(r.bits() | (1 << 17)) });
-    rcc.apbenr2()
-        .modify(|r, w| unsafe { w.bits(r.bits() | (1 << 14)) });
-    let mut moder = gpioa.moder().read().bits();
-    let mut afrl = gpioa.afrl().read().bits();
-    let mut afrh = gpioa.afrh().read().bits();
-    let mut alt = |pin: u32| {
-        moder = (moder & !(0b11 << (2 * pin))) | (0b10 << (2 * pin));
-        if pin < 8 {
-            afrl = (afrl & !(0xF << (4 * pin))) | (1 << (4 * pin));
-        } else {
-            let p = pin - 8;
-            afrh = (afrh & !(0xF << (4 * p))) | (1 << (4 * p));
-        }
-    };
-    for pin in [2, 3, 9, 10] {
-        alt(pin);
-    }
-    if rts_cts {
-        alt(0);
-        moder = (moder & !(0b11 << 2)) | (0b01 << 2);
-    }
-    gpioa.afrl().write(|w| unsafe { w.bits(afrl) });
-    gpioa.afrh().write(|w| unsafe { w.bits(afrh) });
-    gpioa.bsrr().write(|w| unsafe { w.bits(1 << 1) });
-    gpioa.moder().write(|w| unsafe { w.bits(moder) });
-}
-
-/// Starts the independent watchdog.
-fn start_watchdog() {
-    // SAFETY: only `main` and the feed touch the IWDG.
-    let iwdg = unsafe { &*IWDG::ptr() };
-    iwdg.kr().write(|w| unsafe { w.bits(0xCCCC as _) });
-    iwdg.kr().write(|w| unsafe { w.bits(0x5555 as _) });
-    // LSI 32 kHz / 64 = 500 Hz.
-    iwdg.pr().write(|w| unsafe { w.bits(0b100 as _) });
-    iwdg.rlr()
-        .write(|w| unsafe { w.bits((WATCHDOG_MS / 2) as _) });
-    iwdg.kr().write(|w| unsafe { w.bits(0xAAAA as _) });
-}
-
-/// Reloads the watchdog.
-fn feed_watchdog() {
-    // SAFETY: writing the reload key only.
-    unsafe { &*IWDG::ptr() }
-        .kr()
-        .write(|w| unsafe { w.bits(0xAAAA as _) });
-}
-
-/// The statics `setup` builds the bridge and the lines in.
-///
-/// # Safety
-/// Call once, from `main`: the statics' only references; unmask the
-/// USARTs' interrupts only after `setup` handed their ends over.
-unsafe fn statics() -> Statics {
-    // SAFETY: the caller's contract.
-    unsafe {
-        Statics {
-            bridge: &mut *addr_of_mut!(BRIDGE),
-            up: &mut *addr_of_mut!(UP_LINE),
-            down: &mut *addr_of_mut!(DOWN_LINE),
-            pend_up: &pend_up,
-            pend_down: &pend_down,
-            up_end: &UP_END,
-            down_end: &DOWN_END,
-        }
-    }
-}
-
-/// Unmasks both USARTs' interrupts (after their ends were handed over).
-fn unmask_usarts() {
-    // SAFETY: the handlers only touch their ends, handed over before.
-    unsafe {
-        NVIC::unmask(Interrupt::USART1);
-        NVIC::unmask(Interrupt::USART2);
-    }
-}
-
-/// The bridge alone (the STM32G030x8): USART2 faces the host, USART1 the
-/// controller, until the host's quit sequence.
-pub fn run_bridge() -> ! {
-    // SAFETY: called once, before anything else uses the core peripherals.
-    let core = unsafe { cortex_m::Peripherals::steal() };
-    start_tick(core.SYST, CORE_CLOCK_HZ);
-    let (cfg, source) = load_config();
-    let rts_cts = cfg.flow == FlowControl::RtsCts;
-    init_pins(rts_cts);
-    init_usart(up_regs(), cfg.upstream_baud, Format::Plain, rts_cts);
-    init_usart(down_regs(), cfg.downstream_baud, Format::Plain, false);
-    // SAFETY: called once; the interrupts are unmasked after `setup`.
-    let statics = unsafe { statics() };
-    let (bridge, mut up, mut down) = setup(statics, cfg, source);
-    unmask_usarts();
-    start_watchdog();
-    serve(bridge, &mut up, &mut down, feed_watchdog)
-}
-
-/// The gateway's state, written once at start.
 static mut GATEWAY: MaybeUninit<Gateway> = MaybeUninit::uninit();
 
-/// One upstream port (the STM32G070): protocol B through the bridge, or
-/// Modbus RTU through the gateway, as the configuration block chooses
-/// (byte 19, bit 2); on the Modbus line the USART frames 8E1, 8O1 or 8N2
-/// as the block's parity says.
-pub fn run_one_upstream() -> ! {
+/// What each line's task waits for, and what tells the bridge's loop.
+static UP_PENDED: Wake = Wake::new();
+static DOWN_PENDED: Wake = Wake::new();
+static MOVED: Wake = Wake::new();
+
+fn pend_up() {
+    UP_PENDED.signal(());
+}
+
+fn pend_down() {
+    DOWN_PENDED.signal(());
+}
+
+/// A line as its task serves it.
+type G0Line = LinePort<BufferedUartRx<'static>, BufferedUartTx<'static>, Option<GpioModem>>;
+
+/// The lines as their tasks serve them, written once at start.
+static mut UP_PORT: MaybeUninit<G0Line> = MaybeUninit::uninit();
+static mut DOWN_PORT: MaybeUninit<G0Line> = MaybeUninit::uninit();
+
+/// A line's task.
+#[embassy_executor::task(pool_size = 2)]
+async fn line_task(line: &'static mut G0Line) -> ! {
+    line::serve(line, &MOVED).await
+}
+
+/// What the loop's task runs on, written once at start.
+struct Lines {
+    bridge: &'static mut Bridge,
+    up: ThreadEnd<'static>,
+    down: ThreadEnd<'static>,
+    watchdog: IndependentWatchdog<'static, IWDG>,
+}
+
+static mut LINES: MaybeUninit<Lines> = MaybeUninit::uninit();
+
+/// The bridge's loop alone, and its report at the quit sequence.
+#[embassy_executor::task]
+async fn bridge_task(l: &'static mut Lines) -> ! {
+    stall_if_asked();
+    let feed = || l.watchdog.pet();
+    let result = serve::bridge(l.bridge, &mut l.up, &mut l.down, &MOVED, feed).await;
+    finish(result, l.up.pauses())
+}
+
+/// The loop of one upstream port that speaks `speaks`, and its report.
+#[embassy_executor::task]
+async fn one_upstream_task(
+    speaks: UpstreamProtocol,
+    gateway: &'static mut Gateway,
+    l: &'static mut Lines,
+) -> ! {
+    stall_if_asked();
+    let (bridge, up, down) = (&mut *l.bridge, &mut l.up, &mut l.down);
+    let feed = || l.watchdog.pet();
+    let result = serve::one_upstream(speaks, bridge, gateway, up, down, &MOVED, feed).await;
+    finish(result, l.up.pauses())
+}
+
+/// Builds the bridge and the lines (the upstream stamped when it speaks
+/// Modbus), starts the watchdog, spawns the lines' tasks and, with
+/// `spawn_loop`, the loop's.
+fn run(
+    parts: Parts,
+    modbus: bool,
+    spawn_loop: impl FnOnce(Spawner, &Config, &'static mut Lines),
+) -> ! {
     // SAFETY: called once, before anything else uses the core peripherals.
     let core = unsafe { cortex_m::Peripherals::steal() };
     start_tick(core.SYST, CORE_CLOCK_HZ);
-    let (mut cfg, source) = load_config();
-    let speaks = cfg.upstream;
-    let modbus = speaks == UpstreamProtocol::ModbusRtu;
+    let Parts {
+        config: (mut cfg, source),
+        upstream,
+        controller,
+        modem,
+        mut watchdog,
+    } = parts;
     if modbus {
         // No flow control on a Modbus line (its bytes are binary).
         cfg.flow = FlowControl::None;
-        stamp_upstream();
     }
-    let rts_cts = cfg.flow == FlowControl::RtsCts;
-    init_pins(rts_cts);
-    let (baud, format) = if modbus {
-        (cfg.modbus.baud, Format::Modbus(cfg.modbus.parity))
-    } else {
-        (cfg.upstream_baud, Format::Plain)
-    };
-    init_usart(up_regs(), baud, format, rts_cts);
-    init_usart(down_regs(), cfg.downstream_baud, Format::Plain, false);
-    // SAFETY: called once; the interrupts are unmasked after `setup`.
-    let (statics, gateway) = unsafe {
+    let modem = (cfg.flow == FlowControl::RtsCts).then_some(modem);
+    watchdog.unleash();
+    // SAFETY: `run` runs once; these are the only references to these
+    // statics.
+    let (up_line, down_line, lines) = unsafe {
+        let bridge = (*addr_of_mut!(BRIDGE)).write(Bridge::new(cfg, source, boot_seed()));
+        let up_rings = &mut *addr_of_mut!(UP_LINE);
+        let down_rings = &mut *addr_of_mut!(DOWN_LINE);
+        let (up_end, up) = up_rings.split(cfg.flow, UPSTREAM_MARKS, &pend_up);
+        let (down_end, down) = down_rings.split(FlowControl::None, DOWNSTREAM_MARKS, &pend_down);
+        let (up_tx, up_rx) = upstream.split();
+        let (down_tx, down_rx) = controller.split();
         (
-            statics(),
-            (*addr_of_mut!(GATEWAY)).write(Gateway::new(cfg.modbus, cfg.policy)),
+            (*addr_of_mut!(UP_PORT)).write(LinePort {
+                rx: up_rx,
+                tx: up_tx,
+                end: up_end,
+                modem,
+                stamped: modbus,
+                pended: &UP_PENDED,
+            }),
+            (*addr_of_mut!(DOWN_PORT)).write(LinePort {
+                rx: down_rx,
+                tx: down_tx,
+                end: down_end,
+                modem: None,
+                stamped: false,
+                pended: &DOWN_PENDED,
+            }),
+            (*addr_of_mut!(LINES)).write(Lines {
+                bridge,
+                up,
+                down,
+                watchdog,
+            }),
         )
     };
-    let (bridge, mut up, mut down) = setup(statics, cfg, source);
-    unmask_usarts();
-    start_watchdog();
-    serve_one_upstream(speaks, bridge, gateway, &mut up, &mut down, feed_watchdog)
+    executor::run(|spawner| {
+        for line in [up_line, down_line] {
+            if let Ok(t) = line_task(line) {
+                spawner.spawn(t);
+            }
+        }
+        spawn_loop(spawner, &cfg, lines);
+    })
+}
+
+/// The bridge alone (the STM32G030x8) between the upstream and controller
+/// USARTs, until the host's quit sequence.
+pub fn run_bridge(parts: Parts) -> ! {
+    run(parts, false, |spawner, _, lines| {
+        if let Ok(t) = bridge_task(lines) {
+            spawner.spawn(t);
+        }
+    })
+}
+
+/// One upstream port (the STM32G070) that speaks what the configuration
+/// block chooses (byte 19, bit 2): protocol B through the bridge, or
+/// Modbus RTU through the gateway, the bridge then keeping the controller
+/// line with no protocol-B host.
+pub fn run_one_upstream(parts: Parts) -> ! {
+    let speaks = parts.config.0.upstream;
+    run(
+        parts,
+        speaks == UpstreamProtocol::ModbusRtu,
+        |spawner, cfg, lines| {
+            // SAFETY: called once (from `run`); the only reference to it.
+            let gateway =
+                unsafe { (*addr_of_mut!(GATEWAY)).write(Gateway::new(cfg.modbus, cfg.policy)) };
+            if let Ok(t) = one_upstream_task(speaks, gateway, lines) {
+                spawner.spawn(t);
+            }
+        },
+    )
+}
+
+/// Stops the board where it cannot run (a USART refused its settings):
+/// sleeps for ever, the watchdog not started.
+pub fn halt() -> ! {
+    loop {
+        cortex_m::asm::wfi();
+    }
 }
