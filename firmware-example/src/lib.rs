@@ -49,7 +49,8 @@ pub mod bench;
         feature = "board-lm3s6965",
         feature = "board-mps2-an386",
         feature = "board-stm32g030",
-        feature = "board-stm32g070"
+        feature = "board-stm32g070",
+        feature = "board-b-l475e-iot01a"
     )
 ))]
 pub mod board;

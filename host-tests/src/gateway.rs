@@ -65,7 +65,7 @@ use iai_protocol_b::frame::Station;
 
 use crate::bridge::{status_query, status_query_frame, HostLink, SimThread};
 use crate::qemu::{
-    build_ethernet_firmware, build_firmware, symbol_address, target_dir, Board, ExitOutcome,
+    build_ethernet_firmware, build_firmware, loader_arg, symbol_address, Board, ExitOutcome,
     QemuSession, QUIT_GUARD, QUIT_SEQUENCE, READY_MARKER,
 };
 use crate::rtu_relay::RtuRelay;
@@ -898,19 +898,9 @@ pub fn run_ethernet(
 /// Ethernet firmware reads it: [`BLOCK_OFFSET`] bytes past
 /// `_bridge_config`.
 fn network_loader_arg(elf: &Path, net: &NetConfig) -> Result<String, String> {
-    static SERIAL: AtomicU64 = AtomicU64::new(0);
     let addr =
         symbol_address(elf, "_bridge_config").map_err(|e| e.to_string())? + BLOCK_OFFSET as u64;
-    let dir = target_dir().join("qemu-config");
-    let file = dir.join(format!(
-        "net-{}-{}.bin",
-        std::process::id(),
-        SERIAL.fetch_add(1, Ordering::Relaxed)
-    ));
-    std::fs::create_dir_all(&dir)
-        .and_then(|()| std::fs::write(&file, net.to_block()))
-        .map_err(|e| format!("writing {}: {e}", file.display()))?;
-    Ok(format!("loader,file={},addr={addr:#x}", file.display()))
+    loader_arg("net", addr, &net.to_block()).map_err(|e| format!("the network block: {e}"))
 }
 
 /// A port on 127.0.0.1 free a moment ago.

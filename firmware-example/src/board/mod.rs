@@ -40,3 +40,5 @@ pub mod mps2_an386;
 pub mod pl011;
 #[cfg(any(feature = "board-stm32g030", feature = "board-stm32g070"))]
 pub mod stm32g0;
+#[cfg(feature = "board-b-l475e-iot01a")]
+pub mod stm32l4;

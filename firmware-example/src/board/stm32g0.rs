@@ -111,7 +111,9 @@ impl Modem for GpioModem {
 }
 
 /// The buffers of the USARTs' drivers: each only bridges the time until
-/// its line's task runs (the lines' rings are where bytes wait).
+/// its line's task runs (the lines' rings are where bytes wait); the
+/// transmit ones are small so that an XOFF is not queued far behind data
+/// (see `super::embassy::line`).
 pub struct Buffers {
     /// The upstream USART's transmit buffer.
     pub up_tx: &'static mut [u8],
@@ -123,9 +125,9 @@ pub struct Buffers {
     pub down_rx: &'static mut [u8],
 }
 
-static mut UP_TX: [u8; 16] = [0; 16];
+static mut UP_TX: [u8; 8] = [0; 8];
 static mut UP_RX: [u8; 32] = [0; 32];
-static mut DOWN_TX: [u8; 16] = [0; 16];
+static mut DOWN_TX: [u8; 8] = [0; 8];
 static mut DOWN_RX: [u8; 32] = [0; 32];
 
 /// The USARTs' buffers. Returns `None` after the first call.
@@ -238,6 +240,29 @@ fn run(
     modbus: bool,
     spawn_loop: impl FnOnce(Spawner, &Config, &'static mut Lines),
 ) -> ! {
+    let (cfg, up_line, down_line, lines) = boot(parts, modbus);
+    executor::run(|spawner| {
+        for line in [up_line, down_line] {
+            if let Ok(t) = line_task(line) {
+                spawner.spawn(t);
+            }
+        }
+        spawn_loop(spawner, &cfg, lines);
+    })
+}
+
+/// Everything before the tasks run. Not inlined, so that its frame (the
+/// pieces built on the way into their statics) is gone while they run.
+#[inline(never)]
+fn boot(
+    parts: Parts,
+    modbus: bool,
+) -> (
+    Config,
+    &'static mut G0Line,
+    &'static mut G0Line,
+    &'static mut Lines,
+) {
     // SAFETY: called once, before anything else uses the core peripherals.
     let core = unsafe { cortex_m::Peripherals::steal() };
     start_tick(core.SYST, CORE_CLOCK_HZ);
@@ -254,9 +279,9 @@ fn run(
     }
     let modem = (cfg.flow == FlowControl::RtsCts).then_some(modem);
     watchdog.unleash();
-    // SAFETY: `run` runs once; these are the only references to these
+    // SAFETY: `boot` runs once; these are the only references to these
     // statics.
-    let (up_line, down_line, lines) = unsafe {
+    unsafe {
         let bridge = (*addr_of_mut!(BRIDGE)).write(Bridge::new(cfg, source, boot_seed()));
         let up_rings = &mut *addr_of_mut!(UP_LINE);
         let down_rings = &mut *addr_of_mut!(DOWN_LINE);
@@ -265,6 +290,7 @@ fn run(
         let (up_tx, up_rx) = upstream.split();
         let (down_tx, down_rx) = controller.split();
         (
+            cfg,
             (*addr_of_mut!(UP_PORT)).write(LinePort {
                 rx: up_rx,
                 tx: up_tx,
@@ -288,15 +314,7 @@ fn run(
                 watchdog,
             }),
         )
-    };
-    executor::run(|spawner| {
-        for line in [up_line, down_line] {
-            if let Ok(t) = line_task(line) {
-                spawner.spawn(t);
-            }
-        }
-        spawn_loop(spawner, &cfg, lines);
-    })
+    }
 }
 
 /// The bridge alone (the STM32G030x8) between the upstream and controller

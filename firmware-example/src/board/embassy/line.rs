@@ -24,8 +24,11 @@ use crate::serial::{FlowControl, IsrEnd};
 /// task tells the bridge's loop that bytes moved.
 pub type Wake = Signal<CriticalSectionRawMutex, ()>;
 
-/// Bytes moved at a time each way (within every port's transmit buffer).
-const CHUNK: usize = 16;
+/// Bytes moved at a time each way. With the port's transmit buffer (8
+/// bytes on these boards) it bounds how many bytes go out ahead of an XOFF
+/// the line queues: 4 + 8 + the one in the shift register, within the
+/// host latency the line's marks allow (`serial::HOST_LATENCY`, 17).
+const CHUNK: usize = 4;
 
 /// The RTS and CTS lines of a port that has them as GPIOs, for
 /// [`FlowControl::RtsCts`].

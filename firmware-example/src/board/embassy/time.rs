@@ -47,3 +47,18 @@ pub fn on_tick() {
         }
     });
 }
+
+/// The board's clock as the core's async engines use it
+/// ([`iai_protocol_b::clock::AsyncClock`]): the millisecond tick, and
+/// embassy-time's timers to sleep.
+pub struct Clock;
+
+impl iai_protocol_b::clock::AsyncClock for Clock {
+    fn now_ms(&mut self) -> u32 {
+        crate::board::clock::now_ms()
+    }
+
+    async fn sleep_ms(&mut self, ms: u32) {
+        embassy_time::Timer::after_millis(u64::from(ms)).await;
+    }
+}
