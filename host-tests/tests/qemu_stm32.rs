@@ -153,7 +153,10 @@ fn the_l475_passes_recorded_frames_runs_a_plc_and_writes_2000_records_as_one_26d
         err(&out)
     );
     let count = text(&gw.iai(&iai, &["send", "208"]));
-    assert!(count.contains("= 2000"), "208H: {count}");
+    assert!(
+        count.contains("number_of_effective_positions = 0x7D0 (2000)"),
+        "208H: {count}"
+    );
     eprintln!("2,000 records x 8 axes as one 26DH, verified, in {took:.1} s");
 
     let status = gw.stop();

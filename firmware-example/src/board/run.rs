@@ -1,6 +1,6 @@
 //! The loop a board runs once its lines are up: the library's own loops
-//! ([`crate::bridge::run`], [`crate::modbus::run`],
-//! [`crate::modbus::run_one_upstream`]) on the board's clock and sleep,
+//! ([`crate::bridge::run`], [`crate::modbus::run`]) on the board's clock
+//! and sleep (the STM32 boards await instead: `super::embassy::serve`),
 //! then the end-of-run report. With the `stall` feature the loop never
 //! starts, so that the watchdog must reset the board.
 
@@ -12,7 +12,6 @@ use super::clock::{now_ms, now_us, sleep_unless};
 use super::image::stack_peak;
 use super::report::{exit, Out};
 use crate::bridge::{Bridge, Error};
-use crate::config::UpstreamProtocol;
 use crate::modbus::Gateway;
 use crate::serial::{Port, ThreadEnd};
 use crate::status::Stats;
@@ -58,31 +57,6 @@ pub fn serve_gateway<M: Port<Error = Infallible>>(
         up,
         down,
         modbus,
-        now_ms,
-        now_us,
-        sleep_unless,
-        idle,
-    );
-    finish(result, up.pauses())
-}
-
-/// [`serve`] on a board with one upstream port that speaks what the
-/// configuration chose (see [`crate::modbus::run_one_upstream`]).
-pub fn serve_one_upstream(
-    speaks: UpstreamProtocol,
-    bridge: &mut Bridge,
-    gateway: &mut Gateway,
-    up: &mut ThreadEnd<'static>,
-    down: &mut ThreadEnd<'static>,
-    idle: impl FnMut(),
-) -> ! {
-    stall_if_asked();
-    let result = crate::modbus::run_one_upstream(
-        speaks,
-        bridge,
-        gateway,
-        up,
-        down,
         now_ms,
         now_us,
         sleep_unless,

@@ -1,6 +1,6 @@
 //! embassy on the STM32 boards: the executor ([`executor`]), embassy-time
 //! on the board's SysTick ([`time`]), each serial line served by a task
-//! over an `embedded-io-async` port ([`line`]), and the bridge's loops
+//! over an `embedded-io-async` port ([`mod@line`]), and the bridge's loops
 //! awaiting those tasks instead of sleeping ([`serve`]).
 //!
 //! Why SysTick: QEMU's STM32L475 models no timers, and one tick source for
