@@ -10,6 +10,7 @@ use cortex_m::interrupt::Mutex;
 use super::image::boot_seed;
 use crate::bridge::Bridge;
 use crate::config::{Config, Source};
+use crate::modbus::Gateway;
 use crate::serial::{
     DownstreamRings, FlowControl, IsrEnd, ThreadEnd, UpstreamRings, Watermarks, DOWNSTREAM_MARKS,
     UPSTREAM_MARKS,
@@ -52,6 +53,28 @@ pub fn hand_over<const RX: usize, const TX: usize>(
     thread
 }
 
+/// Builds the bridge from `cfg` in `room`, its static. Not inlined: the
+/// optimiser may build parts of it in the caller's stack frame on the way
+/// in, and that frame must not stay below the rest of start-up.
+#[inline(never)]
+pub fn build_bridge(
+    room: &'static mut MaybeUninit<Bridge>,
+    cfg: Config,
+    source: Source,
+) -> &'static mut Bridge {
+    room.write(Bridge::new(cfg, source, boot_seed()))
+}
+
+/// Builds the Modbus gateway from `cfg` in `room`, its static (not
+/// inlined, as [`build_bridge`]).
+#[inline(never)]
+pub fn build_gateway(
+    room: &'static mut MaybeUninit<Gateway>,
+    cfg: &Config,
+) -> &'static mut Gateway {
+    room.write(Gateway::new(cfg.modbus, cfg.policy))
+}
+
 /// The statics a board gives [`setup`].
 pub struct Statics {
     /// Room for the bridge.
@@ -80,7 +103,7 @@ pub fn setup(
     cfg: Config,
     source: Source,
 ) -> (&'static mut Bridge, ThreadEnd<'static>, ThreadEnd<'static>) {
-    let bridge = s.bridge.write(Bridge::new(cfg, source, boot_seed()));
+    let bridge = build_bridge(s.bridge, cfg, source);
     let up = hand_over(s.up, cfg.flow, UPSTREAM_MARKS, s.pend_up, s.up_end);
     let down = hand_over(
         s.down,

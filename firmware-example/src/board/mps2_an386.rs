@@ -193,6 +193,7 @@ static mut BRIDGE: MaybeUninit<Bridge> = MaybeUninit::uninit();
 
 /// The bridge between the host's and the controller's UARTs until the
 /// host's quit sequence.
+#[inline]
 pub fn run(board: &Board) -> ! {
     // SAFETY: called once, before anything else uses the core peripherals.
     let core = unsafe { cortex_m::Peripherals::steal() };

@@ -33,7 +33,8 @@ use embassy_stm32::Peri;
 use super::clock::start_tick;
 use super::embassy::line::{self, LinePort, Modem, Wake};
 use super::embassy::{executor, serve};
-use super::image::{boot_seed, config_address};
+use super::image::config_address;
+use super::lines::{build_bridge, build_gateway};
 use super::run::{finish, stall_if_asked};
 use crate::bridge::Bridge;
 use crate::config::{Config, Parity, Source, UpstreamProtocol};
@@ -282,7 +283,7 @@ fn boot(
     // SAFETY: `boot` runs once; these are the only references to these
     // statics.
     unsafe {
-        let bridge = (*addr_of_mut!(BRIDGE)).write(Bridge::new(cfg, source, boot_seed()));
+        let bridge = build_bridge(&mut *addr_of_mut!(BRIDGE), cfg, source);
         let up_rings = &mut *addr_of_mut!(UP_LINE);
         let down_rings = &mut *addr_of_mut!(DOWN_LINE);
         let (up_end, up) = up_rings.split(cfg.flow, UPSTREAM_MARKS, &pend_up);
@@ -319,6 +320,7 @@ fn boot(
 
 /// The bridge alone (the STM32G030x8) between the upstream and controller
 /// USARTs, until the host's quit sequence.
+#[inline]
 pub fn run_bridge(parts: Parts) -> ! {
     run(parts, false, |spawner, _, lines| {
         if let Ok(t) = bridge_task(lines) {
@@ -331,6 +333,7 @@ pub fn run_bridge(parts: Parts) -> ! {
 /// block chooses (byte 19, bit 2): protocol B through the bridge, or
 /// Modbus RTU through the gateway, the bridge then keeping the controller
 /// line with no protocol-B host.
+#[inline]
 pub fn run_one_upstream(parts: Parts) -> ! {
     let speaks = parts.config.0.upstream;
     run(
@@ -338,8 +341,7 @@ pub fn run_one_upstream(parts: Parts) -> ! {
         speaks == UpstreamProtocol::ModbusRtu,
         |spawner, cfg, lines| {
             // SAFETY: called once (from `run`); the only reference to it.
-            let gateway =
-                unsafe { (*addr_of_mut!(GATEWAY)).write(Gateway::new(cfg.modbus, cfg.policy)) };
+            let gateway = build_gateway(unsafe { &mut *addr_of_mut!(GATEWAY) }, cfg);
             if let Ok(t) = one_upstream_task(speaks, gateway, lines) {
                 spawner.spawn(t);
             }

@@ -18,7 +18,7 @@ use super::{feed_watchdog, read, set_bits, start_watchdog, Uart, SYSCTL_RCGC2};
 use crate::board::clock::{now_ms, sleep_unless, start_tick};
 use crate::board::config_page::{load_net, MappedPage};
 use crate::board::image::{boot_seed, load_config};
-use crate::board::lines::hand_over;
+use crate::board::lines::{build_bridge, build_gateway, hand_over};
 use crate::board::report::{banner, Out};
 use crate::board::run::{finish, stall_if_asked};
 use crate::bridge::Bridge;
@@ -95,8 +95,8 @@ fn setup(board: &Board, now: u32) -> Parts {
     // statics, and the UART's interrupt is unmasked only after its end was
     // handed over.
     let parts = unsafe {
-        let bridge = (*addr_of_mut!(BRIDGE)).write(Bridge::new(cfg, source, seed));
-        let gateway = (*addr_of_mut!(GATEWAY)).write(Gateway::new(cfg.modbus, cfg.policy));
+        let bridge = build_bridge(&mut *addr_of_mut!(BRIDGE), cfg, source);
+        let gateway = build_gateway(&mut *addr_of_mut!(GATEWAY), &cfg);
         let eth = (*addr_of_mut!(ETH)).write(Stellaris::new(
             Mmio,
             &mut *addr_of_mut!(RX_FRAME),
@@ -233,6 +233,7 @@ fn print_counters(net: &Net<'_>, gateway: &Gateway, eth: &Stellaris<Mmio>) {
 
 /// The Ethernet board: the bridge and the gateway behind the network side
 /// ([`net::run`]) until the host's quit sequence.
+#[inline]
 pub fn run(board: &Board) -> ! {
     // SAFETY: called once, before anything else uses the core peripherals.
     let core = unsafe { cortex_m::Peripherals::steal() };

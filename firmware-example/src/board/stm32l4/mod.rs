@@ -35,7 +35,8 @@ use self::usart::{Format, Port, State};
 use super::clock::start_tick;
 use super::embassy::line::{self, LinePort, NoModem, Wake};
 use super::embassy::{executor, serve};
-use super::image::{boot_seed, load_config};
+use super::image::load_config;
+use super::lines::{build_bridge, build_gateway};
 use super::report::banner;
 use super::run::{finish, stall_if_asked};
 use crate::bridge::Bridge;
@@ -237,6 +238,7 @@ async fn gateway_task(l: &'static mut Loop) -> ! {
 /// The board: the bridge between the host's and the controller's USARTs
 /// and the Modbus RTU gateway on its own USART, sharing the controller
 /// line, until the host's quit sequence.
+#[inline]
 pub fn run(board: &Board) -> ! {
     let (lines, l) = boot(board);
     executor::run(|spawner| {
@@ -272,8 +274,8 @@ fn boot(board: &Board) -> ([&'static mut L4Line; 3], &'static mut Loop) {
     // SAFETY: `run` runs once; these are the only references to these
     // statics.
     let (lines, l) = unsafe {
-        let bridge = (*addr_of_mut!(BRIDGE)).write(Bridge::new(cfg, source, boot_seed()));
-        let gateway = (*addr_of_mut!(GATEWAY)).write(Gateway::new(cfg.modbus, cfg.policy));
+        let bridge = build_bridge(&mut *addr_of_mut!(BRIDGE), cfg, source);
+        let gateway = build_gateway(&mut *addr_of_mut!(GATEWAY), &cfg);
         let (up_end, up) = (*addr_of_mut!(UP_LINE)).split(cfg.flow, UPSTREAM_MARKS, &pend_up);
         let (down_end, down) =
             (*addr_of_mut!(DOWN_LINE)).split(FlowControl::None, DOWNSTREAM_MARKS, &pend_down);
