@@ -23,7 +23,7 @@ pub mod ethernet;
 
 use core::mem::MaybeUninit;
 use core::ptr::{addr_of_mut, read_volatile, write_volatile};
-use core::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use core::sync::atomic::{AtomicU32, AtomicU8, Ordering};
 
 use cortex_m::peripheral::NVIC;
 use lm3s6965::{interrupt, Interrupt};
@@ -106,11 +106,12 @@ impl Uart {
         }
     }
 
-    fn stamped(self) -> &'static AtomicBool {
+    /// Its bit in [`STAMPED`].
+    fn bit(self) -> u8 {
         match self {
-            Uart::Uart0 => &STAMPED0,
-            Uart::Uart1 => &STAMPED1,
-            Uart::Uart2 => &STAMPED2,
+            Uart::Uart0 => 1,
+            Uart::Uart1 => 1 << 1,
+            Uart::Uart2 => 1 << 2,
         }
     }
 
@@ -140,7 +141,7 @@ impl Uart {
 
     /// The interrupt handler's body.
     fn service(self) {
-        let stamp: Option<fn() -> u32> = if self.stamped().load(Ordering::Relaxed) {
+        let stamp: Option<fn() -> u32> = if STAMPED.load(Ordering::Relaxed) & self.bit() != 0 {
             Some(super::clock::now_us)
         } else {
             None
@@ -200,6 +201,28 @@ impl Pin {
     fn mask(self) -> u32 {
         1 << self.1
     }
+
+    /// The pin in 16 bits: the port's index, then the pin number.
+    fn code(self) -> u16 {
+        let port = match self.0 {
+            Port::A => 0,
+            Port::B => 1,
+            Port::D => 2,
+            Port::G => 3,
+        };
+        port << 8 | u16::from(self.1 & 7)
+    }
+
+    /// The pin [`Pin::code`] gave `code`.
+    fn decode(code: u16) -> Pin {
+        let port = match code >> 8 {
+            0 => Port::A,
+            1 => Port::B,
+            2 => Port::D,
+            _ => Port::G,
+        };
+        Pin(port, (code & 7) as u8)
+    }
 }
 
 // System control (clock gating) and GPIO registers.
@@ -236,17 +259,23 @@ static END0: Handoff = handoff();
 static END1: Handoff = handoff();
 static END2: Handoff = handoff();
 /// Whether a UART's handler stamps each byte (the Modbus port).
-static STAMPED0: AtomicBool = AtomicBool::new(false);
-static STAMPED1: AtomicBool = AtomicBool::new(false);
-static STAMPED2: AtomicBool = AtomicBool::new(false);
-/// The RTS and CTS pins' data registers (0: none set).
-static RTS: AtomicUsize = AtomicUsize::new(0);
-static CTS: AtomicUsize = AtomicUsize::new(0);
+/// The UARTs whose handler stamps each byte (the Modbus port's), by
+/// [`Uart::bit`].
+static STAMPED: AtomicU8 = AtomicU8::new(0);
+/// The RTS and CTS pins: RTS's port and pin in the low half-word, CTS's in
+/// the high one (see [`Pin::code`]).
+static MODEM_PINS: AtomicU32 = AtomicU32::new(0);
 
-/// The host line's modem lines on the pins [`RTS`] and [`CTS`] name.
+/// The host line's modem lines on the pins [`MODEM_PINS`] names.
 static MODEM: Modem = Modem {
-    set_rts: |high| write(RTS.load(Ordering::Relaxed), if high { 0xFF } else { 0 }),
-    cts: || read(CTS.load(Ordering::Relaxed)) != 0,
+    set_rts: |high| {
+        let rts = Pin::decode(MODEM_PINS.load(Ordering::Relaxed) as u16);
+        write(rts.data(), if high { 0xFF } else { 0 });
+    },
+    cts: || {
+        let cts = Pin::decode((MODEM_PINS.load(Ordering::Relaxed) >> 16) as u16);
+        read(cts.data()) != 0
+    },
 };
 
 fn pend_uart0() {
@@ -296,8 +325,10 @@ fn init_modem(rts: Pin, cts: Pin) {
         set_bits(pin.0.base() + GPIO_DEN, pin.mask());
     }
     set_bits(rts.0.base() + GPIO_DIR, rts.mask());
-    RTS.store(rts.data(), Ordering::Relaxed);
-    CTS.store(cts.data(), Ordering::Relaxed);
+    MODEM_PINS.store(
+        u32::from(rts.code()) | u32::from(cts.code()) << 16,
+        Ordering::Relaxed,
+    );
     write(rts.data(), 0xFF);
 }
 
@@ -362,7 +393,7 @@ fn boot(board: &Board) -> Booted {
         .init(board.core_clock_hz, cfg.downstream_baud);
     board.modbus.init(board.core_clock_hz, cfg.modbus.baud);
     init_modem(board.rts, board.cts);
-    board.modbus.stamped().store(true, Ordering::Relaxed);
+    STAMPED.store(board.modbus.bit(), Ordering::Relaxed);
 
     // SAFETY: `boot` runs once; these are the only references to these
     // statics, and the interrupts that use the ends are unmasked only
