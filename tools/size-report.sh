@@ -21,8 +21,9 @@
 # upstream the configuration block chooses, protocol B or Modbus RTU) run
 # the same tasks on embassy-stm32 and are built and sized only (QEMU has
 # no model of them); their stack is the one measured on b-l475e-iot01a
-# (the same code, compiled for the Cortex-M4, with the gateway beside the
-# bridge: a bound for the bridge alone):
+# (the same tasks, compiled for the Cortex-M4): for stm32g030, the bridge
+# alone, the peak of its demos (the gateway idle); for stm32g070, the peak
+# with its PLC session too:
 #   ram <board> static <bytes> stack <bytes> (measured on b-l475e-iot01a) total <bytes>
 #   goal <board> on STM32G030x8: ram met|missed flash met|missed
 #   goal stm32g070 on STM32G070xB: ram met|missed flash met|missed
@@ -94,7 +95,7 @@ modbus_stack() {
 }
 
 verdict() { [ "$1" -le "$2" ] && echo met || echo missed; }
-l475_stack=
+l475_stack= l475_demo_stack=
 for b in "${boards[@]}"; do
   read -r board bin t feat qemu <<<"$b"
   elf=$target/$t/firmware/$bin
@@ -118,6 +119,7 @@ for b in "${boards[@]}"; do
       echo "stack $board after demo $run: $peak bytes"
       [ "$peak" -gt "$stack" ] && stack=$peak
     done
+    demo_stack=$stack
     if [ "$board" = lm3s6965 ] || [ "$board" = b-l475e-iot01a ]; then
       peak=$(modbus_stack "$elf" rtu "$board")
       if [ -n "$peak" ]; then
@@ -130,9 +132,10 @@ for b in "${boards[@]}"; do
     ram_goal=8192
     [ "$board" != mps2-an386 ] && ram_goal=12288
     echo "goal $board ram $(verdict $((static + stack)) $ram_goal) (<= $ram_goal) flash $(verdict "$flash" 32768)"
-    [ "$board" = b-l475e-iot01a ] && l475_stack=$stack
+    [ "$board" = b-l475e-iot01a ] && l475_stack=$stack l475_demo_stack=$demo_stack
   else
     stack=${l475_stack:-0}
+    [ "$board" = stm32g030 ] && stack=${l475_demo_stack:-0}
     total=$((static + stack))
     echo "ram $board static $static stack $stack (measured on b-l475e-iot01a) total $total"
     echo "flash $board $flash"
