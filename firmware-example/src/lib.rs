@@ -17,10 +17,11 @@
 //!   the Stellaris Ethernet MAC), and the web page; without the feature
 //!   only its network block ([`net::config`]), which every build's
 //!   configuration page holds.
-//!
-//! The boards are the binaries of this package (`src/bin/*.rs`): each only
-//! moves bytes between UART registers and a [`serial::IsrEnd`], reads the
-//! configuration block and runs [`bridge::run`].
+//! - `board` (a Cortex-M target and a `board-*` feature): the boards'
+//!   clock, UART drivers, watchdogs, configuration store and start-up, one
+//!   module per family, on top of the rest; the binaries (`src/bin/*.rs`)
+//!   only say which UART is which and call their family's `run`.
+//! - `bench` (feature `icount-bench`): the instruction-count bench.
 //!
 //! Every public type has one path, its module's (`bridge::Bridge`,
 //! `serial::Port`); the crate root re-exports nothing, as in the core.
@@ -43,6 +44,20 @@
 
 mod log;
 
+#[cfg(all(target_os = "none", feature = "icount-bench"))]
+pub mod bench;
+#[cfg(all(
+    target_os = "none",
+    not(feature = "no-panic-proof"),
+    any(
+        feature = "board-lm3s6965",
+        feature = "board-mps2-an386",
+        feature = "board-stm32g030",
+        feature = "board-stm32g070",
+        feature = "board-b-l475e-iot01a"
+    )
+))]
+pub mod board;
 pub mod bridge;
 pub mod codes;
 pub mod config;

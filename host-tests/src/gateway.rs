@@ -158,7 +158,12 @@ fn page_args(
 ) -> Result<(Vec<String>, Option<Config>), String> {
     match &opts.page {
         PageSource::Built if opts.ethernet => {
-            let image = page_image(cfg, opts.network.as_ref(), opts.sparkplug.as_ref());
+            let image = page_image(
+                Board::Lm3s6965.config_slot_len(),
+                cfg,
+                opts.network.as_ref(),
+                opts.sparkplug.as_ref(),
+            );
             let loader = image_loader_arg(elf, &image).map_err(|e| e.to_string())?;
             Ok((vec!["-device".into(), loader], None))
         }

@@ -19,7 +19,7 @@
 //! port), `--baud B` (9600, 19200, 38400, 57600 or 115200, default
 //! 115200), `--modbus-port P`, `--modbus-baud B` (the Modbus RTU port,
 //! default 115200, even parity, unit 1; with `--ethernet`, `--modbus-port`
-//! is the host port forwarded to Modbus TCP), `--board lm3s6965|mps2-an386`, `--reply-delay-ms MS` (the
+//! is the host port forwarded to Modbus TCP), `--board lm3s6965|mps2-an386|b-l475e-iot01a`, `--reply-delay-ms MS` (the
 //! simulated controller's time per command, default 2), `--faults SPEC`
 //! (as `iai simulate --faults`), `--seed S`, `--elf PATH`,
 //! `--stack-report` (at the stop, end the firmware with the quit sequence
@@ -47,7 +47,7 @@ use host_tests::gateway::{self, Options, PageSource, Ready};
 use host_tests::qemu::Board;
 
 const USAGE: &str = "usage: gateway [--port P] [--baud B] [--modbus-port P] [--modbus-baud B] \
-                     [--board lm3s6965|mps2-an386] \
+                     [--board lm3s6965|mps2-an386|b-l475e-iot01a] \
                      [--reply-delay-ms MS] [--faults SPEC] [--seed S] [--elf PATH] \
                      [--stack-report] [--ethernet] [--broker 127.0.0.1:PORT] [--http-port P] \
                      [--config-image FILE | --blank-config]";
@@ -85,10 +85,8 @@ fn parse_args() -> Result<Options, String> {
             }
             "--board" => {
                 let v = value()?;
-                o.board = Board::ALL
-                    .into_iter()
-                    .find(|b| b.bin() == v || b.machine() == v)
-                    .ok_or(format!("--board takes lm3s6965 or mps2-an386, not {v:?}"))?;
+                o.board = Board::named(&v)
+                    .ok_or(format!("--board takes {}, not {v:?}", Board::names()))?;
             }
             "--reply-delay-ms" => {
                 o.reply_delay_ms = value()?
