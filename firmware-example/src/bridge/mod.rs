@@ -303,8 +303,9 @@ pub struct Bridge {
     /// Since when the host's XOFF holds the upstream transmitter.
     xoff_since: Option<u32>,
     /// The configuration page's writes, if the board keeps a page it can
-    /// write (the configuration messages, see `upstream`).
-    editor: Option<&'static mut Editor<'static>>,
+    /// write (the configuration messages, see `upstream`): a trait object,
+    /// so that a board that attaches no editor links none of its code.
+    editor: Option<&'static mut dyn upstream::PageAgent>,
     /// The last frames through the bridge.
     history: history::History,
 }
@@ -354,7 +355,7 @@ impl Bridge {
 
     /// The configuration page's writes, if attached.
     pub fn editor(&mut self) -> Option<&mut Editor<'static>> {
-        self.editor.as_deref_mut()
+        self.editor.as_deref_mut().map(|a| a.editor())
     }
 
     /// The last frames through the bridge.

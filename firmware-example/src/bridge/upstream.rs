@@ -352,7 +352,7 @@ impl Bridge {
             (None, _) => Err(codes::UNKNOWN_QUERY),
             (Some(Err(())), _) => Err(codes::MALFORMED),
             (Some(Ok(_)), None) => Err(codes::STORE_FAILED),
-            (Some(Ok(r)), Some(e)) => config_answer(e, r, station, resp, now),
+            (Some(Ok(r)), Some(e)) => e.answer(r, station, resp, now),
         };
         match answered {
             Ok(len) => {
@@ -420,6 +420,47 @@ impl Bridge {
         )
         .unwrap_or(0);
         self.mode = Mode::Respond;
+    }
+}
+
+/// The configuration page's editor as the bridge reaches it. The bridge
+/// holds it as a trait object: a board that never attaches an editor has
+/// no vtable for it, so none of the editor's code (its password hash,
+/// settings table and page writes, about 8 KB on the Cortex-M0+) is
+/// linked.
+pub(super) trait PageAgent {
+    /// The editor's own timers (a restart it granted).
+    fn poll(&mut self, now: u32);
+    /// Carries out configuration request `r`, its reply written into
+    /// `resp`: the reply's length, or the `&` code.
+    fn answer(
+        &mut self,
+        r: Request<'_>,
+        station: Station,
+        resp: &mut [u8],
+        now: u32,
+    ) -> Result<usize, u16>;
+    /// The editor itself.
+    fn editor(&mut self) -> &mut Editor<'static>;
+}
+
+impl PageAgent for Editor<'static> {
+    fn poll(&mut self, now: u32) {
+        Editor::poll(self, now);
+    }
+
+    fn answer(
+        &mut self,
+        r: Request<'_>,
+        station: Station,
+        resp: &mut [u8],
+        now: u32,
+    ) -> Result<usize, u16> {
+        config_answer(self, r, station, resp, now)
+    }
+
+    fn editor(&mut self) -> &mut Editor<'static> {
+        self
     }
 }
 
