@@ -1,7 +1,9 @@
 //! The instruction-count bench as a program of its own: no UART, no board
 //! module, only the core peripherals and semihosting, so one source runs on
 //! every Cortex-M machine QEMU has (`lm3s6965evb`, `mps2-an386`,
-//! `microbit`). See `src/bench.rs` for what it counts and how;
+//! `microbit`). See `src/bench.rs` (the core's hex paths) and
+//! `src/bench_line.rs` (the bridge and the gateway on their controller
+//! line) for what it counts and how;
 //! `host-tests/src/bin/icount.rs` builds it, runs it under `-icount` and
 //! prints the figures.
 #![no_std]
@@ -9,6 +11,8 @@
 
 #[path = "../bench.rs"]
 mod bench;
+#[path = "../bench_line.rs"]
+mod bench_line;
 
 use core::fmt::Write as _;
 
@@ -39,7 +43,11 @@ fn exit(status: debug::ExitStatus) -> ! {
 
 #[entry]
 fn main() -> ! {
-    let ok = bench::run(host_print);
+    let ok = bench::start(host_print)
+        .is_some_and(|empty| bench::run(host_print, empty) && bench_line::run(host_print, empty));
+    if ok {
+        host_print(format_args!("bench ok\n"));
+    }
     exit(if ok {
         debug::EXIT_SUCCESS
     } else {
