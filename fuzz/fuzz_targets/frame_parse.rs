@@ -15,7 +15,7 @@ mod common;
 
 use iai_protocol_b::catalogue::{self, text_span};
 use iai_protocol_b::checksum::{BypassPolicy, Checksum, ChecksumField};
-use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 use iai_protocol_b::frame::{Frame, Header};
 use iai_protocol_b::message::*;
 use libfuzzer_sys::fuzz_target;
@@ -95,14 +95,14 @@ fn round_trip(f: &Frame<'_>) {
 fn decoder_verdict(data: &[u8], policy: BypassPolicy) -> Result<(), String> {
     let mut dec = FrameDecoder::<4096>::with_policy(policy);
     let d = dec.decode(data);
-    match d.event {
-        Event::Frame(f) => {
+    match d.status {
+        Status::Complete(Event::Frame(f)) => {
             assert_eq!(d.consumed, data.len(), "a frame before the first CR LF");
             assert_eq!(f.as_bytes(), data);
             Ok(())
         }
-        Event::Error(e) => Err(format!("{e:?}")),
-        Event::NeedMore => Err("NeedMore".into()),
+        Status::Complete(Event::Error(e)) => Err(format!("{e:?}")),
+        Status::Partial => Err("Partial".into()),
     }
 }
 

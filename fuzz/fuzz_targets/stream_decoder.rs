@@ -15,11 +15,11 @@
 //!   per axis, `End { records }` = records seen = announced, `Error {
 //!   records_ok }` = `Record` events before it; an event consumes at least
 //!   one byte; `offset()` never goes back; after `End` / `Error`, `decode`,
-//!   `decode_records` and `push` consume nothing (and say `NeedMore`) until
+//!   `decode_records` and `push` consume nothing (and say `Partial`) until
 //!   `reset`, which zeroes `offset`, `records_done` and `records_announced`
 //!   (the driver then resets and decodes the rest); `decode_records`
 //!   consumes at most its input, writes at most its room, never answers
-//!   `Record`, and answers `NeedMore` with input left only when its slice
+//!   `Record`, and answers `Partial` with input left only when its slice
 //!   is full; at the end the three agree on `offset()` and `records_done()`.
 //! - mode 1: the rest builds up to 11 records; for every kind of
 //!   `PositionStream::ALL`, they are encoded by `PositionStreamEncoder`
@@ -28,8 +28,8 @@
 //!   chunks) gives back `Start` (kind, station, start, count), the same
 //!   records in order and `End`, compared as they come.
 //!
-//! The decoders answer `decoder::Received { consumed, event }`
-//! (`decode_records`: `event` = (records written, event)).
+//! The decoders answer `decoder::Received { consumed, status }`
+//! (`decode_records`: `table::RecordsReceived { consumed, records, status }`).
 //! The harness keeps everything on the stack (records, encoded frame,
 //! encoder output chunks): no allocation per input.
 #![no_main]
@@ -38,7 +38,7 @@
 mod records;
 
 use iai_protocol_b::checksum::BypassPolicy;
-use iai_protocol_b::decoder::Received;
+use iai_protocol_b::decoder::{Received, Status};
 use iai_protocol_b::frame::{Frame, Station};
 use iai_protocol_b::position::{PositionRecord, PositionStream};
 use iai_protocol_b::table::{PositionStreamDecoder, PositionStreamEncoder, StreamEvent};
@@ -48,7 +48,7 @@ use records::Input;
 /// What a finished decoder answers until `reset`.
 const NOTHING: Received<StreamEvent> = Received {
     consumed: 0,
-    event: StreamEvent::NeedMore,
+    status: Status::Partial,
 };
 
 /// Records a round trip builds at most.
@@ -67,7 +67,6 @@ struct Grammar {
 impl Grammar {
     fn see(&mut self, ev: &StreamEvent) {
         match ev {
-            StreamEvent::NeedMore => panic!("NeedMore is not an event"),
             StreamEvent::Start { kind, count, .. } => {
                 assert!(self.started.is_none(), "two Start events in one frame");
                 assert_eq!(self.records, 0);
@@ -127,11 +126,10 @@ impl ByByte<'_> {
     fn next(&mut self) -> Option<StreamEvent> {
         while let Some((&b, rest)) = self.rest.split_first() {
             self.rest = rest;
-            let ev = self.dec.push(b);
-            if ev != StreamEvent::NeedMore {
+            if let Status::Complete(ev) = self.dec.push(b) {
                 if is_final(&ev) {
                     // Nothing more is taken until reset.
-                    assert_eq!(self.dec.push(b'!'), StreamEvent::NeedMore);
+                    assert_eq!(self.dec.push(b'!'), Status::Partial);
                     self.dec.reset();
                 }
                 return Some(ev);
@@ -168,7 +166,7 @@ impl Bulk<'_, '_> {
                 if is_final(&ev) {
                     // Nothing more is taken until reset.
                     let r = self.dec.decode_records(b"!", &mut self.out[..self.room]);
-                    assert_eq!((r.consumed, r.event), (0, (0, StreamEvent::NeedMore)));
+                    assert_eq!((r.consumed, r.records, r.status), (0, 0, Status::Partial));
                     self.dec.reset();
                 }
                 return Some(ev);
@@ -183,23 +181,23 @@ impl Bulk<'_, '_> {
             let r = self
                 .dec
                 .decode_records(self.chunk, &mut self.out[..self.room]);
-            let (k, ev) = r.event;
+            let (k, ev) = (r.records, r.status);
             assert!(r.consumed <= self.chunk.len());
             assert!(k <= self.room, "{k} records written into {}", self.room);
             assert!(
-                !matches!(ev, StreamEvent::Record(_)),
+                !matches!(ev, Status::Complete(StreamEvent::Record(_))),
                 "decode_records gave a Record event"
             );
-            if ev == StreamEvent::NeedMore {
+            if ev == Status::Partial {
                 assert!(
                     r.consumed == self.chunk.len() || k == self.room,
-                    "NeedMore with input left and room in out"
+                    "Partial with input left and room in out"
                 );
             }
             self.chunk = &self.chunk[r.consumed..];
             self.next = 0;
             self.have = k;
-            self.event = (ev != StreamEvent::NeedMore).then_some(ev);
+            self.event = ev.complete();
         }
     }
 }
@@ -232,14 +230,14 @@ fn arbitrary_stream(policy: BypassPolicy, room: usize, cuts: &[u8], stream: &[u8
             let before = dec.offset();
             let Received {
                 consumed: used,
-                event: ev,
+                status,
             } = dec.decode(chunk);
             assert!(used <= chunk.len());
             assert!(dec.offset() >= before, "offset went back");
-            if ev == StreamEvent::NeedMore {
-                assert_eq!(used, chunk.len(), "NeedMore with input left");
+            let Status::Complete(ev) = status else {
+                assert_eq!(used, chunk.len(), "Partial with input left");
                 break;
-            }
+            };
             assert!(used > 0, "an event without consuming");
             g.see(&ev);
             let theirs = other.next().expect("the byte-by-byte decoder ran dry");
@@ -252,7 +250,7 @@ fn arbitrary_stream(policy: BypassPolicy, room: usize, cuts: &[u8], stream: &[u8
                 for later in [chunk, rest, b"!"] {
                     assert_eq!(dec.decode(later), NOTHING);
                 }
-                assert_eq!(dec.push(b'#'), StreamEvent::NeedMore);
+                assert_eq!(dec.push(b'#'), Status::Partial);
                 dec.reset();
                 assert_eq!(
                     (dec.offset(), dec.records_done(), dec.records_announced()),
@@ -330,13 +328,13 @@ fn round_trip(policy: BypassPolicy, cuts: &[u8], mut input: Input<'_>) {
             let k = lens.next().min(rest.len());
             let Received {
                 consumed: used,
-                event: ev,
+                status,
             } = dec.decode(&rest[..k]);
             rest = &rest[used..];
-            if ev == StreamEvent::NeedMore {
+            let Status::Complete(ev) = status else {
                 assert_eq!(used, k);
                 continue;
-            }
+            };
             match at {
                 0 => assert_eq!(
                     ev,
