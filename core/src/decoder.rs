@@ -376,6 +376,26 @@ impl Inner {
         false
     }
 
+    /// [`Inner::store_plain`] for the leading plain bytes of `input`, as
+    /// many as the buffer takes: a run of a body copied in one loop.
+    /// Returns how many it stored.
+    fn store_run(&mut self, buf: &mut [u8], input: &[u8]) -> usize {
+        let end = self.plain_until.min(buf.len());
+        let Some(room) = buf.get_mut(self.len..end) else {
+            return 0;
+        };
+        let mut n = 0;
+        for (slot, &b) in room.iter_mut().zip(input) {
+            if !plain(b) {
+                break;
+            }
+            *slot = b;
+            n += 1;
+        }
+        self.len += n;
+        n
+    }
+
     /// Sets `plain_until` from the state (see its docs).
     fn watch(&mut self, capacity: usize) {
         let body = self.state == State::InFrame
@@ -405,11 +425,13 @@ impl Inner {
         let mut consumed = 0;
         let mut outcome = self.replay(buf);
         if matches!(outcome, Step::More) {
-            for &b in input {
-                consumed += 1;
-                if self.store_plain(buf, b) {
+            while let Some(&b) = input.get(consumed) {
+                let run = self.store_run(buf, input.get(consumed..).unwrap_or(&[]));
+                if run > 0 {
+                    consumed += run;
                     continue;
                 }
+                consumed += 1;
                 outcome = self.step(buf, b);
                 if !matches!(outcome, Step::More) {
                     break;
