@@ -456,19 +456,6 @@ impl PositionStreamDecoder {
             if rest.is_empty() {
                 break;
             }
-            // A whole, well-formed envelope and prefix, or trailer, in the
-            // input: read in place (anything else goes through the stage,
-            // which says what is wrong).
-            if self.stage.len == 0 {
-                let whole = match self.phase {
-                    DecPhase::Envelope => self.start_in_place(rest),
-                    DecPhase::Trailer => self.end_in_place(rest),
-                    _ => None,
-                };
-                if let Some((len, ev)) = whole {
-                    return (used + len, Status::Complete(ev));
-                }
-            }
             // A whole well-formed record in the input: read it in place.
             if self.phase == DecPhase::RecordHead && self.stage.len == 0 {
                 if let Some(kind) = self.kind {
@@ -480,6 +467,19 @@ impl PositionStreamDecoder {
                         self.enter_record_or_trailer(kind);
                         return (used + len, Status::Complete(StreamEvent::Record(rec)));
                     }
+                }
+            }
+            // A whole, well-formed envelope and prefix, or trailer, in the
+            // input: read in place (anything else goes through the stage,
+            // which says what is wrong).
+            if self.stage.len == 0 {
+                let whole = match self.phase {
+                    DecPhase::Envelope => self.start_in_place(rest),
+                    DecPhase::Trailer => self.end_in_place(rest),
+                    _ => None,
+                };
+                if let Some((len, ev)) = whole {
+                    return (used + len, Status::Complete(ev));
                 }
             }
             let want = self.need.saturating_sub(self.stage.len);
