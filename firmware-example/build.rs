@@ -10,7 +10,8 @@
 //!   reference: a link with any other `memory.x` fails (undefined symbol),
 //!   and `tools/size-report.sh` prints the symbol from each ELF. There must
 //!   be no `memory.x` in this crate's folder.
-//! * The device crates (`lm3s6965`, `mps2-an386`, `stm32g0`) provide
+//! * The device crates (`lm3s6965`, `mps2-an386`, and `stm32-metapac` for
+//!   the STM32 boards, through embassy-stm32 or directly) provide
 //!   `device.x` and the interrupt vector table for cortex-m-rt's `device`
 //!   feature; without a board (`icount_bench`) an empty `device.x` is
 //!   written here.
@@ -38,10 +39,16 @@ fn main() {
         !manifest_dir.join("memory.x").exists(),
         "firmware-example/memory.x would shadow the shared ../memory.x; remove it"
     );
-    let boards = ["LM3S6965", "MPS2_AN386", "STM32G030", "STM32G070"]
-        .iter()
-        .filter(|b| env::var_os(format!("CARGO_FEATURE_BOARD_{b}")).is_some())
-        .count();
+    let boards = [
+        "LM3S6965",
+        "MPS2_AN386",
+        "STM32G030",
+        "STM32G070",
+        "B_L475E_IOT01A",
+    ]
+    .iter()
+    .filter(|b| env::var_os(format!("CARGO_FEATURE_BOARD_{b}")).is_some())
+    .count();
     assert!(
         boards <= 1,
         "select one board feature at a time (e.g. --no-default-features --features board-mps2-an386)"
@@ -51,6 +58,8 @@ fn main() {
         "memory-stm32g030.x"
     } else if env::var_os("CARGO_FEATURE_BOARD_STM32G070").is_some() {
         "memory-stm32g070.x"
+    } else if env::var_os("CARGO_FEATURE_BOARD_B_L475E_IOT01A").is_some() {
+        "memory-stm32l475.x"
     } else {
         "memory-qemu.x"
     };
@@ -72,7 +81,7 @@ fn main() {
         // than a board's flash, so it gets the 4 MiB of mps2-an386.
         fs::write(
             dir.join("board-memory.x"),
-            "CONFIG_PAGE = 1K;\nMEMORY\n{\n  FLASH : ORIGIN = 0x00000000, LENGTH = 4096K - 1K\n  \
+            "CONFIG_PAGE = 2K;\nMEMORY\n{\n  FLASH : ORIGIN = 0x00000000, LENGTH = 4096K - 2K\n  \
              RAM   : ORIGIN = 0x20000000, LENGTH = 64K\n}\n",
         )
         .expect("write the proof's memory map");
@@ -96,6 +105,7 @@ fn main() {
         repo_root.join("memory.x").display()
     );
     println!("cargo:rustc-link-arg-bins=-Tlink.x");
+    println!("cargo:rustc-link-arg-examples=-Tlink.x");
     if env::var_os("CARGO_FEATURE_DEFMT").is_some() {
         println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
     }

@@ -29,7 +29,7 @@ cargo +1.87 build -q -p iai-protocol-b --all-features
 cargo +1.87 build -q -p iai-protocol-b --target thumbv7em-none-eabihf
 echo "ok: core builds with Rust 1.87"
 
-step "firmware: the bridge library (host), four boards, the Ethernet board, defmt feature, the icount bench, clippy -D warnings"
+step "firmware: the bridge library (host), five boards, the Ethernet board, the embassy example, defmt feature, the icount bench, clippy -D warnings"
 cargo clippy -q -p firmware-example --no-default-features --lib --tests -- -D warnings
 cargo clippy -q -p firmware-example --no-default-features --features ethernet --lib --tests -- -D warnings
 cargo clippy -q -p firmware-example --target thumbv7m-none-eabi \
@@ -41,10 +41,12 @@ cargo clippy -q -p firmware-example --target thumbv6m-none-eabi \
   --no-default-features --features board-stm32g030 -- -D warnings
 cargo clippy -q -p firmware-example --target thumbv6m-none-eabi \
   --no-default-features --features board-stm32g070 -- -D warnings
+cargo clippy -q -p firmware-example --target thumbv7em-none-eabihf \
+  --no-default-features --features board-b-l475e-iot01a --bins --examples -- -D warnings
 cargo clippy -q -p mps2-an386 --target thumbv7em-none-eabihf --features rt -- -D warnings
 cargo clippy -q -p firmware-example --target thumbv7m-none-eabi --features defmt -- -D warnings
 cargo clippy -q -p firmware-example --target thumbv7em-none-eabihf \
-  --no-default-features --features rt --bin icount_bench -- -D warnings
+  --no-default-features --features icount-bench --bin icount_bench -- -D warnings
 echo "debug build (what a new user types first):"
 cargo build -q -p firmware-example --target thumbv7m-none-eabi
 echo "ok: cargo build -p firmware-example --target thumbv7m-none-eabi"

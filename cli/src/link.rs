@@ -336,6 +336,32 @@ impl Link {
         self.link.line()
     }
 
+    /// What the user should know when the line showed that it repeats
+    /// frames (it heard frames it could not place): every reply taken was
+    /// proved or asked again, but the line is slow until its duplicate
+    /// window is declared.
+    pub fn repeats_note(&self) -> Option<String> {
+        let line = self.line();
+        line.repeats().then(|| {
+            format!(
+                "this line repeats frames: {} frame(s) could not be placed (copies of earlier replies, or replies out of order); every reply counted was proved by a fence or asked again, expecting copies up to {} ms after a reply; declare it with --duplicate-window-ms {} to work faster",
+                line.stats().unplaced,
+                line.copy_window(),
+                line.copy_window()
+            )
+        })
+    }
+
+    /// Runs `f` with a line of its own to `cfg.station` over this link (a
+    /// bridge's own station), then puts this link's line back (see
+    /// `hosted::StdLink::replace_line`).
+    pub fn with_line<T>(&mut self, cfg: LineConfig, f: impl FnOnce(&mut Link) -> T) -> T {
+        let own = self.link.replace_line(cfg);
+        let r = f(self);
+        self.link.put_back_line(own);
+        r
+    }
+
     /// The core's memory of this line, to start a command on it.
     pub fn line_mut(&mut self) -> &mut Line {
         self.link.line_mut()

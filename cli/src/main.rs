@@ -153,6 +153,151 @@ pub(crate) enum BridgeCmd {
     /// it decoded: configuration, counters, last error.
     #[command(after_help = help::BRIDGE_STATUS)]
     Status(BridgeStatusArgs),
+    /// The gateway's configuration page: show it, change settings, apply
+    /// a file, or make an image to flash.
+    #[command(subcommand)]
+    Config(ConfigCmd),
+    /// Restart the gateway (B23H to its own station, with the password):
+    /// what was applied takes effect. Waits until it answers again.
+    #[command(after_help = help::BRIDGE_RESTART)]
+    Restart(BridgeRestartArgs),
+}
+
+#[derive(Subcommand)]
+pub(crate) enum ConfigCmd {
+    /// Show every setting of the configuration page in force (B20H), as
+    /// TOML (the form `config apply` takes) or JSON.
+    #[command(after_help = help::CONFIG_GET)]
+    Get(ConfigGetArgs),
+    /// Change settings (key=value, as `config get` names them) and apply
+    /// the page (B21H, B22H; B24H for access.password). Most take effect
+    /// at the next start (`iai bridge restart`).
+    #[command(after_help = help::CONFIG_SET)]
+    Set(ConfigSetArgs),
+    /// Apply the settings a TOML file gives (the others keep their
+    /// values).
+    #[command(after_help = help::CONFIG_APPLY)]
+    Apply(ConfigApplyArgs),
+    /// Write a TOML file's settings as an image of the configuration page
+    /// to flash with a programmer (no gateway needed); says where.
+    #[command(after_help = help::CONFIG_BLOCK)]
+    Block(ConfigBlockArgs),
+}
+
+/// The bridge on a line, for its configuration messages.
+#[derive(Args)]
+pub(crate) struct BridgeAt {
+    #[command(flatten)]
+    pub(crate) link: LinkArgs,
+    /// The bridge's own station (two hex digits).
+    #[arg(long, default_value = "BB", value_parser = parse_station)]
+    pub(crate) bridge_station: u8,
+    /// How long each reply may take, ms.
+    #[arg(long, value_name = "MS", default_value_t = 3_000,
+          value_parser = clap::value_parser!(u32).range(1..=600_000))]
+    pub(crate) timeout: u32,
+    /// Reads sent again after the first when no reply came (changes are
+    /// sent once).
+    #[arg(long, value_name = "N", default_value_t = 2,
+          value_parser = clap::value_parser!(u8).range(0..=9))]
+    pub(crate) retries: u8,
+}
+
+/// The gateway's password (every change needs it): --password,
+/// --password-file, or the environment variable IAI_BRIDGE_PASSWORD.
+#[derive(Args)]
+pub(crate) struct PasswordArgs {
+    /// The gateway's password (seen by other users of this machine in the
+    /// process list: prefer --password-file or IAI_BRIDGE_PASSWORD).
+    #[arg(long, value_name = "PASSWORD", conflicts_with = "password_file")]
+    pub(crate) password: Option<String>,
+    /// A file whose first line is the gateway's password.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) password_file: Option<PathBuf>,
+}
+
+#[derive(Args)]
+pub(crate) struct ConfigGetArgs {
+    #[command(flatten)]
+    pub(crate) at: BridgeAt,
+    /// One JSON object instead of TOML.
+    #[arg(long)]
+    pub(crate) json: bool,
+    /// Also write the page as an image for `--board`'s slots (with the
+    /// password, its verifier too, so that the image keeps the password).
+    #[arg(long, value_name = "FILE")]
+    pub(crate) image: Option<PathBuf>,
+    /// The board whose slots the image is for.
+    #[arg(long, value_enum, default_value = "lm3s6965")]
+    pub(crate) board: BoardArg,
+    #[command(flatten)]
+    pub(crate) password: PasswordArgs,
+}
+
+#[derive(Args)]
+pub(crate) struct ConfigSetArgs {
+    /// Settings as key=value (`modbus.unit=5`, `access.password=NEW`).
+    #[arg(required = true, value_name = "KEY=VALUE")]
+    pub(crate) settings: Vec<String>,
+    #[command(flatten)]
+    pub(crate) at: BridgeAt,
+    #[command(flatten)]
+    pub(crate) password: PasswordArgs,
+    /// One JSON object for the result.
+    #[arg(long)]
+    pub(crate) json: bool,
+}
+
+#[derive(Args)]
+pub(crate) struct ConfigApplyArgs {
+    /// A TOML file (as `config get` prints).
+    pub(crate) file: PathBuf,
+    #[command(flatten)]
+    pub(crate) at: BridgeAt,
+    #[command(flatten)]
+    pub(crate) password: PasswordArgs,
+    /// One JSON object for the result.
+    #[arg(long)]
+    pub(crate) json: bool,
+}
+
+#[derive(Args)]
+pub(crate) struct ConfigBlockArgs {
+    /// A TOML file (as `config get` prints); what it leaves out is blank
+    /// (the defaults).
+    pub(crate) file: PathBuf,
+    /// The image to write.
+    #[arg(short = 'o', long = "output", value_name = "FILE")]
+    pub(crate) output: PathBuf,
+    /// The board whose slots the image is for.
+    #[arg(long, value_enum, default_value = "lm3s6965")]
+    pub(crate) board: BoardArg,
+}
+
+#[derive(Args)]
+pub(crate) struct BridgeRestartArgs {
+    #[command(flatten)]
+    pub(crate) at: BridgeAt,
+    #[command(flatten)]
+    pub(crate) password: PasswordArgs,
+    /// How long to wait for the gateway to answer again, s (0: do not
+    /// wait).
+    #[arg(long, value_name = "S", default_value_t = 30)]
+    pub(crate) wait: u32,
+}
+
+/// Boards with configuration slots.
+#[derive(Clone, Copy, ValueEnum)]
+pub(crate) enum BoardArg {
+    /// QEMU lm3s6965evb, or an LM3S6965 (two 1 KiB slots at 0x3F800).
+    Lm3s6965,
+    /// QEMU mps2-an386 (two 1 KiB slots at 0x3F800).
+    #[value(name = "mps2-an386")]
+    Mps2An386,
+    /// STM32G030x8 (two 2 KiB slots at 0x0800F000).
+    Stm32g030,
+    /// STM32G070xB (two 2 KiB slots at 0x0801F000).
+    Stm32g070,
 }
 
 #[derive(Subcommand)]
@@ -591,6 +736,17 @@ fn main() -> ExitCode {
             };
             cmd::modbus::map_cmd(form)
         }
+        Cmd::Bridge {
+            op: BridgeCmd::Config(c),
+        } => match c {
+            ConfigCmd::Get(a) => cmd::bridge::config_get(&a),
+            ConfigCmd::Set(a) => cmd::bridge::config_set(&a),
+            ConfigCmd::Apply(a) => cmd::bridge::config_apply(&a),
+            ConfigCmd::Block(a) => cmd::bridge::config_block(&a),
+        },
+        Cmd::Bridge {
+            op: BridgeCmd::Restart(a),
+        } => cmd::bridge::restart_cmd(&a),
         Cmd::Ports { json } => cmd::diag::ports_cmd(json),
         Cmd::Probe(a) => cmd::diag::probe_cmd(&a),
         Cmd::Simulate(args) => cmd::simulate::simulate_cmd(&args),

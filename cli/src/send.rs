@@ -24,9 +24,11 @@ pub enum Outcome {
 /// Sends `frame` (a complete command frame) and waits for its reply;
 /// with `detail`, an error response is followed by the 216H query.
 pub fn request(link: &mut Link, frame: &[u8], detail: bool) -> std::io::Result<Outcome> {
-    let mut client: Box<Client> = Box::new(Client::new());
+    let mut client: Box<Client> = Box::new(Client::new().with_proof());
     if detail {
-        *client = Client::new().with_error_detail_except(firmware_example::codes::is_bridge_code);
+        *client = Client::new()
+            .with_proof()
+            .with_error_detail_except(firmware_example::codes::is_bridge_code);
     }
     let now = link.now();
     client
@@ -139,6 +141,9 @@ pub fn failure_json(e: &Failure, message: &str) -> String {
         }
         Failure::OutcomeUnknown { sends } => {
             json!({"type": "failure", "failure": "outcome_unknown", "sends": sends})
+        }
+        Failure::Unconfirmed { unplaced } => {
+            json!({"type": "failure", "failure": "unconfirmed", "unplaced": unplaced})
         }
         Failure::Protocol(_) => json!({"type": "failure", "failure": "protocol"}),
         _ => json!({"type": "failure", "failure": "other"}),

@@ -24,6 +24,7 @@ use iai_protocol_b::position::{PositionRecord, PositionStream};
 use iai_protocol_b::profile::Profile;
 use iai_protocol_b::readback::{ReadBackStats, ReplyRecords};
 use iai_protocol_b::transfer::{Guarantee, TransferStats};
+use iai_protocol_b::upload::{Upload, UploadConfig};
 use iai_protocol_b::{
     client::Client, error::Failure, frame::Station, line::LineConfig, readback::ReadBack,
     readback::ReadBackConfig, transfer::Transfer, transfer::TransferConfig, transfer::Verify,
@@ -240,10 +241,49 @@ pub fn read(
     plan: &Plan,
     first: u16,
     last: u16,
+    window: impl FnMut(Window) -> bool,
+    hooks: &Hooks<'_>,
+) -> Result<ReadBackStats, TableError> {
+    read_with(link, plan.read_config(first, last), window, hooks)
+}
+
+/// Reads positions `first..=last` once per window (each reply proved,
+/// not confirmed by a second): the records they hold. What a resumed
+/// read checks its kept records against: together with the confirmed
+/// read that kept them, two replies agree.
+pub fn read_once(
+    link: &mut Link,
+    plan: &Plan,
+    first: u16,
+    last: u16,
+    hooks: &Hooks<'_>,
+) -> Result<BTreeMap<u16, PositionRecord>, TableError> {
+    let cfg = ReadBackConfig {
+        confirm: false,
+        ..plan.read_config(first, last)
+    };
+    let mut got = BTreeMap::new();
+    read_with(
+        link,
+        cfg,
+        |w| {
+            got.extend(w.records.into_iter().map(|r| (r.number, r)));
+            true
+        },
+        hooks,
+    )?;
+    Ok(got)
+}
+
+/// [`read`] with the read-back's settings given.
+fn read_with(
+    link: &mut Link,
+    cfg: ReadBackConfig,
     mut window: impl FnMut(Window) -> bool,
     hooks: &Hooks<'_>,
 ) -> Result<ReadBackStats, TableError> {
-    let mut rb: ReadBack<FRAME> = ReadBack::new(plan.read_config(first, last));
+    let last = cfg.last;
+    let mut rb: ReadBack<FRAME> = ReadBack::new(cfg);
     let mut refusals = 0;
     let enough = Cell::new(false);
     let stop = || enough.get() || (hooks.stop)();
@@ -290,7 +330,7 @@ pub fn command<'a, R: Request<'a>>(
     req: &R,
     hooks: &Hooks<'_>,
 ) -> Result<Vec<u8>, TableError> {
-    let mut client: Box<Client> = Box::new(Client::new());
+    let mut client: Box<Client> = Box::new(Client::new().with_proof());
     let now = link.now();
     client
         .start(link.line_mut(), req, now)
@@ -300,6 +340,65 @@ pub fn command<'a, R: Request<'a>>(
         .reply_frame()
         .map(|f| f.as_bytes().to_vec())
         .unwrap_or_default())
+}
+
+/// Sends the raw command `frame` to another responder on the line (a
+/// bridge's own station), on a line of its own with settings `cfg`: its
+/// reply frame; an `&` is `Engine(Failure::Controller)`.
+pub fn command_to(
+    link: &mut Link,
+    cfg: LineConfig,
+    frame: &[u8],
+    hooks: &Hooks<'_>,
+) -> Result<Vec<u8>, TableError> {
+    link.with_line(cfg, |link| {
+        let mut client: Box<Client> = Box::new(Client::new().with_proof());
+        let now = link.now();
+        client
+            .start_frame(link.line_mut(), frame, now)
+            .map_err(|e| TableError::Engine(Failure::Protocol(e)))?;
+        run(link, client.as_mut(), hooks, |_| false, None)?;
+        Ok(client
+            .reply_frame()
+            .map(|f| f.as_bytes().to_vec())
+            .unwrap_or_default())
+    })
+}
+
+/// Sends `records` as one command of `stream` (a bridge splits it into
+/// the controller's commands and answers once; see
+/// [`iai_protocol_b::upload`]), the reply awaited `intake_ms` longer than
+/// the sending took; `progress` is told the bytes sent so far. The count
+/// the reply confirmed.
+pub fn upload(
+    link: &mut Link,
+    stream: PositionStream,
+    records: &[PositionRecord],
+    intake_ms: u32,
+    mut progress: impl FnMut(u64),
+    hooks: &Hooks<'_>,
+) -> Result<u16, TableError> {
+    let count = u16::try_from(records.len()).map_err(|_| {
+        TableError::Refused(format!("{} records do not fit one message", records.len()))
+    })?;
+    let cfg = UploadConfig {
+        stream,
+        start: 0,
+        intake_ms,
+    };
+    let now = link.now();
+    let mut up = Upload::start(cfg, records.iter(), count, link.line_mut(), now)
+        .map_err(|e| TableError::Engine(Failure::Protocol(e)))?;
+    run(
+        link,
+        &mut up,
+        hooks,
+        |u| {
+            progress(u.bytes_sent());
+            false
+        },
+        None,
+    )
 }
 
 /// The largest value field `field` of `msg` carries, from its width in

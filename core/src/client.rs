@@ -19,8 +19,15 @@
 //! Sans-IO at heart, in the shape of every engine ([`crate::engine`]):
 //! [`Client::start`] a command, then [`Client::poll`], [`Client::sent`]
 //! and [`Client::received`] until [`Step::Done`]; [`Client::response`]
-//! then parses the reply as the command's typed response. The timing,
+//! then parses the reply as the command's typed response, the type
+//! following from the [`Pending`] ticket that `start` gave. The timing,
 //! resends and what may still arrive are the line's ([`crate::line`]).
+//!
+//! With [`Client::with_proof`] a reply counts only once a fence sent after
+//! it proved the order ([`Line::start_proof`]): if the line heard a frame
+//! it could not place meanwhile (it repeats frames), the reply may be a
+//! copy of an earlier one; a query is asked again (the line now expects
+//! copies), anything else ends [`Failure::Unconfirmed`].
 //!
 //! An error response becomes [`Failure::Controller`] with its code. With
 //! [`Client::with_error_detail`] the client then asks 216H for the latest
@@ -31,6 +38,8 @@
 //! RAM: a command buffer of `CMD` bytes and a reply buffer of `REPLY`
 //! bytes (defaults: the TTA's 2,051 and 2,048). A client for small
 //! commands and replies can be much smaller: `Client<64, 128>`.
+
+use core::marker::PhantomData;
 
 use crate::catalogue;
 use crate::checksum::BypassPolicy;
@@ -51,10 +60,17 @@ enum Phase {
     Running {
         detail_for: Option<u16>,
     },
+    /// The reply is taken; a fence proves no copy stood in for it.
+    Proving {
+        started: bool,
+    },
     /// Over: `Ok(true)` with a reply, `Ok(false)` for a command without
     /// normal response.
     Done(Result<bool, Failure>),
 }
+
+/// Times a query is asked again when its reply could not be proved.
+const PROOF_ASKS: u8 = 2;
 
 /// Sends commands and matches their replies.
 pub struct Client<
@@ -70,6 +86,40 @@ pub struct Client<
     phase: Phase,
     /// The ID of the command started last.
     id: u16,
+    /// Prove each reply before it counts.
+    prove: bool,
+    /// The line's count of unplaced frames when the command started.
+    unplaced_at_start: u32,
+    /// Times the command was asked again for want of a proof.
+    asked_again: u8,
+    /// Requests started so far: which one a [`Pending`] is for.
+    started: u32,
+}
+
+/// A request started on a [`Client`]: the ticket to its reply, whose type
+/// follows from the request's ([`Client::response`]).
+pub struct Pending<R> {
+    started: u32,
+    id: u16,
+    request: PhantomData<fn() -> R>,
+}
+
+impl<R> Clone for Pending<R> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<R> Copy for Pending<R> {}
+impl<R> PartialEq for Pending<R> {
+    fn eq(&self, other: &Self) -> bool {
+        (self.started, self.id) == (other.started, other.id)
+    }
+}
+impl<R> Eq for Pending<R> {}
+impl<R> core::fmt::Debug for Pending<R> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "Pending({:03X}H, #{})", self.id, self.started)
+    }
 }
 
 impl<const CMD: usize, const REPLY: usize> Default for Client<CMD, REPLY> {
@@ -88,7 +138,18 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
             fetch_error_detail: None,
             phase: Phase::Idle,
             id: 0,
+            prove: false,
+            unplaced_at_start: 0,
+            asked_again: 0,
+            started: 0,
         }
+    }
+
+    /// This client, proving each reply before it counts (see the module
+    /// docs): one fence more per command.
+    pub const fn with_proof(mut self) -> Self {
+        self.prove = true;
+        self
     }
 
     /// This client, asking 216H for the detail of every error response.
@@ -112,14 +173,13 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
         line: &mut Line,
         req: &R,
         now: u32,
-    ) -> Result<(), Error> {
+    ) -> Result<Pending<R>, Error> {
         let cfg = line.config();
         self.phase = Phase::Idle;
         self.command_len = req.emit_with(cfg.station, cfg.checksum, &mut self.command)?;
         line.start(R::INFO, now);
         self.id = R::ID;
-        self.phase = Phase::Running { detail_for: None };
-        Ok(())
+        Ok(self.began(line))
     }
 
     /// [`Client::start`], sent at most `max_sends` times (0 is read as 1)
@@ -131,14 +191,13 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
         req: &R,
         max_sends: u8,
         now: u32,
-    ) -> Result<(), Error> {
+    ) -> Result<Pending<R>, Error> {
         let cfg = line.config();
         self.phase = Phase::Idle;
         self.command_len = req.emit_with(cfg.station, cfg.checksum, &mut self.command)?;
         line.start_raw(R::ID, max_sends, now);
         self.id = R::ID;
-        self.phase = Phase::Running { detail_for: None };
-        Ok(())
+        Ok(self.began(line))
     }
 
     /// Starts a command given as a complete frame (a tool sending what a
@@ -163,8 +222,20 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
         let max_sends = line.config().max_sends;
         line.start_raw(f.code(), max_sends, now);
         self.id = f.code();
-        self.phase = Phase::Running { detail_for: None };
+        let _: Pending<()> = self.began(line);
         Ok(())
+    }
+
+    fn began<R>(&mut self, line: &Line) -> Pending<R> {
+        self.unplaced_at_start = line.stats().unplaced;
+        self.asked_again = 0;
+        self.phase = Phase::Running { detail_for: None };
+        self.started = self.started.wrapping_add(1);
+        Pending {
+            started: self.started,
+            id: self.id,
+            request: PhantomData,
+        }
     }
 
     /// Decides the next step at tick `now`.
@@ -173,6 +244,23 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
             let detail_for = match self.phase {
                 Phase::Idle => return Step::Idle,
                 Phase::Done(r) => return Step::Done(r.map(|_| ())),
+                Phase::Proving { started: false } => {
+                    line.start_proof(now);
+                    self.phase = Phase::Proving { started: true };
+                    continue;
+                }
+                Phase::Proving { started: true } => {
+                    match line.poll(now) {
+                        Due::Fence => return Step::Transmit(line.fence_bytes()),
+                        Due::WaitUntil(t) => return Step::WaitUntil(t),
+                        Due::Done(Ok(())) => self.proved(line, now),
+                        Due::Done(Err(e)) => self.phase = Phase::Done(Err(e)),
+                        Due::Send { .. } | Due::Idle => {
+                            self.phase = Phase::Proving { started: false }
+                        }
+                    }
+                    continue;
+                }
                 Phase::Running { detail_for } => detail_for,
             };
             match line.poll(now) {
@@ -221,7 +309,32 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
             }
             (Err(e), None) => Err(e),
         };
-        self.phase = Phase::Done(result);
+        self.phase = if self.prove && result == Ok(true) && detail_for.is_none() {
+            Phase::Proving { started: false }
+        } else {
+            Phase::Done(result)
+        };
+    }
+
+    /// The proof's echo is back: the reply counts if nothing unplaced came
+    /// since the command started; else a query is asked again.
+    fn proved(&mut self, line: &mut Line, now: u32) {
+        let unplaced = line.stats().unplaced;
+        if unplaced == self.unplaced_at_start {
+            self.phase = Phase::Done(Ok(true));
+            return;
+        }
+        let safe = catalogue::request_rules(self.id)
+            .is_some_and(|(resend, _)| resend == catalogue::Resend::Safe);
+        if safe && self.asked_again < PROOF_ASKS {
+            self.asked_again += 1;
+            self.unplaced_at_start = unplaced;
+            let max_sends = line.config().max_sends;
+            line.start_raw(self.id, max_sends, now);
+            self.phase = Phase::Running { detail_for: None };
+        } else {
+            self.phase = Phase::Done(Err(Failure::Unconfirmed { unplaced }));
+        }
     }
 
     fn has_normal_response(&self, line: &Line) -> bool {
@@ -270,19 +383,26 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
         }
     }
 
-    /// The finished request's reply, as `R`'s response type. For a command
-    /// without normal response (25BH) that is the default value.
-    pub fn response<'c, 'a, R>(&'c self) -> Result<R::Response<'c>, Error>
+    /// The reply to the request `pending` stands for, as its response type
+    /// (for a command without normal response, 25BH, the default value):
+    /// [`Error::NoReply`] if it took none (it failed or is not over),
+    /// [`Error::UnexpectedMessageId`] if another request was started
+    /// since.
+    pub fn response<'c, 'a, R>(&'c self, pending: &Pending<R>) -> Result<R::Response<'c>, Error>
     where
         R: Request<'a>,
         R::Response<'c>: Default,
     {
+        if pending.started != self.started {
+            return Err(Error::UnexpectedMessageId {
+                expected: pending.id,
+                found: self.id,
+            });
+        }
         match self.phase {
             Phase::Done(Ok(false)) => Ok(Default::default()),
             _ => {
-                let frame = self
-                    .reply_frame()
-                    .ok_or(Error::UnknownMessageId { id: R::ID })?;
+                let frame = self.reply_frame().ok_or(Error::NoReply { id: R::ID })?;
                 <R::Response<'c> as Message<'c>>::parse(&frame)
             }
         }
@@ -303,9 +423,9 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
         U: embedded_io::Read + embedded_io::ReadReady + embedded_io::Write,
         C: Clock,
     {
-        self.start(line, req, clock.now_ms())?;
+        let pending = self.start(line, req, clock.now_ms())?;
         engine::run_blocking(self, line, uart, clock)?;
-        Ok(self.response::<R>()?)
+        Ok(self.response(&pending)?)
     }
 
     /// Makes what progress is possible without waiting for the started
@@ -341,19 +461,18 @@ impl<const CMD: usize, const REPLY: usize> Client<CMD, REPLY> {
         U: embedded_io_async::Read + embedded_io_async::ReadReady + embedded_io_async::Write,
         C: crate::clock::AsyncClock,
     {
-        self.start(line, req, clock.now_ms())?;
+        let pending = self.start(line, req, clock.now_ms())?;
         engine::run_async(self, line, uart, clock, poll_ms).await?;
-        Ok(self.response::<R>()?)
+        Ok(self.response(&pending)?)
     }
 }
 
 impl<const CMD: usize, const REPLY: usize> Engine for Client<CMD, REPLY> {
     type Output = ();
     fn poll<'a>(&'a mut self, line: &'a mut Line, now: u32) -> Step<'a, ()> {
-        let id = self.id;
         match Client::poll(self, line, now) {
             // Nothing was started: nothing will ever finish.
-            Step::Idle => Step::Done(Err(Failure::Protocol(Error::UnknownMessageId { id }))),
+            Step::Idle => Step::Done(Err(Failure::Protocol(Error::NotStarted))),
             step => step,
         }
     }

@@ -908,7 +908,7 @@ mod golden {
             input = &input[d.consumed..];
             let ev = match d.status {
                 Status::Partial => {
-                    assert!(input.is_empty(), "NeedMore with input left");
+                    assert!(input.is_empty(), "Partial with input left");
                     break;
                 }
                 Status::Complete(Event::Frame(f)) => Ok(f.len()),

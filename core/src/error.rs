@@ -89,6 +89,14 @@ pub enum Error {
         /// The ID found.
         id: u16,
     },
+    /// No reply was taken for the request with this ID: it failed, had
+    /// none to take, or is not over.
+    NoReply {
+        /// The request's ID.
+        id: u16,
+    },
+    /// An engine was run before anything was started on it.
+    NotStarted,
     /// The message body ended before all its fields were read.
     BodyTooShort {
         /// Offset (in the frame) where the next field should have started.
@@ -173,6 +181,8 @@ impl core::fmt::Display for Error {
                 write!(f, "expected station {expected:02X}, found {found:02X}")
             }
             Error::UnknownMessageId { id } => write!(f, "unknown message ID {id:03X}H"),
+            Error::NoReply { id } => write!(f, "no reply was taken for {id:03X}H"),
+            Error::NotStarted => f.write_str("nothing was started on the engine"),
             Error::BodyTooShort { offset } => write!(f, "body ends early at offset {offset}"),
             Error::TrailingBytes { offset } => write!(f, "unexpected bytes from offset {offset}"),
             Error::ValueOutOfRange { offset } => {
@@ -244,6 +254,15 @@ pub enum Failure<E = core::convert::Infallible> {
         /// Why.
         error: Error,
     },
+    /// The line repeats frames or answers out of order (it heard frames
+    /// it could not place, [`crate::line::Heard::Unplaced`]) and asking
+    /// again did not give a reply that a proof of order confirmed: the
+    /// reply taken may be a copy of an earlier one. Declare the line's
+    /// duplicate window (`LineConfig::duplicate_window_ms`).
+    Unconfirmed {
+        /// Frames the line could not place.
+        unplaced: u32,
+    },
     /// A command could not be emitted, a reply not parsed as the type
     /// asked for, or the configuration cannot work.
     Protocol(Error),
@@ -276,6 +295,7 @@ impl Failure {
                 records,
             },
             Failure::InvalidRecord { index, error } => Failure::InvalidRecord { index, error },
+            Failure::Unconfirmed { unplaced } => Failure::Unconfirmed { unplaced },
             Failure::Protocol(e) => Failure::Protocol(e),
             Failure::Closed => Failure::Closed,
             Failure::Io(never) => match never {},
@@ -314,6 +334,10 @@ impl<E: core::fmt::Debug> core::fmt::Display for Failure<E> {
             Failure::InvalidRecord { index, error } => {
                 write!(f, "record {index} cannot be encoded: {error}")
             }
+            Failure::Unconfirmed { unplaced } => write!(
+                f,
+                "the line repeats frames ({unplaced} it could not place) and no reply could be confirmed: declare its duplicate window"
+            ),
             Failure::Protocol(e) => write!(f, "{e}"),
             Failure::Closed => f.write_str("the link closed"),
             Failure::Io(e) => write!(f, "I/O error: {e:?}"),

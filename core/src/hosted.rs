@@ -179,6 +179,21 @@ impl<S: WaitRead> StdLink<S> {
         &mut self.line
     }
 
+    /// Puts a new line with settings `cfg` in place of this link's, seeded
+    /// as at start, and returns the one it replaces (to put back with
+    /// [`StdLink::put_back_line`]): another responder on the same wire
+    /// (a bridge's own station) gets a line of its own. What arrives for
+    /// the first line meanwhile is heard by the other, so do this before
+    /// the first line owes anything.
+    pub fn replace_line(&mut self, cfg: LineConfig) -> Line {
+        core::mem::replace(&mut self.line, Line::new(cfg, seed()))
+    }
+
+    /// Puts back a line that [`StdLink::replace_line`] returned.
+    pub fn put_back_line(&mut self, line: Line) {
+        self.line = line;
+    }
+
     /// The stream.
     pub fn stream(&mut self) -> &mut S {
         &mut self.stream
@@ -211,9 +226,9 @@ impl<S: WaitRead> StdLink<S> {
         R::Response<'c>: Default,
     {
         let now = self.now();
-        client.start(&mut self.line, req, now)?;
+        let pending = client.start(&mut self.line, req, now)?;
         self.run(client)?;
-        Ok(client.response::<R>()?)
+        Ok(client.response(&pending)?)
     }
 
     /// Runs a started engine to its result.

@@ -25,9 +25,10 @@
 //! - [`engine`], [`io`]: the one shape every engine has and the one driver
 //!   that moves its bytes (non-blocking, blocking, `nb`, async); `embedded-io`
 //!   and `nb` glue
-//! - [`client`], [`transfer`], [`readback`], [`relay`]: any command and its
-//!   typed reply; a table written in confirmed, verified commands; a table
-//!   read back in confirmed windows; a command passed on as it came
+//! - [`client`], [`transfer`], [`readback`], [`relay`], [`upload`]: any
+//!   command and its typed reply; a table written in confirmed, verified
+//!   commands; a table read back in confirmed windows; a command passed on
+//!   as it came; a table sent as one command to a bridge that splits it
 //!
 //! Every public type has one path, the public module that holds it
 //! (`iai_protocol_b::line::Line`): the root re-exports nothing; a module
@@ -75,6 +76,7 @@ pub mod readback;
 pub mod relay;
 pub mod table;
 pub mod transfer;
+pub mod upload;
 mod window;
 
 #[cfg(test)]

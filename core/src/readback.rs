@@ -22,6 +22,17 @@
 //! line with a duplicate window, a window read empty waits out that window
 //! before its confirmation (every empty reply looks alike).
 //!
+//! # Proven windows
+//! A line that declared no copies may still repeat frames (a converter
+//! nobody mentioned): a copy of an earlier reply can answer a query, and
+//! the real reply then comes when nothing awaits it. So before a window is
+//! delivered, a fence ([`Line::start_proof`]) is sent after its last reply:
+//! once its echo is back, every reply owed before it has arrived. If the
+//! line heard nothing it could not place since the last proof, the
+//! window's replies were its own; otherwise every reply taken since is
+//! read again, now that the line expects copies ([`Failure::Unconfirmed`]
+//! after [`MAX_RECONFIRMS`] rounds).
+//!
 //! RAM: the reply decoder (`N` bytes, default 2,048, the TTA's transmit
 //! limit), a 24-byte query, up to 16 windows in flight and counters.
 
@@ -96,6 +107,9 @@ pub struct ReadBackStats {
     pub disagreements: u32,
     /// Frames that were no reply to a query, and broken frames.
     pub ignored: u32,
+    /// Times the windows in flight were read again because the line heard
+    /// frames it could not place (see the module docs).
+    pub reconfirmed: u32,
 }
 
 /// The records of one window, decoded on demand (they were checked when
@@ -135,6 +149,10 @@ impl Iterator for ReplyRecords<'_> {
 /// a confirmation waits out a duplicate window of a few seconds.
 const QUEUED: usize = 16;
 
+/// Rounds of reading again after a proof found frames the line could not
+/// place, before the read-back gives up ([`Failure::Unconfirmed`]).
+pub const MAX_RECONFIRMS: u8 = 8;
+
 /// A window of the queue.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Window {
@@ -163,6 +181,11 @@ enum State {
         at: usize,
         delivers: bool,
     },
+    /// The front window's last reply is taken: a fence proves that no
+    /// copy stood in for one of its replies; `started` once it is asked.
+    Prove {
+        started: bool,
+    },
     /// The front window's reply is to be delivered.
     Deliver,
     Complete,
@@ -181,6 +204,10 @@ pub struct ReadBack<const N: usize = { limits::TTA.response }> {
     replies: Receiver<N>,
     /// Hash and records of the reply taken last.
     answer: Option<(u32, u16)>,
+    /// The line's count of unplaced frames at the last proof (or start).
+    proven: Option<u32>,
+    /// Rounds read again since the last window was delivered.
+    reconfirms: u8,
     state: State,
     stats: ReadBackStats,
 }
@@ -197,6 +224,8 @@ impl<const N: usize> ReadBack<N> {
             query_len: 0,
             replies: Receiver::new(),
             answer: None,
+            proven: None,
+            reconfirms: 0,
             state: State::Plan,
             stats: ReadBackStats::default(),
         }
@@ -246,8 +275,21 @@ impl<const N: usize> ReadBack<N> {
                         })
                     }
                 },
+                State::Prove { started: false } => {
+                    line.start_proof(now);
+                    self.state = State::Prove { started: true };
+                }
+                State::Prove { started: true } => match line.poll(now) {
+                    Due::Fence => return Step::Transmit(line.fence_bytes()),
+                    Due::WaitUntil(t) => return Step::WaitUntil(t),
+                    Due::Done(Ok(())) => self.proved(line),
+                    Due::Done(Err(e)) => self.state = State::Failed(e),
+                    // Another engine took the line meanwhile: prove again.
+                    Due::Send { .. } | Due::Idle => self.state = State::Prove { started: false },
+                },
                 State::Deliver => {
                     self.state = State::Plan;
+                    self.reconfirms = 0;
                     self.windows.grow();
                     let Some(w) = self.queue.pop_front() else {
                         continue;
@@ -283,6 +325,9 @@ impl<const N: usize> ReadBack<N> {
     /// (queuing the next one), else the front's confirmation anyway (the
     /// line holds it until it is clear).
     fn plan(&mut self, line: &mut Line, now: u32) {
+        if self.proven.is_none() {
+            self.proven = Some(line.stats().unplaced);
+        }
         let Some(front) = self.queue.front().copied() else {
             if !self.push_next() {
                 self.state = State::Complete;
@@ -419,18 +464,41 @@ impl<const N: usize> ReadBack<N> {
             return;
         }
         if !self.cfg.confirm {
-            self.state = State::Deliver;
+            self.state = State::Prove { started: false };
             return;
         }
         if w.first == Some(hash) {
             self.stats.windows_confirmed += 1;
-            self.state = State::Deliver;
+            self.state = State::Prove { started: false };
         } else {
             // This reply is provable: the next must agree with it.
             self.stats.disagreements += 1;
             w.first = Some(hash);
             self.state = State::Plan;
         }
+    }
+
+    /// The proof's echo is back: deliver the front window if nothing
+    /// unplaced came since the last proof; else read again every window
+    /// whose replies were taken since (the line now expects copies).
+    fn proved(&mut self, line: &Line) {
+        let unplaced = line.stats().unplaced;
+        if self.proven.is_none_or(|p| p == unplaced) {
+            self.proven = Some(unplaced);
+            self.state = State::Deliver;
+            return;
+        }
+        self.proven = Some(unplaced);
+        self.reconfirms = self.reconfirms.saturating_add(1);
+        self.stats.reconfirmed += 1;
+        if self.reconfirms > MAX_RECONFIRMS {
+            self.state = State::Failed(Failure::Unconfirmed { unplaced });
+            return;
+        }
+        for w in self.queue.iter_mut() {
+            w.first = None;
+        }
+        self.state = State::Plan;
     }
 
     /// The query was completely transmitted at `now`.

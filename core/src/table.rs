@@ -899,7 +899,7 @@ mod tests {
     const WIRE: &[u8] =
         b"!9926D0002000103001E001E0064000186A0FFFF9C64000201000000000000000030392B\r\n";
 
-    /// Pushes `bytes` one at a time; the events other than `NeedMore`,
+    /// Pushes `bytes` one at a time; the events other than `Partial`,
     /// with the index of the byte that gave each.
     fn push_all(bytes: &[u8]) -> std::vec::Vec<(usize, StreamEvent)> {
         let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
@@ -1042,7 +1042,7 @@ mod tests {
             }
         }
 
-        /// Every event other than `NeedMore` of `decode`, the input given
+        /// Every event other than `Partial` of `decode`, the input given
         /// in pieces of `chunk` bytes; and the bytes consumed.
         fn by_events(bytes: &[u8], chunk: usize) -> (Vec<StreamEvent>, usize) {
             let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);

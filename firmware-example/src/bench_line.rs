@@ -2,7 +2,7 @@
 //! the bridge's pass-through and the Modbus gateway's polling, whole
 //! ([`Bridge::poll`], [`Bridge::poll_with`] and everything under them: the
 //! ports, the driver, the line's receiver and frame decoder, the engines),
-//! counted as `src/bench.rs` counts (see its docs).
+//! counted as [`crate::bench`] counts (see its docs).
 //!
 //! A controller of the bench's own answers each command the bridge writes
 //! as soon as its LF is written, with a reply of the right layout (the
@@ -25,15 +25,15 @@
 //! from the controller: `poll-round`, four rounds of the gateway's polls
 //! (212H of 8 axes, 215H, 213H, 216H, 20BH, 20CH, 20DH, 20EH).
 //!
-//! Lines: `bench <workload> <what> <ticks> <bytes>`, as `src/bench.rs`.
+//! Lines: `bench <workload> <what> <ticks> <bytes>`, as [`crate::bench`].
 
 use core::hint::black_box;
 
+use crate::bridge::{Bridge, Guest, NoGuest, Poll};
+use crate::config::{Config, ModbusConfig, Source};
+use crate::modbus::Gateway;
+use crate::serial::Port;
 use embedded_io::{ErrorType, Read, ReadReady, Write, WriteReady};
-use firmware_example::bridge::{Bridge, Guest, NoGuest, Poll};
-use firmware_example::config::{Config, ModbusConfig, Source};
-use firmware_example::modbus::Gateway;
-use firmware_example::serial::Port;
 use iai_protocol_b::axis::{AxisPattern, PerAxis};
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::frame::{Frame, Station};

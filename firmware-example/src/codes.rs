@@ -2,7 +2,9 @@
 //!
 //! Everything the bridge says for itself uses the range [`RANGE`]
 //! (`B00`..`BFF`): `&` error codes, and the message IDs it answers on its
-//! own station ([`STATUS_QUERY`]).
+//! own station ([`STATUS_QUERY`], and the configuration messages
+//! [`CONFIG_READ`] to [`CONFIG_PASSWORD`], laid out in
+//! [`crate::config::wire`]).
 //!
 //! Assumption: no controller sends an `&` code in this range. The
 //! controllers' own code list is published in neither the TTA manual nor
@@ -24,6 +26,16 @@ pub const fn is_bridge_code(code: u16) -> bool {
 
 /// Message ID of the status query, sent to the bridge's own station.
 pub const STATUS_QUERY: u16 = 0xB00;
+/// Message ID: read 64 bytes of the configuration page in force.
+pub const CONFIG_READ: u16 = 0xB20;
+/// Message ID: stage up to 64 bytes of a new configuration page.
+pub const CONFIG_STAGE: u16 = 0xB21;
+/// Message ID: apply the staged page (with the password).
+pub const CONFIG_APPLY: u16 = 0xB22;
+/// Message ID: restart the gateway (with the password).
+pub const RESTART: u16 = 0xB23;
+/// Message ID: set a new password.
+pub const CONFIG_PASSWORD: u16 = 0xB24;
 
 /// `&` B01: the host's 26DH was malformed (wrong checksum, found at its
 /// end; bad digit; bad axis pattern; missing CR LF; count mismatch).
@@ -60,6 +72,26 @@ pub const VERIFY_MISMATCH: u16 = 0xB0A;
 /// gets this reply on the bridge's own station, unasked, and is closed.
 /// The host being served is not disturbed.
 pub const HOST_BUSY: u16 = 0xB0B;
+/// `&` B0C: the password is wrong, or a wrong one came less than a second
+/// ago (`config::access::LOCKOUT_MS`); nothing was changed.
+pub const WRONG_PASSWORD: u16 = 0xB0C;
+/// `&` B0D: no password is set yet: a fresh gateway takes no change but
+/// a new password ([`CONFIG_PASSWORD`]).
+pub const NO_PASSWORD: u16 = 0xB0D;
+/// `&` B0E: the staged page is incomplete, out of order, not what the
+/// apply describes, or was discarded by another change; stage it again
+/// from offset 0.
+pub const STAGING: u16 = 0xB0E;
+/// `&` B0F: a block of the new page does not check, or the new password
+/// is not 8 to 64 characters without control characters; nothing was
+/// changed.
+pub const INVALID_PAGE: u16 = 0xB0F;
+/// `&` B10: the configuration page could not be written (the flash
+/// failed, or this board keeps no page it can write).
+pub const STORE_FAILED: u16 = 0xB10;
+/// `&` B11: a configuration message whose body is not laid out as
+/// [`crate::config::wire`] says.
+pub const MALFORMED: u16 = 0xB11;
 
 /// What each code says, in a few words (for tools that show them).
 pub const fn meaning(code: u16) -> Option<&'static str> {
@@ -74,12 +106,18 @@ pub const fn meaning(code: u16) -> Option<&'static str> {
         UNKNOWN_QUERY => "the bridge does not answer this message ID",
         VERIFY_MISMATCH => "a chunk still read back different after two rewrites",
         HOST_BUSY => "another host is connected to the bridge",
+        WRONG_PASSWORD => "the password is wrong (or a wrong one came less than a second ago)",
+        NO_PASSWORD => "no password is set yet: set one first",
+        STAGING => "the staged configuration is incomplete, out of order or was discarded",
+        INVALID_PAGE => "the new configuration or password does not check",
+        STORE_FAILED => "the configuration could not be written",
+        MALFORMED => "a configuration message with a malformed body",
         _ => return None,
     })
 }
 
 /// Every `&` code the bridge sends, for documentation and tests.
-pub const ALL: [u16; 10] = [
+pub const ALL: [u16; 16] = [
     UPSTREAM_FRAME,
     CONTROLLER_TIMEOUT,
     UPSTREAM_STALLED,
@@ -90,6 +128,12 @@ pub const ALL: [u16; 10] = [
     UNKNOWN_QUERY,
     VERIFY_MISMATCH,
     HOST_BUSY,
+    WRONG_PASSWORD,
+    NO_PASSWORD,
+    STAGING,
+    INVALID_PAGE,
+    STORE_FAILED,
+    MALFORMED,
 ];
 
 /// Bytes that end a QEMU test run: ESC `Q` `!` after
@@ -108,6 +152,16 @@ mod tests {
             assert!(!ALL[..i].contains(c));
         }
         assert!(is_bridge_code(STATUS_QUERY));
+        for id in [
+            CONFIG_READ,
+            CONFIG_STAGE,
+            CONFIG_APPLY,
+            RESTART,
+            CONFIG_PASSWORD,
+        ] {
+            assert!(is_bridge_code(id));
+            assert!(!ALL.contains(&id));
+        }
         assert!(!is_bridge_code(0x0E1));
     }
 }

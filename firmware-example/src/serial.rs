@@ -21,8 +21,11 @@
 //! [`Watermarks::resume_at`] asks it to go on:
 //! * [`FlowControl::XonXoff`]: XOFF (0x13) and XON (0x11) are sent ahead of
 //!   any queued data. Received XON/XOFF bytes are taken out of the data and
-//!   start/stop this line's transmitter. While stopped past the mark, XOFF
-//!   is repeated every [`XOFF_REPEAT`] bytes in case the first was lost.
+//!   start/stop this line's transmitter; the bridge lets an XOFF hold it at
+//!   most [`crate::config::Config::xoff_hold_ms`] ([`Port::release_peer_stop`]):
+//!   line noise can look like XOFF and never be followed by XON. While
+//!   stopped past the mark, XOFF is repeated every [`XOFF_REPEAT`] bytes in
+//!   case the first was lost.
 //! * [`FlowControl::RtsCts`]: [`IsrEnd::rts`] says which level the board
 //!   drives on RTS (`true`: the peer may send); the board passes the CTS
 //!   input to [`IsrEnd::next_tx`].
@@ -143,6 +146,9 @@ struct Shared {
     overruns_seen: AtomicU32,
     /// The sender was asked to stop (interrupt side).
     paused: AtomicBool,
+    /// The peer sent XOFF and no XON since: this line's transmitter is
+    /// stopped (set by the interrupt side, cleared by either).
+    peer_stopped: AtomicBool,
     /// Times the sender was asked to stop (interrupt side).
     pauses: AtomicU32,
     /// When the last byte arrived, in the board's microseconds, if the
@@ -158,6 +164,7 @@ impl Shared {
             overruns: AtomicU32::new(0),
             overruns_seen: AtomicU32::new(0),
             paused: AtomicBool::new(false),
+            peer_stopped: AtomicBool::new(false),
             pauses: AtomicU32::new(0),
             last_rx_us: AtomicU32::new(0),
             stamped: AtomicBool::new(false),
@@ -216,7 +223,6 @@ impl<const RX: usize, const TX: usize> UartRings<RX, TX> {
                 flow,
                 marks,
                 x_char: None,
-                remote_stopped: false,
                 since_xoff: 0,
             },
             ThreadEnd {
@@ -239,8 +245,6 @@ pub struct IsrEnd<'a> {
     marks: Watermarks,
     /// XON or XOFF to send ahead of the data.
     x_char: Option<u8>,
-    /// The peer sent XOFF (and no XON since).
-    remote_stopped: bool,
     /// Bytes received since the last XOFF was queued.
     since_xoff: usize,
 }
@@ -254,7 +258,9 @@ impl IsrEnd<'_> {
     /// One byte the UART received.
     pub fn on_receive(&mut self, byte: u8) {
         if self.flow == FlowControl::XonXoff && (byte == XON || byte == XOFF) {
-            self.remote_stopped = byte == XOFF;
+            self.shared
+                .peer_stopped
+                .store(byte == XOFF, Ordering::Release);
             return;
         }
         if self.rx.enqueue(byte).is_err() {
@@ -317,7 +323,7 @@ impl IsrEnd<'_> {
         }
         let stopped = match self.flow {
             FlowControl::None => false,
-            FlowControl::XonXoff => self.remote_stopped,
+            FlowControl::XonXoff => self.peer_stopped(),
             FlowControl::RtsCts => !cts,
         };
         if stopped {
@@ -330,7 +336,11 @@ impl IsrEnd<'_> {
     /// Whether [`IsrEnd::next_tx`] may have something (keep the transmit
     /// interrupt enabled while it is true).
     pub fn wants_tx(&self) -> bool {
-        self.x_char.is_some() || (self.tx.ready() && !self.remote_stopped)
+        self.x_char.is_some() || (self.tx.ready() && !self.peer_stopped())
+    }
+
+    fn peer_stopped(&self) -> bool {
+        self.shared.peer_stopped.load(Ordering::Acquire)
     }
 
     /// The level to drive on RTS with [`FlowControl::RtsCts`]: `true` while
@@ -468,6 +478,16 @@ pub trait Port:
         0
     }
 
+    /// Whether the peer stopped this port's transmitter (XOFF and no XON
+    /// since).
+    fn peer_stopped(&mut self) -> bool {
+        false
+    }
+
+    /// Lets the transmitter go again as if XON had come (the XOFF held it
+    /// too long: [`crate::config::Config::xoff_hold_ms`]).
+    fn release_peer_stop(&mut self) {}
+
     /// When the last byte arrived (microseconds, the board's clock), if the
     /// port knows; `None`: the reader takes the time it reads a byte.
     fn last_rx_us(&mut self) -> Option<u32> {
@@ -529,12 +549,28 @@ impl<P: Port> Port for Counted<'_, P> {
     fn take_overruns(&mut self) -> u32 {
         self.port.take_overruns()
     }
+    fn peer_stopped(&mut self) -> bool {
+        self.port.peer_stopped()
+    }
+    fn release_peer_stop(&mut self) {
+        self.port.release_peer_stop()
+    }
     fn last_rx_us(&mut self) -> Option<u32> {
         self.port.last_rx_us()
     }
 }
 
 impl Port for ThreadEnd<'_> {
+    fn peer_stopped(&mut self) -> bool {
+        self.shared.peer_stopped.load(Ordering::Acquire)
+    }
+
+    fn release_peer_stop(&mut self) {
+        self.shared.peer_stopped.store(false, Ordering::Release);
+        // The interrupt side resumes transmitting.
+        (self.pend)();
+    }
+
     fn take_overruns(&mut self) -> u32 {
         let total = self.shared.overruns.load(Ordering::Acquire);
         let seen = self.shared.overruns_seen.load(Ordering::Relaxed);

@@ -9,7 +9,7 @@
 //!
 //! | field | digits | meaning |
 //! |---|---|---|
-//! | `layout` | 2 | 01 |
+//! | `layout` | 2 | 02 (01 had no `xoff_released`) |
 //! | `uptime_ms` | 8 | the bridge's millisecond tick (wraps after 49.7 days) |
 //! | `config_source` | 1 | 0 built-in defaults, 1 configuration block, 2 blank block (defaults), 3 invalid block (defaults) |
 //! | `controller_station` | 2 | |
@@ -18,7 +18,7 @@
 //! | `flow_control` | 1 | 0 none, 1 XON/XOFF, 2 RTS/CTS |
 //! | `policy` | 1 | 0 forward all, 1 read-only, 2 allow-list |
 //! | `allow_list_len` | 3 | IDs in the allow-list |
-//! | 16 counters | 8 each | see [`Stats`], in its field order up to `downstream_overruns` |
+//! | 17 counters | 8 each | see [`Stats`], in its field order up to `xoff_released` |
 //! | `last_error` | 3 | the last `&` code the bridge sent itself, 000 if none |
 //! | `last_error_ms` | 8 | when (tick), 0 if none |
 
@@ -64,6 +64,9 @@ pub struct Stats {
     pub upstream_overruns: u32,
     /// Downstream bytes lost (receive overruns).
     pub downstream_overruns: u32,
+    /// XOFFs from the host let go after [`Config::xoff_hold_ms`]: noise
+    /// that looked like XOFF, or a host that never sent XON.
+    pub xoff_released: u32,
     /// Bytes read from the upstream.
     pub upstream_in: u64,
     /// Bytes written to the upstream.
@@ -78,7 +81,7 @@ impl Stats {
     /// The field names, in declaration order: with [`Stats::values`], what
     /// a board prints at the end of a run in the `Debug` layout without
     /// linking `core::fmt`.
-    pub const NAMES: [&'static str; 20] = [
+    pub const NAMES: [&'static str; 21] = [
         "forwarded",
         "relayed",
         "reply_timeouts",
@@ -95,6 +98,7 @@ impl Stats {
         "chunk_error_replies",
         "upstream_overruns",
         "downstream_overruns",
+        "xoff_released",
         "upstream_in",
         "upstream_out",
         "downstream_in",
@@ -102,7 +106,7 @@ impl Stats {
     ];
 
     /// Every counter, in declaration order (see [`Stats::NAMES`]).
-    pub fn values(&self) -> [u64; 20] {
+    pub fn values(&self) -> [u64; 21] {
         [
             u64::from(self.forwarded),
             u64::from(self.relayed),
@@ -120,6 +124,7 @@ impl Stats {
             u64::from(self.chunk_error_replies),
             u64::from(self.upstream_overruns),
             u64::from(self.downstream_overruns),
+            u64::from(self.xoff_released),
             self.upstream_in,
             self.upstream_out,
             self.downstream_in,
@@ -139,7 +144,7 @@ pub struct LastError {
 }
 
 /// Name and width (hex digits) of every field of the reply, in order.
-pub const FIELDS: [(&str, u8); 28] = [
+pub const FIELDS: [(&str, u8); 29] = [
     ("layout", 2),
     ("uptime_ms", 8),
     ("config_source", 1),
@@ -166,6 +171,7 @@ pub const FIELDS: [(&str, u8); 28] = [
     ("chunk_error_replies", 8),
     ("upstream_overruns", 8),
     ("downstream_overruns", 8),
+    ("xoff_released", 8),
     ("last_error", 3),
     ("last_error_ms", 8),
 ];
@@ -200,8 +206,11 @@ pub const DATA_LEN: usize = {
 /// Bytes of the whole reply, header through LF.
 pub const REPLY_LEN: usize = ENVELOPE_LEN + DATA_LEN + 4;
 
+/// Digits of `xoff_released`, the field layout 2 added.
+const XOFF_WIDTH: usize = 8;
+
 /// Layout version sent in the first field.
-pub const LAYOUT: u8 = 1;
+pub const LAYOUT: u8 = 2;
 
 /// What the status reply reports.
 pub struct Report<'a> {
@@ -219,7 +228,7 @@ pub struct Report<'a> {
 
 impl Report<'_> {
     /// The values of [`FIELDS`], in order.
-    pub fn values(&self) -> [u64; 28] {
+    pub fn values(&self) -> [u64; 29] {
         let c = self.config;
         let s = self.stats;
         let allow = match c.policy {
@@ -254,6 +263,7 @@ impl Report<'_> {
             u64::from(s.chunk_error_replies),
             u64::from(s.upstream_overruns),
             u64::from(s.downstream_overruns),
+            u64::from(s.xoff_released),
             u64::from(code),
             u64::from(at),
         ]
@@ -283,13 +293,19 @@ impl Report<'_> {
 /// Splits a status reply's data (the frame body) into `(name, value)`
 /// pairs in [`FIELDS`] order; `None` if the length is wrong or a digit is
 /// not hex.
-pub fn parse(body: &[u8]) -> Option<[(&'static str, u64); 28]> {
-    if body.len() != DATA_LEN {
+/// A reply of layout 1 (before `xoff_released`) reads with that field 0.
+pub fn parse(body: &[u8]) -> Option<[(&'static str, u64); FIELDS.len()]> {
+    let layout_1 = body.get(..2) == Some(b"01") && body.len() == DATA_LEN - XOFF_WIDTH;
+    if body.len() != DATA_LEN && !layout_1 {
         return None;
     }
-    let mut out = [("", 0u64); 28];
+    let mut out = [("", 0u64); FIELDS.len()];
     let mut at = 0;
     for (slot, &(name, width)) in out.iter_mut().zip(FIELDS.iter()) {
+        if layout_1 && name == "xoff_released" {
+            *slot = (name, 0);
+            continue;
+        }
         let w = usize::from(width);
         let digits = body.get(at..at + w)?;
         let v = iai_protocol_b::field::decode_unsigned(FieldSpec::hex(width), digits, at).ok()?;

@@ -1,79 +1,52 @@
 //! The request engine (`client::Client`) over a `line::Line`, on a virtual
 //! clock, against a simulated controller that answers in order.
 //!
-//! Input layout: the line (`common/link.rs`: station, timeout, flags with
-//! sends 1-4, `resend_unsafe`, fences off, raw noise, turnaround, late and
-//! duplicate windows, fence seed, start tick), with the flags' 0x20 bit
-//! for the 216H detail (`with_error_detail`) and 0x40 for skipping it on
-//! the bridge's codes (`with_error_detail_except(codes::is_bridge_code)`);
-//! one byte: requests 1-4; then a script. Each request is picked by a
-//! script byte: a typed request through `Client::start` (212H axis status,
-//! 235H relative move: unsafe to resend, 25BH software reset: no normal
-//! response, 216H error detail), a command outside the catalogue, or any
-//! catalogue command's default frame through `start_frame`.
+//! Input: the line (`common/link.rs`), its flags' 0x20 bit for the 216H
+//! detail (`with_error_detail`), 0x40 for skipping it on the bridge's codes
+//! (`with_error_detail_except`), 0x80 for proofs (`with_proof`); a byte:
+//! requests 1-4; then a script. A script byte picks each request: 212H,
+//! 235H (unsafe), 25BH (no normal response), 216H through `start`, an ID
+//! outside the catalogue or any catalogue command's default frame
+//! (200H included) through `start_frame`. The controller echoes fences and
+//! 200H texts and answers each send in order; per transmission an op byte
+//! (bits 0-2 length ms, bits 3-4 = 2 lost, bits 5-7 the reply: 0 at once,
+//! 1 lost, 2 corrupted, 3 copied later, 4 an `&`, 5 a body that does not
+//! parse, 6 another station's or ID's frame first, 7 late with a copy;
+//! then a byte and a delay); fences get an `&` for 4 and 5, 25BH (no
+//! normal response) silence for 0, an `&` for 2-5 and 7. While it
+//! waits (`% 6`): time, noise (raw with the link's bit), a copy of any
+//! reply made (whole or broken), the next delivery, abandoning the request
+//! for the next one, the deadline. Every byte is fed: the client takes all.
 //!
-//! The controller receives each transmission at its end (`sent`) and
-//! answers in order: the fences it echoes, each command with its normal
-//! reply (the response's default frame; for 216H an error detail whose
-//! number is the `&` code or not; 25BH none). Per transmission the script
-//! picks its length (replies due meanwhile arrive before `sent`), whether
-//! the controller gets it (op bits 0-2: length, ms; bits 3-4 = 2: lost),
-//! and what becomes of the reply (op bits 5-7):
-//! 0 at once, 1 lost, 2 a corrupted byte, 3 a copy later, 4 an `&` (a
-//! controller or bridge code), 5 a body that does not parse, 6 another
-//! station's or another ID's frame first, 7 a delay with a copy; with a
-//! fault, a byte and a delay (up to three timeouts and the late window).
-//! A command without normal response (25BH) gets an `&` for faults 2, 3
-//! and 7. Fences are echoed (4 and 5: an `&` instead). While the client
-//! waits, a script byte (`% 6`): 0 advances the clock (u16 ms) delivering
-//! what is due, 1 injects noise (a byte `k`, `k % 64` bytes, no LF unless
-//! raw noise is on: then a frame in it is forged; with `k & 0x40` the next
-//! delivery follows with no poll between), 2 sends a copy of any reply
-//! made before (a byte: which, `& 0x80` broken), 3 delivers the next
-//! delivery, 4 abandons the request for the next one (its pick follows),
-//! 5 waits until the deadline; when the script ends, the deadline or the
-//! next delivery, whichever comes first.
-//!
-//! A delivery keeps the contract (`Link::arrives`) when an original reply
-//! comes within `timeout + late_window` of the send it answers (in order:
-//! the controller never lets a reply overtake an earlier one) and a copy
-//! within `duplicate_window` of the first arrival, if that kept the
-//! contract; a copy before its original, a stale answer and raw noise
-//! never do. A plain `FrameDecoder` beside the client's (reset with it: at
-//! each send, and when the client drops bytes held from before a first
-//! send) tells which delivery made each frame the client heard.
-//!
-//! Checked:
-//! - no panic; it ends within a bounded number of steps; no wait before
-//!   the first transmission of a line with fences (the first command is
-//!   fenced), none in the past or beyond the longest hold;
-//! - what goes out: fences (200H with the seed's text), or the command in
-//!   flight as started, or after an `&` the 216H query for the detail,
-//!   only with the option on and, with the bridge exception, never for a
-//!   code in `codes::RANGE`; sends of a command <= `max_sends`, one for a
-//!   command the catalogue marks unsafe (and one outside it) unless
-//!   `resend_unsafe`, one for 25BH, nothing resent after an `&`; a resend
-//!   not before `sent + timeout` unless a broken frame came after `sent`;
+//! A `Shadow` mirrors the client's decoders (its own, and the line's
+//! while it keeps its reply) and tells which delivery made each frame.
+//! Checked (beside no panic, a bounded end, waits never in the past, before
+//! the first fence or beyond the longest hold):
 //! - **a reply taken (`Answer` / `Rejected`) is one the controller made for
-//!   a send of the command in flight** (the request, or its 216H query),
-//!   whatever came before: earlier requests' late replies and copies, the
-//!   fences' echoes, abandoned requests; unless the delivery broke the
-//!   contract, or came from raw noise (and a command that took another's
-//!   reply leaves its own replies adrift: whoever takes them later is not
-//!   blamed); taken only while awaited (after `sent`); the frame is the
-//!   station's, with the ID in flight (`&`: its code);
-//! - `Mismatch` only for a reply with the ID in flight whose body does not
-//!   parse; `Fence` only for the echo of the last fence sent;
-//! - `Done(Ok)`: for a command with a normal response, after its reply was
-//!   taken; `reply_frame()` is that frame and the typed `response::<R>()`
-//!   parses; for 25BH only at `sent + timeout` or later, with no reply;
-//! - `Timeout { sends }` / `OutcomeUnknown { sends }` by the command's
-//!   resend safety with the sends made, not before `sent + timeout` unless
-//!   a broken frame came after it (25BH: `OutcomeUnknown` only then);
-//!   `Controller { code, detail }` only after an `&` with that code was
-//!   taken, with the detail of the 216H reply taken (`matches_code`
-//!   right), `None` if the query failed or was not to be asked;
-//! - `stats()` of the line: commands started, sends, fences.
+//!   a send of the command in flight** (or its 216H query) unless that
+//!   delivery broke the contract (`Link::arrives`), came from raw noise,
+//!   or an echo outside the contract settled what it answered (a command
+//!   that took another's reply leaves its own adrift); taken only while
+//!   awaited, from the station, with the ID in flight, never while the
+//!   client keeps a reply; a 200H reply taken echoes the call's text;
+//! - `Mismatch` only for a reply of the ID in flight that does not parse
+//!   (200H: whose text is not the call's); `Fence` exactly for the echo of
+//!   the fence in flight (its text, before its timeout was seen);
+//!   `Foreign` exactly for another station's frame or a command;
+//!   **`Unplaced` never for a reply within the contract** (an original in
+//!   time, a copy in the window of a first arrival the line heard whole);
+//! - what goes out: fences numbered from 1 with the seed's text (these
+//!   engines never stir it), the command as started, the 216H query only
+//!   with the option and not for a bridge code under the exception; sends
+//!   within `max_sends`, once for unsafe commands and 25BH; resends,
+//!   `Timeout` / `OutcomeUnknown` (by resend safety, with the sends) not
+//!   before `sent + timeout` unless a broken frame came; `Done(Ok)` with
+//!   the reply taken (`reply_frame`, typed `response` parse), for 25BH at
+//!   its timeout; `Controller` with the detail of the 216H reply taken;
+//! - proofs: `Ok` only after a fence echoed (or, without one, the replies
+//!   waited out) with nothing unplaced since the command was asked; asked
+//!   again only if something was, safe commands only, at most twice;
+//!   `Unconfirmed` only then; the line's `stats()` agree.
 #![no_main]
 
 #[path = "common/link.rs"]
@@ -84,7 +57,8 @@ mod records;
 use firmware_example::codes;
 use iai_protocol_b::catalogue::{self, Reply, Resend};
 use iai_protocol_b::checksum::BypassPolicy;
-use iai_protocol_b::client::Client;
+use iai_protocol_b::client::{Client, Pending};
+use iai_protocol_b::decoder::Status;
 use iai_protocol_b::engine::Step;
 use iai_protocol_b::error::Failure;
 use iai_protocol_b::frame::{Frame, Header, Station};
@@ -94,7 +68,7 @@ use iai_protocol_b::message::{
     RelativeMove, Response, SoftwareReset,
 };
 use libfuzzer_sys::fuzz_target;
-use link::{Delivery, Link, Setup, Shadow, Source};
+use link::{Delivery, Kind, Link, Seen, Setup, Shadow, Source};
 use records::Input;
 
 const CMD: usize = iai_protocol_b::limits::TTA.command;
@@ -103,13 +77,25 @@ const REPLY: usize = iai_protocol_b::limits::TTA.response;
 /// An ID outside the catalogue (a bridge passing on what it does not know).
 const UNKNOWN_ID: u16 = 0x2FE;
 
+/// Times a client with proofs asks a query again (its `PROOF_ASKS`).
+const PROOF_ASKS: u8 = 2;
+
+/// Finding F18 (open, fuzz/README.md): bytes the client's decoder still
+/// holds at a send (a late reply swallowed as a 200H's ten characters)
+/// are dropped, and the line told (`unread`), only once the line has
+/// decided to send: the send does not wait out the copy window, and a copy
+/// of that reply (within the window) answers it. `false`: a copy of a
+/// reply dropped so is not blamed.
+const F18_FIXED: bool = false;
+
+/// The request's kind, with the client's ticket to its typed reply.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Typed {
     Raw,
-    AxisStatus,
-    RelativeMove,
-    SoftwareReset,
-    ErrorDetail,
+    AxisStatus(Pending<AxisStatusQuery>),
+    RelativeMove(Pending<RelativeMove>),
+    SoftwareReset(Pending<SoftwareReset>),
+    ErrorDetail(Pending<ErrorDetailQuery>),
 }
 
 /// A request: its command (phase 0) and, after an `&`, its 216H query
@@ -124,14 +110,23 @@ struct Req {
     rejected: Option<u16>,
     /// The frame taken as the reply of the phase in flight.
     taken: Option<Vec<u8>>,
+    /// A fence's echo was heard since that reply was taken.
+    echo_since_taken: bool,
     /// The 216H reply taken: its error number (`None` if forged).
     detail: Option<Option<u16>>,
     detail_failed: bool,
     /// A 216H query went out.
     asked_detail: bool,
+    /// Times it was asked again for want of a proof, and the line's count
+    /// of unplaced frames when it was last asked.
+    asked_again: u8,
+    unplaced_mark: u32,
 }
 
-type Owner = (usize, u8);
+/// Who a command frame is for: the request, its phase (1: the 216H
+/// query), and the ask (a query asked again for a proof is a command of
+/// its own).
+type Owner = (usize, u8, u8);
 
 struct H<'a> {
     input: Input<'a>,
@@ -139,31 +134,33 @@ struct H<'a> {
     link: Link,
     line: Line,
     client: Client<CMD, REPLY>,
-    shadow: Shadow,
+    shadow: Shadow<REPLY>,
     clock: u64,
     req: Option<Req>,
     /// Who each command frame the controller received belongs to (`None`:
     /// a fence).
     owners: Vec<Option<Owner>>,
-    /// The last fence sent (controller command index).
+    /// The last fence sent (controller command index), and whether its
+    /// echo is still awaited (sent, no echo, no timeout seen, not
+    /// abandoned).
     last_fence: Option<usize>,
+    fence_awaited: bool,
     /// A reply is awaited: `sent` was called and nothing sent since.
     awaiting: bool,
     last_sent: u64,
     broken_since_sent: bool,
-    /// The client holds a reply: nothing more is fed until the next poll.
-    holding: bool,
     adrift: Vec<Owner>,
     /// Replies to commands before this one (controller command index) are
     /// not blamed: an echo outside the contract settled them.
     excused_before: usize,
-    fetch: bool,
-    except_bridge: bool,
+    /// Replies (made indices) whose bytes the client dropped unread at a
+    /// send (F18).
+    dropped: Vec<usize>,
+    prove: bool,
     transmitted: bool,
     commands: u32,
     sends: u32,
     fences: u32,
-    next_id: usize,
 }
 
 impl H<'_> {
@@ -182,7 +179,7 @@ impl H<'_> {
 
     fn owner(&self) -> Owner {
         let r = self.req.as_ref().expect("a request");
-        (r.serial, r.phase)
+        (r.serial, r.phase, r.asked_again)
     }
 
     fn start(&mut self, serial: usize, pick: u8) {
@@ -195,30 +192,34 @@ impl H<'_> {
             buf.truncate(n);
             buf
         };
+        if self.fence_awaited {
+            // Starting abandons what the line was doing, a fence too.
+            self.fence_awaited = false;
+        }
         let (id, typed, bytes) = match pick % 8 {
             0 => {
                 let q = AxisStatusQuery::default();
-                self.client.start(&mut self.line, &q, now).expect("starts");
+                let p = self.client.start(&mut self.line, &q, now).expect("starts");
                 let b = emit(&|b| q.emit_with(station, checksum, b).expect("emits"));
-                (AxisStatusQuery::ID, Typed::AxisStatus, b)
+                (AxisStatusQuery::ID, Typed::AxisStatus(p), b)
             }
             1 => {
                 let q = RelativeMove::default();
-                self.client.start(&mut self.line, &q, now).expect("starts");
+                let p = self.client.start(&mut self.line, &q, now).expect("starts");
                 let b = emit(&|b| q.emit_with(station, checksum, b).expect("emits"));
-                (RelativeMove::ID, Typed::RelativeMove, b)
+                (RelativeMove::ID, Typed::RelativeMove(p), b)
             }
             2 => {
                 let q = SoftwareReset::default();
-                self.client.start(&mut self.line, &q, now).expect("starts");
+                let p = self.client.start(&mut self.line, &q, now).expect("starts");
                 let b = emit(&|b| q.emit_with(station, checksum, b).expect("emits"));
-                (SoftwareReset::ID, Typed::SoftwareReset, b)
+                (SoftwareReset::ID, Typed::SoftwareReset(p), b)
             }
             3 => {
                 let q = ErrorDetailQuery::latest_system_error();
-                self.client.start(&mut self.line, &q, now).expect("starts");
+                let p = self.client.start(&mut self.line, &q, now).expect("starts");
                 let b = emit(&|b| q.emit_with(station, checksum, b).expect("emits"));
-                (ErrorDetailQuery::ID, Typed::ErrorDetail, b)
+                (ErrorDetailQuery::ID, Typed::ErrorDetail(p), b)
             }
             4 => {
                 let b = link::frame(Header::Command, station, UNKNOWN_ID, &[]);
@@ -243,7 +244,6 @@ impl H<'_> {
         trace!("t={} START request {serial}: {id:03X}", self.clock);
         self.commands += 1;
         self.awaiting = false;
-        self.holding = false;
         self.req = Some(Req {
             serial,
             id,
@@ -253,17 +253,18 @@ impl H<'_> {
             sends: 0,
             rejected: None,
             taken: None,
+            echo_since_taken: false,
             detail: None,
             detail_failed: false,
             asked_detail: false,
+            asked_again: 0,
+            unplaced_mark: self.line.stats().unplaced,
         });
     }
 
-    /// Delivers what is due by `to`, moving the clock (not while the
-    /// client holds a reply).
+    /// Delivers what is due by `to`, moving the clock.
     fn deliver_until(&mut self, to: u64) {
-        while !self.holding {
-            let Some(d) = self.link.due(to) else { break };
+        while let Some(d) = self.link.due(to) {
             self.clock = self.clock.max(d.at);
             self.feed(d);
         }
@@ -271,13 +272,7 @@ impl H<'_> {
 
     /// Feeds one delivery, checking what each frame did.
     fn feed(&mut self, mut d: Delivery) {
-        if self.holding {
-            self.link.put_back(d);
-            return;
-        }
-        if d.ok.is_none() {
-            d.at = self.clock;
-        }
+        d.at = self.clock;
         self.link.arrives(&mut d, self.clock);
         self.shadow.begin(&d);
         let mut rest = &d.bytes[..];
@@ -286,57 +281,77 @@ impl H<'_> {
             let errors = self.line.stats().line_errors;
             let r = self.client.received(&mut self.line, rest, now);
             if self.line.stats().line_errors > errors {
-                // A broken frame (the read-back path reports none).
                 self.broken_since_sent = true;
             }
             trace!(
-                "t={} RX {:?} -> {:?} ({:?})",
+                "t={} RX {:?} -> {:?} ({:?}{})",
                 self.clock,
                 String::from_utf8_lossy(&rest[..r.consumed]),
-                r.event,
-                d.kind
+                r.status,
+                d.kind,
+                if self.shadow.holding() { ", held" } else { "" }
             );
             assert!(r.consumed <= rest.len());
-            assert!(
-                r.consumed > 0 || r.event != Heard::NeedMore || rest.is_empty(),
-                "the client refused bytes while it held no reply"
-            );
-            let heard = self.shadow.decoded(rest, r.consumed, &r.event);
+            let seen = self.shadow.decoded(rest, &r);
             rest = &rest[r.consumed..];
-            if let Heard::Broken(_) = r.event {
+            let heard = match r.status {
+                Status::Partial => {
+                    assert!(rest.is_empty(), "Partial with bytes left");
+                    return;
+                }
+                Status::Complete(h) => h,
+            };
+            if let Heard::Broken(_) = heard {
                 self.broken_since_sent = true;
             }
-            if let Some((frame, src)) = heard {
-                self.heard(r.event, &frame, src);
+            if let Some(seen) = seen {
+                self.heard(heard, seen);
             }
-            if r.event == Heard::Answer {
-                // The client holds its reply until the next start: the
-                // rest waits.
-                self.holding = true;
-                if !rest.is_empty() {
-                    let mut tail = d.clone();
-                    tail.bytes = rest.to_vec();
-                    self.link.put_back(tail);
-                }
-                return;
-            }
-            if r.event == Heard::NeedMore {
-                assert!(rest.is_empty(), "NeedMore with bytes left");
-                return;
+            if heard == Heard::Answer {
+                // The client keeps its reply until its next send.
+                self.shadow.hold();
             }
         }
     }
 
-    fn heard(&mut self, heard: Heard, frame: &[u8], src: Source) {
-        let f = Frame::new_checked(frame, BypassPolicy::Reject).expect("a frame");
+    fn heard(&mut self, heard: Heard, seen: Seen) {
         let station = self.setup.line.station;
-        let d = match src {
+        let (header, from, code) = seen.envelope;
+        let ours = from == station && header != Header::Command;
+        assert_eq!(
+            heard == Heard::Foreign,
+            !ours,
+            "{heard:?} for a frame from {from:?} ({header:?})"
+        );
+        if let Source::Delivery(d) = &seen.source {
+            self.link.heard_whole(d);
+        }
+        let d = match &seen.source {
             Source::Forged => None,
-            Source::Delivery(d) => Some(d),
+            Source::Delivery(d) => Some(d.clone()),
         };
+        let body = &seen.bytes[6..seen.bytes.len() - 4];
+        let echo = self.fence_awaited
+            && (header, code) == (Header::Response, 0x200)
+            && body == link::fence_text(&self.setup, self.fences).as_bytes();
+        assert_eq!(
+            heard == Heard::Fence,
+            ours && echo,
+            "{heard:?} for {:?} (fence {} awaited: {})",
+            String::from_utf8_lossy(&seen.bytes),
+            self.fences,
+            self.fence_awaited
+        );
+        if seen.held {
+            assert!(
+                !matches!(heard, Heard::Answer | Heard::Rejected(_) | Heard::Mismatch),
+                "{heard:?} while the client keeps its reply"
+            );
+        }
         match heard {
             Heard::Answer | Heard::Rejected(_) => {
                 assert!(self.awaiting, "{heard:?} while no reply was awaited");
+                let f = seen.frame();
                 let id = self.id_in_flight();
                 assert_eq!(f.station(), station, "a reply from another station taken");
                 let me = self.owner();
@@ -351,7 +366,9 @@ impl H<'_> {
                         .expect("a frame the controller never made");
                     let owner = self.owners[cmd];
                     let ok = d.ok();
-                    let excused = cmd < self.excused_before;
+                    let dropped =
+                        matches!(d.kind, Kind::Reply { made, .. } if self.dropped.contains(&made));
+                    let excused = cmd < self.excused_before || (!F18_FIXED && dropped);
                     if owner != Some(me) && ok && !excused {
                         assert!(
                             owner.is_some_and(|o| self.adrift.contains(&o)),
@@ -361,8 +378,9 @@ impl H<'_> {
                             d.kind
                         );
                     }
-                    if owner != Some(me) {
-                        // Its own replies are adrift now.
+                    if owner != Some(me) || !ok {
+                        // Something else stood in for its reply: its own
+                        // replies are adrift now.
                         self.adrift.push(me);
                     }
                 }
@@ -373,11 +391,15 @@ impl H<'_> {
                         if catalogue::lookup(id).is_some() {
                             Response::parse(&f).expect("a reply taken parses");
                         }
+                        if id == 0x200 {
+                            assert_eq!(f.body(), &req.bytes[6..16], "a 200H reply of another text");
+                        }
                         if req.phase == 1 {
                             let r = ErrorDetailResponse::parse(&f).expect("a 216H reply");
                             req.detail = Some(Some(r.error_number));
                         }
-                        req.taken = Some(frame.to_vec());
+                        req.taken = Some(seen.bytes.clone());
+                        req.echo_since_taken = false;
                     }
                     Heard::Rejected(code) => {
                         assert_eq!((f.header(), f.code()), (Header::Error, code));
@@ -392,18 +414,22 @@ impl H<'_> {
                 self.awaiting = false;
             }
             Heard::Mismatch => {
+                assert!(self.awaiting, "a mismatch while no reply was awaited");
+                let f = seen.frame();
                 let id = self.id_in_flight();
                 assert_eq!(
                     (f.header(), f.station(), f.code()),
                     (Header::Response, station, id)
                 );
+                let req = self.req.as_ref().expect("a request");
+                let parses = catalogue::lookup(id).is_none() || Response::parse(&f).is_ok();
+                let echoes = id != 0x200 || f.body() == &req.bytes[6..16];
                 assert!(
-                    catalogue::lookup(id).is_some() && Response::parse(&f).is_err(),
-                    "a reply that parses called a mismatch"
+                    !(parses && echoes),
+                    "a reply that parses (and echoes the call) called a mismatch"
                 );
             }
             Heard::Fence => {
-                assert_eq!((f.header(), f.code()), (Header::Response, 0x200));
                 let in_order = match &d {
                     Some(d) => {
                         let cmd = self
@@ -421,13 +447,33 @@ impl H<'_> {
                     // to the commands before it are no longer in order.
                     self.excused_before = self.link.cmds.len();
                 }
+                self.fence_awaited = false;
+                if let Some(req) = self.req.as_mut() {
+                    req.echo_since_taken = true;
+                }
             }
-            Heard::Stale | Heard::Foreign | Heard::NeedMore | Heard::Broken(_) => {}
+            Heard::Unplaced => {
+                if let Some(d) = &d {
+                    if let Some(cmd) = self.link.placeable(d) {
+                        let owner = self.owners[cmd];
+                        let excused = cmd < self.excused_before
+                            || owner.is_some_and(|o| self.adrift.contains(&o));
+                        assert!(
+                            excused,
+                            "a reply within the contract heard Unplaced: command {cmd} of {owner:?} \
+                             sent at {}, now {} ({:?})",
+                            self.link.cmds[cmd].at, self.clock, d.kind
+                        );
+                    }
+                }
+            }
+            Heard::Stale | Heard::Foreign | Heard::Broken(_) => {}
         }
     }
 
-    /// The controller's normal reply to the command in flight.
-    fn normal(&self, extra: u8) -> Option<Vec<u8>> {
+    /// The controller's normal reply to the command in flight (`cmd`:
+    /// the frame it received).
+    fn normal(&self, cmd: &[u8], extra: u8) -> Option<Vec<u8>> {
         let id = self.id_in_flight();
         let station = self.setup.line.station;
         if id == ErrorDetailQuery::ID {
@@ -448,13 +494,16 @@ impl H<'_> {
         if id == UNKNOWN_ID {
             return Some(link::frame(Header::Response, station, id, b"00"));
         }
+        if id == 0x200 {
+            // 200H: the call's ten characters echoed (2003 p. 15).
+            return Some(link::frame(Header::Response, station, id, &cmd[6..16]));
+        }
         let r = Response::default_for(id)?;
         let mut buf = vec![0u8; r.emit_len()];
         let n = r.emit(station, &mut buf).expect("a default response emits");
         buf.truncate(n);
         Some(buf)
     }
-
     fn error(&self, extra: u8) -> Vec<u8> {
         let code = if extra & 1 == 0 {
             *codes::RANGE.start() + u16::from(extra >> 1) % 0x20
@@ -484,18 +533,21 @@ impl H<'_> {
             }
             return;
         }
-        let normal = self.normal(f.extra);
+        let normal = self.normal(bytes, f.extra);
         match f.fault {
             4 => {
                 let e = self.error(f.extra);
                 self.link.reply(e, cmd, at, false);
             }
+            5 if normal.is_none() => {
+                // Nothing but an `&` answers a command without normal
+                // response (25BH).
+                let e = self.error(f.extra);
+                self.link.reply(e, cmd, at, false);
+            }
             5 => {
                 // One digit too many: no catalogue response parses.
-                let Some(mut b) = normal.clone().or_else(|| {
-                    let id = self.id_in_flight();
-                    Some(link::frame(Header::Response, station, id, b""))
-                }) else {
+                let Some(mut b) = normal.clone() else {
                     return;
                 };
                 let body_end = b.len() - 4;
@@ -577,6 +629,7 @@ fuzz_target!(|data: &[u8]| {
     let setup = link::setup(&mut input);
     let fetch = setup.flags & link::FLAG_A != 0;
     let except_bridge = setup.flags & link::FLAG_B != 0;
+    let prove = setup.flags & link::FLAG_C != 0;
     let requests = 1 + usize::from(input.u8() % 4);
     let mut client: Client<CMD, REPLY> = Client::new();
     if fetch {
@@ -586,7 +639,13 @@ fuzz_target!(|data: &[u8]| {
             client.with_error_detail()
         };
     }
-    trace!("{:?} fetch {fetch} except {except_bridge}", setup.line);
+    if prove {
+        client = client.with_proof();
+    }
+    trace!(
+        "{:?} fetch {fetch} except {except_bridge} prove {prove}",
+        setup.line
+    );
     let mut h = H {
         input,
         setup,
@@ -598,21 +657,19 @@ fuzz_target!(|data: &[u8]| {
         req: None,
         owners: Vec::new(),
         last_fence: None,
+        fence_awaited: false,
         awaiting: false,
         last_sent: 0,
         broken_since_sent: false,
-        holding: false,
         adrift: Vec::new(),
         excused_before: 0,
-        fetch,
-        except_bridge,
+        dropped: Vec::new(),
+        prove,
         transmitted: false,
         commands: 0,
         sends: 0,
         fences: 0,
-        next_id: 0,
     };
-    let _ = h.next_id;
     let mut serial = 0usize;
     let p = h.input.u8();
     h.start(serial, p);
@@ -631,12 +688,44 @@ fuzz_target!(|data: &[u8]| {
             Step::Done(r) => S::Done(r),
         };
         let after = h.line.stats();
-        // The 216H query after an `&` is a command of its own.
-        h.commands += after.commands - before.commands;
-        if after.sends > before.sends || after.line_errors > before.line_errors {
-            // The client reset its reply decoder (a send; bytes held from
-            // before a first send dropped): so does the shadow.
-            h.shadow.reset();
+        if after.fences_failed > before.fences_failed {
+            // The fence's timeout was seen: its echo settles nothing now.
+            h.fence_awaited = false;
+        }
+        let asked = after.commands - before.commands;
+        if asked > 0 {
+            // A command of its own: the 216H query after an `&`, or the
+            // query asked again for want of a proof.
+            h.commands += asked;
+            let req = h.req.as_mut().expect("a request");
+            if req.rejected.is_none() && req.phase == 0 {
+                assert!(h.prove, "asked again without proofs");
+                assert_eq!(asked, 1);
+                let safe = catalogue::request_rules(req.id).is_some_and(|(r, _)| r == Resend::Safe);
+                assert!(safe, "{:03X} asked again: not safe to repeat", req.id);
+                assert!(
+                    after.unplaced != req.unplaced_mark,
+                    "asked again with nothing unplaced since it was asked"
+                );
+                assert!(req.taken.is_some(), "asked again with no reply taken");
+                req.asked_again += 1;
+                assert!(
+                    req.asked_again <= PROOF_ASKS,
+                    "asked again {} times",
+                    req.asked_again
+                );
+                req.unplaced_mark = after.unplaced;
+                req.sends = 0;
+                req.taken = None;
+            }
+        }
+        if after.sends > before.sends {
+            // The client cleared its receiver for the send.
+            for d in h.shadow.release() {
+                if let Kind::Reply { made, .. } | Kind::Broken { made, .. } = d.kind {
+                    h.dropped.push(made);
+                }
+            }
         }
         match step {
             S::Idle => panic!("idle with a request started"),
@@ -647,10 +736,15 @@ fuzz_target!(|data: &[u8]| {
                     String::from_utf8_lossy(&bytes).trim_end()
                 );
                 h.transmitted = true;
-                let fence = setup.is_fence(&bytes);
+                let fence = after.fences > before.fences;
+                assert_eq!(
+                    fence,
+                    setup.is_fence(&bytes),
+                    "a fence not counted, or counted and not sent"
+                );
                 if fence {
-                    link::check_fence(&setup, &bytes);
-                    assert_eq!(after.fences, before.fences + 1, "a fence not counted");
+                    assert_eq!(after.fences, before.fences + 1, "two fences at once");
+                    link::check_fence(&setup, &bytes, after.fences);
                     h.fences += 1;
                 } else {
                     assert_eq!(after.sends, before.sends + 1, "a send not counted");
@@ -718,7 +812,10 @@ fuzz_target!(|data: &[u8]| {
                 h.clock = to;
                 let now = h.now();
                 h.client.sent(&mut h.line, now);
-                if !fence {
+                if fence {
+                    h.fence_awaited = true;
+                    h.last_fence = None;
+                } else {
                     h.awaiting = true;
                     h.last_sent = h.clock;
                     h.broken_since_sent = false;
@@ -730,30 +827,25 @@ fuzz_target!(|data: &[u8]| {
                         h.last_fence = Some(cmd);
                     }
                     h.answer(cmd, fence, &fate, &bytes);
-                } else if fence {
-                    h.last_fence = None;
                 }
             }
             S::Wait(t) => {
                 let nothing_sent = !h.transmitted && ex.fences;
-                let ahead = records::check_wait(now, t, setup.horizon(), nothing_sent);
+                let ahead =
+                    records::check_wait(now, t, setup.horizon(h.line.copy_window()), nothing_sent);
                 trace!("t={} WAIT {ahead}", h.clock);
                 let until = h.clock + u64::from(ahead);
                 match h.input.next() {
                     None => {
                         let next = h.link.outbox.first().map_or(until, |d| d.at.min(until));
                         h.deliver_until(next);
-                        if !h.holding {
-                            h.clock = h.clock.max(next);
-                        }
+                        h.clock = h.clock.max(next);
                     }
                     Some(op) => match op % 6 {
                         0 => {
                             let to = h.clock + u64::from(h.input.u16());
                             h.deliver_until(to);
-                            if !h.holding {
-                                h.clock = to;
-                            }
+                            h.clock = h.clock.max(to);
                         }
                         1 => {
                             let (d, then_next) = h.link.noise(&mut h.input, h.clock);
@@ -782,21 +874,18 @@ fuzz_target!(|data: &[u8]| {
                         }
                         _ => {
                             h.deliver_until(until);
-                            if !h.holding {
-                                h.clock = h.clock.max(until);
-                            }
+                            h.clock = h.clock.max(until);
                         }
                     },
                 }
             }
             S::Done(result) => {
                 trace!("t={} DONE {result:?}", h.clock);
-                // The client takes no bytes until the next start.
-                h.holding = true;
                 let req = h.req.take().expect("done without a request");
                 let normal_reply =
                     catalogue::request_rules(req.id).is_none_or(|(_, r)| r == Reply::Normal);
                 let late_enough = h.clock >= h.last_sent + u64::from(ex.timeout_ms);
+                let unplaced = h.line.stats().unplaced;
                 match result {
                     Ok(()) => {
                         assert_eq!(req.phase, 0, "Ok after an &");
@@ -809,26 +898,39 @@ fuzz_target!(|data: &[u8]| {
                                 "reply_frame is not the reply taken"
                             );
                             match req.typed {
-                                Typed::AxisStatus => {
-                                    h.client.response::<AxisStatusQuery>().expect("typed reply");
+                                Typed::AxisStatus(p) => {
+                                    h.client.response(&p).expect("typed reply");
                                 }
-                                Typed::RelativeMove => {
-                                    h.client.response::<RelativeMove>().expect("typed reply");
+                                Typed::RelativeMove(p) => {
+                                    h.client.response(&p).expect("typed reply");
                                 }
-                                Typed::ErrorDetail => {
-                                    h.client
-                                        .response::<ErrorDetailQuery>()
-                                        .expect("typed reply");
+                                Typed::ErrorDetail(p) => {
+                                    h.client.response(&p).expect("typed reply");
                                 }
-                                Typed::SoftwareReset => panic!("25BH has no normal reply"),
+                                Typed::SoftwareReset(_) => panic!("25BH has no normal reply"),
                                 Typed::Raw => {}
+                            }
+                            if prove {
+                                let waited =
+                                    u64::from(ex.timeout_ms) + u64::from(ex.late_window_ms);
+                                assert!(
+                                    req.echo_since_taken || h.clock > h.last_sent + waited,
+                                    "Ok without a proof: no echo since the reply and its \
+                                     replies not waited out (sent {}, now {})",
+                                    h.last_sent,
+                                    h.clock
+                                );
+                                assert_eq!(
+                                    unplaced, req.unplaced_mark,
+                                    "Ok with frames unplaced since it was asked"
+                                );
                             }
                         } else {
                             assert_eq!(req.id, SoftwareReset::ID);
                             assert!(req.taken.is_none(), "a normal reply taken for 25BH");
                             assert!(late_enough, "25BH done before its timeout");
-                            if req.typed == Typed::SoftwareReset {
-                                h.client.response::<SoftwareReset>().expect("the default");
+                            if let Typed::SoftwareReset(p) = req.typed {
+                                h.client.response(&p).expect("the default");
                             }
                         }
                     }
@@ -850,6 +952,9 @@ fuzz_target!(|data: &[u8]| {
                         );
                         if !normal_reply {
                             assert!(h.broken_since_sent, "25BH unknown without a broken reply");
+                            // The broken frame that ended it may have been
+                            // anything: its own reply is adrift.
+                            h.adrift.push((req.serial, 0, 0));
                         }
                     }
                     Err(Failure::Controller { code, detail }) => {
@@ -874,6 +979,19 @@ fuzz_target!(|data: &[u8]| {
                             assert!(req.asked_detail, "no 216H query after an &");
                         }
                     }
+                    Err(Failure::Unconfirmed { unplaced: n }) => {
+                        assert!(prove, "Unconfirmed without proofs");
+                        assert_eq!(n, unplaced, "Unconfirmed names another count");
+                        assert!(req.taken.is_some(), "Unconfirmed with no reply taken");
+                        assert_ne!(n, req.unplaced_mark, "Unconfirmed with nothing unplaced");
+                        let safe = catalogue::request_rules(req.id)
+                            .is_some_and(|(r, _)| r == Resend::Safe);
+                        assert!(
+                            !safe || req.asked_again == PROOF_ASKS,
+                            "Unconfirmed after {} asks of a query",
+                            req.asked_again
+                        );
+                    }
                     Err(e) => panic!("unexpected {e:?}"),
                 }
                 let s = h.line.stats();
@@ -892,5 +1010,4 @@ fuzz_target!(|data: &[u8]| {
             }
         }
     }
-    let _ = (h.fetch, h.except_bridge);
 });

@@ -6,7 +6,7 @@
 //! chunk takes the rest); everything after that is the byte stream.
 //!
 //! Two decoders run side by side on the same stream: one fed in those
-//! chunks through `decode` (called until `NeedMore`, including with the
+//! chunks through `decode` (called until `Partial`, including with the
 //! empty rest of a chunk), the other fed byte by byte through `push` and
 //! drained with `decode(&[])` after each byte. Every event of one is
 //! compared with the next event of the other as it comes, so no event is
@@ -18,7 +18,7 @@
 //!   same `pending()` at the end (the events do not depend on the chunking);
 //! - each gives, call for call, what the reference gives: bytes consumed,
 //!   event, stats, `pending()`, `failed_envelope()`, `last_frame()`;
-//! - `decode` consumes at most its input; `NeedMore` only with all of it
+//! - `decode` consumes at most its input; `Partial` only with all of it
 //!   consumed; an event with `consumed == 0` only while bytes are held
 //!   (`pending() > 0` before the call: bytes of a failed text frame being
 //!   decoded again);
@@ -270,7 +270,7 @@ fn check<const N: usize>(policy: BypassPolicy, cuts: &[u8], stream: &[u8]) {
             chunk = &chunk[d.consumed..];
             let k = match d.status {
                 Status::Partial => {
-                    assert!(chunk.is_empty(), "NeedMore with input left");
+                    assert!(chunk.is_empty(), "Partial with input left");
                     None
                 }
                 Status::Complete(ev) => {

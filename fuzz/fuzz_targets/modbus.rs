@@ -59,7 +59,10 @@ fuzz_target!(|data: &[u8]| {
                 assert_eq!(resp[..4], [(tid >> 8) as u8, tid as u8, 0, 0], "IDs echoed");
                 let len = usize::from(u16::from_be_bytes([resp[4], resp[5]]));
                 assert_eq!(len, resp.len() - 6, "MBAP length");
-                assert!(matches!(piece.first(), Some(1 | 0xFF)), "answered unit 1 or 255 only");
+                assert!(
+                    matches!(piece.first(), Some(1 | 0xFF)),
+                    "answered unit 1 or 255 only"
+                );
                 assert_eq!(resp.get(6), piece.first(), "the request's unit");
                 check_pdu(&resp[7..], piece.get(1).copied());
             }
@@ -99,7 +102,10 @@ fuzz_target!(|data: &[u8]| {
 /// the gateway gives.
 fn check_pdu(pdu: &[u8], function: Option<u8>) {
     let f = pdu.first().copied();
-    assert!(f == function || f == function.map(|f| f | 0x80), "function {f:?} for {function:?}");
+    assert!(
+        f == function || f == function.map(|f| f | 0x80),
+        "function {f:?} for {function:?}"
+    );
     if f.is_some_and(|f| f & 0x80 != 0) {
         assert_eq!(pdu.len(), 2, "an exception is its function and code");
         assert!(matches!(pdu[1], 1 | 2 | 3 | 6), "exception code {}", pdu[1]);

@@ -10,9 +10,9 @@
 #![no_main]
 
 use iai_protocol_b::axis::{AxisPattern, PerAxis};
+use iai_protocol_b::error::Error;
 use iai_protocol_b::field::{Reader, Writer};
 use iai_protocol_b::position::{PositionRecord, RecordLayout};
-use iai_protocol_b::error::Error;
 use libfuzzer_sys::fuzz_target;
 
 fn take<const K: usize>(data: &mut &[u8]) -> [u8; K] {

@@ -2,76 +2,44 @@
 //! virtual clock, against a simulated controller that holds a position
 //! table and answers in order.
 //!
-//! Input layout: the line (`common/link.rs`: station, timeout, flags with
-//! sends 1-4, fences off, raw noise, turnaround, late and duplicate
-//! windows, fence seed, start tick); a byte: query kind (bits 0-3 `% 3`: 21FH,
-//! 22DH, 209H), 0x10 confirmed reads (`ReadBackConfig::confirm`); first
-//! position (u16, cut to the layout's number width); span (u8: last =
-//! first + span, at most 32 windows); reply room (`% 8`: 1-8 records of
-//! 8 axes); the table's
-//! seed and mask of defined positions (u8, u32); resumes (`% 4`); then a
-//! script.
+//! Input: the line (`common/link.rs`); a byte: query kind (bits 0-3 `% 3`:
+//! 21FH, 22DH, 209H), 0x10 confirmed reads; first position (u16); span
+//! (u8, at most 32 windows); reply room (`% 8`: 1-8 records of 8 axes);
+//! the table's seed and mask of defined positions (u8, u32); resumes
+//! (`% 4`); then a script. The controller echoes fences and answers each
+//! query with the defined records of its window; per transmission an op
+//! byte (bits 0-2 length ms, bits 3-4 = 2 lost, bits 5-7 the reply: 0 at
+//! once, 1 lost, 2 corrupted, 3 copied later, 4 a lie (a record altered,
+//! missing, two digits swapped), 5 an `&`, 6 a stale answer (an earlier
+//! reply again), 7 late with a copy; then a byte and a delay); fences get
+//! an `&` for 4 and 5. While it waits (`% 5`): time, noise (raw with the
+//! link's bit), a copy of any reply made (whole or broken), the next
+//! delivery, the deadline. Every byte is fed: the engine takes all.
 //!
-//! The controller receives each transmission at its end and answers in
-//! order: fences with their echo, each query with the defined records of
-//! its window (in position order). Per transmission the script picks its
-//! length (replies due meanwhile arrive before `sent`), whether the
-//! controller gets it, and the reply's fate: at once, lost, a corrupted
-//! byte, a copy later, a lie (a record altered, missing, or two digits
-//! swapped: the SC still checks), an `&`, a stale answer (an earlier reply
-//! sent again: a lie outside the contract), a delay with a copy.
-//!
-//! While the engine waits, a script byte (`% 5`): 0 advances the clock
-//! (u16 ms) delivering what is due, 1 injects noise (a byte `k`, `k % 64`
-//! bytes, no LF unless raw noise is on; with `k & 0x40` the next delivery
-//! follows with no poll between), 2 sends a copy of any reply made before
-//! (a byte: which, `& 0x80` broken), 3 delivers the next delivery, 4 waits
-//! until the deadline; when the script ends, the deadline or the next
-//! delivery, whichever comes first. A transmission's op byte: bits 0-2
-//! its length (ms), bits 3-4 = 2 the query lost, bits 5-7 the reply's
-//! fault (then a byte and a u16 delay): 0 at once, 1 lost, 2 a corrupted
-//! byte, 3 a copy later, 4 a lie, 5 an `&`, 6 a stale answer, 7 a delay
-//! with a copy; fences are echoed (4 and 5: an `&` instead).
-//!
-//! Deliveries keep the contract as in `Link::arrives` (originals within
-//! `timeout + late_window` of their send, copies within
-//! `duplicate_window` of a first arrival that kept it, no lies, no raw
-//! noise); a plain `FrameDecoder` beside the engine's (reset with it at
-//! each send) tells which delivery made each frame.
-//!
-//! Checked:
-//! - no panic; it ends (`Done(Ok(None))`, or a failure with no resume
-//!   left) within a bounded number of steps; no wait before the first
-//!   transmission of a line with fences, none in the past or beyond the
-//!   longest hold;
-//! - fences are 200H with the seed's text; every query is one of the
-//!   kind, asks 1..=`window()` positions, all inside `first..=last` and
-//!   not before the next window to deliver; the controller's reply fits
-//!   `max_response`;
-//! - a reply is taken (`Answer`) only while awaited, holds at most the
-//!   positions asked, all in the window of the query last sent;
-//!   `Rejected(code)` only for an `&` with that code; `Mismatch` only for a
-//!   reply with records outside the window or more than asked; `Fence`
-//!   only for the echo of the last fence sent;
-//! - windows are delivered in order: the first at `first`, each next one
-//!   where the last ended, the last ending at `last` before `Done(Ok(None))`;
-//!   **every record delivered is the controller's, unaltered** (the reply
-//!   taken last, a reply the controller made, never bytes it did not send
-//!   unless raw noise is on), at most `asked`, inside the window, in order;
-//! - **with confirmed reads no window is delivered that differs from the
-//!   table** unless those very bytes came outside the contract (raw noise,
-//!   a stale answer, a late reply, a late copy) or from two separate lies
-//!   of the controller (two replies altered alike: nothing can tell them
-//!   from the truth);
-//! - `stats().records` adds up the records delivered; a failure is only
-//!   `Timeout` (with the sends made, after the timeout or a broken frame)
-//!   or `Controller { code }` after an `&` with that code; `resume` goes
-//!   on from the window it stopped at.
-//!
-//! Removed with the redesign: the checks of re-reads of windows answered
-//! empty and of the holds before a read (the engine has neither now: a
-//! window is delivered once, in order, and the line decides when a query
-//! may go out).
+//! A `Shadow` mirrors the engine's decoders (its own, and the line's while
+//! it keeps a reply to deliver: the harness follows which queries deliver,
+//! the confirmations or, unconfirmed, every query) and tells which delivery
+//! made each frame. Checked (beside no panic, a bounded end, waits):
+//! - fences numbered from 1 with the seed's text; queries of the kind, of
+//!   1..=`window()` positions inside `first..=last`, none before the next
+//!   window to deliver; replies within `max_response`;
+//! - `Answer` only while awaited, never while a reply is kept, its records
+//!   in the window asked; **a confirmation (or unconfirmed query) takes
+//!   only a reply the controller made for it**, a first read also an
+//!   in-contract copy, unless the delivery broke the contract, was forged,
+//!   or an echo outside the contract settled it; `Mismatch` only for a
+//!   reply that does not fit; `Rejected` for an `&`; `Fence` exactly for
+//!   the echo of the fence in flight; `Foreign` exactly for another
+//!   station or a command; **`Unplaced` never for a reply within the
+//!   contract** (but those of a query another reply stood in for);
+//! - windows in order, from `first` to `last`; **every record delivered is
+//!   the reply kept, a reply the controller made**; each window only after
+//!   a proof: a fence echoed since its reply (or, without one, the replies
+//!   waited out) and nothing unplaced since the last proof; **confirmed,
+//!   no window differs from the table** unless its bytes came outside the
+//!   contract or from two lies alike; `stats().records` adds up;
+//! - failures: `Timeout` after the timeout or a broken frame, `Controller`
+//!   after that `&`, `Unconfirmed` after `MAX_RECONFIRMS` rounds read again.
 #![no_main]
 
 #[path = "common/controller.rs"]
@@ -85,14 +53,15 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use controller::Table;
 use iai_protocol_b::checksum::BypassPolicy;
+use iai_protocol_b::decoder::Status;
 use iai_protocol_b::engine::Step;
 use iai_protocol_b::error::Failure;
 use iai_protocol_b::frame::{Frame, Header};
 use iai_protocol_b::line::{Heard, Line};
 use iai_protocol_b::position::{PositionRecord, PositionStream};
-use iai_protocol_b::readback::{ReadBack, ReadBackConfig};
+use iai_protocol_b::readback::{ReadBack, ReadBackConfig, MAX_RECONFIRMS};
 use libfuzzer_sys::fuzz_target;
-use link::{Delivery, Kind, Link, Setup, Shadow, Source};
+use link::{Delivery, Kind, Link, Seen, Setup, Shadow, Source};
 use records::Input;
 
 const N: usize = iai_protocol_b::limits::TTA.response;
@@ -107,9 +76,23 @@ const QUERIES: [PositionStream; 3] = [
 /// contract, and the lies of the controller (made indices) that carried
 /// them.
 #[derive(Default)]
-struct Seen {
+struct Fed {
     out_of_contract: bool,
     lies: BTreeSet<usize>,
+}
+
+/// The query on the line: its window, whether its reply is kept to be
+/// delivered, and whether it was begun as one (a confirmation, or any
+/// query of an unconfirmed read: the line then waits out every copy that
+/// could pass for its reply).
+#[derive(Debug, Clone, Copy)]
+struct Query {
+    head: u16,
+    asked: u16,
+    delivers: bool,
+    proof: bool,
+    /// The line's count of commands when it was begun: who it is.
+    serial: u32,
 }
 
 struct H<'a> {
@@ -121,19 +104,31 @@ struct H<'a> {
     link: Link,
     line: Line,
     rb: ReadBack<N>,
-    shadow: Shadow,
+    shadow: Shadow<N>,
     clock: u64,
-    /// The query last sent (head, asked); whether `sent` came after it.
-    query: Option<(u16, u16)>,
+    query: Option<Query>,
+    /// Windows (head, asked) whose first read is recorded by the engine.
+    firsts: BTreeSet<(u16, u16)>,
+    next_head: u32,
     awaiting: bool,
     last_sent: u64,
     broken_since_sent: bool,
-    /// The frame taken last (bytes, where from).
+    /// The frame taken last (bytes, where from), and whether a fence's echo
+    /// came since.
     last_answer: Option<(Vec<u8>, Source)>,
+    echo_since_answer: bool,
     rejected: Option<u16>,
-    /// The last fence sent (controller command index), if it got there.
+    /// The last fence sent (controller command index), its number, and
+    /// whether its echo is still awaited.
     last_fence: Option<usize>,
-    seen: BTreeMap<Vec<u8>, Seen>,
+    fences: u32,
+    fence_awaited: bool,
+    /// Who each command frame the controller received was for (the
+    /// query's serial; `None`: a fence).
+    owners: Vec<Option<u32>>,
+    adrift: BTreeSet<u32>,
+    excused_before: usize,
+    seen: BTreeMap<Vec<u8>, Fed>,
     /// Made indices of the controller's content lies.
     lies: BTreeSet<usize>,
     transmitted: bool,
@@ -147,18 +142,13 @@ impl H<'_> {
     fn deliver_until(&mut self, to: u64) {
         while let Some(d) = self.link.due(to) {
             self.clock = self.clock.max(d.at);
-            if !self.feed(d) {
-                break;
-            }
+            self.feed(d);
         }
     }
 
-    /// Feeds one delivery; `false` if the engine holds a reply (the rest
-    /// was put back).
-    fn feed(&mut self, mut d: Delivery) -> bool {
-        if d.ok.is_none() {
-            d.at = self.clock;
-        }
+    /// Feeds one delivery, checking what each frame did.
+    fn feed(&mut self, mut d: Delivery) {
+        d.at = self.clock;
         let ok = self.link.arrives(&mut d, self.clock);
         if let Kind::Reply { made, .. } = d.kind {
             let s = self.seen.entry(d.bytes.clone()).or_default();
@@ -174,107 +164,187 @@ impl H<'_> {
             let errors = self.line.stats().line_errors;
             let r = self.rb.received(&mut self.line, rest, now);
             if self.line.stats().line_errors > errors {
-                // A broken frame (the read-back path reports none).
                 self.broken_since_sent = true;
             }
             trace!(
-                "t={} RX {:?} -> {:?} ({:?})",
+                "t={} RX {:?} -> {:?} ({:?}{})",
                 self.clock,
                 String::from_utf8_lossy(&rest[..r.consumed]),
-                r.event,
-                d.kind
+                r.status,
+                d.kind,
+                if self.shadow.holding() { ", held" } else { "" }
             );
             assert!(r.consumed <= rest.len());
-            if r.consumed == 0 && r.event == Heard::NeedMore && !rest.is_empty() {
-                // The engine holds a reply to deliver: the rest waits.
-                assert!(self.line.answered(), "bytes refused with no reply held");
-                let mut tail = d.clone();
-                tail.bytes = rest.to_vec();
-                self.link.put_back(tail);
-                return false;
-            }
-            let heard = self.shadow.decoded(rest, r.consumed, &r.event);
+            let seen = self.shadow.decoded(rest, &r);
             rest = &rest[r.consumed..];
-            if let Heard::Broken(_) = r.event {
-                self.broken_since_sent = true;
+            let heard = match r.status {
+                Status::Partial => {
+                    assert!(rest.is_empty(), "Partial with bytes left");
+                    return;
+                }
+                Status::Complete(h) => h,
+            };
+            if let Some(seen) = seen {
+                self.heard(heard, seen);
             }
-            if let Some((frame, src)) = heard {
-                self.heard(r.event, frame, src);
-            }
-            if r.event == Heard::NeedMore {
-                assert!(rest.is_empty(), "NeedMore with bytes left");
-                return true;
+            if heard == Heard::Answer && self.query.is_some_and(|q| q.delivers) {
+                // A reply to deliver: kept until the next send.
+                self.shadow.hold();
             }
         }
     }
 
-    fn heard(&mut self, heard: Heard, frame: Vec<u8>, src: Source) {
-        let f = Frame::new_checked(&frame, BypassPolicy::Reject).expect("a frame");
+    fn heard(&mut self, heard: Heard, seen: Seen) {
         let station = self.setup.line.station;
+        let (header, from, code) = seen.envelope;
+        let ours = from == station && header != Header::Command;
+        assert_eq!(
+            heard == Heard::Foreign,
+            !ours,
+            "{heard:?} for a frame from {from:?} ({header:?})"
+        );
+        if let Source::Delivery(d) = &seen.source {
+            self.link.heard_whole(d);
+        }
+        let body = &seen.bytes[6..seen.bytes.len() - 4];
+        let echo = self.fence_awaited
+            && (header, code) == (Header::Response, 0x200)
+            && body == link::fence_text(&self.setup, self.fences).as_bytes();
+        assert_eq!(
+            heard == Heard::Fence,
+            ours && echo,
+            "{heard:?} for {:?} (fence {} awaited: {})",
+            String::from_utf8_lossy(&seen.bytes),
+            self.fences,
+            self.fence_awaited
+        );
+        if seen.held {
+            assert!(
+                !matches!(heard, Heard::Answer | Heard::Rejected(_) | Heard::Mismatch),
+                "{heard:?} while the engine keeps a reply"
+            );
+        }
+        let d = match &seen.source {
+            Source::Forged => None,
+            Source::Delivery(d) => Some(d.clone()),
+        };
         match heard {
-            Heard::Answer => {
-                assert!(self.awaiting, "a reply taken while none was awaited");
-                let (head, asked) = self.query.expect("a query");
-                assert_eq!(
-                    (f.header(), f.station(), f.code()),
-                    (Header::Response, station, self.kind.id)
-                );
-                let recs = parse_reply(self.kind, &f).expect("a reply taken parses");
-                assert!(recs.len() <= usize::from(asked), "more records than asked");
-                for r in &recs {
-                    let n = u32::from(r.number);
-                    assert!(
-                        n >= u32::from(head) && n < u32::from(head) + u32::from(asked),
-                        "record {n} taken for {head}+{asked}"
+            Heard::Answer | Heard::Rejected(_) => {
+                assert!(self.awaiting, "{heard:?} while no reply was awaited");
+                let q = self.query.expect("a query");
+                let f = seen.frame();
+                if let Heard::Answer = heard {
+                    assert_eq!(
+                        (f.header(), f.station(), f.code()),
+                        (Header::Response, station, self.kind.id)
                     );
+                    let recs = parse_reply(self.kind, &f).expect("a reply taken parses");
+                    assert!(fits(&recs, q.head, q.asked), "a reply taken for {q:?}");
+                    self.last_answer = Some((seen.bytes.clone(), seen.source.clone()));
+                    self.echo_since_answer = false;
+                    self.firsts.insert((q.head, q.asked));
+                } else {
+                    assert_eq!((f.header(), f.code()), (Header::Error, code));
+                    self.rejected = Some(code);
                 }
-                self.last_answer = Some((frame, src));
-                self.awaiting = false;
-            }
-            Heard::Rejected(code) => {
-                assert!(self.awaiting, "an & taken while no reply was awaited");
-                assert_eq!((f.header(), f.code()), (Header::Error, code));
-                self.rejected = Some(code);
+                self.origin(q, d.as_ref());
                 self.awaiting = false;
             }
             Heard::Mismatch => {
-                let (head, asked) = self.query.expect("a query");
+                assert!(self.awaiting, "a mismatch while no reply was awaited");
+                let q = self.query.expect("a query");
+                let f = seen.frame();
                 assert_eq!(
                     (f.header(), f.station(), f.code()),
                     (Header::Response, station, self.kind.id)
                 );
                 if let Some(recs) = parse_reply(self.kind, &f) {
-                    let fits = recs.len() <= usize::from(asked)
-                        && recs.iter().all(|r| {
-                            let n = u32::from(r.number);
-                            n >= u32::from(head) && n < u32::from(head) + u32::from(asked)
-                        });
-                    assert!(!fits, "a reply that fits {head}+{asked} called a mismatch");
+                    assert!(
+                        !fits(&recs, q.head, q.asked),
+                        "a reply that fits {q:?} called a mismatch"
+                    );
                 }
             }
             Heard::Fence => {
-                assert_eq!((f.header(), f.code()), (Header::Response, 0x200));
-                if let Source::Delivery(d) = &src {
-                    let cmd = self
-                        .link
-                        .origin(d)
-                        .expect("an echo the controller never made");
-                    assert_eq!(Some(cmd), self.last_fence, "the echo of another fence");
+                let in_order = match &d {
+                    Some(d) => {
+                        let cmd = self
+                            .link
+                            .origin(d)
+                            .expect("an echo the controller never made");
+                        assert_eq!(Some(cmd), self.last_fence, "the echo of another fence");
+                        d.ok()
+                    }
+                    None => false,
+                };
+                if !in_order {
+                    // An echo outside the contract settles what is owed:
+                    // replies to earlier commands are no longer in order.
+                    self.excused_before = self.link.cmds.len();
+                }
+                self.fence_awaited = false;
+                self.echo_since_answer = true;
+            }
+            Heard::Unplaced => {
+                if let Some(cmd) = d.as_ref().and_then(|d| self.link.placeable(d)) {
+                    let owner = self.owners[cmd];
+                    let excused = cmd < self.excused_before
+                        || owner.is_some_and(|o| self.adrift.contains(&o));
+                    assert!(
+                        excused,
+                        "a reply within the contract heard Unplaced: command {cmd} of {owner:?} \
+                         sent at {}, now {} ({:?})",
+                        self.link.cmds[cmd].at,
+                        self.clock,
+                        d.map(|d| d.kind)
+                    );
                 }
             }
-            _ => {}
+            Heard::Stale | Heard::Foreign | Heard::Broken(_) => {}
+        }
+    }
+
+    /// Query `q` took a reply from delivery `d` (`None`: forged): it must
+    /// be one the controller made for it, unless the delivery broke the
+    /// contract (or an echo outside it settled it), or the query was a
+    /// first read and the delivery an in-contract copy (a first read does
+    /// not wait for copies: its confirmation checks it).
+    fn origin(&mut self, q: Query, d: Option<&Delivery>) {
+        let Some(d) = d else {
+            self.adrift.insert(q.serial);
+            return;
+        };
+        let cmd = self
+            .link
+            .origin(d)
+            .expect("a frame the controller never made");
+        let owner = self.owners[cmd];
+        let copy = matches!(d.kind, Kind::Reply { copy: true, .. });
+        let excused = cmd < self.excused_before || (copy && !q.proof);
+        if owner != Some(q.serial) && d.ok() && !excused {
+            assert!(
+                owner.is_some_and(|o| self.adrift.contains(&o)),
+                "query {q:?} took a reply made for query {owner:?} (command {cmd} sent at {}, now {}, {:?})",
+                self.link.cmds[cmd].at,
+                self.clock,
+                d.kind
+            );
+        }
+        if owner != Some(q.serial) || !d.ok() {
+            // Something else stood in for its reply.
+            self.adrift.insert(q.serial);
         }
     }
 
     /// The controller got command `cmd` at the clock.
-    fn answer(&mut self, cmd: usize, bytes: &[u8], f: &link::Fate) {
+    fn answer(&mut self, cmd: usize, bytes: &[u8], fence: bool, f: &link::Fate) {
         let at = if f.fault == 0 {
             self.clock + 1
         } else {
             self.clock + f.delay
         };
         let station = self.setup.line.station;
-        if self.setup.is_fence(bytes) {
+        if fence {
             let echo = self.link.echo(bytes);
             match f.fault {
                 4 | 5 => {
@@ -358,6 +428,15 @@ fn parse_reply(kind: PositionStream, f: &Frame<'_>) -> Option<Vec<PositionRecord
     Some(out)
 }
 
+/// Whether `recs` answer the window `head..head + asked`.
+fn fits(recs: &[PositionRecord], head: u16, asked: u16) -> bool {
+    recs.len() <= usize::from(asked)
+        && recs.iter().all(|r| {
+            let n = u32::from(r.number);
+            n >= u32::from(head) && n < u32::from(head) + u32::from(asked)
+        })
+}
+
 enum S {
     Transmit(Vec<u8>),
     Wait(u32),
@@ -411,12 +490,20 @@ fuzz_target!(|data: &[u8]| {
         shadow: Shadow::default(),
         clock: 0,
         query: None,
+        firsts: BTreeSet::new(),
+        next_head: u32::from(first),
         awaiting: false,
         last_sent: 0,
         broken_since_sent: false,
         last_answer: None,
+        echo_since_answer: false,
         rejected: None,
         last_fence: None,
+        fences: 0,
+        fence_awaited: false,
+        owners: Vec::new(),
+        adrift: BTreeSet::new(),
+        excused_before: 0,
         seen: BTreeMap::new(),
         lies: BTreeSet::new(),
         transmitted: false,
@@ -424,17 +511,19 @@ fuzz_target!(|data: &[u8]| {
     let ex = setup.line;
     let windows = (u32::from(last) - u32::from(first)) / u32::from(cfg.window()) + 1;
     let reads = if cfg.confirm { 3 } else { 1 };
-    let max_steps = 400
-        + 16 * data.len()
-        + 32 * reads * windows as usize * usize::from(ex.max_sends) * (1 + usize::from(resumes));
+    let round = 32 * reads * usize::from(ex.max_sends);
+    let mut max_steps =
+        400 + 16 * data.len() + round * windows as usize * (1 + usize::from(resumes));
     let mut steps = 0usize;
-    let mut next_head = u32::from(first);
     let mut delivered = 0u32;
+    // The line's count of unplaced frames at the last proof (or start).
+    let mut proven = 0u32;
     loop {
         steps += 1;
         assert!(steps <= max_steps, "no end after {steps} steps");
         let now = h.now();
         let before = h.line.stats();
+        let reconfirmed = h.rb.stats().reconfirmed;
         let step = match h.rb.poll(&mut h.line, now) {
             Step::Transmit(b) => S::Transmit(b.to_vec()),
             Step::WaitUntil(t) => S::Wait(t),
@@ -447,9 +536,24 @@ fuzz_target!(|data: &[u8]| {
             Step::Done(Err(e)) => S::Failed(e),
         };
         let after = h.line.stats();
+        if after.fences_failed > before.fences_failed {
+            h.fence_awaited = false;
+        }
+        if h.rb.stats().reconfirmed > reconfirmed {
+            // A proof found frames unplaced: every window is read again.
+            assert_ne!(after.unplaced, proven, "read again with nothing unplaced");
+            let waited = u64::from(ex.timeout_ms) + u64::from(ex.late_window_ms);
+            assert!(
+                h.echo_since_answer || h.clock > h.last_sent + waited,
+                "read again before a proof"
+            );
+            proven = after.unplaced;
+            h.firsts.clear();
+            max_steps += round * 16;
+        }
         if after.sends > before.sends {
-            // The engine reset its reply decoder for the send.
-            h.shadow.reset();
+            // The engine cleared its receiver for the send.
+            h.shadow.release();
         }
         match step {
             S::Idle => panic!("a read-back idle"),
@@ -460,19 +564,27 @@ fuzz_target!(|data: &[u8]| {
                     String::from_utf8_lossy(&bytes).trim_end()
                 );
                 h.transmitted = true;
-                let fence = setup.is_fence(&bytes);
+                let fence = after.fences > before.fences;
+                assert_eq!(
+                    fence,
+                    setup.is_fence(&bytes),
+                    "a fence not counted, or counted and not sent"
+                );
                 if fence {
-                    link::check_fence(&setup, &bytes);
+                    link::check_fence(&setup, &bytes, after.fences);
+                    h.fences = after.fences;
                 } else {
+                    assert_eq!(after.sends, before.sends + 1, "a send not counted");
                     let (head, asked) = controller::parse_query(kind, ex.station, &bytes)
                         .expect("neither a fence nor a query of the kind");
                     assert!(asked >= 1 && asked <= cfg.window(), "window of {asked}");
                     assert!(
-                        u32::from(head) >= next_head
+                        u32::from(head) >= h.next_head
                             && u32::from(head) + u32::from(asked) - 1 <= u32::from(last),
-                        "query {head}+{asked} outside {next_head}..={last}"
+                        "query {head}+{asked} outside {}..={last}",
+                        h.next_head
                     );
-                    if after.sends == before.sends + 1 && h.line.sends() > 1 {
+                    let q = if h.line.sends() > 1 {
                         assert!(
                             h.clock >= h.last_sent + u64::from(ex.timeout_ms)
                                 || h.broken_since_sent,
@@ -480,8 +592,29 @@ fuzz_target!(|data: &[u8]| {
                             h.clock,
                             h.last_sent
                         );
-                    }
-                    h.query = Some((head, asked));
+                        let mut q = h.query.expect("a resend of a query");
+                        assert_eq!(q.head, head, "a resend of another window");
+                        if asked != q.asked {
+                            // Split after a timeout: two windows not read yet.
+                            assert!(asked < q.asked, "a resend of a larger window");
+                            h.firsts.remove(&(q.head, q.asked));
+                            q.delivers &= !cfg.confirm;
+                            q.asked = asked;
+                        }
+                        q
+                    } else {
+                        let delivers = !cfg.confirm
+                            || (u32::from(head) == h.next_head
+                                && h.firsts.contains(&(head, asked)));
+                        Query {
+                            head,
+                            asked,
+                            delivers,
+                            proof: delivers,
+                            serial: after.commands,
+                        }
+                    };
+                    h.query = Some(q);
                 }
                 h.awaiting = false;
                 let op = h.input.next();
@@ -491,25 +624,28 @@ fuzz_target!(|data: &[u8]| {
                 h.clock = to;
                 let now = h.now();
                 h.rb.sent(&mut h.line, now);
-                if !fence {
+                if fence {
+                    h.fence_awaited = true;
+                    h.last_fence = None;
+                } else {
                     h.awaiting = true;
                     h.last_sent = h.clock;
                     h.broken_since_sent = false;
                 }
-                if fence {
-                    h.last_fence = None;
-                }
                 if !fate.lost {
                     let cmd = h.link.received(&bytes, h.clock);
+                    let owner = (!fence).then(|| h.query.expect("a query").serial);
+                    h.owners.push(owner);
                     if fence {
                         h.last_fence = Some(cmd);
                     }
-                    h.answer(cmd, &bytes, &fate);
+                    h.answer(cmd, &bytes, fence, &fate);
                 }
             }
             S::Wait(t) => {
                 let nothing_sent = !h.transmitted && ex.fences;
-                let ahead = records::check_wait(now, t, setup.horizon(), nothing_sent);
+                let bound = setup.horizon(h.line.copy_window());
+                let ahead = records::check_wait(now, t, bound, nothing_sent);
                 trace!("t={} WAIT {ahead}", h.clock);
                 let until = h.clock + u64::from(ahead);
                 match h.input.next() {
@@ -557,14 +693,15 @@ fuzz_target!(|data: &[u8]| {
                     h.clock,
                     recs.len()
                 );
-                assert_eq!(u32::from(head), next_head, "windows out of order");
+                assert_eq!(u32::from(head), h.next_head, "windows out of order");
                 assert!(asked >= 1 && asked <= cfg.window());
                 let end = u32::from(head) + u32::from(asked);
                 assert!(
                     end - 1 <= u32::from(last),
                     "a window past the last position"
                 );
-                next_head = end;
+                h.next_head = end;
+                h.firsts.remove(&(head, asked));
                 assert!(recs.len() <= usize::from(asked), "more records than asked");
                 let mut prev = None;
                 for r in &recs {
@@ -578,6 +715,17 @@ fuzz_target!(|data: &[u8]| {
                 }
                 delivered += recs.len() as u32;
                 assert_eq!(h.rb.stats().records, delivered, "stats().records");
+                // Proven: a fence echoed since the reply, or its replies
+                // waited out; nothing unplaced since the last proof.
+                let waited = u64::from(ex.timeout_ms) + u64::from(ex.late_window_ms);
+                assert!(
+                    h.echo_since_answer || h.clock > h.last_sent + waited,
+                    "window {head}+{asked} delivered without a proof"
+                );
+                assert_eq!(
+                    after.unplaced, proven,
+                    "window {head}+{asked} delivered with frames unplaced since the last proof"
+                );
                 let (frame, src) = h
                     .last_answer
                     .clone()
@@ -606,7 +754,7 @@ fuzz_target!(|data: &[u8]| {
             }
             S::End => {
                 assert_eq!(
-                    next_head,
+                    h.next_head,
                     u32::from(last) + 1,
                     "ended before the last window"
                 );
@@ -628,6 +776,14 @@ fuzz_target!(|data: &[u8]| {
                     }
                     Failure::Controller { code, detail: None } => {
                         assert_eq!(h.rejected.take(), Some(code), "Controller without that &")
+                    }
+                    Failure::Unconfirmed { unplaced } => {
+                        assert_eq!(unplaced, after.unplaced, "Unconfirmed names another count");
+                        assert!(
+                            h.rb.stats().reconfirmed > u32::from(MAX_RECONFIRMS),
+                            "Unconfirmed after {} rounds",
+                            h.rb.stats().reconfirmed
+                        );
                     }
                     other => panic!("unexpected {other:?}"),
                 }

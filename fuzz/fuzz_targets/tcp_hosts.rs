@@ -44,7 +44,6 @@ use std::collections::VecDeque;
 use std::convert::Infallible;
 
 use firmware_example::bridge::{Bridge, Poll};
-use firmware_example::serial::Port;
 use firmware_example::codes;
 use firmware_example::config::{Config, Source};
 use firmware_example::modbus::Gateway;
@@ -52,8 +51,9 @@ use firmware_example::net::config::{Addressing, Ipv4Setting, NetConfig};
 use firmware_example::net::host::{Role, Session, SOCKETS};
 use firmware_example::net::modbus::ModbusBuffers;
 use firmware_example::net::{Buffers, Net, EMPTY_SLOTS};
+use firmware_example::serial::Port;
 use iai_protocol_b::checksum::BypassPolicy;
-use iai_protocol_b::decoder::{Event, FrameDecoder};
+use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 use iai_protocol_b::frame::{emit_frame, Header};
 use libfuzzer_sys::fuzz_target;
 use smoltcp::iface::{Config as IfaceConfig, Interface, SocketHandle, SocketSet, SocketStorage};
@@ -269,7 +269,9 @@ fuzz_target!(|data: &[u8]| {
         let report = vec![0, 7, 0, 0, 0, 2, 1, 0x11];
         let bulk = vec![0, 8, 0, 0, 0, 11, 1, 0x10, 0x0D, 0x03, 0, 1, 4, 0, 9, 0, 9];
         let half = vec![0, 9, 0, 0, 0, 6, 1, 0x03];
-        [q212, status, d26, cut, pnow, servo, two, outside, ident, report, bulk, half]
+        [
+            q212, status, d26, cut, pnow, servo, two, outside, ident, report, bulk, half,
+        ]
     };
 
     // The bridge's side: 10.0.0.1, port 5020.
@@ -476,7 +478,7 @@ fuzz_target!(|data: &[u8]| {
             }
             let mut dec: FrameDecoder<4096> = FrameDecoder::with_policy(BypassPolicy::Reject);
             for &b in conn {
-                if let Event::Error(e) = dec.push(b) {
+                if let Status::Complete(Event::Error(e)) = dec.push(b) {
                     panic!("a broken frame went to a client: {e}");
                 }
             }
@@ -499,13 +501,13 @@ fuzz_target!(|data: &[u8]| {
     for &b in &down.output {
         in_frame += 1;
         match dec.push(b) {
-            Event::Frame(f) => {
+            Status::Complete(Event::Frame(f)) => {
                 assert_eq!(f.header(), Header::Command);
                 assert_eq!(f.station(), controller_station);
                 in_frame = 0;
             }
-            Event::Error(e) => panic!("a broken frame went downstream: {e}"),
-            Event::NeedMore => {}
+            Status::Complete(Event::Error(e)) => panic!("a broken frame went downstream: {e}"),
+            Status::Partial => {}
         }
     }
     assert_eq!(in_frame, 0, "a partial frame went downstream");

@@ -97,6 +97,7 @@ mod records;
 use controller::Table;
 use iai_protocol_b::catalogue::{self, Resend};
 use iai_protocol_b::checksum::BypassPolicy;
+use iai_protocol_b::decoder::Status;
 use iai_protocol_b::engine::Step;
 use iai_protocol_b::error::Failure;
 use iai_protocol_b::frame::Frame;
@@ -203,15 +204,17 @@ impl H<'_> {
                 "t={} RX {:?} -> {:?} ({:?})",
                 self.clock,
                 String::from_utf8_lossy(&rest[..r.consumed]),
-                r.event,
+                r.status,
                 d.kind
             );
             assert!(r.consumed <= rest.len());
             rest = &rest[r.consumed..];
-            self.heard(r.event);
-            if r.event == Heard::NeedMore {
-                assert!(rest.is_empty(), "a transfer refused bytes");
-                return;
+            match r.status {
+                Status::Partial => {
+                    assert!(rest.is_empty(), "Partial with bytes left");
+                    return;
+                }
+                Status::Complete(heard) => self.heard(heard),
             }
         }
     }
@@ -302,7 +305,7 @@ impl H<'_> {
     }
 
     /// The controller got command `cmd` at the clock.
-    fn answer(&mut self, cmd: usize, bytes: &[u8], f: &link::Fate) {
+    fn answer(&mut self, cmd: usize, bytes: &[u8], fence: bool, f: &link::Fate) {
         let at = if f.fault == 0 {
             self.clock + 1
         } else {
@@ -310,7 +313,7 @@ impl H<'_> {
         };
         let station = self.setup.line.station;
         let error_code = 0x0A0 + u16::from(f.extra);
-        if self.setup.is_fence(bytes) {
+        if fence {
             let echo = self.link.echo(bytes);
             match f.fault {
                 4 | 5 => {
@@ -567,9 +570,14 @@ fuzz_target!(|data: &[u8]| {
                     String::from_utf8_lossy(&bytes).trim_end()
                 );
                 h.transmitted = true;
-                let fence = setup.is_fence(&bytes);
+                let fence = after.fences > before.fences;
+                assert_eq!(
+                    fence,
+                    setup.is_fence(&bytes),
+                    "a fence not counted, or counted and not sent"
+                );
                 if fence {
-                    link::check_fence(&setup, &bytes);
+                    link::check_fence(&setup, &bytes, after.fences);
                 } else if let Some((s, recs)) = controller::parse_write(kind, &bytes) {
                     assert!(bytes.len() <= max_frame, "a frame over max_frame");
                     assert!(!recs.is_empty(), "a write without records");
@@ -656,12 +664,13 @@ fuzz_target!(|data: &[u8]| {
                     if fence {
                         h.last_fence = Some(cmd);
                     }
-                    h.answer(cmd, &bytes, &fate);
+                    h.answer(cmd, &bytes, fence, &fate);
                 }
             }
             S::Wait(t) => {
                 let nothing_sent = !h.transmitted && ex.fences;
-                let ahead = records::check_wait(now, t, setup.horizon(), nothing_sent);
+                let ahead =
+                    records::check_wait(now, t, setup.horizon(h.line.copy_window()), nothing_sent);
                 trace!("t={} WAIT {ahead}", h.clock);
                 let until = h.clock + u64::from(ahead);
                 match h.input.next() {

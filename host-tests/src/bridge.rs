@@ -14,7 +14,7 @@ use std::collections::{BTreeMap, VecDeque};
 use std::io::{self, Read, Write};
 use std::os::fd::AsRawFd;
 use std::os::unix::net::UnixStream;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant};
@@ -36,6 +36,7 @@ use firmware_example::serial::{XOFF, XON};
 pub struct SimThread {
     handle: JoinHandle<(Simulator, io::Result<()>)>,
     records: Arc<AtomicU64>,
+    silent: Arc<AtomicBool>,
 }
 
 impl SimThread {
@@ -45,11 +46,23 @@ impl SimThread {
     pub fn spawn(mut sim: Simulator, stream: UnixStream, baud: Option<u32>) -> Self {
         let records = Arc::new(AtomicU64::new(0));
         let shared = Arc::clone(&records);
+        let silent = Arc::new(AtomicBool::new(false));
+        let mute = Arc::clone(&silent);
         let handle = thread::spawn(move || {
-            let result = serve_paced(&mut sim, stream, &shared, baud);
+            let result = serve_paced(&mut sim, stream, &shared, &mute, baud);
             (sim, result)
         });
-        SimThread { handle, records }
+        SimThread {
+            handle,
+            records,
+            silent,
+        }
+    }
+
+    /// Makes the controller stop answering (`true`: what reaches it is
+    /// dropped unread, as by a controller switched off) or answer again.
+    pub fn set_silent(&self, silent: bool) {
+        self.silent.store(silent, Ordering::Relaxed);
     }
 
     /// Records the simulator has written so far.
@@ -78,6 +91,7 @@ fn serve_paced(
     sim: &mut Simulator,
     mut stream: UnixStream,
     records: &AtomicU64,
+    silent: &AtomicBool,
     baud: Option<u32>,
 ) -> io::Result<()> {
     let t0 = Instant::now();
@@ -94,6 +108,10 @@ fn serve_paced(
     loop {
         match stream.read(&mut buf) {
             Ok(0) => return Ok(()),
+            Ok(_) if silent.load(Ordering::Relaxed) => {
+                out.clear();
+                continue;
+            }
             Ok(n) => {
                 sim.receive(&buf[..n], now());
                 records.store(sim.stats().records_written, Ordering::Relaxed);
@@ -102,6 +120,12 @@ fn serve_paced(
                 thread::sleep(Duration::from_micros(100));
             }
             Err(e) => return Err(e),
+        }
+        if silent.load(Ordering::Relaxed) {
+            // Switched off: nothing it had to say goes out.
+            out.clear();
+            drop(sim.take_output(now()));
+            continue;
         }
         if out.is_empty() {
             out.extend(sim.take_output(now()));
@@ -125,7 +149,20 @@ fn serve_paced(
             continue;
         }
         let chunk: Vec<u8> = out.drain(..n.min(out.len())).collect();
-        write_all_nonblocking(&mut stream, &chunk)?;
+        match write_all_nonblocking(&mut stream, &chunk) {
+            Ok(()) => {}
+            // QEMU went while a reply was going out: the line's end, as
+            // a read of 0 bytes is.
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::BrokenPipe | io::ErrorKind::ConnectionReset
+                ) =>
+            {
+                return Ok(())
+            }
+            Err(e) => return Err(e),
+        }
         since_base += chunk.len() as u32;
     }
 }

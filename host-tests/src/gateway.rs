@@ -26,7 +26,7 @@
 use std::collections::VecDeque;
 use std::io::{self, Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::thread::{self, JoinHandle};
@@ -40,12 +40,14 @@ use iai_protocol_b::line;
 
 use crate::bridge::{status_query, status_query_frame, HostLink, SimThread};
 use crate::qemu::{
-    build_ethernet_firmware, build_firmware, symbol_address, target_dir, Board, ExitOutcome,
+    build_ethernet_firmware, build_firmware, image_loader_arg, page_image, Board, ExitOutcome,
     QemuSession, QUIT_GUARD, QUIT_SEQUENCE, READY_MARKER,
 };
 use crate::rtu_relay::RtuRelay;
-use firmware_example::net::config::{NetConfig, BLOCK_OFFSET, DEFAULT_PORT};
+use firmware_example::config::access::DEFAULT_WEB_PORT;
+use firmware_example::net::config::{NetConfig, DEFAULT_PORT};
 use firmware_example::net::modbus::MODBUS_PORT;
+use firmware_example::net::sparkplug::config::SparkplugConfig;
 use iai_simulator::{Faults, Simulator};
 
 /// What the gateway runs.
@@ -83,12 +85,45 @@ pub struct Options {
     /// Ethernet only: the bridge honours the quit sequence (for test runs
     /// that end with [`EthernetGateway::quit`]).
     pub quit_sequence: bool,
+    /// Ethernet only: TCP port on 127.0.0.1 forwarded to the web page (0:
+    /// a free one).
+    pub http_port: u16,
     /// Ethernet only: a network block written into the configuration page
     /// (`None`: blank, so DHCP and port 5020). Its port is the one QEMU
     /// forwards to; a static address must be QEMU's guest address,
     /// 10.0.2.15.
     pub network: Option<NetConfig>,
+    /// Ethernet only: a Sparkplug block written into the configuration
+    /// page (`None`: blank, the edge node off). Its broker is seen from
+    /// the guest: QEMU's user network maps 10.0.2.2 to this machine's
+    /// loopback ([`QEMU_HOST`]).
+    pub sparkplug: Option<SparkplugConfig>,
+    /// Ethernet only: the bridge's configuration block, if not the
+    /// gateway's own ([`config`]).
+    pub bridge_config: Option<Config>,
+    /// The configuration page the firmware boots with.
+    pub page: PageSource,
 }
+
+/// Where the firmware's configuration page comes from.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub enum PageSource {
+    /// The gateway's own: the bridge block of [`config`] (and
+    /// [`Options::network`]).
+    #[default]
+    Built,
+    /// This image of both slots (`iai bridge config block`, or `iai
+    /// bridge config get --image` from an earlier run), loaded at
+    /// `_bridge_config`.
+    Image(PathBuf),
+    /// Nothing loaded: a blank page, every default (the quit sequence
+    /// off).
+    Blank,
+}
+
+/// The address of this machine's loopback as QEMU's user network shows
+/// it to the guest.
+pub const QEMU_HOST: [u8; 4] = [10, 0, 2, 2];
 
 impl Default for Options {
     fn default() -> Self {
@@ -105,8 +140,40 @@ impl Default for Options {
             elf: None,
             ethernet: false,
             quit_sequence: false,
+            http_port: 0,
             network: None,
+            sparkplug: None,
+            bridge_config: None,
+            page: PageSource::Built,
         }
+    }
+}
+
+/// The QEMU arguments that load `opts`' configuration page, and the
+/// configuration to load instead ([`QemuSession::start_tied`]'s).
+fn page_args(
+    opts: &Options,
+    elf: &std::path::Path,
+    cfg: &Config,
+) -> Result<(Vec<String>, Option<Config>), String> {
+    match &opts.page {
+        PageSource::Built if opts.ethernet => {
+            let image = page_image(
+                Board::Lm3s6965.config_slot_len(),
+                cfg,
+                opts.network.as_ref(),
+                opts.sparkplug.as_ref(),
+            );
+            let loader = image_loader_arg(elf, &image).map_err(|e| e.to_string())?;
+            Ok((vec!["-device".into(), loader], None))
+        }
+        PageSource::Built => Ok((Vec::new(), Some(*cfg))),
+        PageSource::Image(file) => {
+            let image = std::fs::read(file).map_err(|e| format!("{}: {e}", file.display()))?;
+            let loader = image_loader_arg(elf, &image).map_err(|e| e.to_string())?;
+            Ok((vec!["-device".into(), loader], None))
+        }
+        PageSource::Blank => Ok((Vec::new(), None)),
     }
 }
 
@@ -138,7 +205,7 @@ pub fn config(baud: u32, modbus_baud: u32) -> Config {
 }
 
 /// Where the gateway listens, once it is ready.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct Ready {
     /// The protocol-B host side: the relay's port, or with `--ethernet`
     /// the port QEMU forwards to the firmware's own TCP stack.
@@ -150,6 +217,10 @@ pub struct Ready {
     pub modbus_rtu: Option<SocketAddr>,
     /// Modbus TCP straight to the firmware (the Ethernet build).
     pub modbus_tcp: Option<SocketAddr>,
+    /// The NBIRTH topic, once the Sparkplug edge node has published it.
+    pub sparkplug: Option<String>,
+    /// The web page (the Ethernet build).
+    pub http: Option<SocketAddr>,
 }
 
 fn log(line: &str) {
@@ -209,14 +280,16 @@ pub fn run(opts: &Options, stop: &AtomicBool, on_ready: impl FnOnce(Ready)) -> R
     };
     let mut cfg = config(opts.baud, opts.modbus_baud);
     cfg.quit_sequence = opts.stack_report;
+    let (args, loaded) = page_args(opts, &elf, &cfg)?;
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
     // Tied: QEMU goes with this thread even if the process is killed.
     let mut qemu = QemuSession::start_tied(
         opts.board,
         &elf,
         BOOT_TIMEOUT,
         Some(READY_MARKER),
-        &[],
-        Some(&cfg),
+        &args,
+        loaded.as_ref(),
         modbus_listener.is_some(),
     )
     .map_err(|e| format!("starting QEMU: {e}"))?;
@@ -270,6 +343,8 @@ pub fn run(opts: &Options, stop: &AtomicBool, on_ready: impl FnOnce(Ready)) -> R
                 over_ethernet: false,
                 modbus_tcp: None,
                 modbus_rtu: modbus_addr,
+                sparkplug: None,
+                http: None,
             });
             serve(&listener, &link, &mut qemu, stop, cfg.bridge_station)
         }
@@ -673,6 +748,14 @@ pub const TCP_LISTENING: &str = "protocol-b-tcp listening on ";
 /// What the Ethernet firmware prints once Modbus TCP listens (followed by
 /// `A.B.C.D:502`), right after [`TCP_LISTENING`]'s line.
 pub const MODBUS_TCP_LISTENING: &str = "modbus-tcp listening on ";
+/// What the Ethernet firmware prints at start when its Sparkplug edge
+/// node runs (followed by `spBv1.0/GROUP/NBIRTH/NODE via broker A:P`).
+pub const SPARKPLUG_NODE: &str = "firmware-example: sparkplug spBv1.0/";
+/// What it prints once NBIRTH is out (followed by `bdSeq N`).
+pub const SPARKPLUG_BORN: &str = "sparkplug NBIRTH out, ";
+/// What the Ethernet firmware prints once the web page listens (followed
+/// by `A.B.C.D:80`), right after [`MODBUS_TCP_LISTENING`]'s line.
+pub const HTTP_LISTENING: &str = "http listening on ";
 /// How long the Ethernet firmware may take to get an address (DHCP, or
 /// its fallback address after `DHCP_FALLBACK_MS`).
 const ADDRESS_TIMEOUT: Duration = Duration::from_secs(30);
@@ -691,6 +774,9 @@ pub struct EthernetGateway {
     /// Where Modbus TCP is reached (127.0.0.1, forwarded by QEMU to the
     /// firmware's port 502).
     pub modbus_addr: SocketAddr,
+    /// Where the web page is reached (127.0.0.1, forwarded by QEMU to the
+    /// firmware's port 80, the web block's default).
+    pub http_addr: SocketAddr,
     /// The firmware's [`TCP_LISTENING`] line.
     pub listening: String,
     sim: SimThread,
@@ -718,6 +804,11 @@ impl EthernetGateway {
             p => p,
         };
         let modbus_addr = SocketAddr::from(([127, 0, 0, 1], modbus_port));
+        let http_port = match opts.http_port {
+            0 => free_port()?,
+            p => p,
+        };
+        let http_addr = SocketAddr::from(([127, 0, 0, 1], http_port));
         let elf = match &opts.elf {
             Some(p) => p.clone(),
             None => build_ethernet_firmware()
@@ -725,26 +816,35 @@ impl EthernetGateway {
         };
         let cfg = Config {
             quit_sequence: opts.quit_sequence || opts.stack_report,
-            ..config(opts.baud, opts.modbus_baud)
+            ..opts
+                .bridge_config
+                .unwrap_or_else(|| config(opts.baud, opts.modbus_baud))
         };
         let guest_port = opts.network.map_or(DEFAULT_PORT, |n| n.port);
+        // With a broker the guest must reach this machine's loopback
+        // (10.0.2.2); otherwise it reaches nothing (`restrict=on`).
+        let restrict = if opts.sparkplug.is_some() {
+            "off"
+        } else {
+            "on"
+        };
         let nic = format!(
-            "user,model=stellaris,restrict=on,hostfwd=tcp:127.0.0.1:{port}-:{guest_port},\
-             hostfwd=tcp:127.0.0.1:{modbus_port}-:{MODBUS_PORT}"
+            "user,model=stellaris,restrict={restrict},hostfwd=tcp:127.0.0.1:{port}-:{guest_port},\
+             hostfwd=tcp:127.0.0.1:{modbus_port}-:{MODBUS_PORT},\
+             hostfwd=tcp:127.0.0.1:{http_port}-:{DEFAULT_WEB_PORT}"
         );
-        let mut args = vec!["-nic".to_owned(), nic];
-        if let Some(net) = &opts.network {
-            args.push("-device".to_owned());
-            args.push(network_loader_arg(&elf, net)?);
-        }
-        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        // The bridge's block, the Sparkplug block and the network block
+        // in one page.
+        let (page, _) = page_args(opts, &elf, &cfg)?;
+        let mut args = vec!["-nic", nic.as_str()];
+        args.extend(page.iter().map(String::as_str));
         let qemu = QemuSession::start_tied(
             Board::Lm3s6965,
             &elf,
             BOOT_TIMEOUT,
             Some(READY_MARKER),
             &args,
-            Some(&cfg),
+            None,
             false,
         )
         .map_err(|e| format!("starting QEMU: {e}"))?;
@@ -761,6 +861,7 @@ impl EthernetGateway {
             qemu,
             addr,
             modbus_addr,
+            http_addr,
             listening: String::new(),
             sim,
         };
@@ -795,6 +896,15 @@ impl EthernetGateway {
                 gw.qemu.stdout_so_far()
             ));
         }
+        if !gw
+            .qemu
+            .wait_for_stdout(HTTP_LISTENING, Instant::now() + BOOT_TIMEOUT)
+        {
+            return Err(format!(
+                "the firmware did not print {HTTP_LISTENING:?}\n{}",
+                gw.qemu.stdout_so_far()
+            ));
+        }
         tcp_status_query(addr, cfg.bridge_station, FENCE_TIMEOUT)
             .map_err(|e| format!("the bridge did not answer over TCP: {e}"))?;
         Ok(gw)
@@ -803,6 +913,24 @@ impl EthernetGateway {
     /// Records the simulator has stored so far.
     pub fn records(&self) -> u64 {
         self.sim.records()
+    }
+
+    /// Switches the simulated controller off (`true`) or on again.
+    pub fn set_controller_silent(&self, silent: bool) {
+        self.sim.set_silent(silent);
+    }
+
+    /// The Sparkplug NBIRTH topic the firmware announced at start, once
+    /// it says NBIRTH is out ([`SPARKPLUG_BORN`]; waits until `deadline`).
+    pub fn sparkplug_birth(&self, deadline: Instant) -> Option<String> {
+        if !self.qemu.wait_for_stdout(SPARKPLUG_BORN, deadline) {
+            return None;
+        }
+        let out = self.qemu.stdout_so_far();
+        out.lines()
+            .find_map(|l| l.strip_prefix(SPARKPLUG_NODE))
+            .and_then(|l| l.split_whitespace().next())
+            .map(str::to_owned)
     }
 
     /// Ends the run the firmware's way (it must have been started with
@@ -863,11 +991,26 @@ pub fn run_ethernet(
         config(opts.baud, opts.modbus_baud).controller_station.0,
         opts.baud
     ));
+    let sparkplug = match &opts.sparkplug {
+        None => None,
+        Some(_) => {
+            let topic = gw.sparkplug_birth(Instant::now() + Duration::from_secs(60));
+            let topic = topic.ok_or_else(|| {
+                format!(
+                    "the edge node published no NBIRTH within 60 s (is the broker up?)\n{}",
+                    gw.qemu.stdout_so_far()
+                )
+            })?;
+            Some(format!("spBv1.0/{topic}"))
+        }
+    };
     on_ready(Ready {
         protocol_b: gw.addr,
         over_ethernet: true,
         modbus_rtu: None,
         modbus_tcp: Some(gw.modbus_addr),
+        sparkplug,
+        http: Some(gw.http_addr),
     });
     let result = watch(&mut gw.qemu, stop);
     let ended = if opts.stack_report && result.is_ok() {
@@ -890,25 +1033,6 @@ pub fn run_ethernet(
         Err(e) => log(&format!("stopped; {e}")),
     }
     result
-}
-
-/// QEMU's `-device loader` argument that puts `net`'s block where the
-/// Ethernet firmware reads it: [`BLOCK_OFFSET`] bytes past
-/// `_bridge_config`.
-fn network_loader_arg(elf: &Path, net: &NetConfig) -> Result<String, String> {
-    static SERIAL: AtomicU64 = AtomicU64::new(0);
-    let addr =
-        symbol_address(elf, "_bridge_config").map_err(|e| e.to_string())? + BLOCK_OFFSET as u64;
-    let dir = target_dir().join("qemu-config");
-    let file = dir.join(format!(
-        "net-{}-{}.bin",
-        std::process::id(),
-        SERIAL.fetch_add(1, Ordering::Relaxed)
-    ));
-    std::fs::create_dir_all(&dir)
-        .and_then(|()| std::fs::write(&file, net.to_block()))
-        .map_err(|e| format!("writing {}: {e}", file.display()))?;
-    Ok(format!("loader,file={},addr={addr:#x}", file.display()))
 }
 
 /// A port on 127.0.0.1 free a moment ago.

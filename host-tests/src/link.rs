@@ -13,8 +13,8 @@ use iai_protocol_b::position::PositionRecord;
 use iai_protocol_b::readback::ReadBackStats;
 use iai_protocol_b::transfer::{Guarantee, RecordSource};
 use iai_protocol_b::{
-    client::Client, error::Failure, line::Line, line::LineConfig, readback::ReadBack,
-    transfer::Transfer,
+    client::Client, client::Pending, error::Failure, line::Line, line::LineConfig,
+    readback::ReadBack, transfer::Transfer,
 };
 
 use iai_simulator::Simulator;
@@ -229,17 +229,17 @@ pub fn read_back<const N: usize>(
 }
 
 /// Runs one request of `client` on `line` against `sim` from tick `now`;
-/// returns how it ended and the tick it ended at.
+/// returns how it ended, the tick it ended at and the ticket to its reply.
 pub fn call<'a, R: Request<'a>, const C: usize, const P: usize>(
     client: &mut Client<C, P>,
     line: &mut Line,
     sim: &mut Simulator,
     req: &R,
     now: u32,
-) -> (Result<(), Failure>, u32) {
-    client
+) -> (Result<(), Failure>, u32, Pending<R>) {
+    let pending = client
         .start(line, req, now)
         .expect("the request fits the command buffer");
     let run = drive(client, line, sim, 0, now, |_| {}, |_, _, _| false);
-    (run.result, run.virtual_ms)
+    (run.result, run.virtual_ms, pending)
 }

@@ -5,11 +5,11 @@
 //! that the test command builds each board once (building inside a test
 //! made the first test of a board pay for the whole optimised build: the
 //! mps2-an386 pass-through test took about 9 s, nearly all of it cargo).
-//! [`QemuSession::start`] boots an ELF with both serial ports wired to Unix
-//! sockets: [`QemuSession::upstream`] is the first serial port (the host
-//! side of the bridge), [`QemuSession::downstream`] the second (the
-//! controller side), and a configuration block (see
-//! `firmware_example::config`) loaded into the flash page at the ELF's
+//! [`QemuSession::start`] boots an ELF with its serial ports wired to Unix
+//! sockets: [`QemuSession::upstream`] is the host side of the bridge,
+//! [`QemuSession::downstream`] the controller side (which of QEMU's
+//! `-serial` ports each is: [`Board::serials`]), and a configuration page (see
+//! `firmware_example::config`) loaded into the flash slots at the ELF's
 //! `_bridge_config` symbol. The firmware ends the run through semihosting
 //! `exit`, which becomes QEMU's exit code (0 on success).
 //!
@@ -29,7 +29,11 @@ use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::thread;
 use std::time::{Duration, Instant};
 
+use firmware_example::config::page::{BRIDGE_AT, NET_AT, PAGE_LEN, SPARKPLUG_AT};
+use firmware_example::config::store::image;
 use firmware_example::config::Config;
+use firmware_example::net::config::NetConfig;
+use firmware_example::net::sparkplug::config::SparkplugConfig;
 
 /// Name of the firmware package.
 pub const FIRMWARE_PACKAGE: &str = "firmware-example";
@@ -65,17 +69,44 @@ pub enum Board {
     Lm3s6965,
     /// `mps2-an386`: Cortex-M4F, CMSDK UARTs. Use it for instruction counts.
     Mps2An386,
+    /// `b-l475e-iot01a` (QEMU 9 and later): the STM32L475, Cortex-M4F, the
+    /// USART design of the STM32G0 boards, running their embassy tasks.
+    BL475eIot01a,
+}
+
+/// What a board's serial port (QEMU's `-serial`, in order) carries.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Serial {
+    /// The host side of the bridge ([`QemuSession::upstream`]).
+    Host,
+    /// The controller side ([`QemuSession::downstream`]).
+    Controller,
+    /// The gateway's Modbus RTU port ([`QemuSession::modbus`]).
+    Modbus,
+    /// Nothing the firmware uses (`-serial null`).
+    Unused,
 }
 
 impl Board {
     /// Every supported board.
-    pub const ALL: [Board; 2] = [Board::Lm3s6965, Board::Mps2An386];
+    pub const ALL: [Board; 3] = [Board::Lm3s6965, Board::Mps2An386, Board::BL475eIot01a];
 
     /// QEMU `-machine` name.
     pub fn machine(self) -> &'static str {
         match self {
             Board::Lm3s6965 => "lm3s6965evb",
             Board::Mps2An386 => "mps2-an386",
+            Board::BL475eIot01a => "b-l475e-iot01a",
+        }
+    }
+
+    /// A slot of the board's configuration page: its flash erase page
+    /// (`memory-qemu.x`: 1 KiB, as the LM3S6965's; `memory-stm32l475.x`:
+    /// 2 KiB).
+    pub fn config_slot_len(self) -> usize {
+        match self {
+            Board::Lm3s6965 | Board::Mps2An386 => 1024,
+            Board::BL475eIot01a => 2048,
         }
     }
 
@@ -83,7 +114,7 @@ impl Board {
     pub fn target(self) -> &'static str {
         match self {
             Board::Lm3s6965 => "thumbv7m-none-eabi",
-            Board::Mps2An386 => "thumbv7em-none-eabihf",
+            Board::Mps2An386 | Board::BL475eIot01a => "thumbv7em-none-eabihf",
         }
     }
 
@@ -92,13 +123,36 @@ impl Board {
         match self {
             Board::Lm3s6965 => "lm3s6965",
             Board::Mps2An386 => "mps2-an386",
+            Board::BL475eIot01a => "b-l475e-iot01a",
+        }
+    }
+
+    /// What each of its serial ports carries, in QEMU's `-serial` order
+    /// (the order the machine wires its UARTs: on `b-l475e-iot01a`
+    /// USART1, USART2, USART3, UART4).
+    pub fn serials(self) -> &'static [Serial] {
+        match self {
+            Board::Lm3s6965 => &[Serial::Host, Serial::Controller, Serial::Modbus],
+            Board::Mps2An386 => &[Serial::Host, Serial::Controller],
+            Board::BL475eIot01a => &[
+                Serial::Host,
+                Serial::Modbus,
+                Serial::Unused,
+                Serial::Controller,
+            ],
         }
     }
 
     /// Whether the board's firmware has the gateway's Modbus RTU port (a
     /// third UART).
     pub fn has_modbus(self) -> bool {
-        self == Board::Lm3s6965
+        self.serials().contains(&Serial::Modbus)
+    }
+
+    /// Whether QEMU models the board's watchdog, so that a stalled loop
+    /// resets it (QEMU 10 leaves the STM32L475's IWDG unimplemented).
+    pub fn watchdog_modelled(self) -> bool {
+        self != Board::BL475eIot01a
     }
 
     /// Cargo feature of `firmware-example` that selects this board.
@@ -106,7 +160,20 @@ impl Board {
         match self {
             Board::Lm3s6965 => "board-lm3s6965",
             Board::Mps2An386 => "board-mps2-an386",
+            Board::BL475eIot01a => "board-b-l475e-iot01a",
         }
+    }
+
+    /// The board named `name` (its binary or its QEMU machine).
+    pub fn named(name: &str) -> Option<Board> {
+        Board::ALL
+            .into_iter()
+            .find(|b| b.bin() == name || b.machine() == name)
+    }
+
+    /// The boards' names, for a usage text: `lm3s6965, mps2-an386, ...`.
+    pub fn names() -> String {
+        Board::ALL.map(Board::bin).join(", ")
     }
 
     /// Cargo arguments that select this board's features.
@@ -225,9 +292,33 @@ pub fn build_ethernet_firmware() -> io::Result<PathBuf> {
     )
 }
 
+/// Build `firmware-example`'s example `name` for `board` with
+/// [`FIRMWARE_PROFILE`]; the ELF path.
+pub fn build_example(board: Board, name: &str) -> io::Result<PathBuf> {
+    build_target(board, ("--example", name), FIRMWARE_PROFILE, &[], None)
+}
+
 fn build_bin(
     board: Board,
     bin: &str,
+    profile: &str,
+    features: &[&str],
+    target_dir_override: Option<&Path>,
+) -> io::Result<PathBuf> {
+    build_target(
+        board,
+        ("--bin", bin),
+        profile,
+        features,
+        target_dir_override,
+    )
+}
+
+/// Builds one of `firmware-example`'s programs (`("--bin", name)` or
+/// `("--example", name)`) for `board`; the ELF path.
+fn build_target(
+    board: Board,
+    (kind, name): (&str, &str),
     profile: &str,
     features: &[&str],
     target_dir_override: Option<&Path>,
@@ -238,7 +329,7 @@ fn build_bin(
     let mut command = Command::new(&cargo);
     command
         .current_dir(workspace_root())
-        .args(["build", "--quiet", "-p", FIRMWARE_PACKAGE, "--bin", bin])
+        .args(["build", "--quiet", "-p", FIRMWARE_PACKAGE, kind, name])
         .args(["--profile", profile])
         .args(["--target", board.target()])
         .args(["--no-default-features", "--features"])
@@ -263,11 +354,15 @@ fn build_bin(
         "bench" => "release",
         other => other,
     };
-    let elf = target_dir_override
+    let dir = target_dir_override
         .map_or_else(target_dir, Path::to_path_buf)
         .join(board.target())
-        .join(profile_dir)
-        .join(bin);
+        .join(profile_dir);
+    let elf = if kind == "--example" {
+        dir.join("examples").join(name)
+    } else {
+        dir.join(name)
+    };
     if elf.is_file() {
         Ok(elf)
     } else {
@@ -305,8 +400,8 @@ pub struct QemuSession {
     pub upstream: UnixStream,
     /// Second serial port: the controller side of the bridge.
     pub downstream: UnixStream,
-    /// Third serial port, when asked for ([`QemuSession::start_tied`]):
-    /// the Modbus RTU port of the gateway on `lm3s6965evb` (UART2).
+    /// The gateway's Modbus RTU port, when asked for
+    /// ([`QemuSession::start_tied`]) on a board that has one.
     pub modbus: Option<UnixStream>,
     board: Board,
     child: Child,
@@ -478,8 +573,8 @@ impl QemuSession {
     /// program whose main thread starts QEMU, such as the gateway. Not for
     /// tests, whose sessions may outlive the thread that started them
     /// (a test that runs the gateway runs it in a thread that lives as long
-    /// as the session). With `modbus`, a third serial port is connected
-    /// too ([`QemuSession::modbus`]).
+    /// as the session). With `modbus`, the board's Modbus RTU port is
+    /// connected too ([`QemuSession::modbus`]).
     #[allow(clippy::too_many_arguments)]
     pub fn start_tied(
         board: Board,
@@ -514,7 +609,7 @@ impl QemuSession {
         modbus: bool,
     ) -> io::Result<Self> {
         let loader = match config {
-            Some(cfg) => Some(config_loader_arg(elf, cfg)?),
+            Some(cfg) => Some(config_loader_arg(board, elf, cfg)?),
             None => None,
         };
         // Both lines are Unix sockets: their senders can tell how much QEMU
@@ -541,18 +636,21 @@ impl QemuSession {
         command
             .args(["-machine", board.machine()])
             .args(["-nographic", "-monitor", "none"])
-            .args(["-semihosting-config", "enable=on,target=native"])
-            .arg("-chardev")
-            .arg(format!("socket,id=u0,path={}", sock.display()))
-            .args(["-serial", "chardev:u0"])
-            .arg("-chardev")
-            .arg(format!("socket,id=u1,path={}", down_sock.display()))
-            .args(["-serial", "chardev:u1"]);
-        if modbus {
+            .args(["-semihosting-config", "enable=on,target=native"]);
+        for serial in board.serials() {
+            let (id, path) = match serial {
+                Serial::Host => ("u0", &sock),
+                Serial::Controller => ("u1", &down_sock),
+                Serial::Modbus if modbus => ("u2", &modbus_sock),
+                Serial::Modbus | Serial::Unused => {
+                    command.args(["-serial", "null"]);
+                    continue;
+                }
+            };
             command
                 .arg("-chardev")
-                .arg(format!("socket,id=u2,path={}", modbus_sock.display()))
-                .args(["-serial", "chardev:u2"]);
+                .arg(format!("socket,id={id},path={}", path.display()))
+                .args(["-serial", &format!("chardev:{id}")]);
         }
         command.args(extra_args);
         if let Some(loader) = &loader {
@@ -839,21 +937,104 @@ pub fn symbol_address(elf: &Path, symbol: &str) -> io::Result<u64> {
         })
 }
 
-/// The `-device loader,...` argument that puts `cfg`'s configuration block
-/// at the ELF's `_bridge_config` (the block is written to a file in the
-/// target directory).
-pub fn config_loader_arg(elf: &Path, cfg: &Config) -> io::Result<String> {
-    static SERIAL: AtomicU32 = AtomicU32::new(0);
+/// The configuration page holding `cfg`'s block and, if given, the
+/// network block `net` and the Sparkplug block `sparkplug`, as a
+/// programmer writes it to a board's two slots of `slot_len` bytes
+/// (`firmware_example::config::store::image`; [`Board::config_slot_len`]):
+/// the page in slot A as sequence 1, slot B erased.
+pub fn page_image(
+    slot_len: usize,
+    cfg: &Config,
+    net: Option<&NetConfig>,
+    sparkplug: Option<&SparkplugConfig>,
+) -> Vec<u8> {
+    let mut page = [0xFFu8; PAGE_LEN];
+    page[BRIDGE_AT..BRIDGE_AT + firmware_example::config::BLOCK_LEN]
+        .copy_from_slice(&cfg.to_block());
+    if let Some(net) = net {
+        page[NET_AT..NET_AT + firmware_example::net::config::BLOCK_LEN]
+            .copy_from_slice(&net.to_block());
+    }
+    if let Some(sp) = sparkplug {
+        page[SPARKPLUG_AT..SPARKPLUG_AT + firmware_example::net::sparkplug::config::BLOCK_LEN]
+            .copy_from_slice(&sp.to_block());
+    }
+    let mut out = vec![0u8; 2 * slot_len];
+    image(&page, slot_len, &mut out);
+    out
+}
+
+/// The `-device loader,...` argument that puts `cfg`'s configuration page
+/// ([`page_image`]) at the ELF's `_bridge_config` on `board`.
+pub fn config_loader_arg(board: Board, elf: &Path, cfg: &Config) -> io::Result<String> {
+    image_loader_arg(elf, &page_image(board.config_slot_len(), cfg, None, None))
+}
+
+/// The `-device loader,...` argument that puts `image` (both slots of the
+/// configuration page) at the ELF's `_bridge_config`.
+pub fn image_loader_arg(elf: &Path, image: &[u8]) -> io::Result<String> {
     let addr = symbol_address(elf, "_bridge_config")?;
+    loader_arg("config", addr, image)
+}
+
+/// The `-device loader,...` argument that puts `bytes` at `addr`: written
+/// to an Intel HEX file in the target directory (`name-<pid>-<n>.hex`),
+/// which QEMU's loader places by the addresses it holds. (A raw file is
+/// loaded with the machine's RAM size as its limit, and the
+/// `b-l475e-iot01a` machine has none set, so QEMU refuses it there.)
+pub fn loader_arg(name: &str, addr: u64, bytes: &[u8]) -> io::Result<String> {
+    static SERIAL: AtomicU32 = AtomicU32::new(0);
     let dir = target_dir().join("qemu-config");
     std::fs::create_dir_all(&dir)?;
     let file = dir.join(format!(
-        "config-{}-{}.bin",
+        "{name}-{}-{}.hex",
         std::process::id(),
         SERIAL.fetch_add(1, Ordering::Relaxed)
     ));
-    std::fs::write(&file, cfg.to_block())?;
-    Ok(format!("loader,file={},addr={addr:#x}", file.display()))
+    std::fs::write(&file, intel_hex(addr, bytes)?)?;
+    Ok(format!("loader,file={}", file.display()))
+}
+
+/// `bytes` at `addr` as Intel HEX: an extended linear address record for
+/// each 64 KiB, data records of up to 16 bytes, the end-of-file record.
+fn intel_hex(addr: u64, bytes: &[u8]) -> io::Result<String> {
+    fn record(out: &mut String, kind: u8, offset: u16, data: &[u8]) {
+        let mut sum = data.len() as u8;
+        sum = sum
+            .wrapping_add((offset >> 8) as u8)
+            .wrapping_add(offset as u8);
+        sum = sum.wrapping_add(kind);
+        out.push_str(&format!(":{:02X}{offset:04X}{kind:02X}", data.len()));
+        for b in data {
+            sum = sum.wrapping_add(*b);
+            out.push_str(&format!("{b:02X}"));
+        }
+        out.push_str(&format!("{:02X}\n", sum.wrapping_neg()));
+    }
+    let end = addr + bytes.len() as u64;
+    if end > 1 << 32 {
+        return Err(io::Error::other(format!("{addr:#x}: past 4 GiB")));
+    }
+    let mut out = String::new();
+    let mut high = None;
+    let mut at = addr;
+    for chunk in bytes.chunks(16) {
+        // A chunk never crosses a 64 KiB boundary unless `addr` is odd.
+        let mut rest = chunk;
+        while !rest.is_empty() {
+            if high != Some(at >> 16) {
+                high = Some(at >> 16);
+                record(&mut out, 4, 0, &((at >> 16) as u16).to_be_bytes());
+            }
+            let room = (0x1_0000 - (at & 0xFFFF)) as usize;
+            let (now, later) = rest.split_at(rest.len().min(room));
+            record(&mut out, 0, at as u16, now);
+            at += now.len() as u64;
+            rest = later;
+        }
+    }
+    record(&mut out, 1, 0, &[]);
+    Ok(out)
 }
 
 /// Accept one connection on `listener` before `deadline`, giving up early

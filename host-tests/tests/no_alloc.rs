@@ -123,14 +123,10 @@ fn the_core_allocates_nothing() {
     let mut client: iai_protocol_b::client::Client = core_call(iai_protocol_b::client::Client::new);
     let q = iai_protocol_b::message::AxisStatusQuery::of(&[1, 2]).unwrap();
     let now = sim.next_output_at().unwrap_or(0) + 10_000;
-    core_call(|| client.start(&mut line, &q, now)).unwrap();
+    let ticket = core_call(|| client.start(&mut line, &q, now)).unwrap();
     let outcome = drive_counted(&mut client, &mut line, &mut sim);
     assert!(outcome.is_ok());
-    let status = core_call(|| {
-        client
-            .response::<iai_protocol_b::message::AxisStatusQuery>()
-            .map(|r| r.axes.len())
-    });
+    let status = core_call(|| client.response(&ticket).map(|r| r.axes.len()));
     assert_eq!(status, Ok(2));
 
     assert_eq!(allocations() - before, 0, "the core allocated");

@@ -251,6 +251,33 @@ fn pass_through_rejections_and_upstream_checksum_errors() {
         .expect("reply to the 26DH");
     assert_eq!(got, reply_26dh(STATION, 100));
 
+    // 6. Noise from the host with XOFF (0x13) in it and no XON: the
+    // bridge's transmitter is held at most the configured time
+    // (`Config::xoff_hold_ms`, 5 s), then answers again.
+    link.write_raw(b"\x01\x13z\x13\r\n").expect("noise");
+    let held = Instant::now();
+    let query = status_query(test_config().bridge_station);
+    link.exchange(&query, Duration::from_secs(20))
+        .expect("exchange")
+        .expect("the status after the XOFF noise");
+    let held = held.elapsed();
+    // The reply waited for the XOFF to be let go (its counter is in the
+    // next reply: the first was made before).
+    assert!(held >= Duration::from_secs(4), "held only {held:?}");
+    let got = link
+        .exchange(&query, Duration::from_secs(5))
+        .expect("exchange")
+        .expect("the next status");
+    let frame = Frame::new_checked(&got, Default::default()).expect("a valid frame");
+    let fields = status::parse(frame.body()).expect("status fields");
+    let released = fields
+        .iter()
+        .find(|(n, _)| *n == "xoff_released")
+        .expect("field")
+        .1;
+    assert_eq!(released, 1, "the XOFF was let go once");
+    eprintln!("status after XOFF noise: {held:?}");
+
     let (sim, stdout) = finish(qemu, sim);
     let stats = sim.stats();
     // Forwarded: 212H, 216H, 2FFH, 212H; then the 26DH chunks: those of

@@ -90,12 +90,13 @@ fn mps2_an386_firmware_builds_and_links() {
     );
 }
 
-/// The watchdog (modelled by QEMU on both boards) resets a board whose loop
-/// stalls: a build with the `stall` feature stops feeding it after start,
-/// and the firmware boots again.
+/// The watchdog resets a board whose loop stalls, on each board whose
+/// watchdog QEMU models (not the STM32L475's: see `qemu_stm32.rs`): a
+/// build with the `stall` feature stops feeding it after start, and the
+/// firmware boots again.
 #[test]
 fn the_watchdog_resets_a_stalled_loop() {
-    for board in Board::ALL {
+    for board in Board::ALL.into_iter().filter(|b| b.watchdog_modelled()) {
         let dir = host_tests::qemu::target_dir().join("stall");
         let elf = host_tests::qemu::build_firmware_with(
             board,

@@ -10,6 +10,8 @@ use firmware_example::config::BAUD_RATES;
 use iai_cli::bridge::{decode_status, query_status, status_json};
 use iai_cli::link::{Flow, Link, Target};
 use iai_cli::probe::{nonce, observe, test_call, Observation};
+use iai_cli::table::{Hooks, TableError};
+use iai_protocol_b::error::Failure;
 use iai_protocol_b::frame::Station;
 use iai_protocol_b::line::LineConfig;
 
@@ -163,9 +165,20 @@ pub(crate) fn probe_cmd(a: &ProbeArgs) -> Run {
         let rate = baud.map_or_else(|| "tcp".to_string(), |b| format!("{b} baud"));
         // A bridge says which station its controller has.
         drain(&mut link, Duration::from_millis(30)).map_err(|e| format!("{target}: {e}"))?;
-        let bridge = query_status(&mut link, a.bridge_station, wait, 1, &|| false)
-            .map_err(|e| format!("{target}: {e}"))?
-            .map(|r| decode_status(&r));
+        let quiet = |_: &str| {};
+        let hooks = Hooks {
+            note: &quiet,
+            stop: &|| false,
+        };
+        let bridge = match query_status(&mut link, a.bridge_station, wait, 1, &hooks) {
+            Ok(r) => Some(decode_status(&r)),
+            Err(TableError::Engine(Failure::Controller { code, .. })) => Some(Err(format!(
+                "the bridge answered & {code:03X}{}",
+                iai_cli::codes::meaning(code).map_or(String::new(), |m| format!(" ({m})"))
+            ))),
+            Err(TableError::Engine(Failure::Timeout { .. })) => None,
+            Err(e) => return Err(format!("{target}: {e}").into()),
+        };
         let said = match &bridge {
             Some(Ok(s)) => {
                 let c = s.get("controller_station") as u8;

@@ -156,3 +156,70 @@ Examples:
 Shows the bridge's configuration (stations, baud rates, flow control,
 policy), its counters (forwarded, relayed, 26DH ok/failed, records, chunks,
 retries, overruns...) and its last own & code with what it means.";
+
+pub(crate) const CONFIG_GET: &str = "\
+Examples:
+  iai bridge config get --tcp 127.0.0.1:PORT                 TOML: [modbus] unit = 1 ...
+  iai bridge config get --port /dev/ttyUSB0 --baud 115200 --json
+  iai bridge config get --tcp 127.0.0.1:PORT > gateway.toml  edit, then: iai bridge config apply gateway.toml
+  iai bridge config get --tcp 127.0.0.1:PORT --image page.bin --password-file pw.txt
+
+The page in force (B20H to the bridge's station, 64 bytes a message),
+decoded with the firmware's own settings table. The password is never
+shown (only whether one is set). --image writes the page as the board's
+two slots, to load into a gateway with a programmer (with the password,
+the image keeps it; without, the gateway that boots it asks for a new one).";
+
+pub(crate) const CONFIG_SET: &str = "\
+Examples:
+  iai bridge config set access.password=NEW-PASSWORD --tcp 127.0.0.1:PORT      a fresh gateway: first of all
+  iai bridge config set modbus.unit=5 modbus.baud=19200 --tcp 127.0.0.1:PORT --password-file pw.txt
+  iai bridge config set bridge.policy=allow-list bridge.allow=212,215-217,26D --port COM3 --baud 115200
+  IAI_BRIDGE_PASSWORD=... iai bridge config set web.reads=password --tcp 127.0.0.1:PORT
+  then: iai bridge restart --tcp 127.0.0.1:PORT
+
+Reads the page in force, changes the settings named (each checked against
+the firmware's table: its range, its words), stages the whole page
+(B21H) and applies it with the password (B22H); the gateway checks every
+block again and writes the page to the slot not in force, so that a power
+cut leaves the old page or the new one. Printed: the page's sequence
+number and whether a restart is needed (all but web.* and the password
+take effect at the next start). Refusals name the setting and why;
+nothing is written then.";
+
+pub(crate) const CONFIG_APPLY: &str = "\
+Examples:
+  iai bridge config get --tcp 127.0.0.1:PORT > gateway.toml
+  iai bridge config apply gateway.toml --tcp 127.0.0.1:PORT --password-file pw.txt
+
+gateway.toml:
+  [modbus]
+  unit = 5
+  poll_ms = 50
+  [net]
+  addressing = \"static\"
+  address = \"192.168.10.20/24\"
+
+Every setting the file gives, as `config set` would; every error in the
+file is listed before anything is sent. [access] password = \"...\" sets a
+new password.";
+
+pub(crate) const CONFIG_BLOCK: &str = "\
+Examples:
+  iai bridge config block gateway.toml -o config.bin                      for lm3s6965 (QEMU or an EK-LM3S6965)
+  iai bridge config block gateway.toml -o config.bin --board stm32g070
+
+The image holds both slots of the configuration page: the page in slot A
+(sequence 1) and slot B erased, so that no older page there wins. Written
+to the board's last two flash pages; the command to do it is printed on
+stderr. A password in the file ([access] password) is stored as its
+salted verifier.";
+
+pub(crate) const BRIDGE_RESTART: &str = "\
+Examples:
+  iai bridge restart --tcp 127.0.0.1:PORT --password-file pw.txt
+  IAI_BRIDGE_PASSWORD=... iai bridge restart --port /dev/ttyUSB0 --baud 115200
+
+The gateway answers, then resets 200 ms later and reads its configuration
+page again; this waits until its status query answers with a new uptime
+(--wait 0: not at all).";

@@ -56,6 +56,9 @@ fn exchange(msg: &MessageArgs, line: &LineArgs, json: bool, detail: bool) -> Run
     let target = link.target().clone();
     let mut out = io::stdout().lock();
     let outcome = request(&mut link, &frame, detail).map_err(|e| format!("{target}: {e}"))?;
+    if let Some(note) = link.repeats_note() {
+        eprintln!("{note}");
+    }
     let e = match outcome {
         Outcome::Reply(reply) => {
             show_frame(&mut out, &reply, json).map_err(out_err)?;

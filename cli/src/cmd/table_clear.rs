@@ -83,6 +83,9 @@ pub(crate) fn table_clear(a: &ClearArgs) -> Run {
     println!("cleared positions {lo}..={hi} ({} x 246H)", cmds.len());
     let after = count(&mut link, &hooks)
         .map_err(|e| table_failure(&link, e, " (208H, after the clear)"))?;
+    if let Some(note) = link.repeats_note() {
+        eprintln!("{note}");
+    }
     match (before, after) {
         (Some(b), Some(n)) => println!(
             "{} defined position(s) removed; the table defines {n} now (208H)",

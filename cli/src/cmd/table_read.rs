@@ -107,6 +107,30 @@ pub(crate) fn table_read(a: &ReadArgs) -> Run {
         note: &note,
         stop: &stopped,
     };
+    if state.is_some() && start > u32::from(lo) {
+        // What was kept must still hold on this controller: read once more,
+        // it and the confirmed read that kept it agree, or it all goes.
+        let kept_last = (start - 1) as u16;
+        eprintln!("checking that positions {lo}..={kept_last} still hold what was kept");
+        let now = table::read_once(&mut link, &plan, lo, kept_last, &hooks)
+            .map_err(|e| table_failure(&link, e, " (checking the kept positions)"))?;
+        if now == recs {
+            eprintln!("they do: resuming at position {start}");
+        } else {
+            let changed = now
+                .keys()
+                .chain(recs.keys())
+                .filter(|n| now.get(n) != recs.get(n))
+                .collect::<std::collections::BTreeSet<_>>();
+            eprintln!(
+                "{} position(s) of {lo}..={kept_last} changed since the interrupted read (first: {}): reading from {lo} again",
+                changed.len(),
+                changed.first().map_or(0, |n| **n)
+            );
+            recs.clear();
+            start = u32::from(lo);
+        }
+    }
     let expected = if a.all {
         expect(&mut link, &hooks, hi).map_err(|e| table_failure(&link, e, " (208H)"))?
     } else {
@@ -153,6 +177,9 @@ pub(crate) fn table_read(a: &ReadArgs) -> Run {
         r.map(|_| ())
     };
     let bytes = csv_bytes(&recs, a.axes);
+    if let Some(note) = link.repeats_note() {
+        eprintln!("{note}");
+    }
     if let Err(e) = result {
         return Err(keep_partial(
             a,
@@ -174,9 +201,11 @@ pub(crate) fn table_read(a: &ReadArgs) -> Run {
     match (a.all, expected) {
         (_, _) if n == 0 && a.all => eprintln!("no records: the controller's table defines no position"),
         (_, _) if n == 0 => eprintln!("no records: no position in {lo}..={hi} is defined"),
-        (true, Some(e)) if n < e => eprintln!(
-            "{n} defined position(s) found in 0..={hi}, but 208H counted {e}: the table changed during the read"
-        ),
+        (true, Some(e)) if n != e => {
+            return Err(Failure::Failed(format!(
+                "{n} defined position(s) found in 0..={hi}, but 208H counted {e}: the table changed during the read; the output is not the table the controller holds"
+            )))
+        }
         (true, Some(_)) => eprintln!(
             "all {n} defined position(s) of the table (208H), found in 0..={}",
             covered.unwrap_or(hi)

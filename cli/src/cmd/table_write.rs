@@ -238,6 +238,9 @@ pub(crate) fn table_write(a: &WriteArgs) -> Run {
         ),
     };
     let written = if unread_prefix { total - skip } else { total };
+    if let Some(note) = link.repeats_note() {
+        eprintln!("{note}");
+    }
     match guarantee {
         Guarantee::Verified => println!(
             "verified: the controller holds all {written} records written now (read back and compared){resumed}"

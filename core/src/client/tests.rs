@@ -30,7 +30,7 @@ fn a_212h_and_its_typed_reply() {
     let mut c: Client = Client::new();
     let mut l = line();
     let q = AxisStatusQuery::of(&[1]).unwrap();
-    c.start(&mut l, &q, 0).unwrap();
+    let pending = c.start(&mut l, &q, 0).unwrap();
     match c.poll(&mut l, 0) {
         Step::Transmit(b) => assert_eq!(b, b"!992120189\r\n"),
         other => panic!("{other:?}"),
@@ -43,7 +43,7 @@ fn a_212h_and_its_typed_reply() {
         (reply.len(), Status::Complete(Heard::Answer))
     );
     assert_eq!(c.poll(&mut l, 5), Step::Done(Ok(())));
-    let status = c.response::<AxisStatusQuery>().unwrap();
+    let status = c.response(&pending).unwrap();
     assert_eq!(status.axes[0].axis_status, 0x1C);
     assert_eq!(status.axes[0].current_position, 2_300);
 }
@@ -56,7 +56,7 @@ fn a_copy_in_the_same_burst_never_costs_the_reply_taken() {
     let mut c: Client = Client::new();
     let mut l = line();
     let q = AxisStatusQuery::of(&[1]).unwrap();
-    c.start(&mut l, &q, 0).unwrap();
+    let pending = c.start(&mut l, &q, 0).unwrap();
     let _ = c.poll(&mut l, 0);
     c.sent(&mut l, 1);
     let reply = reply_212();
@@ -67,7 +67,7 @@ fn a_copy_in_the_same_burst_never_costs_the_reply_taken() {
     assert_eq!(l.stats().stale + l.stats().unplaced, 1);
     assert_eq!(c.poll(&mut l, 5), Step::Done(Ok(())));
     assert_eq!(
-        c.response::<AxisStatusQuery>().unwrap().axes[0].current_position,
+        c.response(&pending).unwrap().axes[0].current_position,
         2_300
     );
     // The same through the blocking loop, over a UART that hands out the
@@ -140,7 +140,8 @@ fn a_new_call_never_takes_the_reply_an_earlier_one_still_owes() {
     let first = run(&mut c, &mut l, &mut ctl, 0);
     assert_eq!(first.result, Err(Failure::Timeout { sends: 3 }));
     // 216H next: fenced; the 215H replies come before the echo, stale.
-    c.start(&mut l, &ErrorDetailQuery::latest_system_error(), first.now)
+    let pending = c
+        .start(&mut l, &ErrorDetailQuery::latest_system_error(), first.now)
         .unwrap();
     let second = run(&mut c, &mut l, &mut ctl, first.now);
     let kinds: Vec<&[u8]> = ctl.received.iter().map(|(_, c)| &c[..6]).collect();
@@ -150,7 +151,7 @@ fn a_new_call_never_takes_the_reply_an_earlier_one_still_owes() {
     );
     assert_eq!(second.result, Ok(()));
     assert_eq!(c.reply_frame().map(|f| f.code()), Some(0x216));
-    assert!(c.response::<ErrorDetailQuery>().is_ok());
+    assert!(c.response(&pending).is_ok());
 }
 
 /// The echo of a fence arriving in pieces (as bytes come off a serial
@@ -201,4 +202,96 @@ fn a_fence_echo_in_pieces_is_still_its_echo() {
         }
         assert_eq!(l.stats().fences_failed, 0);
     }
+}
+
+/// The echo of a 200H command `cmd` (`#` for `!`, SC again).
+fn echo_of(cmd: &[u8]) -> Vec<u8> {
+    let body = &cmd[1..cmd.len() - 4];
+    let mut e = std::vec![b'#'];
+    e.extend_from_slice(body);
+    let sum = e.iter().fold(0u8, |s, &b| s.wrapping_add(b));
+    e.extend_from_slice(std::format!("{sum:02X}\r\n").as_bytes());
+    e
+}
+
+/// Issue "never wrong when the line breaks its rules": a program
+/// restarted with the same seed while its first fence's echo is still on
+/// the way. The new run's first fence has the same text: the old echo
+/// settles it (by order, everything before it has arrived), and the new
+/// fence's own echo then comes while a test call waits. A 200H reply is
+/// taken only if it carries the call's own text: the fence's echo is not
+/// the answer to `HELLO-0042`.
+#[test]
+fn a_restart_with_the_same_seed_never_answers_a_test_call_with_a_fence_echo() {
+    let seed = 0x4A_7C15;
+    let first_run_fence = {
+        let mut l = Line::new(LineConfig::new(ST), seed);
+        let mut c: Client<64, 128> = Client::new();
+        c.start(&mut l, &AxisStatusQuery::of(&[1]).unwrap(), 0)
+            .unwrap();
+        let Step::Transmit(f) = c.poll(&mut l, 0) else {
+            panic!("a fence first")
+        };
+        f.to_vec()
+        // The program stops here; the controller echoes the fence later.
+    };
+    let mut l = Line::new(LineConfig::new(ST), seed);
+    let mut c: Client<64, 128> = Client::new();
+    let call = crate::message::TestCall {
+        test_string: *b"HELLO-0042",
+    };
+    let pending = c.start(&mut l, &call, 100).unwrap();
+    let Step::Transmit(f) = c.poll(&mut l, 100) else {
+        panic!("a fence first")
+    };
+    assert_eq!(f, &first_run_fence[..], "the same seed gives the same text");
+    c.sent(&mut l, 101);
+    // The first run's echo: it settles this fence (same text, and by order).
+    crate::engine::feed(&mut c, &mut l, &echo_of(&first_run_fence), 110);
+    let Step::Transmit(cmd) = c.poll(&mut l, 112) else {
+        panic!("the test call")
+    };
+    assert!(cmd.starts_with(b"!99200HELLO-0042"));
+    let cmd = cmd.to_vec();
+    c.sent(&mut l, 113);
+    // This run's own fence echo arrives while the call waits: not its reply.
+    crate::engine::feed(&mut c, &mut l, &echo_of(&first_run_fence), 120);
+    assert!(matches!(c.poll(&mut l, 121), Step::WaitUntil(_)));
+    // Then the call's own echo.
+    crate::engine::feed(&mut c, &mut l, &echo_of(&cmd), 130);
+    assert_eq!(c.poll(&mut l, 131), Step::Done(Ok(())));
+    let r = c.response(&pending).unwrap();
+    assert_eq!(&r.test_string, b"HELLO-0042");
+    assert_eq!(l.stats().mismatches, 1);
+}
+
+/// The reply's type follows from the request: a ticket of an earlier
+/// request reads nothing of a later one's reply, and a request without a
+/// reply says so.
+#[test]
+fn a_ticket_reads_its_own_request_s_reply_only() {
+    let mut ctl = Controller::new();
+    let mut c: Client<64, 128> = Client::new();
+    let mut l = line();
+    let status = c.start(&mut l, &SystemStatusQuery {}, 0).unwrap();
+    assert_eq!(
+        c.response(&status),
+        Err(Error::NoReply { id: 0x215 }),
+        "not over yet"
+    );
+    let first = run(&mut c, &mut l, &mut ctl, 0);
+    assert_eq!(first.result, Ok(()));
+    assert!(c.response(&status).is_ok());
+    let axes = c
+        .start(&mut l, &AxisStatusQuery::of(&[1]).unwrap(), first.now)
+        .unwrap();
+    assert_eq!(
+        c.response(&status).map(|_| ()),
+        Err(Error::UnexpectedMessageId {
+            expected: 0x215,
+            found: 0x212
+        })
+    );
+    run(&mut c, &mut l, &mut ctl, first.now);
+    assert!(c.response(&axes).is_ok());
 }

@@ -315,8 +315,17 @@ pub struct Line {
     taken_next: usize,
     /// The copy window the line learned from unplaced frames, ms.
     learned_copy_ms: u32,
+    /// The longest time, ms, between a reply taken and an earlier one with
+    /// the same bytes (a copy may have stood in for a reply).
+    repeat_ms: u32,
     /// A proof of order was asked for ([`Line::start_proof`]).
     proving: bool,
+    /// The proof's fence got no echo: it waits instead.
+    proof_fence_failed: bool,
+    /// How much longer than `timeout_ms` the current command's reply may
+    /// take after its last byte (a receiver that takes a long frame in at
+    /// a slower line's rate: [`crate::upload`]).
+    reply_extra_ms: u32,
     /// Frames heard while the owner holds its reply, or no engine runs.
     overheard: overheard::Overheard,
     stats: LineStats,
@@ -379,7 +388,10 @@ impl Line {
             taken: [None; TAKEN],
             taken_next: 0,
             learned_copy_ms: 0,
+            repeat_ms: 0,
             proving: false,
+            proof_fence_failed: false,
+            reply_extra_ms: 0,
             overheard: overheard::Overheard::new(),
             stats: LineStats {
                 commands: 0,
@@ -459,6 +471,7 @@ impl Line {
         self.sends = 0;
         self.faulted = false;
         self.proving = true;
+        self.proof_fence_failed = false;
         self.opened = false;
         self.phase = Phase::Ready;
     }
@@ -488,6 +501,7 @@ impl Line {
     pub(crate) fn begin(&mut self, cmd: Command, now: u32) {
         self.abandon(now);
         self.proving = false;
+        self.reply_extra_ms = 0;
         if core::mem::take(&mut self.opened) {
             // The past is unknown: a reply to anything sent before may
             // still come, and a copy of anything received before.
@@ -591,18 +605,24 @@ impl Line {
                     self.ledger.prune(now);
                     let owed = self.ledger.owed(now);
                     if owed.is_some() || self.proving {
+                        // A proof whose fence failed proves by waiting, as
+                        // without fences, rather than fence again.
                         let fence_ok = self.cfg.fences
-                            && self.no_fence_until.is_none_or(|t| self.over(now, t));
+                            && self.no_fence_until.is_none_or(|t| self.over(now, t))
+                            && !(self.proving && self.proof_fence_failed);
                         if !fence_ok {
-                            match owed {
-                                Some(t) => return Due::WaitUntil(t),
-                                None => {
-                                    // No fence: the replies are waited out.
-                                    self.proving = false;
-                                    self.phase = Phase::Finished(Ok(()));
-                                    continue;
-                                }
+                            if let Some(t) = owed {
+                                return Due::WaitUntil(t);
                             }
+                            // No fence proves the order: the replies to the
+                            // last command are waited out instead.
+                            let until = self.late_horizon(self.last_sent);
+                            if !self.over(now, until) {
+                                return Due::WaitUntil(until);
+                            }
+                            self.proving = false;
+                            self.phase = Phase::Finished(Ok(()));
+                            continue;
                         }
                         self.fence.next(self.cfg.station, self.cfg.checksum);
                         self.stats.fences += 1;
@@ -631,6 +651,7 @@ impl Line {
                     self.stats.timeouts += 1;
                     self.stats.fences_failed += 1;
                     self.faulted = true;
+                    self.proof_fence_failed = self.proving;
                     let until = self.late_horizon(self.fence_sent);
                     self.ledger.owe(until, now);
                     self.no_fence_until = self.ledger.owed(now);
@@ -667,8 +688,24 @@ impl Line {
     /// The first tick after which no reply to a send at `sent` can arrive.
     fn late_horizon(&self, sent: u32) -> u32 {
         sent.wrapping_add(self.cfg.timeout_ms)
+            .wrapping_add(self.reply_extra_ms)
             .wrapping_add(self.cfg.late_window_ms)
             .wrapping_add(1)
+    }
+
+    /// [`Line::sent`] for a command whose reply may take `extra_ms` longer
+    /// than the timeout after its last byte (cut to the line's longest
+    /// hold); it and its late replies are owed that much longer.
+    pub(crate) fn sent_allowing(&mut self, now: u32, extra_ms: u32) {
+        let extra = extra_ms.min(MAX_HORIZON_MS / 4);
+        self.reply_extra_ms = extra;
+        let cfg = LineConfig {
+            timeout_ms: self.cfg.timeout_ms.saturating_add(extra),
+            ..self.cfg
+        };
+        self.horizon = self.horizon.max(cfg.horizon());
+        self.ledger.set_horizon(self.horizon);
+        self.sent(now);
     }
 
     /// The command (or fence) was completely transmitted at tick `now`:
@@ -684,7 +721,9 @@ impl Line {
             Phase::Sending => {
                 self.last_sent = now;
                 self.phase = Phase::Await {
-                    deadline: now.wrapping_add(self.cfg.timeout_ms),
+                    deadline: now
+                        .wrapping_add(self.cfg.timeout_ms)
+                        .wrapping_add(self.reply_extra_ms),
                 };
                 if let Reply::None { ready_after_ms } = self.cmd.reply {
                     // The controller restarts: nothing before it is ready.
@@ -778,7 +817,11 @@ impl Line {
         let heard = if for_command && self.awaiting() {
             self.stats.mismatches += 1;
             Heard::Mismatch
-        } else if self.ledger.owed(now).is_some() || self.ledger.expects(id, values, now) {
+        } else if self.ledger.owed(now).is_some()
+            || self.ledger.expects(id, values, now)
+            || self.fence_refused(header)
+            || (for_command && self.between_sends())
+        {
             self.stats.stale += 1;
             Heard::Stale
         } else {
@@ -789,8 +832,35 @@ impl Line {
         heard
     }
 
+    /// Whether a frame with `header` may be the fence's own reply: a
+    /// controller that does not answer 200H refuses it with an `&` (its
+    /// echo is matched by its text).
+    fn fence_refused(&self, header: Header) -> bool {
+        header == Header::Error && matches!(self.phase, Phase::FenceAwait { .. })
+    }
+
+    /// Whether the command was sent and is not awaited now (its timeout
+    /// passed, it is sent again or waits to be): a reply to an earlier
+    /// send may still come, owed though not yet in the ledger.
+    fn between_sends(&self) -> bool {
+        match self.phase {
+            // The send on the wire is not one of them.
+            Phase::Sending => self.sends > 1,
+            Phase::Ready | Phase::FenceSending | Phase::FenceAwait { .. } => self.sends > 0,
+            Phase::Idle | Phase::Await { .. } | Phase::Finished(_) => false,
+        }
+    }
+
     /// Remembers a reply taken at `now`.
     fn took(&mut self, print: u32, id: u16, values: Span, now: u32) {
+        let same = self
+            .taken
+            .iter()
+            .flatten()
+            .filter(|t| t.fingerprint == print);
+        if let Some(after) = same.map(|t| now.wrapping_sub(t.at)).min() {
+            self.repeat_ms = self.repeat_ms.max(after);
+        }
         if let Some(slot) = self.taken.get_mut(self.taken_next) {
             *slot = Some(Taken {
                 fingerprint: print,
@@ -803,9 +873,11 @@ impl Line {
     }
 
     /// A frame nothing explains arrived at `now`: the line repeats frames.
-    /// It learns a copy window (twice the lateness of a copy whose original
-    /// it took, or the time a reply may take, late window included), and
-    /// every reply taken within it may still be copied.
+    /// It learns a copy window: twice the lateness of a copy whose original
+    /// it took, or of the latest reply taken with the bytes of an earlier
+    /// one (a copy may have stood in for it: this frame is then the reply
+    /// displaced), or else the time a reply may take; every reply taken
+    /// within it may still be copied.
     fn unplaced(&mut self, print: Option<u32>, now: u32) {
         self.stats.unplaced += 1;
         let late = self
@@ -815,8 +887,9 @@ impl Line {
             .filter(|t| Some(t.fingerprint) == print)
             .map(|t| now.wrapping_sub(t.at))
             .min();
+        let late = late.or((self.repeat_ms > 0).then_some(self.repeat_ms));
         let window = match late {
-            Some(l) => l.saturating_mul(2).max(self.cfg.timeout_ms),
+            Some(l) => l.saturating_mul(2).max(1),
             None => self.cfg.timeout_ms.saturating_add(self.cfg.late_window_ms),
         }
         .min(MAX_HORIZON_MS / 2);
@@ -868,10 +941,13 @@ impl Line {
                 let id = if h == Header::Error { ANY_ID } else { code };
                 let awaited =
                     self.awaiting() && !self.proving && (h == Header::Error || code == self.cmd.id);
-                let fence = code == catalogue::TEST_CALL.id
-                    && matches!(self.phase, Phase::FenceAwait { .. });
+                let fence = (code == catalogue::TEST_CALL.id
+                    && matches!(self.phase, Phase::FenceAwait { .. }))
+                    || self.fence_refused(h);
+                let for_command = h == Header::Error || code == self.cmd.id;
                 let explained = awaited
                     || fence
+                    || (for_command && !self.proving && self.between_sends())
                     || self.ledger.owed(now).is_some()
                     || self.ledger.expects(id, Span::UNKNOWN, now);
                 if !explained {

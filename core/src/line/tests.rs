@@ -448,3 +448,59 @@ fn a_line_just_opened_on_a_line_that_repeats_frames_waits_for_copies_of_its_past
     assert_eq!(offer(&mut l, &frame(ECHO_1), true, 110), Heard::Fence);
     assert_eq!(l.poll(112), Due::WaitUntil(601));
 }
+
+/// A controller that does not answer 200H may refuse a fence with an `&`:
+/// that is the fence's own reply, not a frame the line cannot place, even
+/// when the fence proves order with nothing owed.
+#[test]
+fn an_error_reply_to_a_fence_is_the_fences_own_not_unplaced() {
+    let mut l = spec();
+    l.start_proof(0);
+    assert_eq!(l.poll(0), Due::Fence);
+    l.sent(5);
+    assert_eq!(
+        offer(&mut l, &frame(b"&99C7446\r\n"), true, 10),
+        Heard::Stale
+    );
+    // Broken, its code unreadable or not: the same.
+    l.broken(Some((Header::Error, S, 0xC74)), 11);
+    assert_eq!(l.stats().unplaced, 0);
+    assert!(!l.repeats());
+    // No echo by its timeout: the fence failed, its own late reply is
+    // waited out.
+    assert_eq!(l.poll(3_005), Due::WaitUntil(6_006));
+    assert_eq!(l.poll(6_006), Due::Done(Ok(())));
+    assert_eq!(l.stats().fences_failed, 1);
+}
+
+/// A late reply to the first send that comes while the command is sent
+/// again (or waits to be) is owed to that send: stale, not unplaced.
+#[test]
+fn a_late_reply_to_an_earlier_send_between_sends_is_stale() {
+    let mut l = spec();
+    l.start(&catalogue::AXIS_STATUS_QUERY, 0);
+    first_send(&mut l, 0);
+    l.sent(0);
+    assert_eq!(l.poll(3_000), Due::Send { fresh: true });
+    // The resend is on the wire when the first send's reply arrives.
+    assert_eq!(offer(&mut l, &frame(REPLY_212), true, 3_001), Heard::Stale);
+    l.broken(Some((Header::Response, S, 0x212)), 3_002);
+    assert_eq!(l.stats().unplaced, 0);
+    l.sent(3_005);
+    assert_eq!(offer(&mut l, &frame(REPLY_212), true, 3_010), Heard::Answer);
+}
+
+/// A proof whose fence gets no echo (a controller that does not answer
+/// 200H) waits out the replies instead, as on a line without fences, and
+/// ends: it does not fence again and again.
+#[test]
+fn a_proof_whose_fence_gets_no_echo_ends_by_waiting() {
+    let mut l = spec();
+    l.start_proof(0);
+    assert_eq!(l.poll(0), Due::Fence);
+    l.sent(0);
+    // No echo by 3,000: the fence's own late reply may come until 6,001.
+    assert_eq!(l.poll(3_000), Due::WaitUntil(6_001));
+    assert_eq!(l.poll(6_001), Due::Done(Ok(())));
+    assert_eq!(l.stats().fences, 1);
+}

@@ -188,6 +188,17 @@ impl PositionStream {
             + self.count_width as usize
     }
 
+    /// Bytes of a frame of this kind holding `records`, header through LF.
+    pub fn frame_len<B: core::borrow::Borrow<super::PositionRecord>>(
+        &self,
+        records: impl Iterator<Item = B>,
+    ) -> usize {
+        let body: usize = records
+            .map(|r| self.layout.record_len(r.borrow().axes.count()))
+            .sum();
+        self.overhead() + body
+    }
+
     /// Bytes of a frame without records (envelope, prefix, SC, CR, LF).
     pub const fn overhead(&self) -> usize {
         ENVELOPE_LEN + self.prefix_len() + TRAILER_LEN

@@ -101,8 +101,11 @@ fn a_late_reply_never_answers_the_next_window() {
     let mut rb: ReadBack = ReadBack::new(cfg);
     let got = read(&mut rb, &mut l, &mut ctl);
     assert_eq!(got, ctl.table.values().cloned().collect::<Vec<_>>());
-    assert_eq!(l.stats().fences, 1);
+    // One fence settles what window 1 owes; each window delivered is
+    // proved by one more.
+    assert_eq!(l.stats().fences, 1 + 2);
     assert_eq!(rb.stats().retries, 1);
+    assert_eq!(l.stats().unplaced, 0);
 }
 
 /// Confirmed reads: a confirmation that times out is asked again for half
@@ -144,7 +147,8 @@ fn an_answered_reply_is_held_until_it_is_polled() {
         confirm: false,
         ..ReadBackConfig::new(Profile::TTA, 1, 3)
     };
-    let mut l = line();
+    // A line that expects copies: the stray one below is explained.
+    let mut l = Line::known(LineConfig::new(ST).with_duplicate_window(1_000));
     let mut rb: ReadBack = ReadBack::new(cfg);
     let Step::Transmit(q) = rb.poll(&mut l, 0) else {
         panic!("a query first")
@@ -166,7 +170,22 @@ fn an_answered_reply_is_held_until_it_is_polled() {
     while !rest.is_empty() {
         rest = &rest[rb.received(&mut l, rest, 21).consumed..];
     }
-    match rb.poll(&mut l, 22) {
+    assert_eq!(l.stats().stale, 1);
+    // Before it is delivered, a fence proves the order; its echo is heard
+    // while the reply is still held.
+    let Step::Transmit(fence) = rb.poll(&mut l, 22) else {
+        panic!("the proof's fence")
+    };
+    assert!(fence.starts_with(b"!99200"));
+    let fence = fence.to_vec();
+    rb.sent(&mut l, 23);
+    ctl.receive(&fence, 23);
+    let echo = ctl.take(10_000);
+    let mut rest = &echo[..];
+    while !rest.is_empty() {
+        rest = &rest[rb.received(&mut l, rest, 30).consumed..];
+    }
+    match rb.poll(&mut l, 31) {
         Step::Done(Ok(Some(recs))) => assert_eq!(
             recs.collect::<Vec<_>>(),
             ctl.table.values().cloned().collect::<Vec<_>>()

@@ -1,23 +1,17 @@
 //! The instruction-count bench as a program of its own: no UART, no board
 //! module, only the core peripherals and semihosting, so one source runs on
 //! every Cortex-M machine QEMU has (`lm3s6965evb`, `mps2-an386`,
-//! `microbit`). See `src/bench.rs` (the core's hex paths) and
-//! `src/bench_line.rs` (the bridge and the gateway on their controller
-//! line) for what it counts and how;
+//! `microbit`). See `firmware_example::bench` for what it counts and how;
 //! `host-tests/src/bin/icount.rs` builds it, runs it under `-icount` and
 //! prints the figures.
 #![no_std]
 #![no_main]
 
-#[path = "../bench.rs"]
-mod bench;
-#[path = "../bench_line.rs"]
-mod bench_line;
-
 use core::fmt::Write as _;
 
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use cortex_m_semihosting::{debug, hio};
+use firmware_example::{bench, bench_line};
 
 /// No device interrupt is enabled; cortex-m-rt (with its `device` feature,
 /// as the firmware builds it) still wants the table.

@@ -20,11 +20,14 @@
 //! block, the serial line) fed arbitrary bytes on both ports, and the
 //! Modbus gateway (its frame handler on arbitrary frames, RTU and Modbus
 //! TCP ADUs cut by `modbus::tcp::adu_len`, its polls and commands on the
-//! bridge's line answered with arbitrary bytes). With the
+//! bridge's line answered with arbitrary bytes), the configuration page
+//! (the bridge's configuration messages through an editor over a page
+//! store in RAM, the settings table's parsers on arbitrary keys and
+//! values, the store's slot check on arbitrary slots). With the
 //! `ethernet` feature too: the network block, the Stellaris MAC driver
-//! reading arbitrary register values and handing smoltcp its tokens, and
-//! the bridge's end of a TCP host (`end_of_input`, `host_idle`), all fed
-//! from those bytes.
+//! reading arbitrary register values and handing smoltcp its tokens, the
+//! bridge's end of a TCP host (`end_of_input`, `host_idle`), and the web
+//! page's form parser, all fed from those bytes.
 //!
 //! Build: `cargo build --release --features no-panic-proof --bin
 //! no_panic_proof --target thumbv7m-none-eabi` (add `ethernet` to the
@@ -35,8 +38,8 @@
 //! packet emitters index buffers it sized itself, and about 70 of those
 //! bounds checks survive. With the `no-panic-audit` feature the program
 //! also runs the whole network side (`Net` on the driver: ingress, egress,
-//! DHCP, the protocol-B hosts and the Modbus TCP clients over the bridge
-//! and the gateway) and its panic handler is an ordinary one, so that it
+//! DHCP, the protocol-B hosts, the Modbus TCP clients and the web page over
+//! the bridge and the gateway) and its panic handler is an ordinary one, so that it
 //! links; `tools/panic-audit.py` then lists every panic call left in the
 //! image, by the source line it comes from, and fails if one comes from
 //! this project's code or from a smoltcp line not in the reviewed list
@@ -61,8 +64,14 @@ use iai_protocol_b::{
     readback::ReadBackConfig, transfer::Transfer, transfer::TransferConfig,
 };
 
+use core::mem::MaybeUninit;
+use core::ptr::addr_of_mut;
+
 use firmware_example::bridge::Bridge;
-use firmware_example::config::Config;
+use firmware_example::config::editor::Editor;
+use firmware_example::config::settings::{self, Settings};
+use firmware_example::config::store::{self, MemFlash, PageStore, Store};
+use firmware_example::config::{wire, Config};
 use firmware_example::modbus::Gateway;
 use firmware_example::serial::Port;
 use firmware_example::serial::{self, FlowControl, Watermarks};
@@ -98,6 +107,47 @@ static __INTERRUPTS: [usize; 1] = [0];
 
 /// Stand-in for bytes from a UART.
 static INPUT: [u8; 4096] = [0; 4096];
+
+static mut PAGE_RAM: [u8; 2048] = [0xFF; 2048];
+static mut STORE: MaybeUninit<Store<MemFlash<'static, 1024, 4>>> = MaybeUninit::uninit();
+static mut EDITOR: MaybeUninit<Editor<'static>> = MaybeUninit::uninit();
+
+fn no_restart() {}
+
+/// An editor over a page store in RAM whose slots hold the input.
+fn editor(input: &[u8]) -> &'static mut Editor<'static> {
+    // SAFETY: called once, from `main`: the only references to these.
+    unsafe {
+        let ram = &mut *addr_of_mut!(PAGE_RAM);
+        let n = input.len().min(ram.len());
+        if let (Some(dst), Some(src)) = (ram.get_mut(..n), input.get(..n)) {
+            dst.copy_from_slice(src);
+        }
+        let store = (*addr_of_mut!(STORE)).write(Store::open(MemFlash::new(ram), 0));
+        let store: &'static mut dyn PageStore = store;
+        (*addr_of_mut!(EDITOR)).write(Editor::new(store, no_restart, black_box(1)))
+    }
+}
+
+/// The configuration page's parsers on arbitrary bytes.
+fn config_page(input: &[u8]) {
+    black_box(store::page_in(input, black_box(1024)));
+    let mut s = Settings::from_page(input, black_box(false));
+    let (key, value) = input.split_at(input.len().min(black_box(24)));
+    if let (Ok(k), Ok(v)) = (core::str::from_utf8(key), core::str::from_utf8(value)) {
+        let _ = black_box(s.set(k, v));
+        for setting in settings::TABLE.iter() {
+            let _ = black_box(settings::parse(setting.kind, v));
+        }
+    }
+    let _ = black_box(s.check());
+    let mut window = [0u8; 64];
+    s.overlay(black_box(0), &mut window);
+    black_box(window);
+    let _ = black_box(wire::Request::parse(black_box(0xB21), input));
+    let mut out = [0u8; 64];
+    black_box(wire::parse_read_reply(input, &mut out));
+}
 
 /// A port that reads the given bytes and swallows what is written.
 struct Wire<'a>(&'a [u8]);
@@ -301,10 +351,11 @@ fn main() -> ! {
     black_box(driver.listen(&mut line, &mut port, &mut clock).is_ok());
     line.start_proof(now);
     black_box(line.poll(now));
-    let mut c: Client = Client::new().with_error_detail();
+    let mut c: Client = Client::new().with_error_detail().with_proof();
     let _ = black_box(c.start_frame(&mut line, input, now));
+    let mut ticket = None;
     if let Ok(q) = AxisStatusQuery::of(black_box(&[1, 2])) {
-        let _ = black_box(c.start(&mut line, &q, now));
+        ticket = c.start(&mut line, &q, now).ok();
     }
     if let Step::Transmit(b) = c.poll(&mut line, now) {
         black_box(b);
@@ -312,7 +363,9 @@ fn main() -> ! {
     c.sent(&mut line, now);
     feed(&mut c, &mut line, input, now);
     black_box(c.poll(&mut line, now.wrapping_add(black_box(3_000))));
-    let _ = black_box(c.response::<AxisStatusQuery>().map(|r| r.axes.len()));
+    if let Some(t) = ticket {
+        let _ = black_box(c.response(&t).map(|r| r.axes.len()));
+    }
     let mut rb: ReadBack = ReadBack::new(ReadBackConfig::new(Profile::TTA, 1, 100));
     if let Step::Transmit(b) = rb.poll(&mut line, now) {
         black_box(b);
@@ -326,9 +379,12 @@ fn main() -> ! {
     }
     black_box(line.stats());
 
-    // The bridge, both ports fed arbitrary bytes, under any configuration.
+    // The bridge, both ports fed arbitrary bytes, under any configuration,
+    // its configuration messages answered through an editor.
     let (cfg, source) = Config::from_block(input);
     let mut bridge = Bridge::new(black_box(cfg), black_box(source), black_box(0));
+    bridge.attach_editor(editor(input));
+    config_page(input);
     let half = input.len() / 2;
     let mut up = Wire(input.get(..half).unwrap_or(&[]));
     let mut down = Wire(input.get(half..).unwrap_or(&[]));
@@ -398,7 +454,9 @@ mod net {
     use firmware_example::net::config::NetConfig;
     use firmware_example::net::stellaris::{Regs, Stellaris, FRAME_CAP};
     #[cfg(feature = "no-panic-audit")]
-    use firmware_example::net::{modbus::ModbusBuffers, Buffers, Net, SocketSlots};
+    use firmware_example::net::{
+        http::HttpBuffers, modbus::ModbusBuffers, Buffers, Net, SocketSlots,
+    };
     use smoltcp::phy::{Device, RxToken, TxToken};
     use smoltcp::time::Instant;
 
@@ -440,6 +498,13 @@ mod net {
 
     pub fn prove(input: &'static [u8], bridge: &mut Bridge, gateway: &mut Gateway) {
         black_box(NetConfig::from_block(input));
+        // The web page's form parser (its head parser, httparse, only in
+        // the audit: see `stack`).
+        let mut form = firmware_example::net::http::form::FormParser::new();
+        for &b in input {
+            black_box(form.push(b).map(|r| r.map(|(k, v)| (k.len(), v.len()))));
+        }
+        black_box(form.end().map(|r| r.map(|(k, v)| (k.len(), v.len()))));
         let regs = Opaque {
             input,
             at: Cell::new(0),
@@ -484,19 +549,28 @@ mod net {
     static mut BUFFERS: Buffers = Buffers::new();
     #[cfg(feature = "no-panic-audit")]
     static mut MODBUS: ModbusBuffers = ModbusBuffers::new();
+    #[cfg(feature = "no-panic-audit")]
+    static mut SPARKPLUG: firmware_example::net::sparkplug::SparkplugBuffers =
+        firmware_example::net::sparkplug::SparkplugBuffers::new();
+    #[cfg(feature = "no-panic-audit")]
+    static mut HTTP: HttpBuffers = HttpBuffers::new();
 
     /// The whole network side, as `net::run` drives it: smoltcp's
     /// interface and sockets on the driver, DHCP or a static address from
-    /// the block, the protocol-B hosts over the bridge and the Modbus TCP
-    /// clients over the gateway (audit builds only: see the module docs).
+    /// the block, the protocol-B hosts over the bridge, the Modbus TCP
+    /// clients over the gateway, the web page and the Sparkplug edge node
+    /// with the block read from the input (audit builds only: see the
+    /// module docs).
     #[cfg(feature = "no-panic-audit")]
     fn stack(input: &'static [u8], eth: &mut Eth<'_>, bridge: &mut Bridge, gateway: &mut Gateway) {
         // SAFETY: `stack` runs once, from `prove`: the only references.
-        let (slots, buffers, modbus) = unsafe {
+        let (slots, buffers, modbus, sparkplug, http) = unsafe {
             (
                 &mut *addr_of_mut!(SLOTS),
                 &mut *addr_of_mut!(BUFFERS),
                 &mut *addr_of_mut!(MODBUS),
+                &mut *addr_of_mut!(SPARKPLUG),
+                &mut *addr_of_mut!(HTTP),
             )
         };
         let (cfg, _) = NetConfig::from_block(input);
@@ -512,12 +586,21 @@ mod net {
             black_box(0),
         );
         net.add_modbus(modbus, black_box(502));
+        let (sp, _) = firmware_example::net::sparkplug::config::SparkplugConfig::from_block(input);
+        net.add_sparkplug(sp, black_box([2, 0, 0, 0, 0, 1]), sparkplug, black_box(0));
+        net.add_http(http, black_box(80));
+        black_box(firmware_example::net::http::request::parse(input));
         let mut down = Wire(input);
         for tick in 0..black_box(64u32) {
             black_box(net.poll_with(eth, bridge, Some(&mut *gateway), black_box(tick)));
             let mut up = net.host_port();
             let _ = black_box(bridge.poll_with(&mut up, &mut down, &mut *gateway, black_box(tick)));
             black_box(net.address());
+            if let Some(node) = net.sparkplug_mut() {
+                if black_box(tick) == 63 {
+                    node.leave();
+                }
+            }
         }
     }
 }

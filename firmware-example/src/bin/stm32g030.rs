@@ -1,54 +1,54 @@
 //! The bridge on an STM32G030x8 (Cortex-M0+, 8 KiB RAM, 64 KiB flash; e.g.
-//! STM32G030C8): the small part the size goal aims at. Its RAM is the 8 KiB
-//! the goal names; its flash is the x8's, as the Cortex-M0 image does not
-//! fit the x6's 32 KiB (see `memory-stm32g030.x`). Its upstream port speaks
-//! protocol B only: the image that lets the configuration block choose
-//! Modbus RTU as well does not fit this part (see `stm32g070.rs`).
+//! STM32G030C8), on embassy-stm32: the small part the size goal aims at.
+//! Its flash is the x8's, as the Cortex-M0 image does not fit the x6's
+//! 32 KiB (see `memory-stm32g030.x`). Its upstream port speaks protocol B
+//! only: the image that lets the configuration block choose Modbus RTU as
+//! well does not fit this part (see `stm32g070.rs`). See
+//! `firmware_example::board::stm32g0`.
 //!
-//! Built and linked for its size figures only: QEMU has no model of it, and
-//! it has not run on silicon. Pins, clock and watchdog: `src/stm32g0.rs`.
+//! Built and linked for its size figures only: QEMU has no model of it,
+//! and it has not run on silicon.
 #![no_std]
 #![no_main]
-// The PAC's `bits` writers are safe on some registers and not on others.
-#![allow(unused_unsafe)]
 
-#[path = "../runtime.rs"]
-mod runtime;
-#[path = "../stm32g0.rs"]
-mod stm32g0_board;
+use embassy_stm32::gpio::{Input, Level, Output, Pull, Speed};
+use embassy_stm32::usart::{BufferedInterruptHandler, BufferedUart};
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_stm32::{bind_interrupts, peripherals};
+use firmware_example::board::config_page;
+use firmware_example::board::stm32g0::{self, GpioModem, Parts};
+use firmware_example::config::UpstreamProtocol;
 
-use cortex_m_rt::entry;
-use firmware_example::serial::FlowControl;
-use stm32g0_board as board;
+bind_interrupts!(struct Irqs {
+    USART1 => BufferedInterruptHandler<peripherals::USART1>;
+    USART2 => BufferedInterruptHandler<peripherals::USART2>;
+});
 
-#[entry]
+#[cortex_m_rt::entry]
 fn main() -> ! {
-    let Some(core) = cortex_m::Peripherals::take() else {
-        panic!("core peripherals already taken");
+    let p = embassy_stm32::init(stm32g0::clocks());
+    let (cfg, source) = config_page::load_config();
+    let Some(b) = stm32g0::buffers() else {
+        stm32g0::halt()
     };
-    runtime::start_tick(core.SYST, board::CORE_CLOCK_HZ);
-    let (cfg, source) = runtime::load_config();
-    let rts_cts = cfg.flow == FlowControl::RtsCts;
-    board::init_pins(rts_cts);
-    board::init_usart(
-        board::up_regs(),
-        cfg.upstream_baud,
-        board::Format::Plain,
-        rts_cts,
-    );
-    board::init_usart(
-        board::down_regs(),
-        cfg.downstream_baud,
-        board::Format::Plain,
-        false,
-    );
-
-    // SAFETY: `main` runs once; these are the only references to these
-    // statics, and the interrupts that use the ends are unmasked only
-    // after `setup` handed them over.
-    let statics = unsafe { board::statics() };
-    let (bridge, mut up, mut down) = runtime::setup(statics, cfg, source);
-    board::unmask_usarts();
-    board::start_watchdog();
-    runtime::serve(bridge, &mut up, &mut down, board::feed_watchdog)
+    // The host on USART2: PA3 RX, PA2 TX; RTS on PA1, CTS on PA0.
+    let up = stm32g0::upstream_uart(&cfg, UpstreamProtocol::ProtocolB);
+    let upstream = BufferedUart::new(p.USART2, p.PA3, p.PA2, b.up_tx, b.up_rx, Irqs, up);
+    let modem = GpioModem {
+        rts: Output::new(p.PA1, Level::High, Speed::Low),
+        cts: Input::new(p.PA0, Pull::None),
+    };
+    // The controller on USART1: PA10 RX, PA9 TX.
+    let down = stm32g0::controller_uart(&cfg);
+    let controller = BufferedUart::new(p.USART1, p.PA10, p.PA9, b.down_tx, b.down_rx, Irqs, down);
+    let (Ok(upstream), Ok(controller)) = (upstream, controller) else {
+        stm32g0::halt()
+    };
+    stm32g0::run_bridge(Parts {
+        config: (cfg, source),
+        upstream,
+        controller,
+        modem,
+        watchdog: IndependentWatchdog::new(p.IWDG, stm32g0::WATCHDOG_US),
+    })
 }

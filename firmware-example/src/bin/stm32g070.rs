@@ -1,96 +1,58 @@
 //! The two-UART gateway on an STM32G070 (Cortex-M0+, 128 KiB flash,
-//! 36 KiB RAM; e.g. STM32G070KB): one upstream port, which speaks what
-//! the configuration block chooses (byte 19, bit 2): protocol B through
-//! the bridge, or Modbus RTU through the PLC gateway, the bridge then
-//! keeping the controller line with no protocol-B host
-//! ([`firmware_example::modbus::run_one_upstream`]).
+//! 36 KiB RAM; e.g. STM32G070KB), on embassy-stm32: one upstream port,
+//! which speaks what the configuration block chooses (byte 19, bit 2):
+//! protocol B through the bridge, or Modbus RTU through the PLC gateway
+//! (8E1, 8O1 or 8N2 as the block's parity says), the bridge then keeping
+//! the controller line with no protocol-B host.
 //!
 //! Why not the STM32G030x8 of the bridge alone: the image with both
 //! engines takes more flash than its 64 KiB (and its two engines' state
-//! more than its 8 KiB of RAM); `tools/size-report.sh` prints both
-//! figures against it. The G070 is the G0 line's part with the same
-//! USARTs and pins (`src/stm32g0.rs`) and the room.
+//! more than its 8 KiB of RAM); `tools/size-report.sh` prints both figures
+//! against it. The same pins as `stm32g030.rs`. See
+//! `firmware_example::board::stm32g0`.
 //!
-//! On the Modbus line the USART frames 8E1, 8O1 or 8N2 as the block's
-//! parity says. Built and linked for its size figures only: QEMU has no
-//! model of it, and it has not run on silicon.
+//! Built and linked for its size figures only: QEMU has no model of it,
+//! and it has not run on silicon.
 #![no_std]
 #![no_main]
-// The PAC's `bits` writers are safe on some registers and not on others.
-#![allow(unused_unsafe)]
 
-#[path = "../runtime.rs"]
-mod runtime;
-#[path = "../stm32g0.rs"]
-mod stm32g0_board;
+use embassy_stm32::gpio::{Input, Level, Output, Pull, Speed};
+use embassy_stm32::usart::{BufferedInterruptHandler, BufferedUart};
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_stm32::{bind_interrupts, peripherals};
+use firmware_example::board::config_page;
+use firmware_example::board::stm32g0::{self, GpioModem, Parts};
 
-use core::convert::Infallible;
-use core::mem::MaybeUninit;
-use core::ptr::addr_of_mut;
+bind_interrupts!(struct Irqs {
+    USART1 => BufferedInterruptHandler<peripherals::USART1>;
+    USART2 => BufferedInterruptHandler<peripherals::USART2>;
+});
 
-use cortex_m_rt::entry;
-use firmware_example::bridge::Error;
-use firmware_example::config::UpstreamProtocol;
-use firmware_example::modbus::{self, Gateway};
-use firmware_example::serial::FlowControl;
-use stm32g0_board as board;
-
-/// The gateway's state, written once at start.
-static mut GATEWAY: MaybeUninit<Gateway> = MaybeUninit::uninit();
-
-#[entry]
+#[cortex_m_rt::entry]
 fn main() -> ! {
-    let Some(core) = cortex_m::Peripherals::take() else {
-        panic!("core peripherals already taken");
+    let p = embassy_stm32::init(stm32g0::clocks());
+    let (cfg, source) = config_page::load_config();
+    let Some(b) = stm32g0::buffers() else {
+        stm32g0::halt()
     };
-    runtime::start_tick(core.SYST, board::CORE_CLOCK_HZ);
-    let (mut cfg, source) = runtime::load_config();
-    let speaks = cfg.upstream;
-    let modbus = speaks == UpstreamProtocol::ModbusRtu;
-    if modbus {
-        // No flow control on a Modbus line (its bytes are binary).
-        cfg.flow = FlowControl::None;
-        board::stamp_upstream();
-    }
-    let rts_cts = cfg.flow == FlowControl::RtsCts;
-    board::init_pins(rts_cts);
-    let (baud, format) = if modbus {
-        (cfg.modbus.baud, board::Format::Modbus(cfg.modbus.parity))
-    } else {
-        (cfg.upstream_baud, board::Format::Plain)
+    // The upstream port on USART2: PA3 RX, PA2 TX; RTS on PA1, CTS on PA0.
+    let up = stm32g0::upstream_uart(&cfg, cfg.upstream);
+    let upstream = BufferedUart::new(p.USART2, p.PA3, p.PA2, b.up_tx, b.up_rx, Irqs, up);
+    let modem = GpioModem {
+        rts: Output::new(p.PA1, Level::High, Speed::Low),
+        cts: Input::new(p.PA0, Pull::None),
     };
-    board::init_usart(board::up_regs(), baud, format, rts_cts);
-    board::init_usart(
-        board::down_regs(),
-        cfg.downstream_baud,
-        board::Format::Plain,
-        false,
-    );
-
-    // SAFETY: `main` runs once; these are the only references to these
-    // statics, and the interrupts that use the ends are unmasked only
-    // after `setup` handed them over.
-    let (statics, gateway) = unsafe {
-        (
-            board::statics(),
-            (*addr_of_mut!(GATEWAY)).write(Gateway::new(cfg.modbus, cfg.policy)),
-        )
+    // The controller on USART1: PA10 RX, PA9 TX.
+    let down = stm32g0::controller_uart(&cfg);
+    let controller = BufferedUart::new(p.USART1, p.PA10, p.PA9, b.down_tx, b.down_rx, Irqs, down);
+    let (Ok(upstream), Ok(controller)) = (upstream, controller) else {
+        stm32g0::halt()
     };
-    // With no flow control the line's marks pause nothing.
-    let (bridge, mut up, mut down) = runtime::setup(statics, cfg, source);
-    board::unmask_usarts();
-    board::start_watchdog();
-    let result = modbus::run_one_upstream(
-        speaks,
-        bridge,
-        gateway,
-        &mut up,
-        &mut down,
-        runtime::now_ms,
-        runtime::now_us,
-        runtime::sleep_unless,
-        board::feed_watchdog,
-    );
-    let result: Result<_, Error<Infallible, Infallible>> = result;
-    runtime::finish(result, up.pauses())
+    stm32g0::run_one_upstream(Parts {
+        config: (cfg, source),
+        upstream,
+        controller,
+        modem,
+        watchdog: IndependentWatchdog::new(p.IWDG, stm32g0::WATCHDOG_US),
+    })
 }

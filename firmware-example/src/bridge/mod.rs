@@ -33,6 +33,7 @@
 //! between 26DHs it is lent out as the pass-through's frame decoder
 //! ([`Transfer::idle_decoder`]), which holds the command, then the reply.
 
+pub mod history;
 mod passthrough;
 pub mod pipeline;
 mod session;
@@ -50,7 +51,9 @@ use iai_protocol_b::relay::Relay;
 use iai_protocol_b::transfer::{packed_len, RecordBuffer, Transfer};
 use iai_protocol_b::{line::LineConfig, profile::Profile, transfer::TransferConfig};
 
+use crate::config::editor::Editor;
 use crate::config::{Config, Source};
+use crate::log;
 use crate::serial::{Counted, Port};
 use crate::status::{self, LastError, Stats};
 
@@ -297,6 +300,13 @@ pub struct Bridge {
     /// The guest holds the line in this poll: the bridge's own paths
     /// leave the downstream alone.
     guest_holds: bool,
+    /// Since when the host's XOFF holds the upstream transmitter.
+    xoff_since: Option<u32>,
+    /// The configuration page's writes, if the board keeps a page it can
+    /// write (the configuration messages, see `upstream`).
+    editor: Option<&'static mut Editor<'static>>,
+    /// The last frames through the bridge.
+    history: history::History,
 }
 
 /// The line to the controller for `cfg`.
@@ -329,7 +339,35 @@ impl Bridge {
             last_error: None,
             forward_pending: None,
             guest_holds: false,
+            xoff_since: None,
+            editor: None,
+            history: history::History::new(),
         }
+    }
+
+    /// Answers the configuration messages with `editor` (see
+    /// [`crate::config::wire`]); without one they are refused
+    /// [`crate::codes::STORE_FAILED`].
+    pub fn attach_editor(&mut self, editor: &'static mut Editor<'static>) {
+        self.editor = Some(editor);
+    }
+
+    /// The configuration page's writes, if attached.
+    pub fn editor(&mut self) -> Option<&mut Editor<'static>> {
+        self.editor.as_deref_mut()
+    }
+
+    /// The last frames through the bridge.
+    pub fn history(&self) -> &history::History {
+        &self.history
+    }
+
+    /// Records `frame` in the history, as the bridge does (the web page's
+    /// tests only).
+    #[cfg(all(test, feature = "ethernet"))]
+    pub(crate) fn history_for_tests(&mut self, frame: &[u8], now: u32) {
+        self.history
+            .record(history::Dir::FromHost, frame, frame.len(), now);
     }
 
     /// Sets the configuration (at start, before the first [`Bridge::poll`]):
@@ -389,6 +427,7 @@ impl Bridge {
         guest: &mut G,
         now: u32,
     ) -> Result<Poll, Error<U::Error, D::Error>> {
+        let xoff_until = self.watch_xoff(up, now);
         let mut guest_moved = false;
         let host_waits = self.forward_pending.is_some() || matches!(self.mode, Mode::Stream { .. });
         if host_waits && guest.holds_line() && guest.may_yield() {
@@ -419,12 +458,13 @@ impl Bridge {
             }
             Mode::Forward | Mode::RelayReply => self.poll_passthrough(up, down, now)?,
             Mode::Stream { .. } => self.poll_stream(up, down, now)?,
-            Mode::Respond => self.poll_respond(up).map_err(Error::Upstream)?,
+            Mode::Respond => self.poll_respond(up, now).map_err(Error::Upstream)?,
         };
         Ok(if moved || guest_moved {
             Poll::Busy
         } else {
             let mut w = self.wait(now);
+            w.deadline = earliest(now, w.deadline, xoff_until);
             let g = guest.wait(now);
             if self.guest_holds {
                 w.interest.down_read = true;
@@ -435,6 +475,27 @@ impl Bridge {
             }
             Poll::Wait(w)
         })
+    }
+
+    /// Lets the host's XOFF hold the upstream transmitter at most
+    /// [`Config::xoff_hold_ms`]: an XOFF that line noise made, or a host
+    /// that never sends XON, must not silence the bridge for good. The
+    /// tick by which to look again while it holds.
+    fn watch_xoff<U: Port>(&mut self, up: &mut U, now: u32) -> Option<u32> {
+        if !up.peer_stopped() {
+            self.xoff_since = None;
+            return None;
+        }
+        let since = *self.xoff_since.get_or_insert(now);
+        let until = since.wrapping_add(self.cfg.xoff_hold_ms);
+        if iai_protocol_b::clock::reached(now, until) {
+            log::warning!("XOFF from the host held the transmitter too long: let go");
+            up.release_peer_stop();
+            self.stats.xoff_released = self.stats.xoff_released.wrapping_add(1);
+            self.xoff_since = None;
+            return None;
+        }
+        Some(until)
     }
 
     /// What the bridge waits for in its current mode.

@@ -13,6 +13,7 @@
 use iai_protocol_b::engine::Turn;
 use iai_protocol_b::error::Failure;
 
+use super::history::Dir::ToHost;
 use super::{write_some, Bridge, Error, Mode, Port};
 use crate::codes;
 use crate::log;
@@ -39,6 +40,7 @@ impl Bridge {
                 let out = &mut self.stats.upstream_out;
                 let n = write_some(up, bytes, &mut self.out_off, out).map_err(Error::Upstream)?;
                 if self.out_off >= bytes.len() {
+                    self.history.record(ToHost, bytes, bytes.len(), now);
                     self.stats.relayed += 1;
                     self.go_idle();
                     return Ok(true);

@@ -11,19 +11,21 @@ use embedded_io::{Read, ReadReady};
 use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
 use iai_protocol_b::frame::{emit_frame, Frame, Header};
 
-/// The seed of the bridges under test: their fences' texts begin `000000`.
+/// The seed of the bridges under test.
 const SEED: u32 = 0;
 
 /// A port over byte vectors: reads `input`, collects what is written. As
-/// the controller side it answers the bridge's fences (200H whose text
-/// begins with the seed's six digits) with their echo, and keeps them out
-/// of `output`.
+/// the controller side it answers the bridge's fences (200H whose ten
+/// characters are hex digits; the hosts of these tests send other texts)
+/// with their echo, and keeps them out of `output`.
 #[derive(Default)]
 struct Fake {
     input: Vec<u8>,
     output: Vec<u8>,
     echo_fences: bool,
     fences: u32,
+    /// The peer sent XOFF (and no XON since).
+    stopped: bool,
 }
 
 impl Fake {
@@ -58,7 +60,10 @@ impl WriteReady for Fake {
 }
 impl Write for Fake {
     fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
-        if self.echo_fences && buf.starts_with(b"!99200000000") && buf.len() == 20 {
+        let fence = buf.len() == 20
+            && buf.starts_with(b"!99200")
+            && buf[6..16].iter().all(|b| b.is_ascii_hexdigit());
+        if self.echo_fences && fence {
             self.fences += 1;
             let f = Frame::new_checked(buf, BypassPolicy::Reject).unwrap();
             let echo = frame(Header::Response, 0x99, 0x200, f.body());
@@ -72,7 +77,14 @@ impl Write for Fake {
         Ok(())
     }
 }
-impl Port for Fake {}
+impl Port for Fake {
+    fn peer_stopped(&mut self) -> bool {
+        self.stopped
+    }
+    fn release_peer_stop(&mut self) {
+        self.stopped = false;
+    }
+}
 
 fn frame(header: Header, station: u8, code: u16, body: &[u8]) -> Vec<u8> {
     let mut buf = [0u8; 64];
@@ -431,4 +443,85 @@ fn reply_26dh_of(count: u16) -> Vec<u8> {
     emitted(&ChangePositionData2Response {
         number_of_changed_positions: count,
     })
+}
+
+/// Issue "never wrong when the line breaks its rules": the bridge restarts
+/// (same seed, and the host's first byte at the same tick: its first fence
+/// has the same text) while its first fence's echo is on the way. The old
+/// echo settles the new fence; the new fence's own echo then arrives while
+/// the host's 200H waits for its reply. The pass-through never relays a
+/// frame the bridge itself caused: the host gets the echo of its own text.
+#[test]
+fn a_restarted_bridge_never_relays_its_own_fence_echo() {
+    let query = frame(Header::Command, 0x99, 0x212, b"01");
+    let first_fence = {
+        let mut b = bridge(Policy::ForwardAll);
+        let (mut up, mut down) = (Fake::default(), Fake::default());
+        up.input = query.clone();
+        settle(&mut b, &mut up, &mut down, 0);
+        let fence = down.output.clone();
+        assert!(
+            fence.starts_with(b"!99200"),
+            "a line just booted fences first"
+        );
+        fence
+        // Power cut: the echo is still on its way.
+    };
+    let mut b = bridge(Policy::ForwardAll);
+    let (mut up, mut down) = (Fake::default(), Fake::default());
+    let call = frame(Header::Command, 0x99, 0x200, b"HELLO-0042");
+    // The host's first bytes as after the first boot: as many, at the same
+    // tick (the fences would differ otherwise).
+    up.input = call[..query.len()].to_vec();
+    settle(&mut b, &mut up, &mut down, 0);
+    up.input = call[query.len()..].to_vec();
+    settle(&mut b, &mut up, &mut down, 0);
+    assert_eq!(down.output, first_fence, "the same seed, the same text");
+    down.output.clear();
+    let echo = |cmd: &[u8]| {
+        let f = Frame::new_checked(cmd, BypassPolicy::Reject).unwrap();
+        frame(Header::Response, 0x99, 0x200, f.body())
+    };
+    // The first boot's echo settles the fence; the host's 200H goes down.
+    down.input = echo(&first_fence);
+    settle(&mut b, &mut up, &mut down, 10);
+    settle(&mut b, &mut up, &mut down, 12);
+    assert_eq!(down.output, call);
+    // This boot's own fence echo, then the controller's echo of the call.
+    down.input = echo(&first_fence);
+    settle(&mut b, &mut up, &mut down, 20);
+    assert!(
+        up.output.is_empty(),
+        "the bridge's own fence echo is not relayed"
+    );
+    down.input = echo(&call);
+    settle(&mut b, &mut up, &mut down, 30);
+    settle(&mut b, &mut up, &mut down, 31);
+    assert_eq!(up.output, echo(&call));
+}
+
+/// Issue "never wrong when the line breaks its rules": an XOFF in noise
+/// (and no XON) holds the bridge's transmitter at most
+/// `Config::xoff_hold_ms`; the bridge wakes for it, lets go, counts it.
+#[test]
+fn an_xoff_holds_the_transmitter_at_most_the_configured_time() {
+    let mut b = bridge(Policy::ForwardAll);
+    let (mut up, mut down) = (Fake::default(), Fake::controller());
+    up.stopped = true;
+    let hold = Config::DEFAULT.xoff_hold_ms;
+    match b.poll(&mut up, &mut down, 100).unwrap() {
+        Poll::Wait(w) => assert_eq!(w.deadline, Some(100 + hold)),
+        other => panic!("{other:?}"),
+    }
+    settle(&mut b, &mut up, &mut down, 100 + hold - 1);
+    assert!(up.stopped, "held until the limit");
+    settle(&mut b, &mut up, &mut down, 100 + hold);
+    assert!(!up.stopped, "let go at the limit");
+    assert_eq!(b.stats().xoff_released, 1);
+    // An XOFF the host lifts itself is not counted.
+    up.stopped = true;
+    settle(&mut b, &mut up, &mut down, 200 + hold);
+    up.stopped = false;
+    settle(&mut b, &mut up, &mut down, 300 + 2 * hold);
+    assert_eq!(b.stats().xoff_released, 1);
 }

@@ -1,13 +1,20 @@
 //! Frames from the host, sorted by their envelope (header, station, ID):
 //! the bridge's own station, other stations, refused commands, 26DH, and
-//! the pass-through; and the bridge's own answers going up.
+//! the pass-through; and the bridge's own answers going up: the status
+//! query, and the configuration messages ([`crate::config::wire`]) answered
+//! through the board's [`Editor`], whose granted restart goes when due.
 
+use iai_protocol_b::catalogue;
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameSkipper, Skipped, Status};
 use iai_protocol_b::frame::{emit_frame, read_envelope, Frame, Header, Station, ENVELOPE_LEN};
 
+use super::history::Dir::{FromHost, ToHost};
 use super::{write_some, Bridge, Error, Mode, Port, STREAM};
 use crate::codes;
+use crate::config::editor::Editor;
+use crate::config::page::{ACCESS_AT, WINDOW};
+use crate::config::wire::{self, PageInfo, Request};
 use crate::config::Policy;
 use crate::log;
 use crate::status::{self, LastError};
@@ -72,6 +79,9 @@ impl Bridge {
         down: &mut D,
         now: u32,
     ) -> Result<Read, Error<U::Error, D::Error>> {
+        if let Some(editor) = self.editor.as_deref_mut() {
+            editor.poll(now);
+        }
         let mut moved = self
             .drain_downstream(down, now)
             .map_err(Error::Downstream)?;
@@ -133,6 +143,11 @@ impl Bridge {
         let is_header = Header::from_byte(b).is_some();
         match self.mode {
             Mode::Idle | Mode::Head if is_header => {
+                // When a host's frame starts varies from boot to boot (a
+                // QEMU run's RAM starts zeroed, a board's may not be
+                // random): the fences to come take it in.
+                self.line
+                    .stir(now ^ (self.stats.upstream_in as u32).rotate_left(16));
                 self.up.head[0] = b;
                 self.up.head_len = 1;
                 self.mode = Mode::Head;
@@ -172,6 +187,8 @@ impl Bridge {
                 return;
             }
             if id == STREAM.id {
+                // Its records are not kept: the envelope says what it was.
+                self.history.record(FromHost, &head, head.len(), now);
                 self.start_stream(station, now);
                 return;
             }
@@ -243,6 +260,8 @@ impl Bridge {
         };
         let decided = match event {
             Event::Frame(f) if f.header() == Header::Command => {
+                let bytes = f.as_bytes();
+                self.history.record(FromHost, bytes, bytes.len(), now);
                 let (station, id) = (f.station(), f.code());
                 if station == bridge_station {
                     Next::Own {
@@ -295,30 +314,78 @@ impl Bridge {
         }
     }
 
-    /// A command to the bridge's own station.
+    /// A command to the bridge's own station. Not inlined: the
+    /// configuration messages' buffers (passwords, a window) stay off the
+    /// stack of every other command.
+    #[inline(never)]
     fn own_query(&mut self, station: Station, id: u16, body_empty: bool, now: u32) {
         if id == codes::STATUS_QUERY && body_empty {
-            let report = status::Report {
-                now_ms: now,
-                config: &self.cfg,
-                source: self.source,
-                stats: &self.stats,
-                last_error: self.last_error,
-            };
-            self.resp_len = report.emit(station, &mut self.resp).unwrap_or(0);
+            self.status_reply(station, now);
+            return;
+        }
+        if id == catalogue::TEST_CALL.id {
+            // The echo, as a controller gives it (2003 p. 15): a host can
+            // fence its line to the bridge's own station.
+            let frames = self.job.idle_decoder();
+            let text = frames.last_frame().map_or(&[][..], |f| f.body());
+            self.resp_len = emit_frame(
+                &mut self.resp,
+                Header::Response,
+                station,
+                catalogue::TEST_CALL.id,
+                Default::default(),
+                |w| w.put(text),
+            )
+            .unwrap_or(0);
             self.out_off = 0;
             self.mode = Mode::Respond;
-        } else {
-            self.respond_error(station, codes::UNKNOWN_QUERY, now);
+            return;
+        }
+        let Bridge {
+            job, editor, resp, ..
+        } = self;
+        let request = job
+            .idle_decoder()
+            .last_frame()
+            .and_then(|f| Request::parse(id, f.body()));
+        let answered = match (request, editor.as_deref_mut()) {
+            (None, _) => Err(codes::UNKNOWN_QUERY),
+            (Some(Err(())), _) => Err(codes::MALFORMED),
+            (Some(Ok(_)), None) => Err(codes::STORE_FAILED),
+            (Some(Ok(r)), Some(e)) => config_answer(e, r, station, resp, now),
+        };
+        match answered {
+            Ok(len) => {
+                self.resp_len = len;
+                self.out_off = 0;
+                self.mode = Mode::Respond;
+            }
+            Err(code) => self.respond_error(station, code, now),
         }
     }
 
+    /// The status reply goes up next.
+    #[inline(never)]
+    fn status_reply(&mut self, station: Station, now: u32) {
+        let report = status::Report {
+            now_ms: now,
+            config: &self.cfg,
+            source: self.source,
+            stats: &self.stats,
+            last_error: self.last_error,
+        };
+        self.resp_len = report.emit(station, &mut self.resp).unwrap_or(0);
+        self.out_off = 0;
+        self.mode = Mode::Respond;
+    }
+
     /// The Respond mode: the bridge's own reply goes up.
-    pub(super) fn poll_respond<U: Port>(&mut self, up: &mut U) -> Result<bool, U::Error> {
+    pub(super) fn poll_respond<U: Port>(&mut self, up: &mut U, now: u32) -> Result<bool, U::Error> {
         let resp = self.resp.get(..self.resp_len).unwrap_or(&[]);
         let out = &mut self.stats.upstream_out;
         let n = write_some(up, resp, &mut self.out_off, out)?;
         if self.out_off >= self.resp_len {
+            self.history.record(ToHost, resp, resp.len(), now);
             self.go_idle();
         }
         Ok(n > 0)
@@ -354,6 +421,70 @@ impl Bridge {
         .unwrap_or(0);
         self.mode = Mode::Respond;
     }
+}
+
+/// Carries out configuration request `r` with `e` and writes its reply
+/// into `resp`: the reply's length, or the `&` code.
+#[inline(never)]
+fn config_answer(
+    e: &mut Editor<'static>,
+    r: Request<'_>,
+    station: Station,
+    resp: &mut [u8],
+    now: u32,
+) -> Result<usize, u16> {
+    let refused = |r: crate::config::editor::Refusal| wire::refusal_code(&r);
+    let mut password = [0u8; wire::PASSWORD_MAX];
+    let mut new = [0u8; wire::PASSWORD_MAX];
+    let emitted = match r {
+        Request::Read { at, password: p } => {
+            let len = wire::window_at(at).ok_or(codes::MALFORMED)?;
+            let mut window = [0u8; WINDOW];
+            if at == ACCESS_AT {
+                let p = wire::unhex(p, &mut password).ok_or(codes::MALFORMED)?;
+                e.read_verifier(p, now, &mut window).map_err(refused)?;
+            } else {
+                let bytes = window.get_mut(..len).ok_or(codes::MALFORMED)?;
+                e.read_host(at, bytes).map_err(refused)?;
+            }
+            let bytes = window.get(..len).ok_or(codes::MALFORMED)?;
+            let info = PageInfo {
+                seq: e.sequence(),
+                password_set: e.verifier().is_some(),
+                restart_pending: e.restart_pending(),
+            };
+            wire::emit_read_reply(resp, station, at, info, bytes)
+        }
+        Request::Stage { at, digits } => {
+            let mut window = [0u8; WINDOW];
+            let bytes = wire::unhex(digits, &mut window).ok_or(codes::MALFORMED)?;
+            let next = e.stage(at, bytes).map_err(refused)?;
+            wire::emit_reply(resp, station, codes::CONFIG_STAGE, &[(next as u64, 3)])
+        }
+        Request::Apply { crc, password: p } => {
+            let p = wire::unhex(p, &mut password).ok_or(codes::MALFORMED)?;
+            let a = e.apply(p, crc, now).map_err(refused)?;
+            let fields = [(u64::from(a.seq), 8), (u64::from(a.restart_needed), 1)];
+            wire::emit_reply(resp, station, codes::CONFIG_APPLY, &fields)
+        }
+        Request::Restart { password: p } => {
+            let p = wire::unhex(p, &mut password).ok_or(codes::MALFORMED)?;
+            e.request_restart(p, now).map_err(refused)?;
+            wire::emit_reply(resp, station, codes::RESTART, &[])
+        }
+        Request::Password { current, new: n } => {
+            let current = wire::unhex(current, &mut password).ok_or(codes::MALFORMED)?;
+            let n = wire::unhex(n, &mut new).ok_or(codes::MALFORMED)?;
+            let a = e.set_password(current, n, now).map_err(refused)?;
+            wire::emit_reply(
+                resp,
+                station,
+                codes::CONFIG_PASSWORD,
+                &[(u64::from(a.seq), 8)],
+            )
+        }
+    };
+    emitted.map_err(|_| codes::INTERNAL)
 }
 
 /// What a complete upstream command asks of the bridge.

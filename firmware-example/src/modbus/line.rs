@@ -17,8 +17,8 @@ use iai_protocol_b::message::{
 };
 use iai_protocol_b::transfer::{packed_len, Guarantee, RecordBuffer};
 use iai_protocol_b::{
-    client::Client, error::Error, error::Failure, profile::Profile, readback::ReadBack,
-    readback::ReadBackConfig, transfer::Transfer, transfer::TransferConfig,
+    client::Client, client::Pending, error::Error, error::Failure, profile::Profile,
+    readback::ReadBack, readback::ReadBackConfig, transfer::Transfer, transfer::TransferConfig,
 };
 
 use super::cache::Cache;
@@ -54,7 +54,7 @@ pub const WINDOW_BYTES: usize = WINDOW_RECORDS * packed_len(MAX_AXES);
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Exchange {
     Idle,
-    Poll(Query),
+    Poll(Polled),
     Command(Job),
 }
 
@@ -218,8 +218,9 @@ impl Engines {
                     query_axis_pattern: axes,
                 },
                 now,
-            ),
-            Query::System => poll(c, line, &SystemStatusQuery {}, now),
+            )
+            .map(Polled::Axes),
+            Query::System => poll(c, line, &SystemStatusQuery {}, now).map(Polled::System),
             Query::Program => poll(
                 c,
                 line,
@@ -227,8 +228,10 @@ impl Engines {
                     program_number: regs.program,
                 },
                 now,
-            ),
-            Query::ErrorDetail => poll(c, line, &ErrorDetailQuery::latest_system_error(), now),
+            )
+            .map(Polled::Program),
+            Query::ErrorDetail => poll(c, line, &ErrorDetailQuery::latest_system_error(), now)
+                .map(Polled::ErrorDetail),
             Query::Inputs => poll(
                 c,
                 line,
@@ -237,7 +240,8 @@ impl Engines {
                     number_of_query_ports: BITS,
                 },
                 now,
-            ),
+            )
+            .map(Polled::Inputs),
             Query::Outputs => poll(
                 c,
                 line,
@@ -246,7 +250,8 @@ impl Engines {
                     number_of_query_ports: BITS,
                 },
                 now,
-            ),
+            )
+            .map(Polled::Outputs),
             Query::Flags => poll(
                 c,
                 line,
@@ -256,7 +261,8 @@ impl Engines {
                     number_of_query_flags: BITS,
                 },
                 now,
-            ),
+            )
+            .map(Polled::Flags),
             Query::Integers => poll(
                 c,
                 line,
@@ -266,7 +272,8 @@ impl Engines {
                     number_of_query_variables: INTEGERS as u8,
                 },
                 now,
-            ),
+            )
+            .map(Polled::Integers),
             Query::Version => poll(
                 c,
                 line,
@@ -275,12 +282,16 @@ impl Engines {
                     device_number: 0,
                 },
                 now,
-            ),
+            )
+            .map(Polled::Version),
         };
-        if started.is_ok() {
-            self.exchange = Exchange::Poll(q);
+        match started {
+            Ok(polled) => {
+                self.exchange = Exchange::Poll(polled);
+                true
+            }
+            Err(_) => false,
         }
-        started.is_ok()
     }
 
     /// Starts the engine of `job`.
@@ -294,15 +305,15 @@ impl Engines {
         let c = &mut self.client;
         let one = |axis: u8| AxisPattern::of(&[axis]);
         match job {
-            Job::Servo { axis, on } => c.start(line, &ServoOnOff::new(&[axis], on)?, now),
-            Job::Home { axis } => c.start(line, &HomeReturn::of(&[axis])?, now),
+            Job::Servo { axis, on } => c.start(line, &ServoOnOff::new(&[axis], on)?, now).map(drop),
+            Job::Home { axis } => c.start(line, &HomeReturn::of(&[axis])?, now).map(drop),
             Job::MoveToPosition { axis, number } => {
                 let m = PositionNumberMove2 {
                     axis_pattern: one(axis)?,
                     position_number: number,
                     ..PositionNumberMove2::default()
                 };
-                c.start(line, &m, now)
+                c.start(line, &m, now).map(drop)
             }
             Job::Move {
                 axis,
@@ -314,22 +325,22 @@ impl Engines {
                     .with_speed(speed)
                     .with_acceleration(acceleration)
                     .with_deceleration(acceleration);
-                c.start(line, &m, now)
+                c.start(line, &m, now).map(drop)
             }
             Job::Stop { axis } => {
                 let m = OperationStop {
                     stop_axis_pattern: one(axis)?,
                     appended_command_byte: 0,
                 };
-                c.start(line, &m, now)
+                c.start(line, &m, now).map(drop)
             }
-            Job::AlarmReset => c.start(line, &AlarmReset {}, now),
+            Job::AlarmReset => c.start(line, &AlarmReset {}, now).map(drop),
             Job::Output { port, on } => {
                 let m = OutputPortChange {
                     output_port_number: port,
                     change_type: u8::from(on),
                 };
-                c.start(line, &m, now)
+                c.start(line, &m, now).map(drop)
             }
             Job::Flag { flag, on } => {
                 let m = FlagChange {
@@ -337,7 +348,7 @@ impl Engines {
                     flag_number: flag,
                     change_type: u8::from(on),
                 };
-                c.start(line, &m, now)
+                c.start(line, &m, now).map(drop)
             }
             Job::Integers {
                 first,
@@ -351,7 +362,7 @@ impl Engines {
                         values.get(..usize::from(count)).unwrap_or(&[]),
                     ),
                 };
-                c.start(line, &m, now)
+                c.start(line, &m, now).map(drop)
             }
             Job::ReadWindow { head } => {
                 // Positions the controller does not hold read as their
@@ -390,14 +401,14 @@ impl Engines {
         }
         match exchange {
             Exchange::Idle => {}
-            Exchange::Poll(q) => {
+            Exchange::Poll(polled) => {
                 // An `&` is an answer too: the controller is there.
                 if c.set_link(matches!(r, Ok(()) | Err(Failure::Controller { .. }))) {
                     regs.schedule.version_soon();
                 }
                 if r.is_ok() {
                     c.polls_ok = c.polls_ok.wrapping_add(1);
-                    take_reply(&self.client, q, c, now);
+                    take_reply(&self.client, polled, c, now);
                 } else {
                     c.polls_failed = c.polls_failed.wrapping_add(1);
                 }
@@ -434,67 +445,81 @@ impl Default for Engines {
     }
 }
 
+/// A poll on the line: its query, with the ticket to its typed reply.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Polled {
+    Axes(Pending<AxisStatusQuery>),
+    System(Pending<SystemStatusQuery>),
+    Program(Pending<ProgramStatusQuery>),
+    ErrorDetail(Pending<ErrorDetailQuery>),
+    Inputs(Pending<InputPortQuery>),
+    Outputs(Pending<OutputPortQuery>),
+    Flags(Pending<FlagQuery>),
+    Integers(Pending<IntegerVariableQuery>),
+    Version(Pending<VersionQuery>),
+}
+
 /// Starts a poll: sent once (the next round asks again).
 fn poll<'a, R: iai_protocol_b::message::Request<'a>>(
     c: &mut Poller,
     line: &mut Line,
     req: &R,
     now: u32,
-) -> Result<(), Error> {
+) -> Result<Pending<R>, Error> {
     c.start_with_sends(line, req, 1, now)
 }
 
-/// Puts the reply to poll `q` into the cache.
-fn take_reply(client: &Poller, q: Query, c: &mut Cache, now: u32) {
-    match q {
-        Query::Axes => {
-            if let Ok(r) = client.response::<AxisStatusQuery>() {
+/// Puts the reply to the poll into the cache.
+fn take_reply(client: &Poller, polled: Polled, c: &mut Cache, now: u32) {
+    match polled {
+        Polled::Axes(p) => {
+            if let Ok(r) = client.response(&p) {
                 c.axes(&r, true, now);
             }
         }
-        Query::System => {
-            if let Ok(r) = client.response::<SystemStatusQuery>() {
+        Polled::System(p) => {
+            if let Ok(r) = client.response(&p) {
                 c.system(&r, now);
             }
         }
-        Query::Program => {
-            if let Ok(r) = client.response::<ProgramStatusQuery>() {
+        Polled::Program(p) => {
+            if let Ok(r) = client.response(&p) {
                 c.program(&r, now);
             }
         }
-        Query::ErrorDetail => {
-            if let Ok(r) = client.response::<ErrorDetailQuery>() {
+        Polled::ErrorDetail(p) => {
+            if let Ok(r) = client.response(&p) {
                 c.error_detail(&r, now);
             }
         }
-        Query::Inputs => {
-            if let Ok(r) = client.response::<InputPortQuery>() {
+        Polled::Inputs(p) => {
+            if let Ok(r) = client.response(&p) {
                 c.inputs = Cache::port_bits(r.input_port_data.items.iter());
                 c.io_at.set(now);
             }
         }
-        Query::Outputs => {
-            if let Ok(r) = client.response::<OutputPortQuery>() {
+        Polled::Outputs(p) => {
+            if let Ok(r) = client.response(&p) {
                 c.outputs = Cache::port_bits(r.output_port_data.items.iter());
                 c.io_at.set(now);
             }
         }
-        Query::Flags => {
-            if let Ok(r) = client.response::<FlagQuery>() {
+        Polled::Flags(p) => {
+            if let Ok(r) = client.response(&p) {
                 c.flags = Cache::port_bits(r.flag_data.items.iter());
                 c.io_at.set(now);
             }
         }
-        Query::Integers => {
-            if let Ok(r) = client.response::<IntegerVariableQuery>() {
+        Polled::Integers(p) => {
+            if let Ok(r) = client.response(&p) {
                 for (slot, v) in c.integers.iter_mut().zip(r.integer_variable_data.iter()) {
                     *slot = v;
                 }
                 c.integers_at.set(now);
             }
         }
-        Query::Version => {
-            if let Ok(r) = client.response::<VersionQuery>() {
+        Polled::Version(p) => {
+            if let Ok(r) = client.response(&p) {
                 c.version = Some(r);
             }
         }

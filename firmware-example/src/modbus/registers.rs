@@ -200,8 +200,9 @@ impl Registers {
     }
 
     /// Queues `job` if the policy allows its message and no command is
-    /// busy.
-    fn command(&mut self, job: Job) -> Result<(), ErrorKind> {
+    /// busy (exception 01 or 06 otherwise): the one way in to the
+    /// handshake for every front (Modbus, Sparkplug's DCMD).
+    pub fn command(&mut self, job: Job) -> Result<(), ErrorKind> {
         if !self.policy.allows(job.message().id) {
             self.cache.refused = self.cache.refused.wrapping_add(1);
             return Err(ErrorKind::IllegalFunction);

@@ -26,6 +26,8 @@
 //! address then breaks: the stack resets its socket at once, without a
 //! word to the peer, and the bridge is free for the next host).
 
+use core::ops::RangeInclusive;
+
 use crate::config::{crc32, BlockError};
 
 /// Where the network block starts, in bytes past the bridge's block: the
@@ -47,6 +49,8 @@ pub const DHCP_FALLBACK_MS: u32 = 10_000;
 pub const FALLBACK_ADDRESS: [u8; 4] = [192, 168, 1, 20];
 /// Its prefix length.
 pub const FALLBACK_PREFIX: u8 = 24;
+/// Prefix lengths an address may have.
+pub const PREFIXES: RangeInclusive<u8> = 1..=30;
 
 /// How the interface gets its address.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -144,7 +148,7 @@ impl NetConfig {
             return Err(BlockError::Field(8));
         }
         let prefix = byte(12);
-        if !(1..=30).contains(&prefix) {
+        if !PREFIXES.contains(&prefix) {
             return Err(BlockError::Field(12));
         }
         let gateway = quad(16);

@@ -32,10 +32,16 @@
 //! [`modbus::MODBUS_PORT`] (502), added by [`Net::add_modbus`] and served
 //! in [`Net::poll_with`] by the gateway ([`crate::modbus`]) that shares the
 //! controller line with the bridge.
+//!
+//! Sparkplug B ([`sparkplug`]): one client socket to an MQTT broker, added
+//! by [`Net::add_sparkplug`] and served in [`Net::poll_with`] from the
+//! same gateway's cache and command handshake.
 
 pub mod config;
 pub mod host;
+pub mod http;
 pub mod modbus;
+pub mod sparkplug;
 pub mod stellaris;
 #[cfg(test)]
 mod testkit;
@@ -56,8 +62,11 @@ use crate::modbus::Gateway;
 use crate::serial::Port;
 use crate::status::Stats;
 use config::{Addressing, Ipv4Setting, NetConfig, DHCP_FALLBACK_MS};
-use host::{HostPort, Hosts, SOCKETS};
-use modbus::{ModbusBuffers, ModbusClients, CLIENTS};
+use host::{HostPort, HostStats, Hosts, Session, SOCKETS};
+use http::{Http, HttpBuffers};
+use modbus::{ModbusBuffers, ModbusClients, ModbusTcpStats, CLIENTS};
+use sparkplug::config::SparkplugConfig;
+use sparkplug::{EdgeNode, SparkplugBuffers};
 
 /// Bytes of each socket buffer (receive and transmit, per socket). The
 /// receive buffer is the TCP window: the most a host can send ahead of
@@ -90,12 +99,28 @@ impl Default for Buffers {
     }
 }
 
-/// The slots of the socket set: the protocol-B sockets, DHCP and the
-/// Modbus TCP sockets.
-pub type SocketSlots<'a> = [SocketStorage<'a>; SOCKETS + 1 + CLIENTS];
+/// The slots of the socket set: the protocol-B sockets, DHCP, the Modbus
+/// TCP sockets, the web sockets and the Sparkplug node's.
+pub type SocketSlots<'a> = [SocketStorage<'a>; SOCKETS + 1 + CLIENTS + http::SOCKETS + 1];
 
 /// Empty socket slots.
-pub const EMPTY_SLOTS: SocketSlots<'static> = [SocketStorage::EMPTY; SOCKETS + 1 + CLIENTS];
+pub const EMPTY_SLOTS: SocketSlots<'static> =
+    [SocketStorage::EMPTY; SOCKETS + 1 + CLIENTS + http::SOCKETS + 1];
+
+/// What the network side shows the web page.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NetView {
+    /// The interface's address and where it came from.
+    pub address: Option<(Ipv4Setting, AddressSource)>,
+    /// Protocol B's TCP port.
+    pub port: u16,
+    /// The protocol-B hosts' counters.
+    pub hosts: HostStats,
+    /// Whether a protocol-B host is connected.
+    pub host_connected: bool,
+    /// The Modbus TCP side's counters, if it is served.
+    pub modbus: Option<ModbusTcpStats>,
+}
 
 /// Where the interface's address came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -121,9 +146,13 @@ pub enum NetEvent {
         port: u16,
         /// The Modbus TCP port, if Modbus TCP is served.
         modbus_port: Option<u16>,
+        /// The web page's port, if it is served.
+        http_port: Option<u16>,
     },
     /// The DHCP lease was lost; no address until the next.
     AddressLost,
+    /// News of the Sparkplug edge node.
+    Sparkplug(sparkplug::Event),
 }
 
 /// A wrapping millisecond tick as smoltcp's clock.
@@ -151,6 +180,8 @@ pub struct Net<'a> {
     dhcp: Option<SocketHandle>,
     hosts: Hosts,
     modbus: Option<ModbusClients>,
+    sparkplug: Option<EdgeNode<'a>>,
+    http: Option<Http<'a>>,
     cfg: NetConfig,
     clock: Clock,
     address: Option<(Ipv4Setting, AddressSource)>,
@@ -198,6 +229,8 @@ impl<'a> Net<'a> {
             dhcp,
             hosts: Hosts::new(handles, cfg.port),
             modbus: None,
+            sparkplug: None,
+            http: None,
             cfg,
             clock,
             address: None,
@@ -236,6 +269,47 @@ impl<'a> Net<'a> {
         self.modbus.as_ref()
     }
 
+    /// Runs the Sparkplug edge node with `cfg` (if it is enabled) on a
+    /// socket over `buffers`; `mac` names it when `cfg` gives no node ID.
+    /// Once only: a second call changes nothing.
+    pub fn add_sparkplug(
+        &mut self,
+        cfg: SparkplugConfig,
+        mac: [u8; 6],
+        buffers: &'a mut SparkplugBuffers,
+        now: u32,
+    ) {
+        if self.sparkplug.is_none() && cfg.enabled {
+            let node = EdgeNode::new(cfg, mac, buffers, &mut self.sockets, now);
+            self.sparkplug = Some(node);
+        }
+    }
+
+    /// The Sparkplug edge node, if it runs.
+    pub fn sparkplug(&self) -> Option<&EdgeNode<'a>> {
+        self.sparkplug.as_ref()
+    }
+
+    /// The Sparkplug edge node, to end its session ([`EdgeNode::leave`]).
+    pub fn sparkplug_mut(&mut self) -> Option<&mut EdgeNode<'a>> {
+        self.sparkplug.as_mut()
+    }
+
+    /// Serves the web page ([`http`]) on `port` on sockets over `buffers`;
+    /// they listen from the next [`Net::poll_with`]. Once only.
+    pub fn add_http(&mut self, buffers: &'a mut HttpBuffers, port: u16) {
+        if self.http.is_some() {
+            return;
+        }
+        let (handles, form) = buffers.add_sockets(&mut self.sockets);
+        self.http = Some(Http::new(handles, form, port));
+    }
+
+    /// The web side, if the web page is served.
+    pub fn http(&self) -> Option<&Http<'a>> {
+        self.http.as_ref()
+    }
+
     /// The settings in force.
     pub fn config(&self) -> &NetConfig {
         &self.cfg
@@ -259,7 +333,8 @@ impl<'a> Net<'a> {
     }
 
     /// [`Net::poll`], and then the Modbus TCP clients, answered by
-    /// `gateway` (if Modbus TCP was added and a gateway is given).
+    /// `gateway` (if Modbus TCP was added and a gateway is given), and the
+    /// web page's connections (if it was added).
     pub fn poll_with<D: Device>(
         &mut self,
         device: &mut D,
@@ -285,8 +360,38 @@ impl<'a> Net<'a> {
         let event = self.poll_address(now);
         self.hosts
             .service(&mut self.sockets, bridge, self.station, now);
-        if let (Some(clients), Some(gateway)) = (self.modbus.as_mut(), gateway) {
+        let mut gateway = gateway;
+        if let (Some(clients), Some(gateway)) = (self.modbus.as_mut(), gateway.as_deref_mut()) {
             clients.service(&mut self.sockets, gateway, now);
+        }
+        if let Some(web) = self.http.as_mut() {
+            let view = NetView {
+                address: self.address,
+                port: self.cfg.port,
+                hosts: self.hosts.stats(),
+                host_connected: matches!(self.hosts.session(), Session::Host(_)),
+                modbus: self.modbus.as_ref().map(ModbusClients::stats),
+            };
+            web.service(&mut self.sockets, bridge, gateway.as_deref_mut(), view, now);
+        }
+        if let (Some(node), Some(gateway)) = (self.sparkplug.as_mut(), gateway) {
+            let hosts = (self.hosts.host_handle().is_some(), self.hosts.stats().hosts);
+            let news = node.service(
+                &mut self.iface,
+                &mut self.sockets,
+                bridge,
+                gateway,
+                hosts,
+                now,
+            );
+            if let Some(news) = news {
+                // One event a round: the address's first, the node's kept.
+                if event.is_some() {
+                    node.defer(news);
+                } else {
+                    return Some(NetEvent::Sparkplug(news));
+                }
+            }
         }
         event
     }
@@ -347,6 +452,7 @@ impl<'a> Net<'a> {
                 source,
                 port: self.cfg.port,
                 modbus_port: self.modbus.as_ref().map(ModbusClients::port),
+                http_port: self.http.as_ref().map(Http::port),
             },
             None => NetEvent::AddressLost,
         }

@@ -221,6 +221,15 @@ impl Rig<'static> {
     }
 }
 
+impl Rig<'static> {
+    /// Runs the Sparkplug edge node with `cfg` (its broker: a client
+    /// socket of this rig listening at [`CLIENT_IP`]).
+    pub fn add_sparkplug(&mut self, cfg: super::sparkplug::config::SparkplugConfig) {
+        let buffers = Box::leak(Box::new(super::sparkplug::SparkplugBuffers::new()));
+        self.net.add_sparkplug(cfg, NET_MAC, buffers, self.now);
+    }
+}
+
 impl<'a> Rig<'a> {
     /// `ms` milliseconds, a round per `step` ms.
     pub fn run(&mut self, ms: u32, step: u32) {

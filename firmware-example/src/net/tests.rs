@@ -194,6 +194,7 @@ fn without_dhcp_the_fallback_after_its_delay_then_a_late_lease_replaces_it() {
         source: AddressSource::Fallback,
         port: PB_PORT,
         modbus_port: Some(MODBUS_PORT),
+        http_port: None,
     };
     assert_eq!(rig.events, [(DHCP_FALLBACK_MS, fallback)]);
     assert_eq!(
@@ -225,6 +226,7 @@ fn without_dhcp_the_fallback_after_its_delay_then_a_late_lease_replaces_it() {
             source: AddressSource::Dhcp,
             port: PB_PORT,
             modbus_port: Some(MODBUS_PORT),
+            http_port: None,
         }
     );
     assert_eq!(rig.net.address(), Some((lease, AddressSource::Dhcp)));

@@ -5,15 +5,17 @@
 //! window), the fences echoed, and the contract each delivery keeps or
 //! breaks (see [`Link::arrives`]).
 //!
-//! Also [`Shadow`]: a plain `FrameDecoder` fed the same bytes as an
-//! engine's reply decoder, which tells which delivery made each frame the
-//! engine heard.
+//! Also [`Shadow`]: the engine's decoders mirrored (its receiver's
+//! `FrameDecoder`, and the line's decoder of frames heard while the
+//! engine keeps a reply), fed the same bytes, which tells which delivery
+//! made each frame the engine heard.
 #![allow(dead_code)]
 
 use iai_protocol_b::catalogue::LONGEST_RESTART_MS;
 use iai_protocol_b::checksum::{BypassPolicy, ChecksumMode};
-use iai_protocol_b::decoder::{Event, FrameDecoder};
-use iai_protocol_b::frame::{emit_frame, Frame, Header, Station};
+use iai_protocol_b::decoder::{Event, FrameDecoder, FrameSkipper, Received, Skipped, Status};
+use iai_protocol_b::error::Error;
+use iai_protocol_b::frame::{emit_frame, read_envelope, Frame, Header, Station, ENVELOPE_LEN};
 use iai_protocol_b::line::{Heard, LineConfig};
 
 use crate::records::Input;
@@ -61,12 +63,16 @@ pub fn setup(input: &mut Input<'_>) -> Setup {
 }
 
 impl Setup {
-    /// The longest hold the line may place (`WaitUntil` bound).
-    pub fn horizon(&self) -> u64 {
+    /// The longest hold the line may place (`WaitUntil` bound), with
+    /// copies expected for `copy_window` ms (`Line::copy_window`: the
+    /// declared window, or the one the line learned from frames it could
+    /// not place).
+    pub fn horizon(&self, copy_window: u32) -> u64 {
         let c = &self.line;
+        let dup = c.duplicate_window_ms.max(copy_window);
         let sum = u64::from(c.timeout_ms)
             + u64::from(c.late_window_ms)
-            + u64::from(c.duplicate_window_ms)
+            + u64::from(dup)
             + u64::from(c.turnaround_ms)
             + 2;
         sum.max(u64::from(LONGEST_RESTART_MS))
@@ -105,6 +111,9 @@ pub struct Delivery {
     /// Whether it kept the contract, judged when it first reached the
     /// engine (`Link::arrives`).
     pub ok: Option<bool>,
+    /// It was the first arrival of its reply (whole or broken, the
+    /// original or a copy).
+    pub first: bool,
 }
 
 impl Delivery {
@@ -114,6 +123,7 @@ impl Delivery {
             bytes,
             kind,
             ok: None,
+            first: false,
         }
     }
 
@@ -138,6 +148,9 @@ pub struct Made {
     /// Not the controller's answer to that command (an earlier reply sent
     /// again, ...): outside the contract whenever it comes.
     pub lie: bool,
+    /// Its first arrival was heard as a whole frame of that delivery alone
+    /// (so the line knows of it: its copies are expected).
+    pub first_heard: bool,
 }
 
 /// A command frame the controller received.
@@ -245,6 +258,7 @@ impl Link {
             arrived: None,
             first_ok: false,
             lie,
+            first_heard: false,
         });
         let made = self.made.len() - 1;
         self.schedule(Delivery::new(at, bytes, Kind::Reply { made, copy: false }));
@@ -266,6 +280,7 @@ impl Link {
                     arrived: None,
                     first_ok: false,
                     lie,
+                    first_heard: false,
                 });
             }
             2 => {
@@ -349,6 +364,7 @@ impl Link {
                                     + u64::from(c.late_window_ms);
                         m.arrived = Some(clock);
                         m.first_ok = ok;
+                        d.first = true;
                         ok
                     }
                     // A line with no duplicate window never repeats a
@@ -367,6 +383,28 @@ impl Link {
         };
         d.ok = Some(ok);
         ok
+    }
+
+    /// A whole frame made of delivery `d` alone was heard.
+    pub fn heard_whole(&mut self, d: &Delivery) {
+        if let Kind::Reply { made, .. } = d.kind {
+            if d.first {
+                self.made[made].first_heard = true;
+            }
+        }
+    }
+
+    /// The command whose reply delivery `d` is, if the line must be able
+    /// to place it when it comes whole: a reply within the contract (not a
+    /// lie), the original or a copy of a first arrival the line heard
+    /// whole. An original in time is owed (or awaited), a copy in the
+    /// window is expected.
+    pub fn placeable(&self, d: &Delivery) -> Option<usize> {
+        let Kind::Reply { made, .. } = d.kind else {
+            return None;
+        };
+        let m = &self.made[made];
+        (d.ok() && (d.first || m.first_heard)).then_some(m.cmd)
     }
 
     /// The command a delivery answers, if it is the controller's.
@@ -456,14 +494,32 @@ pub fn corrupt_body(frame: &mut [u8], pick: u32) -> bool {
     false
 }
 
-/// A plain decoder beside an engine's: fed the same bytes, reset when the
-/// engine resets its own, it tells which delivery made each frame.
-pub struct Shadow {
-    dec: FrameDecoder<4096>,
-    /// Bytes fed since the last reset, and where each delivery's begin.
+/// The engine's decoders mirrored: fed the same bytes as the engine's
+/// `received`, they tell which delivery made each frame it heard.
+///
+/// An engine decodes with its receiver's `FrameDecoder<N>` (policy
+/// `Reject`) until it takes a reply it keeps (a client's answer, a
+/// read-back window to deliver); from then until its next fresh send
+/// (`Receiver::clear`) the bytes go to the line's own decoder of frames
+/// heard in passing (`line/overheard.rs`: a `FrameSkipper` per frame, no
+/// buffer, its state kept across those phases), which [`Overheard`]
+/// mirrors. The harness says when a reply is kept ([`Shadow::hold`]) and
+/// when the engine sends afresh ([`Shadow::release`]); every call is then
+/// checked to consume the same bytes and end the same way.
+pub struct Shadow<const N: usize> {
+    dec: FrameDecoder<N>,
+    /// Bytes fed to `dec` since its last reset, where each delivery's
+    /// begin (index into `deliveries`), and where the last frame ended.
     stream: Vec<u8>,
-    fed: Vec<(usize, Delivery)>,
+    fed: Vec<(usize, usize)>,
     cursor: usize,
+    over: Overheard,
+    /// Bytes fed to the line's decoder, ever, and where each delivery's
+    /// begin.
+    held_stream: Vec<u8>,
+    held_fed: Vec<(usize, usize)>,
+    deliveries: Vec<Delivery>,
+    held: bool,
 }
 
 /// Who made a frame the engine heard.
@@ -471,97 +527,312 @@ pub struct Shadow {
 pub enum Source {
     /// A delivery of the controller's (or noise).
     Delivery(Delivery),
-    /// Bytes of raw noise are in it: anything.
+    /// Bytes of raw noise are in it, or of several deliveries: anything.
     Forged,
 }
 
-impl Default for Shadow {
+/// A whole frame the engine heard.
+#[derive(Debug, Clone)]
+pub struct Seen {
+    pub bytes: Vec<u8>,
+    pub envelope: (Header, Station, u16),
+    pub source: Source,
+    /// Heard by the line's own decoder while the engine kept a reply (its
+    /// bytes passed the frame's SC check, not necessarily
+    /// `Frame::new_checked`).
+    pub held: bool,
+}
+
+impl Seen {
+    /// The frame, checked (an engine's decoder gives only such frames).
+    pub fn frame(&self) -> Frame<'_> {
+        Frame::new_checked(&self.bytes, BypassPolicy::Reject).expect("a checked frame")
+    }
+}
+
+impl<const N: usize> Default for Shadow<N> {
     fn default() -> Self {
         Shadow {
             dec: FrameDecoder::with_policy(BypassPolicy::Reject),
             stream: Vec::new(),
             fed: Vec::new(),
             cursor: 0,
+            over: Overheard::default(),
+            held_stream: Vec::new(),
+            held_fed: Vec::new(),
+            deliveries: Vec::new(),
+            held: false,
         }
     }
 }
 
-impl Shadow {
-    pub fn reset(&mut self) {
+impl<const N: usize> Shadow<N> {
+    /// The engine sent afresh: its receiver drops what it half decoded
+    /// and the reply it kept. Returns the deliveries whose bytes its
+    /// decoder still held (unless it kept a reply): dropped unread.
+    pub fn release(&mut self) -> Vec<Delivery> {
+        let mut dropped = Vec::new();
+        if !self.held && self.dec.pending() > 0 {
+            let first = self
+                .fed
+                .iter()
+                .rposition(|(s, _)| *s <= self.cursor)
+                .unwrap_or(0);
+            for &(_, d) in &self.fed[first..] {
+                dropped.push(self.deliveries[d].clone());
+            }
+        }
         self.dec.reset();
         self.stream.clear();
         self.fed.clear();
         self.cursor = 0;
+        self.held = false;
+        dropped
+    }
+
+    /// The engine keeps the reply it just took: the next bytes go to the
+    /// line's own decoder.
+    pub fn hold(&mut self) {
+        self.held = true;
+    }
+
+    pub fn holding(&self) -> bool {
+        self.held
     }
 
     /// A delivery begins.
     pub fn begin(&mut self, d: &Delivery) {
-        self.fed.push((self.stream.len(), d.clone()));
+        self.deliveries.push(d.clone());
     }
 
-    /// The engine consumed `used` bytes of `rest` and heard `heard`: the
-    /// shadow decodes the same bytes. Returns the frame heard (its bytes
-    /// and source), if any.
-    pub fn decoded(
-        &mut self,
-        rest: &[u8],
-        used: usize,
-        heard: &Heard,
-    ) -> Option<(Vec<u8>, Source)> {
-        if used == 0 && *heard == Heard::NeedMore {
-            // The engine took nothing (it holds a reply, or had nothing to
-            // decode again): bytes waiting to be decoded again come first
-            // in the next call either way.
-            return None;
+    fn current(&self) -> usize {
+        self.deliveries
+            .len()
+            .checked_sub(1)
+            .expect("a delivery begun")
+    }
+
+    /// The engine's `received` was given `rest` and answered `r`: the
+    /// shadow decodes the same bytes and checks that it ends alike.
+    /// Returns the whole frame heard, if any.
+    pub fn decoded(&mut self, rest: &[u8], r: &Received<Heard>) -> Option<Seen> {
+        if self.held {
+            self.decoded_held(rest, r)
+        } else {
+            self.decoded_engine(rest, r)
         }
+    }
+
+    fn decoded_engine(&mut self, rest: &[u8], r: &Received<Heard>) -> Option<Seen> {
+        let cur = self.current();
         let s = self.dec.decode(rest);
-        assert_eq!(s.consumed, used, "the engine decodes otherwise");
-        self.stream.extend_from_slice(&rest[..used]);
-        let frame = match (heard, s.event) {
-            (Heard::NeedMore, Event::NeedMore) => return None,
-            (Heard::Broken(a), Event::Error(b)) => {
-                assert_eq!(*a, b, "the engine decodes otherwise");
+        assert_eq!(s.consumed, r.consumed, "the engine decodes otherwise");
+        if s.consumed > 0 && self.fed.last().is_none_or(|&(_, d)| d != cur) {
+            self.fed.push((self.stream.len(), cur));
+        }
+        self.stream.extend_from_slice(&rest[..s.consumed]);
+        let bytes = match (r.status, s.status) {
+            (Status::Partial, Status::Partial) => return None,
+            (Status::Complete(Heard::Broken(a)), Status::Complete(Event::Error(b))) => {
+                assert_eq!(a, b, "the engine decodes otherwise");
                 return None;
             }
-            (Heard::Broken(_) | Heard::NeedMore, e) => {
-                panic!("the engine heard {heard:?}, the decoder {e:?}")
+            (Status::Complete(h), Status::Complete(Event::Frame(f)))
+                if !matches!(h, Heard::Broken(_)) =>
+            {
+                f.as_bytes().to_vec()
             }
-            (_, Event::Frame(f)) => f.as_bytes().to_vec(),
-            (_, e) => panic!("the engine heard {heard:?}, the decoder {e:?}"),
+            (heard, e) => panic!("the engine heard {heard:?}, the decoder {e:?}"),
         };
         // Frames come out in stream order (bytes of a failed text frame
         // are decoded again, so a frame may come from an earlier delivery).
         let at = self.stream[self.cursor..]
-            .windows(frame.len())
-            .position(|w| w == frame.as_slice())
+            .windows(bytes.len())
+            .position(|w| w == bytes.as_slice())
             .expect("a frame that is not in the bytes fed")
             + self.cursor;
-        let end = at + frame.len();
+        let end = at + bytes.len();
         self.cursor = end;
-        let first = self.fed.iter().rposition(|(s, _)| *s <= at).expect("fed");
-        let last = self.fed.iter().rposition(|(s, _)| *s < end).expect("fed");
-        let span = &self.fed[first..=last];
-        let src = if span.iter().any(|(_, d)| d.kind == Kind::Forged) || first != last {
+        let source = self.source(&self.fed, at, end);
+        let envelope = read_envelope(&bytes).expect("a frame's envelope");
+        Some(Seen {
+            bytes,
+            envelope,
+            source,
+            held: false,
+        })
+    }
+
+    fn decoded_held(&mut self, rest: &[u8], r: &Received<Heard>) -> Option<Seen> {
+        let cur = self.current();
+        let base = self.held_stream.len();
+        let (used, passed) = self.over.decode(rest, base);
+        assert_eq!(used, r.consumed, "the line's decoder decodes otherwise");
+        if used > 0 && self.held_fed.last().is_none_or(|&(_, d)| d != cur) {
+            self.held_fed.push((base, cur));
+        }
+        self.held_stream.extend_from_slice(&rest[..used]);
+        match (r.status, passed) {
+            (Status::Partial, None) => None,
+            (Status::Complete(Heard::Broken(a)), Some(Passed::Broken(b))) => {
+                assert_eq!(a, b, "the line's decoder decodes otherwise");
+                None
+            }
+            (Status::Complete(h), Some(Passed::Whole { start, envelope }))
+                if !matches!(h, Heard::Broken(_)) =>
+            {
+                let end = base + used;
+                let bytes = self.held_stream[start..end].to_vec();
+                let source = self.source(&self.held_fed, start, end);
+                Some(Seen {
+                    bytes,
+                    envelope,
+                    source,
+                    held: true,
+                })
+            }
+            (heard, p) => panic!("the line heard {heard:?}, its decoder {p:?}"),
+        }
+    }
+
+    /// Who made the bytes `at..end` of a stream fed as `fed` says.
+    fn source(&self, fed: &[(usize, usize)], at: usize, end: usize) -> Source {
+        let first = fed.iter().rposition(|(s, _)| *s <= at).expect("fed");
+        let last = fed.iter().rposition(|(s, _)| *s < end).expect("fed");
+        let d = &self.deliveries[fed[first].1];
+        if first != last || d.kind == Kind::Forged {
             Source::Forged
         } else {
-            Source::Delivery(span[0].1.clone())
-        };
-        Some((frame, src))
+            Source::Delivery(d.clone())
+        }
     }
 }
 
-/// Checks a 200H fence an engine transmitted.
-pub fn check_fence(setup: &Setup, bytes: &[u8]) {
+/// What the line's decoder of frames heard in passing made of a frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Passed {
+    /// Its SC checked; it began at this index of the stream.
+    Whole {
+        start: usize,
+        envelope: (Header, Station, u16),
+    },
+    Broken(Error),
+}
+
+/// The line's decoder of frames heard in passing (`line/overheard.rs`),
+/// rebuilt from its rules: a header byte starts a frame; in its envelope
+/// a header byte, CR or LF cuts it; once the envelope reads, a
+/// `FrameSkipper` takes the rest, and a header byte it breaks at starts
+/// the next frame.
+#[derive(Debug, Clone, Default)]
+struct Overheard {
+    /// Bytes of the frame so far, and where it began.
+    frame: Vec<u8>,
+    start: usize,
+    envelope: Option<(Header, Station, u16)>,
+    skipper: Option<FrameSkipper>,
+}
+
+impl Overheard {
+    fn restart(&mut self) {
+        self.frame.clear();
+        self.envelope = None;
+        self.skipper = None;
+    }
+
+    /// Decodes `input` (from index `base` of the stream) up to the first
+    /// frame that ends; returns the bytes used.
+    fn decode(&mut self, input: &[u8], base: usize) -> (usize, Option<Passed>) {
+        for (i, &b) in input.iter().enumerate() {
+            let at = base + i;
+            let header = Header::from_byte(b);
+            if self.frame.is_empty() {
+                if header.is_some() {
+                    self.frame.push(b);
+                    self.start = at;
+                }
+                continue;
+            }
+            let broken = |o: &mut Overheard, e: Error, again: bool| {
+                o.restart();
+                if again {
+                    o.frame.push(b);
+                    o.start = at;
+                }
+                (i + 1, Some(Passed::Broken(e)))
+            };
+            if let Some(mut skipper) = self.skipper {
+                let status = skipper.push(b);
+                self.skipper = Some(skipper);
+                let cut = Error::Truncated {
+                    len: self.frame.len(),
+                };
+                match status {
+                    Status::Partial => self.frame.push(b),
+                    Status::Complete(Skipped::End { checksum_ok: true }) => {
+                        let envelope = self.envelope.expect("an envelope read");
+                        let start = self.start;
+                        self.restart();
+                        return (i + 1, Some(Passed::Whole { start, envelope }));
+                    }
+                    Status::Complete(Skipped::End { checksum_ok: false }) => {
+                        return broken(self, skipper.checksum_error(), false);
+                    }
+                    Status::Complete(Skipped::Broken) => {
+                        return broken(self, cut, header.is_some());
+                    }
+                }
+                continue;
+            }
+            if header.is_some() || b == b'\r' || b == b'\n' {
+                let cut = Error::Truncated {
+                    len: self.frame.len(),
+                };
+                return broken(self, cut, header.is_some());
+            }
+            self.frame.push(b);
+            if self.frame.len() == ENVELOPE_LEN {
+                self.envelope = read_envelope(&self.frame);
+                match self.envelope {
+                    Some((h, _, _)) => {
+                        let env: [u8; ENVELOPE_LEN] =
+                            self.frame[..].try_into().expect("an envelope");
+                        self.skipper = Some(FrameSkipper::new(h, &env, BypassPolicy::Reject));
+                    }
+                    None => {
+                        let e = Error::InvalidHeader {
+                            byte: self.frame[0],
+                        };
+                        return broken(self, e, false);
+                    }
+                }
+            }
+        }
+        (input.len(), None)
+    }
+}
+
+/// The text of fence `seq` of a line whose nonce is the seed's: six hex
+/// digits of it, then the sequence number (four). The engines of these
+/// targets never stir the nonce (`Line::stir`: the bridge does), so the
+/// seed's digits hold for every fence they send.
+pub fn fence_text(setup: &Setup, seq: u32) -> String {
+    format!("{:06X}{:04X}", setup.seed & 0xFF_FFFF, seq & 0xFFFF)
+}
+
+/// Checks fence number `seq` (the line's `stats().fences` once it is
+/// due) that an engine transmitted: a 200H command for the station whose
+/// ten characters are the seed's nonce and `seq` ([`fence_text`]).
+pub fn check_fence(setup: &Setup, bytes: &[u8], seq: u32) {
     let f = Frame::new_checked(bytes, BypassPolicy::Accept).expect("an invalid fence");
     assert_eq!(
         (f.header(), f.station(), f.code()),
         (Header::Command, setup.line.station, 0x200)
     );
-    assert_eq!(f.body().len(), 10);
-    let nonce = format!("{:06X}", setup.seed & 0xFF_FFFF);
-    assert!(
-        f.body().starts_with(nonce.as_bytes()),
-        "a fence without the seed's text: {:?}",
+    assert_eq!(
+        f.body(),
+        fence_text(setup, seq).as_bytes(),
+        "fence {seq} has another text: {:?}",
         String::from_utf8_lossy(bytes)
     );
 }

@@ -12,7 +12,7 @@
 //!
 //! Run through `./tools/demo.sh`. Options: `--records N` (1..=20000),
 //! `--baud B`, `--processing-ms MS` (the controller's time per command,
-//! default 100), `--board lm3s6965|mps2-an386`, `--faults SEED` (controller
+//! default 100), `--board lm3s6965|mps2-an386|b-l475e-iot01a`, `--faults SEED` (controller
 //! faults: flipped bits both ways, dropped and `&` replies, records stored
 //! altered; the host sends the command again after an `&`, up to
 //! [`MAX_SENDS`] times), `--elf PATH`,
@@ -83,10 +83,8 @@ fn parse_args() -> Result<Options, String> {
             }
             "--board" => {
                 let v = value()?;
-                o.board = Board::ALL
-                    .into_iter()
-                    .find(|b| b.bin() == v || b.machine() == v)
-                    .ok_or(format!("--board takes lm3s6965 or mps2-an386, not {v:?}"))?;
+                o.board = Board::named(&v)
+                    .ok_or(format!("--board takes {}, not {v:?}", Board::names()))?;
             }
             "--faults" => {
                 o.faults = Some(

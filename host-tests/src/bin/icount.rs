@@ -154,7 +154,7 @@ fn build(board: &Board) -> io::Result<PathBuf> {
     let status = Command::new(&cargo)
         .current_dir(workspace_root())
         .args(["rustc", "--quiet", "-p", "firmware-example", "--release"])
-        .args(["--no-default-features", "--features", "rt"])
+        .args(["--no-default-features", "--features", "icount-bench"])
         .args(["--bin", "icount_bench", "--target", board.target])
         .arg("--target-dir")
         .arg(&dir)

@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 /// The ready lines of the serial build with its Modbus RTU port.
 pub const SERIAL: [&str; 2] = ["protocol-b", "modbus-rtu"];
 /// The ready lines of the Ethernet build.
-pub const ETHERNET: [&str; 2] = ["protocol-b-tcp", "modbus-tcp"];
+pub const ETHERNET: [&str; 3] = ["protocol-b-tcp", "modbus-tcp", "http"];
 
 /// The gateway; SIGTERM (then SIGKILL) when dropped.
 pub struct Gateway {
@@ -24,6 +24,8 @@ pub struct Gateway {
     pub addr: String,
     /// Its Modbus side (the second ready line, if one was due), or empty.
     pub modbus: String,
+    /// Its web page (the third ready line, if one was due), or empty.
+    pub http: String,
     stderr: Receiver<String>,
     log: Vec<String>,
 }
@@ -69,6 +71,7 @@ impl Gateway {
             child,
             addr: String::new(),
             modbus: String::new(),
+            http: String::new(),
             stderr,
             log: Vec::new(),
         };
@@ -92,6 +95,7 @@ impl Gateway {
         let mut addrs = addrs.into_iter();
         gw.addr = addrs.next().unwrap_or_default();
         gw.modbus = addrs.next().unwrap_or_default();
+        gw.http = addrs.next().unwrap_or_default();
         gw
     }
 

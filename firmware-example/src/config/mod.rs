@@ -1,15 +1,22 @@
-//! The bridge's run-time configuration and the command policy.
+//! The bridge's run-time configuration and the command policy, and the
+//! configuration page that holds it.
 //!
-//! A board reads a [`Config`] at start from a 64-byte configuration block
-//! in flash ([`Config::from_block`]); a blank or invalid block gives
-//! [`Config::DEFAULT`] and the status query says which ([`Source`]).
+//! A board reads a [`Config`] at start from the bridge's block at the
+//! start of the configuration page ([`Config::from_block`]); a blank or
+//! invalid block gives [`Config::DEFAULT`] and the status query says which
+//! ([`Source`]). The page ([`page`]) holds independent blocks, each with
+//! its own magic, version and CRC; it is kept in two flash slots by the
+//! [`store`], so that a power cut leaves the old or the new page. Every
+//! setting of the page is declared once, in [`settings`]; [`access`] holds
+//! the web block and the password that guards every write, [`editor`] the
+//! writes themselves and [`wire`] the bridge's messages that carry them.
 //!
-//! # Configuration block (64 bytes, multi-byte numbers little-endian)
+//! # Bridge block (128 bytes in version 3, multi-byte numbers little-endian)
 //!
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 4 | magic `IAIB` |
-//! | 4 | 1 | layout version, 2 (version 1 blocks are still read: their Modbus fields take the defaults) |
+//! | 4 | 1 | layout version, 3 (versions 1 and 2, 64 bytes, are still read: their missing fields take the defaults) |
 //! | 5 | 1 | upstream flow control: 0 none, 1 XON/XOFF, 2 RTS/CTS |
 //! | 6 | 1 | controller station (I/O parameter No. 91 of the controller) |
 //! | 7 | 1 | the bridge's own station (must differ) |
@@ -17,14 +24,17 @@
 //! | 12 | 4 | downstream baud rate |
 //! | 16 | 1 | policy: 0 forward all, 1 read-only preset, 2 allow-list |
 //! | 17 | 1 | flags: bit 0 = honour the quit sequence (QEMU test runs only) |
-//! | 18 | 1 | Modbus unit ID, 1..=247 (version 2; 0 in version 1) |
+//! | 18 | 1 | Modbus unit ID, [`UNITS`] (version 2; 0 in version 1) |
 //! | 19 | 1 | Modbus: bits 0-1 parity (0 none, 1 even, 2 odd); bit 2 = the upstream port speaks Modbus RTU instead of protocol B (two-UART boards) |
 //! | 20 | 32 | allow-list: bit `id - 200H` (byte `(id - 200H) / 8`, bit `id % 8`) for IDs 200H..2FFH |
 //! | 52 | 4 | Modbus baud rate (version 2) |
-//! | 56 | 2 | Modbus: polling period, ms, 10..=60,000 (version 2) |
-//! | 58 | 1 | Modbus: axes polled and mapped, 1..=8 (version 2) |
+//! | 56 | 2 | Modbus: polling period, ms, [`POLL_PERIODS_MS`] (version 2) |
+//! | 58 | 1 | Modbus: axes polled and mapped, [`AXES`] (version 2) |
 //! | 59 | 1 | 0 |
-//! | 60 | 4 | CRC-32 (IEEE 802.3, as zlib's `crc32`) of bytes 0..60 |
+//! | 60 | 4 | duplicate window, ms, [`DUPLICATE_WINDOWS_MS`] (version 3; versions 1 and 2 end here with their CRC) |
+//! | 64 | 4 | XOFF hold, ms, [`XOFF_HOLDS_MS`] (version 3) |
+//! | 68 | 56 | 0 |
+//! | 124 | 4 | CRC-32 (IEEE 802.3, as zlib's `crc32`) of bytes 0..124 |
 //!
 //! The command policy applies to both upstreams: a Modbus write whose
 //! protocol-B command the policy refuses is answered with exception 01.
@@ -33,17 +43,28 @@
 //! 115,200; TTA p. 7). A board that cannot set a rate (QEMU ignores them)
 //! still reports the configured one.
 
+pub mod access;
+pub mod editor;
+pub mod page;
+pub mod settings;
+pub mod store;
+pub mod wire;
+
+use core::ops::RangeInclusive;
+
 use iai_protocol_b::catalogue;
 use iai_protocol_b::frame::Station;
 
 use crate::serial::FlowControl;
 
-/// Size of the configuration block.
-pub const BLOCK_LEN: usize = 64;
+/// Size of the bridge's block (version 3).
+pub const BLOCK_LEN: usize = 128;
+/// Size of a version 1 or 2 block.
+pub const BLOCK_LEN_V2: usize = 64;
 /// First bytes of a configuration block.
 pub const MAGIC: [u8; 4] = *b"IAIB";
-/// Layout version this firmware writes (it reads 1 and 2).
-pub const VERSION: u8 = 2;
+/// Layout version this firmware writes (it reads 1, 2 and 3).
+pub const VERSION: u8 = 3;
 /// The longest an XOFF holds the bridge's transmitter unless configured
 /// otherwise, ms: longer than any host's pause to drain its buffer, short
 /// enough that a bridge stopped by noise answers again within the host's
@@ -51,6 +72,17 @@ pub const VERSION: u8 = 2;
 pub const DEFAULT_XOFF_HOLD_MS: u32 = 5_000;
 /// Baud rates the TTA offers (TTA p. 7).
 pub const BAUD_RATES: [u32; 5] = [9_600, 19_200, 38_400, 57_600, 115_200];
+/// Modbus unit IDs a gateway may take (0 is the broadcast, 248..=255
+/// are reserved by the Modbus specification).
+pub const UNITS: RangeInclusive<u8> = 1..=247;
+/// The Modbus gateway's polling periods, ms.
+pub const POLL_PERIODS_MS: RangeInclusive<u16> = 10..=60_000;
+/// Axes the Modbus gateway polls and maps.
+pub const AXES: RangeInclusive<u8> = 1..=8;
+/// Duplicate windows a line may declare, ms (0: a direct line).
+pub const DUPLICATE_WINDOWS_MS: RangeInclusive<u32> = 0..=60_000;
+/// How long an XOFF from the host may hold the bridge's transmitter, ms.
+pub const XOFF_HOLDS_MS: RangeInclusive<u32> = 100..=60_000;
 
 /// Parity of the Modbus line (8 data bits; 1 stop bit with parity, 2
 /// without, as the Modbus serial-line specification asks).
@@ -63,6 +95,27 @@ pub enum Parity {
     Even,
     /// Odd parity.
     Odd,
+}
+
+impl Parity {
+    /// Code in the configuration block (bits 0-1 of byte 19).
+    pub const fn code(self) -> u8 {
+        match self {
+            Parity::None => 0,
+            Parity::Even => 1,
+            Parity::Odd => 2,
+        }
+    }
+
+    /// The parity with this code.
+    pub const fn from_code(code: u8) -> Option<Parity> {
+        match code {
+            0 => Some(Parity::None),
+            1 => Some(Parity::Even),
+            2 => Some(Parity::Odd),
+            _ => None,
+        }
+    }
 }
 
 /// What the upstream port speaks on a board with one upstream port.
@@ -192,6 +245,16 @@ impl AllowList {
         self.0
     }
 
+    /// The list with this 32-byte map.
+    pub const fn from_bytes(map: [u8; 32]) -> Self {
+        AllowList(map)
+    }
+
+    /// The IDs in the list, lowest first.
+    pub fn ids(&self) -> impl Iterator<Item = u16> + '_ {
+        (catalogue::LOWEST_ID..catalogue::LOWEST_ID + 0x100).filter(|&id| self.contains(id))
+    }
+
     fn slot(id: u16) -> Option<(usize, u8)> {
         let i = id
             .checked_sub(catalogue::LOWEST_ID)
@@ -277,7 +340,8 @@ pub struct Config {
 impl Config {
     /// Station 99 (the spec's examples), bridge on station BB, 115,200
     /// baud both sides, XON/XOFF upstream, forward all, no quit sequence;
-    /// Modbus as [`ModbusConfig::DEFAULT`], protocol B upstream.
+    /// Modbus as [`ModbusConfig::DEFAULT`], protocol B upstream, no
+    /// duplicate window, an XOFF held at most 5 s.
     pub const DEFAULT: Config = Config {
         upstream_baud: 115_200,
         downstream_baud: 115_200,
@@ -289,7 +353,7 @@ impl Config {
         modbus: ModbusConfig::DEFAULT,
         upstream: UpstreamProtocol::ProtocolB,
         duplicate_window_ms: 0,
-        xoff_hold_ms: DEFAULT_XOFF_HOLD_MS,
+        xoff_hold_ms: 5_000,
     };
 
     /// Reads a configuration block: the configuration and where it came
@@ -304,21 +368,23 @@ impl Config {
         }
     }
 
-    /// Reads a configuration block, strictly.
+    /// Reads a configuration block, strictly: version 3, or 1 and 2 (64
+    /// bytes) with the defaults for what they lack.
     pub fn parse(block: &[u8]) -> Result<Config, BlockError> {
-        let b: &[u8; BLOCK_LEN] = block
-            .get(..BLOCK_LEN)
-            .and_then(|b| b.try_into().ok())
-            .ok_or(BlockError::TooShort)?;
-        let (body, crc) = b.split_at(60);
+        let version = block.get(4).copied().ok_or(BlockError::TooShort)?;
+        let len = match version {
+            1 | 2 => BLOCK_LEN_V2,
+            _ => BLOCK_LEN,
+        };
+        let b = block.get(..len).ok_or(BlockError::TooShort)?;
+        let (body, crc) = b.split_at(len - 4);
         if crc32(body).to_le_bytes() != crc {
             return Err(BlockError::Crc);
         }
         if body.get(..4) != Some(&MAGIC[..]) {
             return Err(BlockError::Field(0));
         }
-        let version = body.get(4).copied().unwrap_or(0);
-        if version != 1 && version != VERSION {
+        if !(1..=VERSION).contains(&version) {
             return Err(BlockError::Version);
         }
         let byte = |i: usize| body.get(i).copied().unwrap_or(0);
@@ -357,6 +423,22 @@ impl Config {
         } else {
             Self::parse_modbus(&byte, &word)?
         };
+        let (duplicate_window_ms, xoff_hold_ms) = if version < 3 {
+            (
+                Config::DEFAULT.duplicate_window_ms,
+                Config::DEFAULT.xoff_hold_ms,
+            )
+        } else {
+            let window = word(60);
+            if !DUPLICATE_WINDOWS_MS.contains(&window) {
+                return Err(BlockError::Field(60));
+            }
+            let hold = word(64);
+            if !XOFF_HOLDS_MS.contains(&hold) {
+                return Err(BlockError::Field(64));
+            }
+            (window, hold)
+        };
         Ok(Config {
             upstream_baud,
             downstream_baud,
@@ -367,28 +449,22 @@ impl Config {
             quit_sequence: flags & 1 != 0,
             modbus,
             upstream,
-            // Not in a version 2 block: its defaults.
-            duplicate_window_ms: Config::DEFAULT.duplicate_window_ms,
-            xoff_hold_ms: Config::DEFAULT.xoff_hold_ms,
+            duplicate_window_ms,
+            xoff_hold_ms,
         })
     }
 
-    /// The Modbus fields of a version 2 block.
+    /// The Modbus fields of a version 2 or 3 block.
     fn parse_modbus(
         byte: &dyn Fn(usize) -> u8,
         word: &dyn Fn(usize) -> u32,
     ) -> Result<(ModbusConfig, UpstreamProtocol), BlockError> {
         let unit = byte(18);
-        if !(1..=247).contains(&unit) {
+        if !UNITS.contains(&unit) {
             return Err(BlockError::Field(18));
         }
         let bits = byte(19);
-        let parity = match bits & 0b11 {
-            0 => Parity::None,
-            1 => Parity::Even,
-            2 => Parity::Odd,
-            _ => return Err(BlockError::Field(19)),
-        };
+        let parity = Parity::from_code(bits & 0b11).ok_or(BlockError::Field(19))?;
         if bits & !0b111 != 0 {
             return Err(BlockError::Field(19));
         }
@@ -402,11 +478,11 @@ impl Config {
             return Err(BlockError::Field(52));
         }
         let poll_period_ms = u16::from_le_bytes([byte(56), byte(57)]);
-        if !(10..=60_000).contains(&poll_period_ms) {
+        if !POLL_PERIODS_MS.contains(&poll_period_ms) {
             return Err(BlockError::Field(56));
         }
         let axes = byte(58);
-        if !(1..=8).contains(&axes) {
+        if !AXES.contains(&axes) {
             return Err(BlockError::Field(58));
         }
         let modbus = ModbusConfig {
@@ -419,7 +495,7 @@ impl Config {
         Ok((modbus, upstream))
     }
 
-    /// The configuration block holding this configuration.
+    /// The configuration block holding this configuration (version 3).
     pub fn to_block(&self) -> [u8; BLOCK_LEN] {
         fn put(b: &mut [u8], at: usize, bytes: &[u8]) {
             if let Some(dst) = b.get_mut(at..at + bytes.len()) {
@@ -442,21 +518,22 @@ impl Config {
             &[self.policy.code(), u8::from(self.quit_sequence)],
         );
         let m = &self.modbus;
-        let parity = match m.parity {
-            Parity::None => 0,
-            Parity::Even => 1,
-            Parity::Odd => 2,
-        };
         let speaks_modbus = self.upstream == UpstreamProtocol::ModbusRtu;
-        put(&mut b, 18, &[m.unit, parity | u8::from(speaks_modbus) << 2]);
+        put(
+            &mut b,
+            18,
+            &[m.unit, m.parity.code() | u8::from(speaks_modbus) << 2],
+        );
         if let Policy::Allow(list) = self.policy {
             put(&mut b, 20, &list.bytes());
         }
         put(&mut b, 52, &m.baud.to_le_bytes());
         put(&mut b, 56, &m.poll_period_ms.to_le_bytes());
         put(&mut b, 58, &[m.axes]);
-        let crc = crc32(b.get(..60).unwrap_or(&[]));
-        put(&mut b, 60, &crc.to_le_bytes());
+        put(&mut b, 60, &self.duplicate_window_ms.to_le_bytes());
+        put(&mut b, 64, &self.xoff_hold_ms.to_le_bytes());
+        let crc = crc32(b.get(..BLOCK_LEN - 4).unwrap_or(&[]));
+        put(&mut b, BLOCK_LEN - 4, &crc.to_le_bytes());
         b
     }
 }
@@ -468,17 +545,63 @@ impl Default for Config {
 }
 
 /// CRC-32 (IEEE 802.3, reflected, as zlib's `crc32`), bit by bit: it runs
-/// once at start, so no table is spent on it.
+/// at start and when the page is written, so no table is spent on it.
 pub fn crc32(bytes: &[u8]) -> u32 {
-    let mut crc = !0u32;
-    for &b in bytes {
-        crc ^= u32::from(b);
-        for _ in 0..8 {
-            let mask = (crc & 1).wrapping_neg();
-            crc = (crc >> 1) ^ (0xEDB8_8320 & mask);
+    Crc32::new().update(bytes).finish()
+}
+
+/// [`crc32`] over bytes that come in pieces, or CRC-32C
+/// ([`Crc32::castagnoli`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Crc32 {
+    sum: u32,
+    poly: u32,
+}
+
+impl Crc32 {
+    /// CRC-32 (IEEE 802.3), nothing summed yet.
+    pub const fn new() -> Self {
+        Crc32 {
+            sum: !0,
+            poly: 0xEDB8_8320,
         }
     }
-    !crc
+
+    /// CRC-32C (Castagnoli, as iSCSI's), nothing summed yet: the check
+    /// over a run of blocks that each end in their own CRC-32. A CRC is
+    /// linear: a block followed by its own CRC-32 adds the same to any
+    /// CRC-32 run over it, whatever the block holds, so a CRC-32 over the
+    /// page could not tell one valid block from another; a CRC of another
+    /// polynomial can.
+    pub const fn castagnoli() -> Self {
+        Crc32 {
+            sum: !0,
+            poly: 0x82F6_3B78,
+        }
+    }
+
+    /// Sums `bytes`.
+    pub fn update(mut self, bytes: &[u8]) -> Self {
+        for &b in bytes {
+            self.sum ^= u32::from(b);
+            for _ in 0..8 {
+                let mask = (self.sum & 1).wrapping_neg();
+                self.sum = (self.sum >> 1) ^ (self.poly & mask);
+            }
+        }
+        self
+    }
+
+    /// The CRC of everything summed.
+    pub const fn finish(self) -> u32 {
+        !self.sum
+    }
+}
+
+impl Default for Crc32 {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 #[cfg(test)]
@@ -486,8 +609,12 @@ mod tests {
     use super::*;
 
     #[test]
-    fn crc32_check_value() {
+    fn crc32_check_values() {
         assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+        assert_eq!(
+            Crc32::castagnoli().update(b"123456789").finish(),
+            0xE306_9283
+        );
     }
 
     #[test]
@@ -508,7 +635,8 @@ mod tests {
                 axes: 2,
             },
             upstream: UpstreamProtocol::ModbusRtu,
-            ..Config::DEFAULT
+            duplicate_window_ms: 8_000,
+            xoff_hold_ms: 1_000,
         };
         let block = cfg.to_block();
         assert_eq!(Config::from_block(&block), (cfg, Source::Block));
@@ -529,13 +657,22 @@ mod tests {
         let mut unit = cfg;
         unit.modbus.unit = 0;
         assert_eq!(Config::parse(&unit.to_block()), Err(BlockError::Field(18)));
+        let mut hold = cfg;
+        hold.xoff_hold_ms = 50;
+        assert_eq!(Config::parse(&hold.to_block()), Err(BlockError::Field(64)));
+        let mut window = cfg;
+        window.duplicate_window_ms = 60_001;
+        assert_eq!(
+            Config::parse(&window.to_block()),
+            Err(BlockError::Field(60))
+        );
     }
 
     #[test]
     fn a_version_1_block_reads_with_the_modbus_defaults() {
         // A block written by the firmware before the gateway: 9,600 baud
         // upstream, 38,400 downstream, RTS/CTS, read-only, stations 01/FE.
-        let mut v1 = [0u8; BLOCK_LEN];
+        let mut v1 = [0u8; BLOCK_LEN_V2];
         v1[..4].copy_from_slice(b"IAIB");
         v1[4..8].copy_from_slice(&[1, 2, 0x01, 0xFE]);
         v1[8..12].copy_from_slice(&9_600u32.to_le_bytes());
@@ -548,9 +685,31 @@ mod tests {
         assert_eq!(cfg.modbus, ModbusConfig::DEFAULT);
         assert_eq!(cfg.upstream, UpstreamProtocol::ProtocolB);
         assert_eq!((cfg.upstream_baud, cfg.policy), (9_600, Policy::ReadOnly));
-        // Written back, it is a version 2 block with the same settings.
-        assert_eq!(cfg.to_block()[4], 2);
+        // Written back, it is a version 3 block with the same settings.
+        assert_eq!(cfg.to_block()[4], 3);
         assert_eq!(Config::from_block(&cfg.to_block()), (cfg, Source::Block));
+    }
+
+    #[test]
+    fn a_version_2_block_reads_with_the_line_defaults() {
+        // A 64-byte block of the gateway's first layout: unit 17 at 19,200
+        // baud, odd parity, polled every 250 ms, 2 axes.
+        let mut v2 = [0u8; BLOCK_LEN_V2];
+        v2[..4].copy_from_slice(b"IAIB");
+        v2[4..8].copy_from_slice(&[2, 1, 0x99, 0xBB]);
+        v2[8..12].copy_from_slice(&115_200u32.to_le_bytes());
+        v2[12..16].copy_from_slice(&115_200u32.to_le_bytes());
+        v2[18..20].copy_from_slice(&[17, 2]);
+        v2[52..56].copy_from_slice(&19_200u32.to_le_bytes());
+        v2[56..58].copy_from_slice(&250u16.to_le_bytes());
+        v2[58] = 2;
+        let crc = crc32(&v2[..60]);
+        v2[60..].copy_from_slice(&crc.to_le_bytes());
+        let (cfg, source) = Config::from_block(&v2);
+        assert_eq!(source, Source::Block);
+        assert_eq!(cfg.modbus.unit, 17);
+        assert_eq!(cfg.modbus.parity, Parity::Odd);
+        assert_eq!((cfg.duplicate_window_ms, cfg.xoff_hold_ms), (0, 5_000));
     }
 
     #[test]
