@@ -164,6 +164,16 @@ struct Inner {
     replay_pos: usize,
     replay_len: usize,
     stats: DecoderStats,
+    /// The last frame length at which the text span is looked for: the
+    /// largest any message needs until the envelope is read, then the
+    /// one its message needs (see [`Inner::store`]).
+    probe_until: usize,
+    /// The length below which a plain byte (see [`plain`]) is stored
+    /// without a step: the buffer's capacity while a frame's body is read
+    /// with nothing else to watch (its text span found or known absent,
+    /// no bytes waiting to be decoded again), else 0. Set from the fields
+    /// above after every step.
+    plain_until: usize,
 }
 
 impl<const N: usize> core::fmt::Debug for FrameDecoder<N> {
@@ -214,6 +224,8 @@ impl<const N: usize> FrameDecoder<N> {
                     errors: 0,
                     discarded_bytes: 0,
                 },
+                probe_until: TEXT_PROBE_MAX,
+                plain_until: 0,
             },
         }
     }
@@ -267,7 +279,11 @@ impl<const N: usize> FrameDecoder<N> {
     /// Pushes one byte. If bytes of a failed text frame are waiting to be
     /// decoded again, `byte` joins them and they come first; call
     /// `decode(&[])` until [`Status::Partial`] to drain them.
+    #[inline]
     pub fn push(&mut self, byte: u8) -> Status<Event<'_>> {
+        if self.inner.store_plain(&mut self.buf, byte) {
+            return Status::Partial;
+        }
         let outcome = self.inner.push(&mut self.buf, byte);
         self.event(outcome)
     }
@@ -342,6 +358,51 @@ impl Inner {
         self.replay_pos = 0;
         self.replay_len = 0;
         self.state = State::Hunting;
+        self.plain_until = 0;
+    }
+
+    /// Stores `byte` if it is plain and the frame's body is being read
+    /// with nothing else to watch: the whole of a [`Inner::step`] for such
+    /// a byte, in a few instructions. `false` if the byte needs the step.
+    #[inline(always)]
+    fn store_plain(&mut self, buf: &mut [u8], byte: u8) -> bool {
+        if self.len < self.plain_until && plain(byte) {
+            if let Some(slot) = buf.get_mut(self.len) {
+                *slot = byte;
+                self.len += 1;
+                return true;
+            }
+        }
+        false
+    }
+
+    /// [`Inner::store_plain`] for the leading plain bytes of `input`, as
+    /// many as the buffer takes: a run of a body copied in one loop.
+    /// Returns how many it stored.
+    fn store_run(&mut self, buf: &mut [u8], input: &[u8]) -> usize {
+        let end = self.plain_until.min(buf.len());
+        let Some(room) = buf.get_mut(self.len..end) else {
+            return 0;
+        };
+        let mut n = 0;
+        for (slot, &b) in room.iter_mut().zip(input) {
+            if !plain(b) {
+                break;
+            }
+            *slot = b;
+            n += 1;
+        }
+        self.len += n;
+        n
+    }
+
+    /// Sets `plain_until` from the state (see its docs).
+    fn watch(&mut self, capacity: usize) {
+        let body = self.state == State::InFrame
+            && self.replay_pos >= self.replay_len
+            && self.failed.is_none()
+            && (self.text.is_some() || self.len >= self.probe_until);
+        self.plain_until = if body { capacity } else { 0 };
     }
 
     fn push(&mut self, buf: &mut [u8], byte: u8) -> Step {
@@ -364,7 +425,12 @@ impl Inner {
         let mut consumed = 0;
         let mut outcome = self.replay(buf);
         if matches!(outcome, Step::More) {
-            for &b in input {
+            while let Some(&b) = input.get(consumed) {
+                let run = self.store_run(buf, input.get(consumed..).unwrap_or(&[]));
+                if run > 0 {
+                    consumed += run;
+                    continue;
+                }
                 consumed += 1;
                 outcome = self.step(buf, b);
                 if !matches!(outcome, Step::More) {
@@ -389,6 +455,7 @@ impl Inner {
         }
         self.replay_pos = 0;
         self.replay_len = 0;
+        self.watch(buf.len());
         Step::More
     }
 
@@ -443,6 +510,7 @@ impl Inner {
             self.len = 1;
             self.state = State::InFrame;
             self.text = None;
+            self.probe_until = TEXT_PROBE_MAX;
         } else {
             // N == 0: nothing can ever be buffered.
             self.len = 0;
@@ -452,13 +520,22 @@ impl Inner {
     }
 
     /// Appends a byte of the frame in progress; `false` if the buffer is full.
+    ///
+    /// The text span is looked for at every length from the envelope's
+    /// to the one the frame's message needs to locate it
+    /// ([`TextField::known_by`](crate::catalogue::TextField::known_by));
+    /// after that the answer cannot change, and a message without a text
+    /// field is not looked for at all.
     fn store(&mut self, buf: &mut [u8], byte: u8) -> bool {
         match buf.get_mut(self.len) {
             Some(slot) => {
                 *slot = byte;
                 self.len += 1;
+                if self.len == ENVELOPE_LEN {
+                    self.probe_until = probe_until(buf.get(..ENVELOPE_LEN).unwrap_or(&[]));
+                }
                 // Finding the span again finds the same one: `||` here is an equivalent mutant.
-                if self.text.is_none() && (ENVELOPE_LEN..=TEXT_PROBE_MAX).contains(&self.len) {
+                if self.text.is_none() && (ENVELOPE_LEN..=self.probe_until).contains(&self.len) {
                     let head = buf.first().copied().and_then(Header::from_byte);
                     let prefix = buf.get(..self.len).unwrap_or(&[]);
                     self.text = head.and_then(|h| crate::catalogue::text_span(h, prefix));
@@ -469,7 +546,15 @@ impl Inner {
         }
     }
 
+    /// One byte through the state machine; then what the next plain
+    /// bytes may skip.
     fn step(&mut self, buf: &mut [u8], byte: u8) -> Step {
+        let outcome = self.step_byte(buf, byte);
+        self.watch(buf.len());
+        outcome
+    }
+
+    fn step_byte(&mut self, buf: &mut [u8], byte: u8) -> Step {
         self.failed = None;
         if self.state == State::Done {
             self.len = 0;
@@ -568,6 +653,40 @@ impl Inner {
             self.fail(e, dropped)
         }
     }
+}
+
+/// Whether `byte` is plain: neither a header byte nor CR nor LF, so that
+/// inside a frame's body, text or not, it is only stored.
+#[inline(always)]
+fn plain(byte: u8) -> bool {
+    // Every byte that is not plain is below `'\''`: one comparison for
+    // the digits of a body.
+    byte > b'&' || !(Header::from_byte(byte).is_some() || byte == b'\r' || byte == b'\n')
+}
+
+// No header byte lies above `'&'`, as [`plain`] takes for granted.
+const _: () = {
+    let mut b = b'&';
+    while b < u8::MAX {
+        b += 1;
+        assert!(Header::from_byte(b).is_none());
+    }
+};
+
+/// The last frame length at which the text span of the frame whose
+/// envelope is `envelope` is looked for: where its message's text field is
+/// known by, or 0 for a message without one (or a code that is not hex,
+/// which [`text_span`](crate::catalogue::text_span) never locates).
+fn probe_until(envelope: &[u8]) -> usize {
+    let code = envelope
+        .get(3..ENVELOPE_LEN)
+        .map(crate::hex::decode_bytewise);
+    let id = code
+        .and_then(|c| c.ok())
+        .and_then(|c| u16::try_from(c).ok());
+    id.and_then(crate::catalogue::lookup)
+        .and_then(|m| m.text)
+        .map_or(0, |t| t.known_by().min(TEXT_PROBE_MAX))
 }
 
 #[cfg(test)]
@@ -789,7 +908,7 @@ mod golden {
             input = &input[d.consumed..];
             let ev = match d.status {
                 Status::Partial => {
-                    assert!(input.is_empty(), "NeedMore with input left");
+                    assert!(input.is_empty(), "Partial with input left");
                     break;
                 }
                 Status::Complete(Event::Frame(f)) => Ok(f.len()),

@@ -42,7 +42,8 @@ use crate::decoder::{Received, Status};
 use crate::error::{Error, Failure, Result};
 use crate::field::{hex_digit, hex_value, FieldSpec, Reader, Writer};
 use crate::frame::{emit_envelope, Header, Station, ENVELOPE_LEN};
-use crate::position::{len_as, put_exact, PositionRecord, PER_FIELD};
+use crate::hex;
+use crate::position::{len_as, put_exact, PositionRecord, PER_FIELD, RESERVED};
 
 /// Staging buffer size of the streaming encoder and decoder: the longest
 /// record (4 + 2 + 12 + 8 × 8 + 2 = 84 bytes) or the longest envelope and
@@ -468,6 +469,19 @@ impl PositionStreamDecoder {
                     }
                 }
             }
+            // A whole, well-formed envelope and prefix, or trailer, in the
+            // input: read in place (anything else goes through the stage,
+            // which says what is wrong).
+            if self.stage.len == 0 {
+                let whole = match self.phase {
+                    DecPhase::Envelope => self.start_in_place(rest),
+                    DecPhase::Trailer => self.end_in_place(rest),
+                    _ => None,
+                };
+                if let Some((len, ev)) = whole {
+                    return (used + len, Status::Complete(ev));
+                }
+            }
             let want = self.need.saturating_sub(self.stage.len);
             let take = want.min(rest.len());
             let end = self.stage.len + take;
@@ -588,6 +602,74 @@ impl PositionStreamDecoder {
                 (ev, _) => return (used, n, ev),
             }
         }
+    }
+
+    /// The envelope and prefix at the start of `bytes`, if they are whole
+    /// and well-formed: what the stage would make of them (the bytes used
+    /// and `Start`), without it.
+    fn start_in_place(&mut self, bytes: &[u8]) -> Option<(usize, StreamEvent)> {
+        if self.kind.is_some() {
+            return None;
+        }
+        let (envelope, rest) = bytes.split_first_chunk::<ENVELOPE_LEN>()?;
+        let [first, s1, s2, i1, i2, i3] = *envelope;
+        let header = Header::from_byte(first)?;
+        let station = hex_field(&[s1, s2])?;
+        let kind = PositionStream::find(header, hex_field(&[i1, i2, i3])?)?;
+        let prefix = rest.get(..kind.prefix_len())?;
+        let mut fields = prefix;
+        if kind.reserved {
+            fields = fields.strip_prefix(RESERVED.0)?;
+        }
+        let (start, count) = fields.split_at_checked(usize::from(kind.start_width))?;
+        let start = if start.is_empty() {
+            0
+        } else {
+            hex_field(start)?
+        };
+        let count = hex_field(count)?;
+        if count > kind.max_records {
+            return None;
+        }
+        self.sum.update(envelope);
+        self.sum.update(prefix);
+        self.kind = Some(kind);
+        self.header = header;
+        self.station = Station(station as u8);
+        self.count = count;
+        let len = ENVELOPE_LEN + prefix.len();
+        self.offset += len;
+        self.enter_record_or_trailer(kind);
+        let station = self.station;
+        Some((
+            len,
+            StreamEvent::Start {
+                kind,
+                station,
+                start,
+                count,
+            },
+        ))
+    }
+
+    /// The trailer at the start of `bytes`, if it is whole and right (its
+    /// SC, or an `@@` the policy allows, then CR LF): the bytes used and
+    /// `End`, as the stage would give them.
+    fn end_in_place(&mut self, bytes: &[u8]) -> Option<(usize, StreamEvent)> {
+        let [h, l, b'\r', b'\n'] = *bytes.first_chunk::<4>()? else {
+            return None;
+        };
+        let ok = if [h, l] == *b"@@" {
+            self.policy.allows(self.header)
+        } else {
+            hex::decode2(&[h, l]) == Some(self.sum.value())
+        };
+        if !ok {
+            return None;
+        }
+        self.offset += 4;
+        self.phase = DecPhase::Finished;
+        Some((4, StreamEvent::End { records: self.done }))
     }
 
     /// Pushes one byte (ignored after the end of the frame, see [`Self::decode`]).
@@ -762,6 +844,12 @@ impl PositionStreamDecoder {
     }
 }
 
+/// The value of a field of 1 to 4 hex digits of either case.
+fn hex_field(digits: &[u8]) -> Option<u16> {
+    let v = hex::decode_bytewise(digits).ok()?;
+    u16::try_from(v).ok().filter(|_| !digits.is_empty())
+}
+
 /// [`put_exact`] of a record of `len` bytes into the stage: the path of
 /// the one record per `read` that does not fit `out` whole, kept out of
 /// line so that the loop over the others stays small.
@@ -811,7 +899,7 @@ mod tests {
     const WIRE: &[u8] =
         b"!9926D0002000103001E001E0064000186A0FFFF9C64000201000000000000000030392B\r\n";
 
-    /// Pushes `bytes` one at a time; the events other than `NeedMore`,
+    /// Pushes `bytes` one at a time; the events other than `Partial`,
     /// with the index of the byte that gave each.
     fn push_all(bytes: &[u8]) -> std::vec::Vec<(usize, StreamEvent)> {
         let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
@@ -954,7 +1042,7 @@ mod tests {
             }
         }
 
-        /// Every event other than `NeedMore` of `decode`, the input given
+        /// Every event other than `Partial` of `decode`, the input given
         /// in pieces of `chunk` bytes; and the bytes consumed.
         fn by_events(bytes: &[u8], chunk: usize) -> (Vec<StreamEvent>, usize) {
             let mut d = PositionStreamDecoder::new(BypassPolicy::CommandsOnly);
@@ -1025,8 +1113,10 @@ mod tests {
                     // Bytes after the frame belong to whatever follows it.
                     wire.extend_from_slice(b"#99");
                     let stale = records(kind, 1, &mut next).remove(0);
+                    let staged = by_events(&wire, 1);
                     for chunk in [1, 2, 7, 30, 64, 1000] {
                         let (expect, used) = by_events(&wire, chunk);
+                        assert_eq!((&expect, used), (&staged.0, staged.1), "{kind:?}");
                         assert_eq!(expect.len(), count + 2, "{kind:?}");
                         assert_eq!(
                             expect.last(),
@@ -1066,8 +1156,14 @@ mod tests {
                             continue;
                         }
                         w[at] = bad;
+                        // Byte by byte every unit goes through the stage;
+                        // whole, the envelope, the records and the trailer
+                        // are read in place where they are well-formed:
+                        // the same events and errors either way.
+                        let staged = by_events(&w, 1);
                         for chunk in [5, 1000] {
                             let expect = by_events(&w, chunk);
+                            assert_eq!(expect, staged, "{kind:?} {bad:#04X} at {at}");
                             for room in [1, 3] {
                                 let got = by_bulk(&w, chunk, room, &stale);
                                 assert_eq!(got, expect, "{kind:?} {bad:#04X} at {at}");

@@ -21,7 +21,8 @@
 //!   clock, UART drivers, watchdogs, configuration store and start-up, one
 //!   module per family, on top of the rest; the binaries (`src/bin/*.rs`)
 //!   only say which UART is which and call their family's `run`.
-//! - `bench` (feature `icount-bench`): the instruction-count bench.
+//! - `bench` and `bench_line` (feature `icount-bench`): the
+//!   instruction-count bench, the core's paths and the firmware's line.
 //!
 //! Every public type has one path, its module's (`bridge::Bridge`,
 //! `serial::Port`); the crate root re-exports nothing, as in the core.
@@ -46,6 +47,8 @@ mod log;
 
 #[cfg(all(target_os = "none", feature = "icount-bench"))]
 pub mod bench;
+#[cfg(all(target_os = "none", feature = "icount-bench"))]
+pub mod bench_line;
 #[cfg(all(
     target_os = "none",
     not(feature = "no-panic-proof"),

@@ -10,11 +10,14 @@
 //! empty rest of a chunk), the other fed byte by byte through `push` and
 //! drained with `decode(&[])` after each byte. Every event of one is
 //! compared with the next event of the other as it comes, so no event is
-//! stored (the harness allocates nothing per input).
+//! stored. Each runs in lockstep with a `ReferenceDecoder` (test-support:
+//! the decoder without its short cuts) fed the same calls.
 //!
 //! Checked:
 //! - no panic; both decoders give the same events, the same stats and the
 //!   same `pending()` at the end (the events do not depend on the chunking);
+//! - each gives, call for call, what the reference gives: bytes consumed,
+//!   event, stats, `pending()`, `failed_envelope()`, `last_frame()`;
 //! - `decode` consumes at most its input; `Partial` only with all of it
 //!   consumed; an event with `consumed == 0` only while bytes are held
 //!   (`pending() > 0` before the call: bytes of a failed text frame being
@@ -49,10 +52,29 @@ use iai_protocol_b::decoder::{
 use iai_protocol_b::error::Error;
 use iai_protocol_b::frame::{Frame, Header, ENVELOPE_LEN};
 use libfuzzer_sys::fuzz_target;
+use test_support::reference_decoder::{Reference, ReferenceDecoder};
+
+/// The decoder's answer in the reference's terms.
+fn as_reference(status: &Status<Event<'_>>) -> Reference {
+    match status {
+        Status::Partial => Reference::Partial,
+        Status::Complete(Event::Frame(f)) => Reference::Frame(f.as_bytes().to_vec()),
+        Status::Complete(Event::Error(e)) => Reference::Error(*e),
+    }
+}
+
+/// Everything a caller can see of a decoder and its reference is the same.
+fn same_as_reference<const N: usize>(dec: &FrameDecoder<N>, reference: &ReferenceDecoder) {
+    assert_eq!(dec.stats(), reference.stats(), "stats differ from the reference");
+    assert_eq!(dec.pending(), reference.pending(), "pending differs from the reference");
+    assert_eq!(dec.failed_envelope(), reference.failed_envelope());
+    assert_eq!(dec.last_frame().map(|f| f.as_bytes()), reference.last_frame());
+}
 
 /// The byte-by-byte decoder, producing one event at a time.
 struct ByByte<'s, const N: usize> {
     dec: FrameDecoder<N>,
+    reference: ReferenceDecoder,
     rest: &'s [u8],
     /// The last call gave an event: drain with `decode(&[])` first.
     draining: bool,
@@ -63,11 +85,16 @@ impl<'s, const N: usize> ByByte<'s, N> {
     /// drained.
     fn next(&mut self, f: impl FnOnce(Event<'_>)) -> bool {
         loop {
+            // What the last call left, before the next (its event borrowed
+            // the decoder).
+            same_as_reference(&self.dec, &self.reference);
             if self.draining {
+                let (used, want) = self.reference.decode(&[]);
                 let d = self.dec.decode(&[]);
-                assert_eq!(d.consumed, 0);
-                if let Status::Complete(ev) = d.status {
-                    f(ev);
+                assert_eq!((d.consumed, used), (0, 0));
+                assert_eq!(as_reference(&d.status), want, "push differs from the reference");
+                if let Status::Complete(e) = d.status {
+                    f(e);
                     return true;
                 }
                 self.draining = false;
@@ -77,7 +104,10 @@ impl<'s, const N: usize> ByByte<'s, N> {
                 return false;
             };
             self.rest = rest;
-            if let Status::Complete(e) = self.dec.push(b) {
+            let want = self.reference.push(b);
+            let e = self.dec.push(b);
+            assert_eq!(as_reference(&e), want, "push differs from the reference");
+            if let Status::Complete(e) = e {
                 self.draining = true;
                 f(e);
                 return true;
@@ -208,8 +238,10 @@ fn skip_scan(policy: BypassPolicy, stream: &[u8]) {
 fn check<const N: usize>(policy: BypassPolicy, cuts: &[u8], stream: &[u8]) {
     skip_scan(policy, stream);
     let mut dec = FrameDecoder::<N>::with_policy(policy);
+    let mut reference = ReferenceDecoder::new(N, policy);
     let mut other = ByByte::<N> {
         dec: FrameDecoder::with_policy(policy),
+        reference: ReferenceDecoder::new(N, policy),
         rest: stream,
         draining: false,
     };
@@ -226,8 +258,13 @@ fn check<const N: usize>(policy: BypassPolicy, cuts: &[u8], stream: &[u8]) {
         let mut chunk = &rest[..n];
         rest = &rest[n..];
         loop {
+            // What the last call left, before the next.
+            same_as_reference(&dec, &reference);
             let held = dec.pending();
+            let (used, want) = reference.decode(chunk);
             let d = dec.decode(chunk);
+            assert_eq!(d.consumed, used, "consumed differs from the reference");
+            assert_eq!(as_reference(&d.status), want, "decode differs from the reference");
             assert!(d.consumed <= chunk.len());
             consumed_total += d.consumed;
             chunk = &chunk[d.consumed..];
@@ -285,6 +322,8 @@ fn check<const N: usize>(policy: BypassPolicy, cuts: &[u8], stream: &[u8]) {
         !other.next(|e| panic!("the byte-by-byte decoder has more: {e:?}")),
         "the byte-by-byte decoder has more events"
     );
+    same_as_reference(&dec, &reference);
+    same_as_reference(&other.dec, &other.reference);
     assert_eq!(dec.stats(), other.dec.stats());
     assert_eq!(dec.pending(), other.dec.pending());
     assert!(frames as usize + errors as usize <= stream.len());

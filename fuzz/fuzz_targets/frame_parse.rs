@@ -102,7 +102,7 @@ fn decoder_verdict(data: &[u8], policy: BypassPolicy) -> Result<(), String> {
             Ok(())
         }
         Status::Complete(Event::Error(e)) => Err(format!("{e:?}")),
-        Status::Partial => Err("NeedMore".into()),
+        Status::Partial => Err("Partial".into()),
     }
 }
 

@@ -15,11 +15,11 @@
 //!   per axis, `End { records }` = records seen = announced, `Error {
 //!   records_ok }` = `Record` events before it; an event consumes at least
 //!   one byte; `offset()` never goes back; after `End` / `Error`, `decode`,
-//!   `decode_records` and `push` consume nothing (and say `NeedMore`) until
+//!   `decode_records` and `push` consume nothing (and say `Partial`) until
 //!   `reset`, which zeroes `offset`, `records_done` and `records_announced`
 //!   (the driver then resets and decodes the rest); `decode_records`
 //!   consumes at most its input, writes at most its room, never answers
-//!   `Record`, and answers `NeedMore` with input left only when its slice
+//!   `Record`, and answers `Partial` with input left only when its slice
 //!   is full; at the end the three agree on `offset()` and `records_done()`.
 //! - mode 1: the rest builds up to 11 records; for every kind of
 //!   `PositionStream::ALL`, they are encoded by `PositionStreamEncoder`
@@ -28,8 +28,8 @@
 //!   chunks) gives back `Start` (kind, station, start, count), the same
 //!   records in order and `End`, compared as they come.
 //!
-//! The decoders answer `decoder::Received { consumed, event }`
-//! (`decode_records`: `event` = (records written, event)).
+//! The decoders answer `decoder::Received { consumed, status }`
+//! (`decode_records`: `table::RecordsReceived { consumed, records, status }`).
 //! The harness keeps everything on the stack (records, encoded frame,
 //! encoder output chunks): no allocation per input.
 #![no_main]
@@ -181,14 +181,14 @@ impl Bulk<'_, '_> {
             let r = self
                 .dec
                 .decode_records(self.chunk, &mut self.out[..self.room]);
-            let (k, ev) = (r.records, r.status.clone());
+            let (k, ev) = (r.records, r.status);
             assert!(r.consumed <= self.chunk.len());
             assert!(k <= self.room, "{k} records written into {}", self.room);
             assert!(
                 !matches!(ev, Status::Complete(StreamEvent::Record(_))),
                 "decode_records gave a Record event"
             );
-            if ev.is_partial() {
+            if ev == Status::Partial {
                 assert!(
                     r.consumed == self.chunk.len() || k == self.room,
                     "Partial with input left and room in out"

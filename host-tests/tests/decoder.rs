@@ -11,10 +11,11 @@ mod replay;
 use replay::{decode_chunks, push_bytes, Out};
 
 use iai_protocol_b::checksum::{BypassPolicy, Checksum, ChecksumField};
-use iai_protocol_b::decoder::{FrameDecoder, Status, DEFAULT_CAPACITY};
+use iai_protocol_b::decoder::{Event, FrameDecoder, Status, DEFAULT_CAPACITY};
 use iai_protocol_b::error::Error;
 use iai_protocol_b::frame::Frame;
 use proptest::prelude::*;
+use test_support::reference_decoder::{Reference, ReferenceDecoder};
 
 /// Small deterministic generator (SplitMix64), so failures reproduce.
 struct Rng(u64);
@@ -385,4 +386,196 @@ fn decoder_size_at_the_default_capacity() {
     assert!(default < DEFAULT_CAPACITY + 96, "{default} bytes");
     assert!(small < 64 + 96);
     assert_eq!(FrameDecoder::<64>::new().capacity(), 64);
+}
+
+// ---------------------------------------------------------------------------
+// Against the reference decoder.
+
+/// `head` + its SC (upper or lower case) + CR LF.
+fn with_trailer(head: &[u8], lower: bool) -> Vec<u8> {
+    let sc = format!("{:02X}", Checksum::of(head));
+    let sc = if lower { sc.to_lowercase() } else { sc };
+    let mut f = head.to_vec();
+    f.extend_from_slice(sc.as_bytes());
+    f.extend_from_slice(b"\r\n");
+    f
+}
+
+/// A frame, whole or damaged, of a kind the decoder treats apart: a
+/// fixture frame, a 200H with ten raw characters (header bytes, CR, LF
+/// among them), a 216H reply with a counted text, a long 26DH-like body, a
+/// frame cut, a byte of it changed, its SC wrong.
+fn reference_case_frame(rng: &mut Rng, fixtures: &[Vec<u8>], out: &mut Vec<u8>) {
+    const TEXT: &[u8] = b"!#&%\r\n0123456789ABCDEFabcdef@xyz";
+    let text = |rng: &mut Rng, n: usize| -> Vec<u8> {
+        (0..n).map(|_| TEXT[rng.below(TEXT.len())]).collect()
+    };
+    let header = [b'!', b'#', b'&', b'%'][rng.below(4)];
+    let mut frame = match rng.below(5) {
+        0 => fixtures[rng.below(fixtures.len())].clone(),
+        1 => {
+            let mut head = vec![header];
+            head.extend_from_slice(b"99200");
+            head.extend(text(rng, 10));
+            with_trailer(&head, rng.below(4) == 0)
+        }
+        2 => {
+            // 216H reply: 82 digits, then the count and that many characters
+            // (or fewer or more than counted).
+            let n = rng.below(40);
+            let mut head = vec![if rng.below(4) == 0 { header } else { b'#' }];
+            head.extend_from_slice(b"99216");
+            head.extend((0..82).map(|_| b"0123456789ABCDEF"[rng.below(16)]));
+            head.extend_from_slice(format!("{n:02X}").as_bytes());
+            let told = (n + rng.below(3)).saturating_sub(1);
+            head.extend(text(rng, told.min(60)));
+            with_trailer(&head, false)
+        }
+        3 => {
+            let mut head = vec![header];
+            head.extend_from_slice(if rng.below(2) == 0 {
+                b"9926D"
+            } else {
+                b"99g6d"
+            });
+            let n = rng.below(2100);
+            head.extend((0..n).map(|_| b"0123456789ABCDEFabcdef"[rng.below(22)]));
+            with_trailer(&head, rng.below(2) == 0)
+        }
+        _ => {
+            let n = rng.below(30);
+            let mut head = vec![header];
+            head.extend(text(rng, n));
+            with_trailer(&head, false)
+        }
+    };
+    match rng.below(6) {
+        0 if !frame.is_empty() => frame.truncate(rng.below(frame.len())),
+        1 if !frame.is_empty() => {
+            let at = rng.below(frame.len());
+            frame[at] = TEXT[rng.below(TEXT.len())];
+        }
+        2 if frame.len() >= 4 => {
+            let at = frame.len() - 4;
+            frame[at] ^= 1;
+        }
+        _ => {}
+    }
+    out.extend_from_slice(&frame);
+}
+
+/// The decoder's answer in the reference's terms; a frame must also be
+/// what `Frame::new_checked` makes of its bytes.
+fn as_reference(status: Status<Event<'_>>, policy: BypassPolicy) -> Reference {
+    match status {
+        Status::Partial => Reference::Partial,
+        Status::Complete(Event::Frame(f)) => {
+            assert_eq!(Frame::new_checked(f.as_bytes(), policy), Ok(f));
+            Reference::Frame(f.as_bytes().to_vec())
+        }
+        Status::Complete(Event::Error(e)) => Reference::Error(e),
+    }
+}
+
+/// Everything a caller can see of the two decoders is the same.
+fn assert_same_as_reference<const N: usize>(dec: &FrameDecoder<N>, reference: &ReferenceDecoder) {
+    assert_eq!(dec.stats(), reference.stats(), "stats");
+    assert_eq!(dec.pending(), reference.pending(), "pending");
+    assert_eq!(
+        dec.failed_envelope(),
+        reference.failed_envelope(),
+        "failed envelope"
+    );
+    assert_eq!(
+        dec.last_frame().map(|f| f.as_bytes()),
+        reference.last_frame(),
+        "last frame"
+    );
+}
+
+/// Feeds `input` to a decoder and the reference in lockstep, in the
+/// chunks `cuts` gives through `decode` (or byte by byte through `push`
+/// where a cut is 0), with a `reset` of both now and then, comparing every
+/// answer and everything visible after it.
+fn lockstep<const N: usize>(rng: &mut Rng, input: &[u8], cuts: &[usize], policy: BypassPolicy) {
+    let mut dec: FrameDecoder<N> = FrameDecoder::with_policy(policy);
+    let mut reference = ReferenceDecoder::new(N, policy);
+    let mut rest = input;
+    let mut cuts = cuts.iter();
+    while !rest.is_empty() {
+        if rng.below(200) == 0 {
+            dec.reset();
+            reference.reset();
+            assert_same_as_reference(&dec, &reference);
+        }
+        let n = cuts.next().copied().unwrap_or(rest.len()).min(rest.len());
+        if n == 0 {
+            let (&b, tail) = rest.split_first().unwrap();
+            rest = tail;
+            let want = reference.push(b);
+            assert_eq!(as_reference(dec.push(b), policy), want);
+            assert_same_as_reference(&dec, &reference);
+            continue;
+        }
+        let mut chunk = &rest[..n];
+        rest = &rest[n..];
+        loop {
+            let (used, want) = reference.decode(chunk);
+            let d = dec.decode(chunk);
+            assert_eq!(d.consumed, used, "consumed");
+            let done = want == Reference::Partial;
+            assert_eq!(as_reference(d.status, policy), want);
+            assert_same_as_reference(&dec, &reference);
+            chunk = &chunk[used..];
+            if done && chunk.is_empty() {
+                break;
+            }
+        }
+    }
+    loop {
+        let (_, want) = reference.decode(&[]);
+        assert_eq!(as_reference(dec.decode(&[]).status, policy), want);
+        assert_same_as_reference(&dec, &reference);
+        if want == Reference::Partial {
+            break;
+        }
+    }
+}
+
+/// The decoder takes short cuts (plain body bytes stored without a step,
+/// the text span looked for only where the message has one): over frames
+/// of every kind, whole and damaged, between random bytes, in chunks of
+/// every size and byte by byte, at four capacities, it gives what the
+/// reference decoder gives, call for call.
+#[test]
+fn the_decoder_gives_what_the_reference_decoder_gives() {
+    let (_, fixtures) = fixture_file::stream();
+    let mut rng = Rng(0x0032_DEC0_DE00_0032);
+    let policies = [
+        BypassPolicy::Reject,
+        BypassPolicy::CommandsOnly,
+        BypassPolicy::Accept,
+    ];
+    let mut total = 0;
+    let mut case = 0;
+    while total < 4_000_000 {
+        let mut input = Vec::new();
+        for _ in 0..rng.below(10) + 1 {
+            let noise = [0, 0, 1, 3, 40][rng.below(5)];
+            random_bytes(&mut rng, noise, &mut input);
+            reference_case_frame(&mut rng, &fixtures, &mut input);
+        }
+        let max = [1, 2, 16, 100, 5000][rng.below(5)];
+        let cuts: Vec<usize> = (0..input.len()).map(|_| rng.below(max + 1)).collect();
+        let policy = policies[case % 3];
+        match case % 5 {
+            0 => lockstep::<16>(&mut rng, &input, &cuts, policy),
+            1 => lockstep::<100>(&mut rng, &input, &cuts, policy),
+            2 => lockstep::<0>(&mut rng, &input, &cuts, policy),
+            _ => lockstep::<DEFAULT_CAPACITY>(&mut rng, &input, &cuts, policy),
+        }
+        total += input.len();
+        case += 1;
+    }
+    eprintln!("{case} cases, {total} bytes, every answer the reference's");
 }

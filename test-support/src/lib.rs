@@ -3,8 +3,12 @@
 //! for each, so that a change to a trait they implement is made once.
 //!
 //! - [`VecPort`]: a firmware serial port over byte vectors.
+//! - [`reference_decoder`]: the frame decoder without its short cuts, what
+//!   the core's decoder is checked against.
 
 use std::convert::Infallible;
+
+pub mod reference_decoder;
 
 use firmware_example::serial::Port;
 

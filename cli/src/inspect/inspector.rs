@@ -11,7 +11,7 @@
 //! After a failed 200H or 216H the frame decoder decodes that frame's
 //! bytes again from its first header byte (its text may hide whole
 //! frames): each byte is given with `decode` and everything it produces is
-//! taken until it answers `NeedMore`, and [`Held`] places each frame and
+//! taken until it answers `Partial`, and [`Held`] places each frame and
 //! error at its offset. Where the capture (or a text log's line) ends
 //! inside a frame, that frame is listed as cut short and its bytes are
 //! decoded again the same way, so the frames its text swallowed are

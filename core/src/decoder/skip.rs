@@ -80,6 +80,28 @@ impl FrameSkipper {
         }
     }
 
+    /// Takes the leading bytes of `bytes` that only continue the frame's
+    /// body (no header byte, CR or LF, and no text field left to cross),
+    /// as [`FrameSkipper::push`] would one by one with [`Status::Partial`]
+    /// for each, but summed a word at a time; returns how many it took
+    /// (0: push the next byte).
+    pub fn skip_run(&mut self, bytes: &[u8]) -> usize {
+        let text_left = self.text.is_some_and(|(_, end)| self.len < end);
+        if self.cr || text_left {
+            return 0;
+        }
+        let n = bytes.iter().position(|&b| !super::plain(b));
+        let run = bytes.get(..n.unwrap_or(bytes.len())).unwrap_or(&[]);
+        self.sum = hex::sum(self.sum, run);
+        self.tail = match *run {
+            [] => self.tail,
+            [b] => [self.tail[1], b],
+            [.., a, b] => [a, b],
+        };
+        self.len = self.len.saturating_add(run.len());
+        run.len()
+    }
+
     /// One more byte of the frame: [`Status::Partial`] while it goes on.
     pub fn push(&mut self, b: u8) -> Status<Skipped> {
         let in_text = self
@@ -151,6 +173,61 @@ mod tests {
             end(bypass, BypassPolicy::Reject),
             Skipped::End { checksum_ok: false }
         );
+    }
+
+    /// Skipping runs where it can ([`FrameSkipper::skip_run`]) and pushing
+    /// the rest ends every frame as pushing every byte does, in the same
+    /// state: a long body, a 200H whose text holds header bytes and CR LF,
+    /// a wrong SC, a cut frame, a CR without LF.
+    #[test]
+    fn a_run_is_skipped_as_its_bytes_would_be_pushed() {
+        let mut long = b"!9926D0002".to_vec();
+        long.extend_from_slice(
+            b"000103001E001E0064000186A0FFFF9C64000201000000000000000030392B\r\n",
+        );
+        let frames: [&[u8]; 6] = [
+            &long,
+            b"!99200!#&\r\n89AB5D\r\n",
+            b"!9920900100555\r\n",
+            b"#99212011500#992322C\r\n",
+            b"#992120115000\rX",
+            b"&99E3A000000\n",
+        ];
+        for frame in frames {
+            for policy in [BypassPolicy::Reject, BypassPolicy::Accept] {
+                let mut env = [0u8; ENVELOPE_LEN];
+                env.copy_from_slice(&frame[..ENVELOPE_LEN]);
+                let header = Header::from_byte(frame[0]).unwrap();
+                let mut by_byte = FrameSkipper::new(header, &env, policy);
+                let mut pushed = Vec::new();
+                for &b in &frame[ENVELOPE_LEN..] {
+                    pushed.push((by_byte.push(b), by_byte));
+                }
+                let mut runs = FrameSkipper::new(header, &env, policy);
+                let mut got = Vec::new();
+                let mut rest = &frame[ENVELOPE_LEN..];
+                while let Some((&b, tail)) = rest.split_first() {
+                    let n = runs.skip_run(rest);
+                    for _ in 0..n {
+                        got.push((Status::Partial, runs));
+                    }
+                    if n > 0 {
+                        // The run's state is the last byte's.
+                        let (_, at) = pushed[got.len() - 1];
+                        assert_eq!(runs, at, "{frame:?}");
+                        rest = &rest[n..];
+                        continue;
+                    }
+                    got.push((runs.push(b), runs));
+                    rest = tail;
+                }
+                let statuses = |v: &[(Status<Skipped>, FrameSkipper)]| {
+                    v.iter().map(|(s, _)| *s).collect::<Vec<_>>()
+                };
+                assert_eq!(statuses(&got), statuses(&pushed), "{frame:?}");
+                assert_eq!(got.last().map(|g| g.1), pushed.last().map(|p| p.1));
+            }
+        }
     }
 
     #[test]

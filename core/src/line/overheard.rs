@@ -59,17 +59,37 @@ impl Overheard {
     }
 
     fn keep(&mut self, b: u8) {
-        if let Some(slot) = self.kept.get_mut(self.len) {
-            *slot = b;
+        self.keep_all(core::slice::from_ref(&b));
+    }
+
+    /// [`Overheard::keep`] for each of `bytes`.
+    fn keep_all(&mut self, bytes: &[u8]) {
+        if let Some(room) = self.kept.get_mut(self.len..) {
+            let n = room.len().min(bytes.len());
+            if let (Some(dst), Some(src)) = (room.get_mut(..n), bytes.get(..n)) {
+                dst.copy_from_slice(src);
+            }
         }
-        self.len = self.len.saturating_add(1);
-        self.print = fingerprint_more(self.print, core::slice::from_ref(&b));
+        self.len = self.len.saturating_add(bytes.len());
+        self.print = fingerprint_more(self.print, bytes);
     }
 
     /// Decodes `input` up to the first frame that ends (whole or broken);
-    /// returns the bytes used.
+    /// returns the bytes used. A frame's body goes through a run at a time
+    /// ([`FrameSkipper::skip_run`]), the rest a byte at a time.
     pub(crate) fn decode(&mut self, input: &[u8]) -> (usize, Status<Passed<'_>>) {
-        for (i, &b) in input.iter().enumerate() {
+        let mut i = 0;
+        while let Some(&b) = input.get(i) {
+            if let Some(skipper) = self.skipper.as_mut() {
+                let rest = input.get(i..).unwrap_or(&[]);
+                let n = skipper.skip_run(rest);
+                if n > 0 {
+                    self.keep_all(rest.get(..n).unwrap_or(&[]));
+                    i += n;
+                    continue;
+                }
+            }
+            i += 1;
             match self.step(b) {
                 Step::More => {}
                 Step::Broken(env, e, again) => {
@@ -77,10 +97,10 @@ impl Overheard {
                     if again {
                         self.keep(b);
                     }
-                    return (i + 1, Status::Complete(Passed::Broken(env, e)));
+                    return (i, Status::Complete(Passed::Broken(env, e)));
                 }
                 Step::Whole => {
-                    let (used, len) = (i + 1, self.len);
+                    let (used, len) = (i, self.len);
                     let Some((header, station, code)) = self.envelope else {
                         self.restart();
                         let e = Error::BodyTooShort { offset: len };
@@ -208,6 +228,48 @@ mod tests {
         let got = all(&wire);
         assert_eq!(got[0], "200 Some(\"1234560001\")");
         assert_eq!(got[1], "212 None");
+    }
+
+    /// What a stream of frames gives, fed in pieces of `piece` bytes: each
+    /// frame's bytes used, envelope, body and fingerprint, or why broken.
+    fn pieces(input: &[u8], piece: usize) -> std::vec::Vec<std::string::String> {
+        let mut d = Overheard::new();
+        let mut out = std::vec::Vec::new();
+        let mut used = 0;
+        for chunk in input.chunks(piece) {
+            let mut rest = chunk;
+            while !rest.is_empty() {
+                let (n, status) = d.decode(rest);
+                rest = &rest[n..];
+                used += n;
+                if let Status::Complete(p) = status {
+                    out.push(std::format!("{used} {p:?}"));
+                }
+            }
+        }
+        out
+    }
+
+    /// A 26DH's body goes by a run at a time, the rest a byte at a time:
+    /// whole, byte by byte or in pieces, the same frames, bodies and
+    /// fingerprints, at the same bytes.
+    #[test]
+    fn the_same_frames_however_the_bytes_come() {
+        let mut wire = b"noise!9926D0002".to_vec();
+        wire.extend_from_slice(
+            b"000103001E001E0064000186A0FFFF9C64000201000000000000000030392B\r\n",
+        );
+        // A fence's echo, a 200H with header bytes and CR LF in its text,
+        // a wrong SC, a cut frame, a CR without LF, a 212H reply.
+        wire.extend_from_slice(b"#9920012345600011D\r\n");
+        wire.extend_from_slice(b"#99200!#&\r\n12345E4\r\n");
+        wire.extend_from_slice(b"#992322D\r\n#99212#992120115\rX");
+        wire.extend_from_slice(b"#99212011500000000001388A5\r\n");
+        let whole = pieces(&wire, wire.len());
+        assert_eq!(whole.len(), 7, "{whole:?}");
+        for piece in [1, 2, 3, 7, 16, 64] {
+            assert_eq!(pieces(&wire, piece), whole, "in pieces of {piece}");
+        }
     }
 
     #[test]

@@ -215,11 +215,11 @@ impl RecordLayout {
     ) -> Option<(usize, u32)> {
         use hex::ModBatch as M;
         match (self.number_width, self.extended) {
-            (4, false) => read_into::<4, 18, false, M>(bytes, rec),
-            (4, true) => read_into::<4, 18, true, M>(bytes, rec),
-            (3, false) => read_into::<3, 17, false, M>(bytes, rec),
-            (0, false) => read_into::<0, 14, false, M>(bytes, rec),
-            (0, true) => read_into::<0, 14, true, M>(bytes, rec),
+            (4, false) => read_into::<4, 18, false, false, M>(bytes, rec),
+            (4, true) => read_into::<4, 18, true, false, M>(bytes, rec),
+            (3, false) => read_into::<3, 17, false, false, M>(bytes, rec),
+            (0, false) => read_into::<0, 14, false, false, M>(bytes, rec),
+            (0, true) => read_into::<0, 14, true, false, M>(bytes, rec),
             _ => None,
         }
     }

@@ -11,7 +11,7 @@ use core::fmt::Write as _;
 
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use cortex_m_semihosting::{debug, hio};
-use firmware_example::bench;
+use firmware_example::{bench, bench_line};
 
 /// No device interrupt is enabled; cortex-m-rt (with its `device` feature,
 /// as the firmware builds it) still wants the table.
@@ -37,7 +37,11 @@ fn exit(status: debug::ExitStatus) -> ! {
 
 #[entry]
 fn main() -> ! {
-    let ok = bench::run(host_print);
+    let ok = bench::start(host_print)
+        .is_some_and(|empty| bench::run(host_print, empty) && bench_line::run(host_print, empty));
+    if ok {
+        host_print(format_args!("bench ok\n"));
+    }
     exit(if ok {
         debug::EXIT_SUCCESS
     } else {

@@ -1,25 +1,31 @@
-//! Instructions per wire byte of the core's hex paths on three Cortex-M
-//! cores, counted under QEMU with `-icount shift=5,sleep=off`.
+//! Instructions per wire byte of the core's hex paths, and per received
+//! byte of the firmware's line paths, on three Cortex-M cores, counted
+//! under QEMU with `-icount shift=5,sleep=off`.
 //!
 //! Builds `firmware-example`'s `icount_bench` program (see
-//! `firmware-example/src/bench.rs`) for each board into its own target
-//! directory (`target/icount`, so the bridge ELF other tests use stays as
-//! it is), runs it and prints one line per figure:
+//! `firmware-example/src/bench.rs` and `src/bench_line.rs`) for each board
+//! into its own target directory (`target/icount`, so the bridge ELF other
+//! tests use stays as it is), runs it and prints one line per figure:
 //!
 //! ```text
 //! icount <board> <workload> <what> <N.NN> instr/byte
 //! ```
 //!
 //! for the boards `mps2-an386` (Cortex-M4F), `lm3s6965evb` (Cortex-M3) and
-//! `microbit` (Cortex-M0, if this QEMU has it), the workloads `26dh-8axis`
-//! and `26dh-1axis`, and `encode` (`PositionStreamEncoder::read` in 64-byte
-//! chunks), `encode-frame` (the same, the whole frame in one `read`),
-//! `decode` (`PositionStreamDecoder::decode`, a record per event),
-//! `decode-records` (`PositionStreamDecoder::decode_records`, records
-//! straight into the caller's array), `push` (the frame decoder) and
-//! `checksum`. Lines starting `icount:` are context, not figures. Figures,
-//! not assertions: the exit code is 0 when every board ran and checked its
-//! round trips, whatever the numbers.
+//! `microbit` (Cortex-M0, if this QEMU has it). The hex paths, per byte of
+//! 26DH frames (workloads `26dh-8axis` and `26dh-1axis`): `encode`
+//! (`PositionStreamEncoder::read` in 64-byte chunks), `encode-frame` (the
+//! same, the whole frame in one `read`), `decode`
+//! (`PositionStreamDecoder::decode`, a record per event), `decode-records`
+//! (`PositionStreamDecoder::decode_records`, records straight into the
+//! caller's array), `push` (the frame decoder, byte by byte) and
+//! `checksum`. The line paths, per byte the bridge read: workload `bridge`
+//! (`212h-8axis` and `21fh-window`, a host's command and the controller's
+//! reply relayed; `listen`, replies heard with no command on the line) and
+//! workload `gateway` (`poll-round`, the Modbus gateway's polls). Lines
+//! starting `icount:` are context, not figures. Figures, not assertions:
+//! the exit code is 0 when every board ran and checked its round trips,
+//! whatever the numbers.
 
 use std::collections::BTreeMap;
 use std::io::{self, Read};
@@ -58,14 +64,22 @@ const BOARDS: [Board; 3] = [
     },
 ];
 
-/// The figures printed, in order.
-const FIGURES: [&str; 6] = [
+/// The figures of a hex-path workload, in order.
+const HEX_FIGURES: &[&str] = &[
     "encode",
     "encode-frame",
     "decode",
     "decode-records",
     "push",
     "checksum",
+];
+
+/// Every workload and its figures, in the order printed.
+const WORKLOADS: [(&str, &[&str]); 4] = [
+    ("26dh-8axis", HEX_FIGURES),
+    ("26dh-1axis", HEX_FIGURES),
+    ("bridge", &["212h-8axis", "21fh-window", "listen"]),
+    ("gateway", &["poll-round"]),
 ];
 const QEMU: &str = "qemu-system-arm";
 const ICOUNT: &str = "shift=5,sleep=off";
@@ -109,8 +123,13 @@ fn measure(board: &Board) -> io::Result<()> {
     let out = run(board, &elf)?;
     let report = Report::parse(&out)?;
     let per_tick = report.instructions_per_tick();
-    for (workload, figures) in &report.workloads {
-        for what in FIGURES {
+    for (workload, expected) in WORKLOADS {
+        let figures = report
+            .workloads
+            .iter()
+            .find_map(|(w, f)| (w == workload).then_some(f))
+            .ok_or_else(|| io::Error::other(format!("no {workload} figures in:\n{out}")))?;
+        for &what in expected {
             let &(ticks, bytes) = figures.get(what).ok_or_else(|| {
                 io::Error::other(format!("no {workload} {what} figure in:\n{out}"))
             })?;

@@ -32,7 +32,7 @@ pub fn decode_chunks<const N: usize>(
             assert!(d.consumed <= chunk.len());
             match d.status {
                 Status::Partial => {
-                    assert_eq!(d.consumed, chunk.len(), "NeedMore before the chunk ended");
+                    assert_eq!(d.consumed, chunk.len(), "Partial before the chunk ended");
                     break;
                 }
                 Status::Complete(Event::Frame(f)) => out.push(Out::Frame(f.as_bytes().to_vec())),
