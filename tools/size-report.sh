@@ -36,18 +36,18 @@ target=${CARGO_TARGET_DIR:-target}
 size=arm-none-eabi-size
 nm=arm-none-eabi-nm
 
-# board  bin  target  features  qemu(yes/no)  profile; the STM32G0 boards
-# after b-l475e-iot01a, whose measured stack they take.
+# board  bin  target  features  qemu(yes/no); the STM32G0 boards after
+# b-l475e-iot01a, whose measured stack they take.
 boards=(
-  "lm3s6965 lm3s6965 thumbv7m-none-eabi board-lm3s6965 yes firmware"
-  "mps2-an386 mps2-an386 thumbv7em-none-eabihf board-mps2-an386 yes firmware"
-  "b-l475e-iot01a b-l475e-iot01a thumbv7em-none-eabihf board-b-l475e-iot01a yes firmware"
-  "stm32g030 stm32g030 thumbv6m-none-eabi board-stm32g030 no firmware-m0"
-  "stm32g070 stm32g070 thumbv6m-none-eabi board-stm32g070 no firmware-m0"
+  "lm3s6965 lm3s6965 thumbv7m-none-eabi board-lm3s6965 yes"
+  "mps2-an386 mps2-an386 thumbv7em-none-eabihf board-mps2-an386 yes"
+  "b-l475e-iot01a b-l475e-iot01a thumbv7em-none-eabihf board-b-l475e-iot01a yes"
+  "stm32g030 stm32g030 thumbv6m-none-eabi board-stm32g030 no"
+  "stm32g070 stm32g070 thumbv6m-none-eabi board-stm32g070 no"
 )
 for b in "${boards[@]}"; do
-  read -r _ bin t feat _ profile <<<"$b"
-  cargo build -q -p firmware-example --profile "$profile" --target "$t" \
+  read -r _ bin t feat _ <<<"$b"
+  cargo build -q -p firmware-example --profile firmware --target "$t" \
     --no-default-features --features "$feat" --bin "$bin"
 done
 cargo build -q -p host-tests --bin demo --bin gateway
@@ -135,8 +135,8 @@ modbus_stack() {
 verdict() { [ "$1" -le "$2" ] && echo met || echo missed; }
 l475_stack= l475_demo_stack=
 for b in "${boards[@]}"; do
-  read -r board bin t feat qemu profile <<<"$b"
-  elf=$target/$t/$profile/$bin
+  read -r board bin t feat qemu <<<"$b"
+  elf=$target/$t/firmware/$bin
   read -r flash static < <($size -A "$elf" | awk '
     $1==".vector_table"||$1==".text"||$1==".rodata" {flash+=$2}
     $1==".data" {flash+=$2; ram+=$2}

@@ -18,8 +18,7 @@
 //!   checksum, against 28 without it for spreading the nibbles over a word
 //!   and adding `'0'` or `'A' - 10` with SWAR arithmetic.
 //! - Decoding looks up each digit of a group of four in a table for its
-//!   position in the group ([`positional`], one per digit of four; Armv6-M
-//!   keeps the last one only and shifts its entries), which holds
+//!   position in the group (`T12`, `T8`, `T4`, `T0`), which holds
 //!   its value already shifted into place (bits 0-15), the byte itself
 //!   (bits 24-31) and, for a byte that is not a hex digit, a marker in bits
 //!   16-23 that no valid entry has. Adding the four entries gives the
@@ -40,7 +39,7 @@
 //! most 1,024 bytes before they are folded, and table entries are added
 //! with wrapping additions (only the low byte of their sum counts).
 
-/// What a [`positional`] table holds for a byte that is not
+/// What a positional table ([`T0`]…[`T12`]) holds for a byte that is not
 /// a hex digit: bits 16-23 set, where a valid digit's entry has none.
 const MARK: u32 = 0x00FF_0000;
 
@@ -77,52 +76,21 @@ const fn positional(shift: u32) -> [u32; 256] {
 
 /// The four [`positional`] tables, one after the other: one base address
 /// for all four.
-#[cfg(target_has_atomic = "32")]
 static TABLES: [[u32; 256]; 4] = [positional(12), positional(8), positional(4), positional(0)];
 /// [`positional`] for the last digit of a group of four.
-#[cfg(target_has_atomic = "32")]
 static T0: &[u32; 256] = &TABLES[3];
-/// [`positional`] for the last digit of a group of four. Armv6-M keeps
-/// this table only (1 KB, where the four take 4 KB of a part that may have
-/// 64 KB of flash) and derives the others from it ([`shifted`]).
-#[cfg(not(target_has_atomic = "32"))]
-static T0: &[u32; 256] = &positional(0);
+/// [`positional`] for the third digit of a group of four.
+static T4: &[u32; 256] = &TABLES[2];
+/// [`positional`] for the second digit of a group of four.
+static T8: &[u32; 256] = &TABLES[1];
+/// [`positional`] for the first digit of a group of four.
+static T12: &[u32; 256] = &TABLES[0];
 
 /// The entry of `byte` in `table`.
 #[inline(always)]
 fn entry(table: &[u32; 256], byte: u8) -> u32 {
     // A `u8` index is always in bounds of the 256 entries.
     table.get(usize::from(byte)).copied().unwrap_or(MARK)
-}
-
-/// The [`positional`] entry for `shift` (12, 8 or 4) from the one for 0:
-/// the value moved into place, the byte and the marker where they are
-/// (a digit's value is its low 4 bits; [`MARK`] has none of them set).
-#[cfg_attr(target_has_atomic = "32", allow(dead_code))]
-#[inline(always)]
-const fn shifted(t0_entry: u32, shift: u32) -> u32 {
-    ((t0_entry & 0xF) << shift) | (t0_entry & 0xFFFF_0000)
-}
-
-/// The entry of `byte` for the digit `SHIFT` bits up its group of four: a
-/// table load, or on Armv6-M a load and [`shifted`].
-#[inline(always)]
-fn at<const SHIFT: u32>(byte: u8) -> u32 {
-    #[cfg(target_has_atomic = "32")]
-    {
-        let [t12, t8, t4, t0] = &TABLES;
-        let table = match SHIFT {
-            12 => t12,
-            8 => t8,
-            4 => t4,
-            _ => t0,
-        };
-        entry(table, byte)
-    }
-    #[cfg(not(target_has_atomic = "32"))]
-    {
-        shifted(entry(T0, byte), SHIFT)
-    }
 }
 
 /// Up to four digits at once: their value (bits 0-15), bits 16-23 set if
@@ -144,24 +112,26 @@ fn group4(d: &[u8; 4]) -> u32 {
     };
     #[cfg(not(target_has_atomic = "32"))]
     let [a, b, c, e] = *d;
-    at::<12>(a)
-        .wrapping_add(at::<8>(b))
-        .wrapping_add(at::<4>(c))
-        .wrapping_add(at::<0>(e))
+    entry(T12, a)
+        .wrapping_add(entry(T8, b))
+        .wrapping_add(entry(T4, c))
+        .wrapping_add(entry(T0, e))
 }
 
 /// [`group4`] for three digits.
 #[inline(always)]
 fn group3(d: &[u8; 3]) -> u32 {
     let [a, b, c] = *d;
-    at::<8>(a).wrapping_add(at::<4>(b)).wrapping_add(at::<0>(c))
+    entry(T8, a)
+        .wrapping_add(entry(T4, b))
+        .wrapping_add(entry(T0, c))
 }
 
 /// [`group4`] for two digits.
 #[inline(always)]
 fn group2(d: &[u8; 2]) -> u32 {
     let [a, b] = *d;
-    at::<4>(a).wrapping_add(at::<0>(b))
+    entry(T4, a).wrapping_add(entry(T0, b))
 }
 
 /// Whether a group (or the OR of groups) had only hex digits.
@@ -912,19 +882,12 @@ mod tests {
     fn positional_tables() {
         for b in 0..=255u8 {
             let v = decode_bytewise(&[b]).ok().map(|v| v as u32);
-            let each = [
-                (at::<0>(b), 0),
-                (at::<4>(b), 4),
-                (at::<8>(b), 8),
-                (at::<12>(b), 12),
-            ];
-            for (e, shift) in each {
+            for (t, shift) in [(T0, 0), (T4, 4), (T8, 8), (T12, 12)] {
+                let e = entry(t, b);
                 match v {
                     Some(v) => assert_eq!(e, (v << shift) | (u32::from(b) << 24), "{b:#04X}"),
                     None => assert_eq!(e, MARK, "{b:#04X}"),
                 }
-                // Armv6-M's entries, derived from the last digit's.
-                assert_eq!(shifted(entry(T0, b), shift), e, "{b:#04X} << {shift}");
             }
             assert_eq!(value(b).map(u32::from), v);
         }

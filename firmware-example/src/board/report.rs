@@ -2,12 +2,24 @@
 //! machinery costs several KiB of flash), the start-up banner the QEMU
 //! tests wait for, the end of a run, and the fault handlers (each prints
 //! where it happened and exits QEMU with a failure).
+//!
+//! The STM32G0 boards run on silicon only (QEMU has no model of them),
+//! where a semihosting call without a debugger attached is itself a
+//! HardFault: there nothing is written and the end of a run, a panic or a
+//! fault resets the part ([`SEMIHOSTING`]).
 
 use cortex_m_rt::{exception, ExceptionFrame};
 use cortex_m_semihosting::{debug, hio};
 
 use crate::config::{BlockError, Source};
 use crate::serial::FlowControl;
+
+/// Whether this board talks to a host through semihosting: the boards
+/// that run under QEMU (or a debugger), not the STM32G0 parts.
+pub const SEMIHOSTING: bool = !cfg!(any(
+    feature = "board-stm32g030",
+    feature = "board-stm32g070"
+));
 
 /// Writes to the host's standard output through semihosting: strings,
 /// decimals and hex, each written as it comes. Failures are ignored (this
@@ -21,25 +33,59 @@ impl Default for Out {
 }
 
 impl Out {
-    /// The host's standard output (writes go nowhere without a host).
+    /// The host's standard output (writes go nowhere without a host, or
+    /// on a board without [`SEMIHOSTING`]).
     pub fn new() -> Self {
-        Self(hio::hstdout().ok())
+        Self(if SEMIHOSTING {
+            hio::hstdout().ok()
+        } else {
+            None
+        })
     }
 
     /// Writes `s`.
+    #[inline(always)]
     pub fn str(&mut self, s: &str) -> &mut Self {
-        self.bytes(s.as_bytes())
-    }
-
-    fn bytes(&mut self, b: &[u8]) -> &mut Self {
-        if let Some(host) = self.0.as_mut() {
-            let _ = host.write_all(b);
+        if SEMIHOSTING {
+            self.bytes(s.as_bytes());
         }
         self
     }
 
     /// Writes `n` in decimal.
+    #[inline(always)]
     pub fn dec(&mut self, n: u64) -> &mut Self {
+        if SEMIHOSTING {
+            self.put_dec(n);
+        }
+        self
+    }
+
+    /// Writes `n` as `0x` and eight lower-case hex digits (`{:#010x}`).
+    #[inline(always)]
+    pub fn hex(&mut self, n: u32) -> &mut Self {
+        if SEMIHOSTING {
+            self.put_hex(n);
+        }
+        self
+    }
+
+    /// Writes `b` as two lower-case hex digits.
+    #[inline(always)]
+    pub fn hex_byte(&mut self, b: u8) -> &mut Self {
+        if SEMIHOSTING {
+            self.bytes(&[hex_digit(u32::from(b >> 4)), hex_digit(u32::from(b))]);
+        }
+        self
+    }
+
+    fn bytes(&mut self, b: &[u8]) {
+        if let Some(host) = self.0.as_mut() {
+            let _ = host.write_all(b);
+        }
+    }
+
+    fn put_dec(&mut self, n: u64) {
         let mut digits = [b'0'; 20];
         let mut at = digits.len();
         let mut n = n;
@@ -51,21 +97,15 @@ impl Out {
                 break;
             }
         }
-        self.bytes(digits.get(at..).unwrap_or(&[]))
+        self.bytes(digits.get(at..).unwrap_or(&[]));
     }
 
-    /// Writes `n` as `0x` and eight lower-case hex digits (`{:#010x}`).
-    pub fn hex(&mut self, n: u32) -> &mut Self {
+    fn put_hex(&mut self, n: u32) {
         let mut digits = *b"0x00000000";
         for (i, d) in digits.iter_mut().skip(2).enumerate() {
             *d = hex_digit(n >> (28 - 4 * i));
         }
-        self.bytes(&digits)
-    }
-
-    /// Writes `b` as two lower-case hex digits.
-    pub fn hex_byte(&mut self, b: u8) -> &mut Self {
-        self.bytes(&[hex_digit(u32::from(b >> 4)), hex_digit(u32::from(b))])
+        self.bytes(&digits);
     }
 }
 
@@ -109,8 +149,12 @@ pub fn banner(board: &str, source: Source, flow: FlowControl) {
     out.str(")\n");
 }
 
-/// Ends the QEMU run with the given status.
+/// Ends the QEMU run with the given status; resets a board without
+/// [`SEMIHOSTING`].
 pub fn exit(status: debug::ExitStatus) -> ! {
+    if !SEMIHOSTING {
+        cortex_m::peripheral::SCB::sys_reset();
+    }
     debug::exit(status);
     // Only reached when no debugger or QEMU handles semihosting.
     loop {
