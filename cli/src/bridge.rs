@@ -234,9 +234,19 @@ pub fn query_status(
         // The bridge answers its own station at once: a line to it waits
         // for nothing late.
         late_window_ms: 0,
+        // B00H only reads: sent again as a query is (its code is the
+        // bridge's, outside the catalogue, which the line counts unsafe to
+        // send again).
+        resend_unsafe: true,
         ..LineConfig::new(Station(station))
     };
-    table::command_to(link, cfg, &status_query(station), hooks)
+    table::command_to(link, cfg, &status_query(station), hooks).map_err(|e| match e {
+        // Unanswered, and nothing ran: a timeout, as for any query.
+        TableError::Engine(Failure::OutcomeUnknown { sends }) => {
+            TableError::Engine(Failure::Timeout { sends })
+        }
+        e => e,
+    })
 }
 
 /// Records per 26DH message at most (its format's limit, TTA p. 60).

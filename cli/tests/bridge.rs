@@ -140,8 +140,8 @@ fn a_whole_table_goes_to_the_bridge_as_one_26dh() {
     let seen: Vec<String> = ids.try_iter().collect();
     assert_eq!(
         seen,
-        ["B00", "200", "200", "26D"],
-        "status, fence, test call, one 26DH"
+        ["200", "B00", "200", "200", "26D"],
+        "fence (what was on the line before is unknown), status, fence, test call, one 26DH"
     );
     // An & worth resending is resent; the last one is the verdict.
     let (addr, ids) = fake_bridge(Answer::Overrun);

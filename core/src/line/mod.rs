@@ -131,6 +131,19 @@ impl LineConfig {
         self
     }
 
+    /// The longest copy window the line learns by itself: twice the time a
+    /// reply may take. The line cannot tell a copy later than that from
+    /// the same question asked again and answered the same (a read-back's
+    /// windows after a resume), and a window learned from those grew
+    /// without end on a long run and held every command; a longer copy is
+    /// caught by order instead (a proof's fence), or declared
+    /// ([`LineConfig::with_duplicate_window`]).
+    pub const fn learnable_copy_ms(&self) -> u32 {
+        self.timeout_ms
+            .saturating_add(self.late_window_ms)
+            .saturating_mul(2)
+    }
+
     /// The furthest ahead of the current tick that these settings ever
     /// place a hold.
     const fn horizon(&self) -> u32 {
@@ -859,7 +872,11 @@ impl Line {
             .flatten()
             .filter(|t| t.fingerprint == print);
         if let Some(after) = same.map(|t| now.wrapping_sub(t.at)).min() {
-            self.repeat_ms = self.repeat_ms.max(after);
+            // Later than a copy the line learns of: the same question
+            // asked again, answered the same.
+            if after <= self.cfg.learnable_copy_ms() {
+                self.repeat_ms = self.repeat_ms.max(after);
+            }
         }
         if let Some(slot) = self.taken.get_mut(self.taken_next) {
             *slot = Some(Taken {
@@ -877,7 +894,8 @@ impl Line {
     /// it took, or of the latest reply taken with the bytes of an earlier
     /// one (a copy may have stood in for it: this frame is then the reply
     /// displaced), or else the time a reply may take; every reply taken
-    /// within it may still be copied.
+    /// within it may still be copied. At most
+    /// [`LineConfig::learnable_copy_ms`]: a longer one is declared.
     fn unplaced(&mut self, print: Option<u32>, now: u32) {
         self.stats.unplaced += 1;
         let late = self
@@ -892,7 +910,7 @@ impl Line {
             Some(l) => l.saturating_mul(2).max(1),
             None => self.cfg.timeout_ms.saturating_add(self.cfg.late_window_ms),
         }
-        .min(MAX_HORIZON_MS / 2);
+        .min(self.cfg.learnable_copy_ms());
         if window > self.learned_copy_ms {
             self.learned_copy_ms = window;
             let cfg = LineConfig {
