@@ -164,6 +164,10 @@ for b in "${boards[@]}"; do
         echo "stack $board after a PLC's Modbus session (pymodbus): $peak bytes"
         [ "$peak" -gt "$stack" ] && stack=$peak
       fi
+    fi
+    # The configuration editor: the boards that write their page (the
+    # STM32s read theirs).
+    if [ "$board" = lm3s6965 ]; then
       peak=$(config_stack "$elf" serial)
       if [ -n "$peak" ]; then
         echo "stack $board after a configuration session (iai bridge config): $peak bytes"

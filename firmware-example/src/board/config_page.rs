@@ -95,7 +95,7 @@ fn store() -> &'static mut BoardStore {
 }
 
 /// Reads the page in force at `at` into `buf` (FFH where there is none).
-/// Boot code: call it before [`editor`].
+/// Boot code: call it before [`attach_editor`].
 pub fn read_page(at: usize, buf: &mut [u8]) {
     #[cfg(any(feature = "board-lm3s6965", feature = "board-mps2-an386"))]
     if store().read(at, buf).is_err() {
@@ -156,12 +156,16 @@ fn restart() {
     cortex_m::peripheral::SCB::sys_reset();
 }
 
-/// The writes of the configuration page, over the board's store (once, at
-/// boot, after the blocks were read); `seed` differs at each boot.
+/// Gives `bridge` the writes of the configuration page, over the board's
+/// store. Once, at boot, after the last block was read: the editor holds
+/// the store from then on.
 #[cfg(any(feature = "board-lm3s6965", feature = "board-mps2-an386"))]
-pub fn editor(seed: u32) -> &'static mut Editor<'static> {
+pub fn attach_editor(bridge: &mut crate::bridge::Bridge) {
     static mut EDITOR: MaybeUninit<Editor<'static>> = MaybeUninit::uninit();
     let store: &'static mut dyn PageStore = store();
+    let seed = super::image::boot_seed();
     // SAFETY: called once, at boot; the only reference to this static.
-    unsafe { (*core::ptr::addr_of_mut!(EDITOR)).write(Editor::new(store, restart, seed)) }
+    let editor =
+        unsafe { (*core::ptr::addr_of_mut!(EDITOR)).write(Editor::new(store, restart, seed)) };
+    bridge.attach_editor(editor);
 }

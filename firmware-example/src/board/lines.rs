@@ -53,9 +53,7 @@ pub fn hand_over<const RX: usize, const TX: usize>(
     thread
 }
 
-/// Builds the bridge from `cfg` in `room`, its static, with the
-/// configuration page's editor where the board writes the page (read the
-/// page's blocks before: the editor holds its store from then on). Not inlined: the
+/// Builds the bridge from `cfg` in `room`, its static. Not inlined: the
 /// optimiser may build parts of it in the caller's stack frame on the way
 /// in, and that frame must not stay below the rest of start-up.
 #[inline(never)]
@@ -64,10 +62,7 @@ pub fn build_bridge(
     cfg: Config,
     source: Source,
 ) -> &'static mut Bridge {
-    let bridge = room.write(Bridge::new(cfg, source, boot_seed()));
-    #[cfg(any(feature = "board-lm3s6965", feature = "board-mps2-an386"))]
-    bridge.attach_editor(super::config_page::editor(boot_seed()));
-    bridge
+    room.write(Bridge::new(cfg, source, boot_seed()))
 }
 
 /// Builds the Modbus gateway from `cfg` in `room`, its static (not
@@ -98,7 +93,8 @@ pub struct Statics {
     pub down_end: &'static Handoff,
 }
 
-/// Builds the bridge from `cfg`, splits both lines and hands their
+/// Builds the bridge from `cfg` (with the configuration page's editor
+/// where the board writes the page), splits both lines and hands their
 /// interrupt ends over; the caller unmasks the interrupts afterwards.
 /// Not inlined, so that its stack frame (the bridge is built on the way
 /// into its static) is gone before the loop runs.
@@ -109,6 +105,8 @@ pub fn setup(
     source: Source,
 ) -> (&'static mut Bridge, ThreadEnd<'static>, ThreadEnd<'static>) {
     let bridge = build_bridge(s.bridge, cfg, source);
+    #[cfg(any(feature = "board-lm3s6965", feature = "board-mps2-an386"))]
+    super::config_page::attach_editor(bridge);
     let up = hand_over(s.up, cfg.flow, UPSTREAM_MARKS, s.pend_up, s.up_end);
     let down = hand_over(
         s.down,

@@ -18,7 +18,7 @@ use lm3s6965::{interrupt, Interrupt};
 
 use super::{feed_watchdog, read, set_bits, start_watchdog, Uart, SYSCTL_RCGC2};
 use crate::board::clock::{now_ms, sleep_unless, start_tick};
-use crate::board::config_page::{load_config, load_net, load_sparkplug, web_port};
+use crate::board::config_page::{attach_editor, load_config, load_net, load_sparkplug, web_port};
 use crate::board::image::boot_seed;
 use crate::board::lines::{build_bridge, build_gateway, hand_over};
 use crate::board::report::{banner, Out};
@@ -28,7 +28,6 @@ use crate::modbus::Gateway;
 use crate::net::config::NetSource;
 use crate::net::http::HttpBuffers;
 use crate::net::modbus::{ModbusBuffers, MODBUS_PORT};
-use crate::net::sparkplug::config::SparkplugConfig;
 use crate::net::sparkplug::{self, SparkplugBuffers};
 use crate::net::stellaris::{self, Mmio, Regs, Stellaris, FRAME_CAP};
 use crate::net::{self, AddressSource, Buffers, Net, NetEvent, SocketSlots};
@@ -83,7 +82,6 @@ struct Parts {
     eth: &'static mut Stellaris<Mmio>,
     down: crate::serial::ThreadEnd<'static>,
     mac: [u8; 6],
-    sparkplug: SparkplugConfig,
 }
 
 /// Builds the bridge, the driver and the network side in their statics and
@@ -92,11 +90,9 @@ struct Parts {
 /// loop runs.
 #[inline(never)]
 fn setup(board: &Board, now: u32) -> Parts {
-    // Every block is read before the bridge's editor takes the store.
     let (cfg, source) = load_config();
     let (net_cfg, net_source) = load_net();
     let web = web_port();
-    let sparkplug = load_sparkplug();
     board
         .controller
         .init(board.core_clock_hz, cfg.downstream_baud);
@@ -142,7 +138,6 @@ fn setup(board: &Board, now: u32) -> Parts {
             eth,
             down,
             mac,
-            sparkplug,
         }
     };
     banner(board.name, source, FlowControl::None);
@@ -164,13 +159,15 @@ fn setup(board: &Board, now: u32) -> Parts {
     parts
 }
 
-/// Adds the Sparkplug B node `cfg` asks for (none without a broker) and
-/// says where it reports. Not inlined, as [`setup`].
+/// Adds the Sparkplug B node its block asks for (none without a broker)
+/// and says where it reports. Not inlined, as [`setup`]: the block and its
+/// parse are on this frame, gone before the loop runs and not nested in
+/// setup's.
 #[inline(never)]
-fn setup_sparkplug(net: &mut Net<'static>, cfg: SparkplugConfig, mac: [u8; 6], now: u32) {
+fn setup_sparkplug(net: &mut Net<'static>, mac: [u8; 6], now: u32) {
     // SAFETY: called once, at start; the only reference to these buffers.
     let buffers = unsafe { &mut *addr_of_mut!(SPARKPLUG_BUFFERS) };
-    net.add_sparkplug(cfg, mac, buffers, now);
+    net.add_sparkplug(load_sparkplug(), mac, buffers, now);
     if let Some(node) = net.sparkplug() {
         let cfg = node.config();
         let mut out = Out::new();
@@ -302,9 +299,10 @@ pub fn run(board: &Board) -> ! {
         eth,
         mut down,
         mac,
-        sparkplug,
     } = setup(board, now_ms());
-    setup_sparkplug(net, sparkplug, mac, now_ms());
+    setup_sparkplug(net, mac, now_ms());
+    // The page's last block is read: the editor takes the store.
+    attach_editor(bridge);
     if let Some((address, source)) = net.address() {
         report(NetEvent::Listening {
             address,
