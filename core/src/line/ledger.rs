@@ -50,6 +50,36 @@ impl Span {
         self.lo > self.hi || other.lo > other.hi || (self.lo <= other.hi && other.lo <= self.hi)
     }
 
+    /// The smallest span holding both (unknown if either is).
+    pub(crate) const fn union(self, other: Span) -> Span {
+        if self.lo > self.hi || other.lo > other.hi {
+            return Span::UNKNOWN;
+        }
+        Span {
+            lo: if self.lo < other.lo {
+                self.lo
+            } else {
+                other.lo
+            },
+            hi: if self.hi > other.hi {
+                self.hi
+            } else {
+                other.hi
+            },
+        }
+    }
+
+    /// How far apart the two lie (0 if they meet or either is unknown).
+    const fn gap(self, other: Span) -> u16 {
+        if self.meets(other) {
+            0
+        } else if self.hi < other.lo {
+            other.lo - self.hi
+        } else {
+            self.lo - other.hi
+        }
+    }
+
     /// Whether a reply carrying these values could be accepted by a command
     /// that accepts `accepts`.
     pub(crate) const fn within(self, accepts: Span) -> bool {
@@ -57,15 +87,21 @@ impl Span {
     }
 }
 
-/// Copies remembered at once; a further one is merged into the last slot
-/// as a copy of anything (never forgotten early, maybe kept too broadly).
+/// Copies remembered at once; a further one widens the nearest copy of
+/// its ID, or with none the last slot becomes a copy of anything (never
+/// forgotten early, maybe kept too broadly).
 const COPIES: usize = 16;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 struct Copy {
     id: u16,
+    /// What the copy carries; for a widened entry, the range its copies'
+    /// values lie in.
     values: Span,
+    /// Widened from several copies: each carries some values in `values`,
+    /// so it may pass for any command whose accepted values meet them.
+    widened: bool,
     /// The first tick at which it can no longer arrive.
     until: u32,
 }
@@ -131,18 +167,38 @@ impl Ledger {
     /// until `until` (exclusive).
     pub(crate) fn copy(&mut self, id: u16, values: Span, until: u32, now: u32) {
         self.prune(now);
-        let new = Copy { id, values, until };
+        let new = Copy {
+            id,
+            values,
+            widened: false,
+            until,
+        };
         if let Some(c) = self
             .copies
             .iter_mut()
-            .find(|c| c.id == id && c.values == values)
+            .find(|c| c.id == id && c.values == values && !c.widened)
         {
             c.until = later(c.until, until);
         } else if self.copies.push(new).is_err() {
-            if let Some(last) = self.copies.last_mut() {
+            // Full: widen the copy of the same ID whose values lie nearest
+            // (a window next to the last one read, a count next to the
+            // last one written), so that none is forgotten early and the
+            // values far from it stay clear; without one, the last slot
+            // becomes a copy of anything.
+            let nearest = self
+                .copies
+                .iter_mut()
+                .filter(|c| c.id == id)
+                .min_by_key(|c| c.values.gap(values));
+            if let Some(c) = nearest {
+                c.values = c.values.union(values);
+                c.widened = true;
+                c.until = later(c.until, until);
+            } else if let Some(last) = self.copies.last_mut() {
                 *last = Copy {
                     id: ANY_ID,
                     values: Span::UNKNOWN,
+                    widened: false,
                     until: later(last.until, until),
                 };
             }
@@ -165,7 +221,12 @@ impl Ledger {
         let mut at = now;
         for c in &self.copies {
             let id_ok = c.id == ANY_ID || (!errors_only && c.id == id);
-            if id_ok && c.values.within(accepts) && !self.over(now, c.until) {
+            let passes = if c.widened {
+                c.values.meets(accepts)
+            } else {
+                c.values.within(accepts)
+            };
+            if id_ok && passes && !self.over(now, c.until) {
                 at = later(at, c.until);
             }
         }
@@ -226,6 +287,32 @@ mod tests {
         for i in 0..40u16 {
             assert!(l.clear_at(0x26D, Span::one(i), false, 1) >= 1_000 + u32::from(i));
         }
+    }
+
+    /// Forty read-back windows' replies on a full ledger: every window
+    /// read stays guarded until its copy's time or later, while a window
+    /// not read yet and another ID are clear at once.
+    #[test]
+    fn a_full_ledger_widens_the_nearest_copy_of_its_id() {
+        let window = |w: u16| Span {
+            lo: 1 + 24 * w,
+            hi: 24 * (w + 1),
+        };
+        let mut l = Ledger::new(100_000);
+        for w in 0..40u16 {
+            l.copy(0x21F, window(w), 8_000 + u32::from(w), u32::from(w));
+        }
+        for w in 0..40u16 {
+            assert!(l.clear_at(0x21F, window(w), false, 40) >= 8_000 + u32::from(w));
+            // A confirmation that asks one more position is guarded too.
+            let wider = Span {
+                lo: window(w).lo.saturating_sub(1).max(1),
+                hi: window(w).hi,
+            };
+            assert!(l.clear_at(0x21F, wider, false, 40) >= 8_000 + u32::from(w));
+        }
+        assert_eq!(l.clear_at(0x21F, window(40), false, 40), 40);
+        assert_eq!(l.clear_at(0x212, Span::ANY, false, 40), 40);
     }
 
     #[test]
