@@ -196,8 +196,8 @@ pub struct ReadRun {
 
 /// Reads back with `rb` on `line` against `sim` on a line of `baud`,
 /// resuming at most `max_resumes` times after a failure.
-pub fn read_back<const N: usize>(
-    rb: &mut ReadBack<N>,
+pub fn read_back<const N: usize, const Q: usize>(
+    rb: &mut ReadBack<N, Q>,
     line: &mut Line,
     sim: &mut Simulator,
     max_resumes: u32,

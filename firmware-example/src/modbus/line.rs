@@ -61,7 +61,8 @@ enum Exchange {
 /// The engines and the exchange in progress.
 pub struct Engines {
     client: Poller,
-    readback: ReadBack<WINDOW_FRAME>,
+    /// The table window's reads: one window at a time, so two queued.
+    readback: ReadBack<WINDOW_FRAME, 2>,
     transfer: Transfer<RecordBuffer<WINDOW_BYTES>, WINDOW_FRAME>,
     exchange: Exchange,
     /// Where the transmission of the exchange stands.
