@@ -241,7 +241,10 @@ fuzz_target!(|data: &[u8]| {
         assert_eq!(Some(slot.seq), e.sequence());
         assert_eq!(in_force, &p[..]);
         if p[..4] == MAGIC {
-            assert!(Config::parse(&p).is_ok(), "the bridge's block does not check");
+            assert!(
+                Config::parse(&p).is_ok(),
+                "the bridge's block does not check"
+            );
         }
         if p[NET_AT..NET_AT + 4] == *b"IAIN" {
             assert!(NetConfig::parse(&p[NET_AT..]).is_ok());

@@ -65,10 +65,21 @@ fn as_reference(status: &Status<Event<'_>>) -> Reference {
 
 /// Everything a caller can see of a decoder and its reference is the same.
 fn same_as_reference<const N: usize>(dec: &FrameDecoder<N>, reference: &ReferenceDecoder) {
-    assert_eq!(dec.stats(), reference.stats(), "stats differ from the reference");
-    assert_eq!(dec.pending(), reference.pending(), "pending differs from the reference");
+    assert_eq!(
+        dec.stats(),
+        reference.stats(),
+        "stats differ from the reference"
+    );
+    assert_eq!(
+        dec.pending(),
+        reference.pending(),
+        "pending differs from the reference"
+    );
     assert_eq!(dec.failed_envelope(), reference.failed_envelope());
-    assert_eq!(dec.last_frame().map(|f| f.as_bytes()), reference.last_frame());
+    assert_eq!(
+        dec.last_frame().map(|f| f.as_bytes()),
+        reference.last_frame()
+    );
 }
 
 /// The byte-by-byte decoder, producing one event at a time.
@@ -92,7 +103,11 @@ impl<'s, const N: usize> ByByte<'s, N> {
                 let (used, want) = self.reference.decode(&[]);
                 let d = self.dec.decode(&[]);
                 assert_eq!((d.consumed, used), (0, 0));
-                assert_eq!(as_reference(&d.status), want, "push differs from the reference");
+                assert_eq!(
+                    as_reference(&d.status),
+                    want,
+                    "push differs from the reference"
+                );
                 if let Status::Complete(e) = d.status {
                     f(e);
                     return true;
@@ -264,7 +279,11 @@ fn check<const N: usize>(policy: BypassPolicy, cuts: &[u8], stream: &[u8]) {
             let (used, want) = reference.decode(chunk);
             let d = dec.decode(chunk);
             assert_eq!(d.consumed, used, "consumed differs from the reference");
-            assert_eq!(as_reference(&d.status), want, "decode differs from the reference");
+            assert_eq!(
+                as_reference(&d.status),
+                want,
+                "decode differs from the reference"
+            );
             assert!(d.consumed <= chunk.len());
             consumed_total += d.consumed;
             chunk = &chunk[d.consumed..];

@@ -27,7 +27,9 @@
 //! answers its status query and the gateway a Modbus read.
 #![no_main]
 
-use std::collections::VecDeque;
+#[path = "common/wire.rs"]
+mod wire;
+
 use std::mem::MaybeUninit;
 use std::ptr::addr_of_mut;
 
@@ -44,62 +46,15 @@ use firmware_example::net::{Buffers, Net, EMPTY_SLOTS};
 use iai_protocol_b::frame::{emit_frame, Header, Station};
 use libfuzzer_sys::fuzz_target;
 use smoltcp::iface::{Config as IfaceConfig, Interface, SocketHandle, SocketSet, SocketStorage};
-use smoltcp::phy::{Device, DeviceCapabilities, Medium, RxToken, TxToken};
 use smoltcp::socket::tcp;
 use smoltcp::time::Instant;
 use smoltcp::wire::{EthernetAddress, IpAddress, IpCidr};
+use wire::Wire;
 
 const WEB_CLIENTS: usize = 3;
 const PB_PORT: u16 = 5020;
 const MODBUS_PORT: u16 = 502;
 const WEB_PORT: u16 = 80;
-
-#[derive(Default)]
-struct Wire {
-    rx: VecDeque<Vec<u8>>,
-    tx: VecDeque<Vec<u8>>,
-}
-
-struct Rx(Vec<u8>);
-struct Tx<'a>(&'a mut VecDeque<Vec<u8>>);
-
-impl RxToken for Rx {
-    fn consume<R, F: FnOnce(&[u8]) -> R>(self, f: F) -> R {
-        f(&self.0)
-    }
-}
-
-impl TxToken for Tx<'_> {
-    fn consume<R, F: FnOnce(&mut [u8]) -> R>(self, len: usize, f: F) -> R {
-        let mut frame = vec![0u8; len];
-        let r = f(&mut frame);
-        if self.0.len() < 64 {
-            self.0.push_back(frame);
-        }
-        r
-    }
-}
-
-impl Device for Wire {
-    type RxToken<'a> = Rx;
-    type TxToken<'a> = Tx<'a>;
-
-    fn receive(&mut self, _: Instant) -> Option<(Rx, Tx<'_>)> {
-        let frame = self.rx.pop_front()?;
-        Some((Rx(frame), Tx(&mut self.tx)))
-    }
-
-    fn transmit(&mut self, _: Instant) -> Option<Tx<'_>> {
-        Some(Tx(&mut self.tx))
-    }
-
-    fn capabilities(&self) -> DeviceCapabilities {
-        let mut caps = DeviceCapabilities::default();
-        caps.medium = Medium::Ethernet;
-        caps.max_transmission_unit = 1514;
-        caps
-    }
-}
 
 static mut PAGE: [u8; 2048] = [0xFF; 2048];
 static mut STORE: MaybeUninit<Store<MemFlash<'static, 1024, 4>>> = MaybeUninit::uninit();
@@ -182,9 +137,12 @@ impl Side<'_> {
         let t = Instant::from_millis(i64::from(self.now));
         self.iface.poll(t, &mut self.cwire, &mut self.sockets);
         self.wire.rx.extend(self.cwire.tx.drain(..));
-        let _ = self
-            .net
-            .poll_with(&mut self.wire, &mut self.bridge, Some(&mut *self.gateway), self.now);
+        let _ = self.net.poll_with(
+            &mut self.wire,
+            &mut self.bridge,
+            Some(&mut *self.gateway),
+            self.now,
+        );
         for _ in 0..16 {
             let mut up = self.net.host_port();
             if !matches!(
@@ -287,9 +245,12 @@ fuzz_target!(|data: &[u8]| {
                 let s = side.sockets.get_mut::<tcp::Socket>(h);
                 if !s.is_open() {
                     local_port = local_port.wrapping_add(1).max(40_000);
-                    if s
-                        .connect(side.iface.context(), (IpAddress::v4(10, 0, 0, 1), WEB_PORT), local_port)
-                        .is_ok()
+                    if s.connect(
+                        side.iface.context(),
+                        (IpAddress::v4(10, 0, 0, 1), WEB_PORT),
+                        local_port,
+                    )
+                    .is_ok()
                     {
                         got[c].push(Vec::new());
                         reading[c] = true;
@@ -301,7 +262,10 @@ fuzz_target!(|data: &[u8]| {
                     break;
                 };
                 let n = usize::from(n).min(tail.len());
-                let _ = side.sockets.get_mut::<tcp::Socket>(h).send_slice(&tail[..n]);
+                let _ = side
+                    .sockets
+                    .get_mut::<tcp::Socket>(h)
+                    .send_slice(&tail[..n]);
                 rest = &tail[n..];
             }
             2 => {
@@ -358,7 +322,10 @@ fuzz_target!(|data: &[u8]| {
             assert!(head.starts_with("HTTP/1.1 "), "{head:?}");
             assert!(STATUSES.contains(&&head[9..12]), "{head:?}");
         } else {
-            assert!("HTTP/1.1 200".starts_with(&head[..head.len().min(9)]), "{head:?}");
+            assert!(
+                "HTTP/1.1 200".starts_with(&head[..head.len().min(9)]),
+                "{head:?}"
+            );
         }
     }
 
@@ -382,15 +349,17 @@ fuzz_target!(|data: &[u8]| {
     let pb = handles[WEB_CLIENTS];
     let mb = handles[WEB_CLIENTS + 1];
     let ctx = side.iface.context();
-    let _ = side
-        .sockets
-        .get_mut::<tcp::Socket>(pb)
-        .connect(ctx, (IpAddress::v4(10, 0, 0, 1), PB_PORT), 50_000);
+    let _ = side.sockets.get_mut::<tcp::Socket>(pb).connect(
+        ctx,
+        (IpAddress::v4(10, 0, 0, 1), PB_PORT),
+        50_000,
+    );
     let ctx = side.iface.context();
-    let _ = side
-        .sockets
-        .get_mut::<tcp::Socket>(mb)
-        .connect(ctx, (IpAddress::v4(10, 0, 0, 1), MODBUS_PORT), 50_001);
+    let _ = side.sockets.get_mut::<tcp::Socket>(mb).connect(
+        ctx,
+        (IpAddress::v4(10, 0, 0, 1), MODBUS_PORT),
+        50_001,
+    );
     for _ in 0..50 {
         side.round();
     }
@@ -404,7 +373,10 @@ fuzz_target!(|data: &[u8]| {
         |_| Ok(()),
     )
     .unwrap_or(0);
-    let _ = side.sockets.get_mut::<tcp::Socket>(pb).send_slice(&status[..n]);
+    let _ = side
+        .sockets
+        .get_mut::<tcp::Socket>(pb)
+        .send_slice(&status[..n]);
     let _ = side
         .sockets
         .get_mut::<tcp::Socket>(mb)
@@ -415,6 +387,10 @@ fuzz_target!(|data: &[u8]| {
         side.take(pb, &mut pb_got);
         side.take(mb, &mut mb_got);
     }
-    assert!(pb_got.starts_with(b"#BBB00"), "{:?}", String::from_utf8_lossy(&pb_got));
+    assert!(
+        pb_got.starts_with(b"#BBB00"),
+        "{:?}",
+        String::from_utf8_lossy(&pb_got)
+    );
     assert_eq!(mb_got, [0, 7, 0, 0, 0, 7, 1, 4, 4, 0, 0, 0x2E, 0xE0]);
 });

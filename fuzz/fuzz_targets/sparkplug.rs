@@ -26,7 +26,8 @@
 //! every PUBLISH on a topic of `spBv1.0/`.
 #![no_main]
 
-use std::collections::VecDeque;
+#[path = "common/wire.rs"]
+mod wire;
 
 use firmware_example::bridge::Bridge;
 use firmware_example::config::{Config, Policy, Source};
@@ -40,60 +41,12 @@ use firmware_example::net::sparkplug::SparkplugBuffers;
 use firmware_example::net::{Buffers, Net, EMPTY_SLOTS};
 use libfuzzer_sys::fuzz_target;
 use smoltcp::iface::{Config as IfaceConfig, Interface, SocketSet, SocketStorage};
-use smoltcp::phy::{Device, DeviceCapabilities, Medium, RxToken, TxToken};
 use smoltcp::socket::tcp;
 use smoltcp::time::Instant;
 use smoltcp::wire::{EthernetAddress, IpAddress, IpCidr};
+use wire::Wire;
 
 const BROKER_PORT: u16 = 1883;
-
-/// One end of the wire: frames in, frames out.
-#[derive(Default)]
-struct Wire {
-    rx: VecDeque<Vec<u8>>,
-    tx: VecDeque<Vec<u8>>,
-}
-
-struct Rx(Vec<u8>);
-struct Tx<'a>(&'a mut VecDeque<Vec<u8>>);
-
-impl RxToken for Rx {
-    fn consume<R, F: FnOnce(&[u8]) -> R>(self, f: F) -> R {
-        f(&self.0)
-    }
-}
-
-impl TxToken for Tx<'_> {
-    fn consume<R, F: FnOnce(&mut [u8]) -> R>(self, len: usize, f: F) -> R {
-        let mut frame = vec![0u8; len];
-        let r = f(&mut frame);
-        if self.0.len() < 64 {
-            self.0.push_back(frame);
-        }
-        r
-    }
-}
-
-impl Device for Wire {
-    type RxToken<'a> = Rx;
-    type TxToken<'a> = Tx<'a>;
-
-    fn receive(&mut self, _: Instant) -> Option<(Rx, Tx<'_>)> {
-        let frame = self.rx.pop_front()?;
-        Some((Rx(frame), Tx(&mut self.tx)))
-    }
-
-    fn transmit(&mut self, _: Instant) -> Option<Tx<'_>> {
-        Some(Tx(&mut self.tx))
-    }
-
-    fn capabilities(&self) -> DeviceCapabilities {
-        let mut caps = DeviceCapabilities::default();
-        caps.medium = Medium::Ethernet;
-        caps.max_transmission_unit = 1514;
-        caps
-    }
-}
 
 /// One metric as a payload.
 fn one_metric(name: Option<&str>, alias: Option<u16>, t: DataType, v: Value<'_>) -> Vec<u8> {

@@ -40,7 +40,9 @@
 //! frame for the controller's station.
 #![no_main]
 
-use std::collections::VecDeque;
+#[path = "common/wire.rs"]
+mod wire;
+
 use std::convert::Infallible;
 
 use firmware_example::bridge::{Bridge, Poll};
@@ -57,64 +59,14 @@ use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 use iai_protocol_b::frame::{emit_frame, Header};
 use libfuzzer_sys::fuzz_target;
 use smoltcp::iface::{Config as IfaceConfig, Interface, SocketHandle, SocketSet, SocketStorage};
-use smoltcp::phy::{Device, DeviceCapabilities, Medium, RxToken, TxToken};
 use smoltcp::socket::tcp;
 use smoltcp::time::Instant;
 use smoltcp::wire::{EthernetAddress, IpAddress, IpCidr};
+use wire::Wire;
 
 const CLIENTS: usize = 4;
 const PORT: u16 = 5020;
 const MODBUS_PORT: u16 = 502;
-const MTU: usize = 1514;
-
-/// One end of the wire: frames in, frames out.
-#[derive(Default)]
-struct Wire {
-    rx: VecDeque<Vec<u8>>,
-    tx: VecDeque<Vec<u8>>,
-}
-
-struct Rx(Vec<u8>);
-struct Tx<'a>(&'a mut VecDeque<Vec<u8>>);
-
-impl RxToken for Rx {
-    fn consume<R, F: FnOnce(&[u8]) -> R>(self, f: F) -> R {
-        f(&self.0)
-    }
-}
-
-impl TxToken for Tx<'_> {
-    fn consume<R, F: FnOnce(&mut [u8]) -> R>(self, len: usize, f: F) -> R {
-        let mut frame = vec![0u8; len];
-        let r = f(&mut frame);
-        // A wire that holds too much drops frames, as a busy link does.
-        if self.0.len() < 64 {
-            self.0.push_back(frame);
-        }
-        r
-    }
-}
-
-impl Device for Wire {
-    type RxToken<'a> = Rx;
-    type TxToken<'a> = Tx<'a>;
-
-    fn receive(&mut self, _: Instant) -> Option<(Rx, Tx<'_>)> {
-        let frame = self.rx.pop_front()?;
-        Some((Rx(frame), Tx(&mut self.tx)))
-    }
-
-    fn transmit(&mut self, _: Instant) -> Option<Tx<'_>> {
-        Some(Tx(&mut self.tx))
-    }
-
-    fn capabilities(&self) -> DeviceCapabilities {
-        let mut caps = DeviceCapabilities::default();
-        caps.medium = Medium::Ethernet;
-        caps.max_transmission_unit = MTU;
-        caps
-    }
-}
 
 /// The controller's port: takes everything, answers nothing.
 #[derive(Default)]
