@@ -22,7 +22,6 @@
 //! whole (its slot's CRC right) and every block in it checks.
 #![no_main]
 
-use std::convert::Infallible;
 use std::mem::MaybeUninit;
 use std::ptr::addr_of_mut;
 
@@ -35,51 +34,13 @@ use firmware_example::config::settings::Settings;
 use firmware_example::config::store::{self, MemFlash, PageStore, Store};
 use firmware_example::config::{Config, Source, MAGIC};
 use firmware_example::net::config::NetConfig;
-use firmware_example::serial::Port;
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 use iai_protocol_b::frame::{emit_frame, Header, Station};
 use libfuzzer_sys::fuzz_target;
+use test_support::VecPort;
 
 const PASSWORD: &[u8] = b"plant-1234";
-
-#[derive(Default)]
-struct Fake {
-    input: Vec<u8>,
-    output: Vec<u8>,
-}
-
-impl embedded_io::ErrorType for Fake {
-    type Error = Infallible;
-}
-impl embedded_io::ReadReady for Fake {
-    fn read_ready(&mut self) -> Result<bool, Infallible> {
-        Ok(!self.input.is_empty())
-    }
-}
-impl embedded_io::Read for Fake {
-    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Infallible> {
-        let n = buf.len().min(self.input.len());
-        buf[..n].copy_from_slice(&self.input[..n]);
-        self.input.drain(..n);
-        Ok(n)
-    }
-}
-impl embedded_io::WriteReady for Fake {
-    fn write_ready(&mut self) -> Result<bool, Infallible> {
-        Ok(true)
-    }
-}
-impl embedded_io::Write for Fake {
-    fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
-        self.output.extend_from_slice(buf);
-        Ok(buf.len())
-    }
-    fn flush(&mut self) -> Result<(), Infallible> {
-        Ok(())
-    }
-}
-impl Port for Fake {}
 
 static mut PAGE: [u8; 2048] = [0xFF; 2048];
 static mut STORE: MaybeUninit<Store<MemFlash<'static, 1024, 4>>> = MaybeUninit::uninit();
@@ -131,11 +92,11 @@ fn page(unit: u8) -> Vec<u8> {
 fuzz_target!(|data: &[u8]| {
     let mut bridge = Bridge::new(Config::DEFAULT, Source::Default, 0x5EED);
     bridge.attach_editor(editor());
-    let (mut up, mut down) = (Fake::default(), Fake::default());
+    let (mut up, mut down) = (VecPort::default(), VecPort::default());
     let mut now = 0u32;
     let mut unit = 5u8;
     let mut rest = data;
-    let mut poll = |bridge: &mut Bridge, up: &mut Fake, now: u32| {
+    let mut poll = |bridge: &mut Bridge, up: &mut VecPort, now: u32| {
         for _ in 0..64 {
             match bridge.poll(up, &mut down, now) {
                 Ok(Poll::Busy) => {}

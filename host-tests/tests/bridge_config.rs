@@ -4,8 +4,6 @@
 //! bridge config` sends (`iai_cli::bridge`), on a bridge whose page store
 //! is a flash model; and where each board keeps its slots.
 
-use std::convert::Infallible;
-
 use firmware_example::bridge::{Bridge, Poll};
 use firmware_example::codes;
 use firmware_example::config::editor::{host_crc, Editor};
@@ -13,49 +11,11 @@ use firmware_example::config::page::{ACCESS_AT, HOST_LEN, WINDOW};
 use firmware_example::config::settings::Settings;
 use firmware_example::config::store::{MemFlash, PageStore, Store};
 use firmware_example::config::{Config, Source};
-use firmware_example::serial::Port;
 use iai_cli::bridge::{config_frame, hex, settings_from_toml, settings_toml, BOARDS};
 use iai_protocol_b::checksum::BypassPolicy;
 use iai_protocol_b::decoder::{Event, FrameDecoder, Status};
 use iai_protocol_b::frame::Header;
-
-#[derive(Default)]
-struct Fake {
-    input: Vec<u8>,
-    output: Vec<u8>,
-}
-
-impl embedded_io::ErrorType for Fake {
-    type Error = Infallible;
-}
-impl embedded_io::ReadReady for Fake {
-    fn read_ready(&mut self) -> Result<bool, Infallible> {
-        Ok(!self.input.is_empty())
-    }
-}
-impl embedded_io::Read for Fake {
-    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Infallible> {
-        let n = buf.len().min(self.input.len());
-        buf[..n].copy_from_slice(&self.input[..n]);
-        self.input.drain(..n);
-        Ok(n)
-    }
-}
-impl embedded_io::WriteReady for Fake {
-    fn write_ready(&mut self) -> Result<bool, Infallible> {
-        Ok(true)
-    }
-}
-impl embedded_io::Write for Fake {
-    fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
-        self.output.extend_from_slice(buf);
-        Ok(buf.len())
-    }
-    fn flush(&mut self) -> Result<(), Infallible> {
-        Ok(())
-    }
-}
-impl Port for Fake {}
+use test_support::VecPort;
 
 fn no_restart() {}
 
@@ -74,7 +34,7 @@ fn gateway() -> Bridge {
 /// Sends `frame` to the bridge at tick `now` and returns its answer (the
 /// one frame it sends up).
 fn ask(b: &mut Bridge, frame: &[u8], now: u32) -> (Header, u16, String) {
-    let (mut up, mut down) = (Fake::default(), Fake::default());
+    let (mut up, mut down) = (VecPort::default(), VecPort::default());
     up.input = frame.to_vec();
     for _ in 0..100 {
         if let Poll::Wait(_) = b.poll(&mut up, &mut down, now).unwrap() {
@@ -211,7 +171,7 @@ fn a_restart_comes_200_ms_after_its_answer() {
         ask(&mut b, &cmd(codes::RESTART, &hex(b"plant-1234")), 5_000),
         (Header::Response, codes::RESTART, String::new())
     );
-    let (mut up, mut down) = (Fake::default(), Fake::default());
+    let (mut up, mut down) = (VecPort::default(), VecPort::default());
     b.poll(&mut up, &mut down, 5_199).unwrap();
     assert_eq!(b.editor().unwrap().restarts, 0);
     b.poll(&mut up, &mut down, 5_200).unwrap();
