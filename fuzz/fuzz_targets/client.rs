@@ -316,7 +316,7 @@ impl H<'_> {
 
     fn heard(&mut self, heard: Heard, seen: Seen) {
         let station = self.setup.line.station;
-        let (header, from, code) = seen.envelope;
+        let (header, from, _) = seen.envelope;
         let ours = from == station && header != Header::Command;
         assert_eq!(
             heard == Heard::Foreign,
@@ -330,17 +330,13 @@ impl H<'_> {
             Source::Forged => None,
             Source::Delivery(d) => Some(d.clone()),
         };
-        let body = &seen.bytes[6..seen.bytes.len() - 4];
-        let echo = self.fence_awaited
-            && (header, code) == (Header::Response, 0x200)
-            && body == link::fence_text(&self.setup, self.fences).as_bytes();
-        assert_eq!(
-            heard == Heard::Fence,
-            ours && echo,
-            "{heard:?} for {:?} (fence {} awaited: {})",
-            String::from_utf8_lossy(&seen.bytes),
+        link::check_fence_echo(
+            &self.setup,
+            &seen,
+            ours,
+            heard,
             self.fences,
-            self.fence_awaited
+            self.fence_awaited,
         );
         if seen.held {
             assert!(

@@ -206,17 +206,13 @@ impl H<'_> {
         if let Source::Delivery(d) = &seen.source {
             self.link.heard_whole(d);
         }
-        let body = &seen.bytes[6..seen.bytes.len() - 4];
-        let echo = self.fence_awaited
-            && (header, code) == (Header::Response, 0x200)
-            && body == link::fence_text(&self.setup, self.fences).as_bytes();
-        assert_eq!(
-            heard == Heard::Fence,
-            ours && echo,
-            "{heard:?} for {:?} (fence {} awaited: {})",
-            String::from_utf8_lossy(&seen.bytes),
+        link::check_fence_echo(
+            &self.setup,
+            &seen,
+            ours,
+            heard,
             self.fences,
-            self.fence_awaited
+            self.fence_awaited,
         );
         if seen.held {
             assert!(

@@ -820,6 +820,30 @@ pub fn fence_text(setup: &Setup, seq: u32) -> String {
     format!("{:06X}{:04X}", setup.seed & 0xFF_FFFF, seq & 0xFFFF)
 }
 
+/// Checks that `seen` (from the station if `ours`) was heard as the echo
+/// of fence `seq` exactly when it is one: a 200H reply carrying that
+/// fence's text while it is awaited.
+pub fn check_fence_echo(
+    setup: &Setup,
+    seen: &Seen,
+    ours: bool,
+    heard: Heard,
+    seq: u32,
+    awaited: bool,
+) {
+    let (header, _, code) = seen.envelope;
+    let body = &seen.bytes[6..seen.bytes.len() - 4];
+    let echo = awaited
+        && (header, code) == (Header::Response, 0x200)
+        && body == fence_text(setup, seq).as_bytes();
+    assert_eq!(
+        heard == Heard::Fence,
+        ours && echo,
+        "{heard:?} for {:?} (fence {seq} awaited: {awaited})",
+        String::from_utf8_lossy(&seen.bytes),
+    );
+}
+
 /// Checks fence number `seq` (the line's `stats().fences` once it is
 /// due) that an engine transmitted: a 200H command for the station whose
 /// ten characters are the seed's nonce and `seq` ([`fence_text`]).
