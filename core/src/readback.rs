@@ -146,11 +146,12 @@ impl Iterator for ReplyRecords<'_> {
 }
 
 /// Windows queued at once by default: first reads that keep the line busy
-/// while the oldest window's confirmation waits out a duplicate window
-/// (48 windows of 24 8-axis records take about 8.5 s at 115,200 baud: an
-/// 8 s window; the fault suite's read with 10 % copies up to 8 s late
-/// took 1.98x the clean run with 48, 3.01x with 16). An engine that reads
-/// one window at a time needs 2.
+/// while the oldest window's confirmation waits out a duplicate window.
+/// 48 windows of 24 8-axis records (about 2,000 bytes each with the
+/// query) take about 8.3 s at 115,200 baud, an 8 s window; the fault
+/// suite's read with 10 % copies up to 8 s late took 1.98x the clean run
+/// with 48, 3.01x with 16. An engine that reads one window at a time
+/// needs 2.
 pub const QUEUED: usize = 48;
 
 /// Rounds of reading again after a proof found frames the line could not
