@@ -44,6 +44,18 @@ impl Span {
         Span { lo: v, hi: v }
     }
 
+    /// This span grown to hold `v` (from no value, `v` alone): the
+    /// positions of a reply, record by record.
+    pub(crate) const fn holding(self, v: u16) -> Span {
+        if self.lo > self.hi {
+            return Span::one(v);
+        }
+        Span {
+            lo: if v < self.lo { v } else { self.lo },
+            hi: if v > self.hi { v } else { self.hi },
+        }
+    }
+
     /// Whether the two could describe the same reply: either is unknown,
     /// or they share a value.
     pub(crate) const fn meets(self, other: Span) -> bool {
@@ -69,17 +81,6 @@ impl Span {
         }
     }
 
-    /// How far apart the two lie (0 if they meet or either is unknown).
-    const fn gap(self, other: Span) -> u16 {
-        if self.meets(other) {
-            0
-        } else if self.hi < other.lo {
-            other.lo - self.hi
-        } else {
-            self.lo - other.hi
-        }
-    }
-
     /// Whether a reply carrying these values could be accepted by a command
     /// that accepts `accepts`.
     pub(crate) const fn within(self, accepts: Span) -> bool {
@@ -87,23 +88,55 @@ impl Span {
     }
 }
 
-/// Copies remembered at once; a further one widens the nearest copy of
-/// its ID, or with none the last slot becomes a copy of anything (never
-/// forgotten early, maybe kept too broadly).
+/// Copies remembered at once; a further one merges the two copies of one
+/// ID that would be forgotten soonest (never forgotten early, kept a
+/// little more broadly), or with no two of one ID the last slot becomes a
+/// copy of anything.
 const COPIES: usize = 16;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 struct Copy {
     id: u16,
-    /// What the copy carries; for a widened entry, the range its copies'
+    /// What the copy carries; for merged copies, the range all their
     /// values lie in.
     values: Span,
-    /// Widened from several copies: each carries some values in `values`,
-    /// so it may pass for any command whose accepted values meet them.
-    widened: bool,
+    /// The highest first value and the lowest last value of the copies
+    /// merged here (`values` for one copy): a command can take one of them
+    /// only if it accepts a span reaching from at most the one to at least
+    /// the other. Merging copies of windows read in order (low positions)
+    /// thus keeps the windows ahead clear.
+    inner: Span,
     /// The first tick at which it can no longer arrive.
     until: u32,
+}
+
+impl Copy {
+    /// Whether one of the copies here could pass for the reply to a
+    /// command that accepts `accepts`.
+    const fn passes(&self, accepts: Span) -> bool {
+        let unknown = self.values.lo > self.values.hi;
+        unknown || (accepts.lo <= self.inner.lo && self.inner.hi <= accepts.hi)
+    }
+
+    /// These copies and those of `other` (same ID) in one entry.
+    fn merge(self, other: Copy) -> Copy {
+        let values = self.values.union(other.values);
+        let known = values.lo <= values.hi;
+        Copy {
+            id: self.id,
+            values,
+            inner: if known {
+                Span {
+                    lo: self.inner.lo.max(other.inner.lo),
+                    hi: self.inner.hi.min(other.inner.hi),
+                }
+            } else {
+                Span::UNKNOWN
+            },
+            until: later(self.until, other.until),
+        }
+    }
 }
 
 /// What the ledger holds.
@@ -170,37 +203,65 @@ impl Ledger {
         let new = Copy {
             id,
             values,
-            widened: false,
+            inner: values,
             until,
         };
         if let Some(c) = self
             .copies
             .iter_mut()
-            .find(|c| c.id == id && c.values == values && !c.widened)
+            .find(|c| c.id == id && c.values == values && c.inner == values)
         {
             c.until = later(c.until, until);
-        } else if self.copies.push(new).is_err() {
-            // Full: widen the copy of the same ID whose values lie nearest
-            // (a window next to the last one read, a count next to the
-            // last one written), so that none is forgotten early and the
-            // values far from it stay clear; without one, the last slot
-            // becomes a copy of anything.
-            let nearest = self
-                .copies
-                .iter_mut()
-                .filter(|c| c.id == id)
-                .min_by_key(|c| c.values.gap(values));
-            if let Some(c) = nearest {
-                c.values = c.values.union(values);
-                c.widened = true;
-                c.until = later(c.until, until);
-            } else if let Some(last) = self.copies.last_mut() {
-                *last = Copy {
-                    id: ANY_ID,
-                    values: Span::UNKNOWN,
-                    widened: false,
-                    until: later(last.until, until),
-                };
+            return;
+        }
+        let Err(new) = self.copies.push(new) else {
+            return;
+        };
+        // Full: merge the two copies of one ID, the new one among them,
+        // whose entry would end soonest (a window read long ago, a count
+        // written long ago: far from what is asked next), so that none is
+        // forgotten early and the values asked next stay clear.
+        let h = self.horizon;
+        let end = |c: &Copy| c.until.wrapping_sub(now).min(h);
+        let mut best: Option<(usize, Option<usize>, u32)> = None;
+        for (i, a) in self.copies.iter().enumerate() {
+            if a.id == id {
+                let cost = end(a).max(end(&new));
+                if best.is_none_or(|(_, _, c)| cost < c) {
+                    best = Some((i, None, cost));
+                }
+            }
+            for (j, b) in self.copies.iter().enumerate().skip(i + 1) {
+                if a.id == b.id {
+                    let cost = end(a).max(end(b));
+                    if best.is_none_or(|(_, _, c)| cost < c) {
+                        best = Some((i, Some(j), cost));
+                    }
+                }
+            }
+        }
+        match best {
+            Some((i, None, _)) => {
+                if let Some(a) = self.copies.get_mut(i) {
+                    *a = a.merge(new);
+                }
+            }
+            Some((i, Some(j), _)) => {
+                let b = self.copies.swap_remove(j);
+                if let Some(a) = self.copies.get_mut(i) {
+                    *a = a.merge(b);
+                }
+                let _ = self.copies.push(new);
+            }
+            None => {
+                if let Some(last) = self.copies.last_mut() {
+                    *last = Copy {
+                        id: ANY_ID,
+                        values: Span::UNKNOWN,
+                        inner: Span::UNKNOWN,
+                        until: later(last.until, until),
+                    };
+                }
             }
         }
     }
@@ -221,12 +282,7 @@ impl Ledger {
         let mut at = now;
         for c in &self.copies {
             let id_ok = c.id == ANY_ID || (!errors_only && c.id == id);
-            let passes = if c.widened {
-                c.values.meets(accepts)
-            } else {
-                c.values.within(accepts)
-            };
-            if id_ok && passes && !self.over(now, c.until) {
+            if id_ok && c.passes(accepts) && !self.over(now, c.until) {
                 at = later(at, c.until);
             }
         }
@@ -291,9 +347,10 @@ mod tests {
 
     /// Forty read-back windows' replies on a full ledger: every window
     /// read stays guarded until its copy's time or later, while a window
-    /// not read yet and another ID are clear at once.
+    /// not read yet, another ID, and a window shifted by half of one over
+    /// the windows read last are clear at once.
     #[test]
-    fn a_full_ledger_widens_the_nearest_copy_of_its_id() {
+    fn a_full_ledger_merges_the_copies_that_end_soonest() {
         let window = |w: u16| Span {
             lo: 1 + 24 * w,
             hi: 24 * (w + 1),
@@ -313,6 +370,13 @@ mod tests {
         }
         assert_eq!(l.clear_at(0x21F, window(40), false, 40), 40);
         assert_eq!(l.clear_at(0x212, Span::ANY, false, 40), 40);
+        for w in 30..39u16 {
+            let shifted = Span {
+                lo: window(w).lo + 12,
+                hi: window(w).hi + 12,
+            };
+            assert_eq!(l.clear_at(0x21F, shifted, false, 40), 40, "window {w}");
+        }
     }
 
     #[test]
