@@ -455,7 +455,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                                     }
                                 }
                                 self.replies.clear(line, now);
-                                self.verifier.hunting = true;
+                                self.drop_read_back(line, now);
                             }
                             if !matches!(self.state, State::Write | State::Verify) {
                                 continue;
@@ -532,13 +532,11 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
     /// first frame (or broken one): call again with the rest of the input
     /// until it answers [`Status::Partial`].
     pub fn received(&mut self, line: &mut Line, bytes: &[u8], now: u32) -> Received<Heard> {
-        if self.state != State::Verify {
-            let r = self.receive(line, bytes, now);
-            self.stats.bytes_received += r.consumed as u64;
-            return r;
-        }
-        // A read-back reply is compared as it streams by, byte by byte;
-        // the receiver takes the other frames.
+        // A read-back reply streams by the verifier byte by byte, whatever
+        // the transfer awaits: it is compared while a read-back runs, and
+        // otherwise (a copy, a late reply) still tells the line which
+        // positions it carried, which a 32-byte buffer could not. The
+        // receiver takes the other frames.
         for (i, &b) in bytes.iter().enumerate() {
             self.stats.bytes_received += 1;
             let mut heard = self.verify_byte(line, b, now);
@@ -566,7 +564,6 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 State::Write => self.chunk,
                 _ => None,
             },
-            reading_back: self.state == State::Verify,
         };
         let r = self.replies.receive(line, &mut judge, bytes, now);
         if let Status::Complete(heard) = r.status {
@@ -680,7 +677,6 @@ struct CountCheck<'c> {
     cfg: &'c TransferConfig,
     /// The chunk being written, if a write reply is awaited.
     chunk: Option<Chunk>,
-    reading_back: bool,
 }
 
 impl Judge for CountCheck<'_> {
@@ -706,7 +702,7 @@ impl Judge for CountCheck<'_> {
 
     fn streams(&self, header: Header, code: u16) -> bool {
         let read_back = self.cfg.stream.read_back();
-        self.reading_back && header == read_back.header && code == read_back.id
+        header == read_back.header && code == read_back.id
     }
 }
 

@@ -267,6 +267,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
     /// records as they arrive; the comparison counts when the line takes
     /// the reply.
     pub(super) fn verify_byte(&mut self, line: &mut Line, b: u8, now: u32) -> Status<Heard> {
+        let verifying = self.state == State::Verify;
         let v = &mut self.verifier;
         if v.hunting {
             if Header::from_byte(b).is_none() {
@@ -291,21 +292,15 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 v.station = station;
                 v.seen = 0;
                 v.carried = Span::UNKNOWN;
-                v.candidate = kind == v.stream && count <= v.asked;
+                // Outside a read-back it answers nothing: it is only heard.
+                v.candidate = kind == v.stream && count <= v.asked && verifying;
                 v.started = kind == v.stream && station == line.config().station;
                 Status::Partial
             }
             StreamEvent::Record(rec) => {
                 let v = &mut self.verifier;
                 let n = rec.number;
-                v.carried = if v.carried == Span::UNKNOWN {
-                    Span::one(n)
-                } else {
-                    Span {
-                        lo: v.carried.lo.min(n),
-                        hi: v.carried.hi.max(n),
-                    }
-                };
+                v.carried = v.carried.holding(n);
                 let window = v.window();
                 if n < window.lo || n > window.hi {
                     v.candidate = false;
@@ -352,6 +347,16 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 }
                 Status::Partial
             }
+        }
+    }
+
+    /// Before a send at `now`: a read-back reply half streamed by is
+    /// dropped; a copy of it may still come whole.
+    pub(super) fn drop_read_back(&mut self, line: &mut Line, now: u32) {
+        let v = &mut self.verifier;
+        v.hunting = true;
+        if core::mem::take(&mut v.started) {
+            line.broken(Some((Header::Response, v.station, v.stream.id)), now);
         }
     }
 
