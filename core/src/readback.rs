@@ -13,14 +13,24 @@
 //!
 //! # Confirmed reads
 //! The 8-bit SC lets some corruptions through (two bit flips that cancel).
-//! With [`ReadBackConfig::confirm`] (the default) a window is delivered only
-//! when two replies agree byte for byte, and the second provably answers
-//! its own query: it is sent when no copy of any earlier reply that could
-//! pass for it may still arrive. A first read may be answered by anything
-//! the confirmation then rejects, so first reads of the next windows go on
-//! while a confirmation waits; windows are still delivered in order. On a
-//! line with a duplicate window, a window read empty waits out that window
-//! before its confirmation (every empty reply looks alike).
+//! With [`ReadBackConfig::confirm`] (the default) every record is read
+//! twice and delivered only when both replies agree on it, and the second
+//! provably answers its own query: it is sent when no reply that may still
+//! arrive could pass for it. Each window is read once ("first read"); the
+//! query whose reply is delivered starts at the first position not
+//! delivered and ends at the middle or the end of a window read, so that
+//! its records are compared half window by half window with the first
+//! reads' (a fingerprint per half). On a line that repeats frames a copy of
+//! a first read could pass for a second read of the same window, but not
+//! for one shifted by half a window: the same records, asked by a question
+//! no earlier reply answers. The engine asks the longest such query that
+//! nothing could pass for, first reading ahead so that it can span a whole
+//! window; windows are still delivered in order. Only when every choice
+//! could still be answered by a copy (a window read empty: every empty
+//! reply looks alike) does the line wait the copies out. While a reply is
+//! kept for delivery, replies that pass meanwhile (copies, late ones) are
+//! read as they stream by, so that the line knows which positions their
+//! own copies would carry.
 //!
 //! # Proven windows
 //! A line that declared no copies may still repeat frames (a converter
@@ -34,18 +44,24 @@
 //! after [`MAX_RECONFIRMS`] rounds).
 //!
 //! RAM: the reply decoder (`N` bytes, default 2,048, the TTA's transmit
-//! limit), a 24-byte query, up to 16 windows in flight and counters.
+//! limit), a position-stream decoder for replies passing while one is
+//! kept, a 24-byte query, `Q` windows in flight ([`QUEUED`]) and counters.
 
+use crate::checksum::BypassPolicy;
 use crate::clock::Clock;
 use crate::decoder::{Received, Status};
 use crate::engine::{self, Engine, Step};
 use crate::error::{Error, Failure};
 use crate::field::Reader;
-use crate::frame::{Frame, Header};
+use crate::frame::{Frame, Header, Station};
 use crate::limits;
-use crate::line::{fingerprint, Claim, Command, Due, Heard, Judge, Line, Receiver, Span, Verdict};
+use crate::line::{
+    fingerprint_more, Claim, Command, Due, Heard, Judge, Line, Receiver, Span, Verdict,
+    FINGERPRINT_START,
+};
 use crate::position::{PositionRecord, PositionStream};
 use crate::profile::Profile;
+use crate::table::{PositionStreamDecoder, StreamEvent};
 use crate::window::{write_query, Windows, QUERY_LEN};
 
 /// Settings of a read-back.
@@ -145,54 +161,79 @@ impl Iterator for ReplyRecords<'_> {
     }
 }
 
-/// Windows queued at once by default: first reads that keep the line busy
-/// while the oldest window's confirmation waits out a duplicate window.
-/// 48 windows of 24 8-axis records (about 2,000 bytes each with the
-/// query) take about 8.3 s at 115,200 baud, an 8 s window; the fault
-/// suite's read with 10 % copies up to 8 s late took 1.98x the clean run
-/// with 48, 3.01x with 16. An engine that reads one window at a time
-/// needs 2.
-pub const QUEUED: usize = 48;
+/// Windows queued at once by default: a confirmation spans at most two
+/// windows' halves, and a window split after a timeout takes one more
+/// place. An engine that reads one window at a time needs 2.
+pub const QUEUED: usize = 4;
 
 /// Rounds of reading again after a proof found frames the line could not
 /// place, before the read-back gives up ([`Failure::Unconfirmed`]).
 pub const MAX_RECONFIRMS: u8 = 8;
 
-/// A window of the queue.
+/// A window of the queue: positions `head..head + asked`, read first by
+/// one query; confirmations compare its halves.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Window {
     head: u32,
     asked: u16,
-    /// The hash of a reply that awaits its confirmation.
-    first: Option<u32>,
+    /// The fingerprints of the records its first reply carried in each
+    /// half (`head..mid`, `mid..end`), once read.
+    prints: Option<[u32; 2]>,
 }
 
 impl Window {
-    fn span(&self) -> Span {
-        Span {
-            lo: self.head as u16,
-            hi: (self.head + u32::from(self.asked.max(1)) - 1) as u16,
-        }
+    /// Where its second half begins.
+    fn mid(&self) -> u32 {
+        self.head + u32::from(self.asked / 2)
     }
+    /// The first position after it.
+    fn end(&self) -> u32 {
+        self.head + u32::from(self.asked.max(1))
+    }
+    /// Its halves, as position ranges `lo..hi` (the first is empty for a
+    /// window of one position).
+    fn halves(&self) -> [(u32, u32); 2] {
+        [(self.head, self.mid()), (self.mid(), self.end())]
+    }
+}
+
+/// Positions `lo..hi` (`lo < hi`) as a span.
+fn span(lo: u32, hi: u32) -> Span {
+    Span {
+        lo: lo as u16,
+        hi: hi.saturating_sub(1) as u16,
+    }
+}
+
+/// A query of the read-back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Ask {
+    /// The first read of window `at` of the queue.
+    First { at: usize },
+    /// The query whose reply is delivered once it agrees with the first
+    /// reads (or, unconfirmed, at once): positions `lo..hi`.
+    Deliver { lo: u32, hi: u32 },
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum State {
     /// Choosing the next query.
     Plan,
-    /// The query of window `at` of the queue is on the line; `confirming`
-    /// if its reply is to confirm (or, unconfirmed, to be delivered).
-    Query {
-        at: usize,
-        delivers: bool,
-    },
-    /// The front window's last reply is taken: a fence proves that no
-    /// copy stood in for one of its replies; `started` once it is asked.
+    /// The query is on the line.
+    Query(Ask),
+    /// The reply of positions `lo..hi` is to be delivered: a fence proves
+    /// that no copy stood in for one of the replies it rests on; `started`
+    /// once it is asked.
     Prove {
         started: bool,
+        lo: u32,
+        hi: u32,
     },
-    /// The front window's reply is to be delivered.
-    Deliver,
+    /// The reply of positions `lo..hi` is to be delivered.
+    Deliver {
+        lo: u32,
+        hi: u32,
+    },
     Complete,
     Failed(Failure),
 }
@@ -203,13 +244,18 @@ pub struct ReadBack<const N: usize = { limits::TTA.response }, const Q: usize = 
     cfg: ReadBackConfig,
     /// First position not queued yet; `u32` so that it can pass 0xFFFF.
     next: u32,
+    /// First position not delivered yet.
+    delivered: u32,
     queue: heapless::Deque<Window, Q>,
     windows: Windows,
     query: [u8; QUERY_LEN],
     query_len: usize,
     replies: Receiver<N>,
-    /// Hash and records of the reply taken last.
-    answer: Option<(u32, u16)>,
+    /// Replies heard while one is kept for delivery.
+    passing: Passing,
+    /// The reply taken last: its records, and for a first read the
+    /// fingerprints of its window's halves.
+    answer: Option<[u32; 2]>,
     /// The line's count of unplaced frames at the last proof (or start).
     proven: Option<u32>,
     /// Rounds read again since the last window was delivered.
@@ -224,11 +270,13 @@ impl<const N: usize, const Q: usize> ReadBack<N, Q> {
         ReadBack {
             cfg,
             next: u32::from(cfg.first),
+            delivered: u32::from(cfg.first),
             queue: heapless::Deque::new(),
             windows: Windows::new(cfg.window()),
             query: [0; QUERY_LEN],
             query_len: 0,
             replies: Receiver::new(),
+            passing: Passing::new(),
             answer: None,
             proven: None,
             reconfirms: 0,
@@ -253,22 +301,23 @@ impl<const N: usize, const Q: usize> ReadBack<N, Q> {
         loop {
             match self.state {
                 State::Plan => self.plan(line, now),
-                State::Query { at, delivers } => match line.poll(now) {
+                State::Query(ask) => match line.poll(now) {
                     Due::Fence => return Step::Transmit(line.fence_bytes()),
                     Due::Send { fresh } => {
                         if fresh {
+                            self.passing.stop(line, self.cfg.stream, now);
                             self.replies.clear(line, now);
                             self.answer = None;
                             if line.sends() > 1 {
                                 self.stats.retries += 1;
                                 self.stats.timeouts += 1;
-                                self.split(line, at);
+                                self.split(line, ask);
                             }
                         }
                         return Step::Transmit(self.query.get(..self.query_len).unwrap_or(&[]));
                     }
                     Due::WaitUntil(t) => return Step::WaitUntil(t),
-                    Due::Done(Ok(())) => self.answered(at, delivers),
+                    Due::Done(Ok(())) => self.answered(ask),
                     Due::Done(Err(e)) => {
                         if !matches!(e, Failure::Controller { .. }) {
                             self.stats.timeouts += 1;
@@ -281,25 +330,42 @@ impl<const N: usize, const Q: usize> ReadBack<N, Q> {
                         })
                     }
                 },
-                State::Prove { started: false } => {
+                State::Prove {
+                    started: false,
+                    lo,
+                    hi,
+                } => {
                     line.start_proof(now);
-                    self.state = State::Prove { started: true };
+                    self.state = State::Prove {
+                        started: true,
+                        lo,
+                        hi,
+                    };
                 }
-                State::Prove { started: true } => match line.poll(now) {
+                State::Prove { started: true, .. } => match line.poll(now) {
                     Due::Fence => return Step::Transmit(line.fence_bytes()),
                     Due::WaitUntil(t) => return Step::WaitUntil(t),
                     Due::Done(Ok(())) => self.proved(line),
                     Due::Done(Err(e)) => self.state = State::Failed(e),
                     // Another engine took the line meanwhile: prove again.
-                    Due::Send { .. } | Due::Idle => self.state = State::Prove { started: false },
+                    Due::Send { .. } | Due::Idle => {
+                        if let State::Prove { lo, hi, .. } = self.state {
+                            self.state = State::Prove {
+                                started: false,
+                                lo,
+                                hi,
+                            };
+                        }
+                    }
                 },
-                State::Deliver => {
+                State::Deliver { lo, hi } => {
                     self.state = State::Plan;
                     self.reconfirms = 0;
                     self.windows.grow();
-                    let Some(w) = self.queue.pop_front() else {
-                        continue;
-                    };
+                    self.delivered = hi;
+                    while self.queue.front().is_some_and(|w| w.end() <= hi) {
+                        self.queue.pop_front();
+                    }
                     let stream = self.cfg.stream;
                     // The reply was checked on arrival; an empty list if it
                     // vanished.
@@ -316,8 +382,8 @@ impl<const N: usize, const Q: usize> ReadBack<N, Q> {
                         r,
                         left,
                         stream,
-                        head: w.head as u16,
-                        asked: w.asked,
+                        head: lo as u16,
+                        asked: hi.saturating_sub(lo) as u16,
                     })));
                 }
                 State::Complete => return Step::Done(Ok(None)),
@@ -326,40 +392,107 @@ impl<const N: usize, const Q: usize> ReadBack<N, Q> {
         }
     }
 
-    /// Chooses the next query: the front window's confirmation once no
-    /// copy could pass for it, else a first read of a window not read yet
-    /// (queuing the next one), else the front's confirmation anyway (the
-    /// line holds it until it is clear).
+    /// Chooses the next query.
     fn plan(&mut self, line: &mut Line, now: u32) {
         if self.proven.is_none() {
             self.proven = Some(line.stats().unplaced);
         }
-        let Some(front) = self.queue.front().copied() else {
-            if !self.push_next() {
-                self.state = State::Complete;
+        if self.queue.is_empty() && !self.push_next() {
+            self.state = State::Complete;
+            return;
+        }
+        if !self.cfg.confirm {
+            if let Some(w) = self.queue.front().copied() {
+                let ask = Ask::Deliver {
+                    lo: w.head,
+                    hi: w.end(),
+                };
+                self.begin(line, ask, Claim::Proof, now);
             }
             return;
-        };
-        if !self.cfg.confirm {
-            self.begin(line, 0, Claim::Proof, true, now);
-            return;
         }
+        self.plan_confirmation(line, now);
+    }
+
+    /// Confirmed reads: the next confirmation starts at the first position
+    /// not delivered and ends at a half of a window read once, at most a
+    /// window long. Of those no copy could pass for, the longest; before
+    /// it, the first reads that let it reach a whole window. A copy of a
+    /// first read can pass for a confirmation of the same window, but not
+    /// for one shifted by half a window: the same records, asked by a
+    /// different question. Only when every choice could still be answered
+    /// by a copy does a first read go ahead, or the line wait.
+    fn plan_confirmation(&mut self, line: &mut Line, now: u32) {
         let id = self.cfg.stream.id;
-        let confirmable = front.first.is_some();
-        if confirmable && line.clear_at(id, front.span(), Claim::Proof, now) == now {
-            self.begin(line, 0, Claim::Proof, true, now);
-            return;
+        let from = self.delivered;
+        let limit = u32::from(self.windows.span(u32::MAX));
+        let mut reach = from;
+        let mut longest_clear = None;
+        let mut soonest: Option<(u32, u32)> = None;
+        let mut unread = None;
+        for (i, w) in self.queue.iter().enumerate() {
+            if w.prints.is_none() {
+                unread = Some(i);
+                break;
+            }
+            for b in [w.mid(), w.end()] {
+                // The first end is always a choice (a window queued before
+                // the windows shrank may be longer than the limit).
+                if b <= from || (b - from > limit && reach > from) {
+                    continue;
+                }
+                reach = b;
+                let at = line.clear_at(id, span(from, b), Claim::Proof, now);
+                if at == now {
+                    longest_clear = Some(b);
+                } else if soonest.is_none_or(|(_, t)| at.wrapping_sub(now) <= t.wrapping_sub(now)) {
+                    soonest = Some((b, at));
+                }
+            }
         }
-        let unread = self.queue.iter().position(|w| w.first.is_none());
-        let at = match unread {
+        let end = u32::from(self.cfg.last) + 1;
+        let short = reach < end && reach - from < limit;
+        let read_ahead = |rb: &mut Self| match unread {
             Some(at) => Some(at),
-            None if self.push_next() => Some(self.queue.len() - 1),
+            None if rb.push_next() => Some(rb.queue.len() - 1),
             None => None,
         };
-        match at {
-            Some(at) => self.begin(line, at, Claim::Tentative, false, now),
-            None => self.begin(line, 0, Claim::Proof, true, now),
+        if short || longest_clear.is_none() {
+            if let Some(at) = read_ahead(self) {
+                self.begin(line, Ask::First { at }, Claim::Tentative, now);
+                return;
+            }
         }
+        let hi = match (longest_clear, soonest) {
+            (Some(b), _) | (None, Some((b, _))) => b,
+            (None, None) => {
+                // Nothing read and nothing to read: the queue is full of
+                // windows read; start over from the first not delivered.
+                self.restart_from(from, limit);
+                return;
+            }
+        };
+        self.begin(line, Ask::Deliver { lo: from, hi }, Claim::Proof, now);
+    }
+
+    /// Drops the queue and reads again from `from`, in windows of at most
+    /// `asked` positions.
+    fn restart_from(&mut self, from: u32, asked: u32) {
+        self.queue.clear();
+        self.next = from;
+        let last = u32::from(self.cfg.last);
+        if from > last {
+            self.state = State::Complete;
+            return;
+        }
+        let asked = asked.min(last + 1 - from).max(1) as u16;
+        let _ = self.queue.push_back(Window {
+            head: from,
+            asked,
+            prints: None,
+        });
+        self.next = from + u32::from(asked);
+        self.state = State::Plan;
     }
 
     /// Queues the next window; `false` when every position is queued or
@@ -373,45 +506,79 @@ impl<const N: usize, const Q: usize> ReadBack<N, Q> {
         let w = Window {
             head: self.next,
             asked,
-            first: None,
+            prints: None,
         };
         self.next += u32::from(asked);
         self.queue.push_back(w).is_ok()
     }
 
-    /// Starts the query of window `at` of the queue.
-    fn begin(&mut self, line: &mut Line, at: usize, claim: Claim, delivers: bool, now: u32) {
-        let Some(w) = self.queue.iter().nth(at).copied() else {
+    /// The positions `ask` reads, as `lo..hi`.
+    fn range(&self, ask: Ask) -> Option<(u32, u32)> {
+        match ask {
+            Ask::First { at } => self.queue.iter().nth(at).map(|w| (w.head, w.end())),
+            Ask::Deliver { lo, hi } => Some((lo, hi)),
+        }
+    }
+
+    /// Starts the query `ask`.
+    fn begin(&mut self, line: &mut Line, ask: Ask, claim: Claim, now: u32) {
+        let Some((lo, hi)) = self.range(ask) else {
             self.state = State::Plan;
             return;
         };
-        if let Err(e) = self.write_query(line, &w) {
+        if let Err(e) = self.write_query(line, lo, hi) {
             self.state = State::Failed(Failure::Protocol(e));
             return;
         }
-        let cmd = Command::of(self.cfg.stream.id, w.span(), claim, line.config().max_sends);
+        let cmd = Command::of(
+            self.cfg.stream.id,
+            span(lo, hi),
+            claim,
+            line.config().max_sends,
+        );
         line.begin(cmd, now);
-        self.state = State::Query { at, delivers };
+        self.state = State::Query(ask);
     }
 
-    fn write_query(&mut self, line: &Line, w: &Window) -> Result<(), Error> {
+    fn write_query(&mut self, line: &Line, lo: u32, hi: u32) -> Result<(), Error> {
         let (station, checksum) = (line.config().station, line.config().checksum);
-        let head = u16::try_from(w.head).map_err(|_| Error::ValueOutOfRange { offset: 6 })?;
+        let head = u16::try_from(lo).map_err(|_| Error::ValueOutOfRange { offset: 6 })?;
+        let asked = u16::try_from(hi.saturating_sub(lo))
+            .map_err(|_| Error::ValueOutOfRange { offset: 10 })?;
         self.query_len = write_query(
             self.cfg.stream,
             station,
             checksum,
             head,
-            w.asked,
+            asked,
             &mut self.query,
         )?;
         Ok(())
     }
 
-    /// The query of window `at` timed out: ask its first half (a long reply
-    /// is more likely hit by noise) and queue the rest right after it. A
-    /// reply of the larger window still answers the smaller one exactly.
-    fn split(&mut self, line: &mut Line, at: usize) {
+    /// The query `ask` timed out: ask fewer positions (a long reply is more
+    /// likely hit by noise). A first read asks its window's first half and
+    /// queues the rest right after it; a delivering query becomes the first
+    /// read of a smaller window from the first position not delivered. A
+    /// reply of the larger query still answers the smaller one exactly.
+    fn split(&mut self, line: &mut Line, ask: Ask) {
+        let at = match ask {
+            Ask::First { at } => at,
+            Ask::Deliver { lo, hi } if self.cfg.confirm => {
+                let asked = hi.saturating_sub(lo) as u16;
+                if asked <= 1 {
+                    return;
+                }
+                let half = self.windows.shrink(asked);
+                self.restart_from(lo, u32::from(half));
+                if self.write_query(line, lo, lo + u32::from(half)).is_ok() {
+                    line.accept(span(lo, lo + u32::from(half)));
+                }
+                self.state = State::Query(Ask::First { at: 0 });
+                return;
+            }
+            Ask::Deliver { .. } => 0,
+        };
         let Some(w) = self.queue.iter().nth(at).copied() else {
             return;
         };
@@ -421,13 +588,13 @@ impl<const N: usize, const Q: usize> ReadBack<N, Q> {
         let half = self.windows.shrink(w.asked);
         let first = Window {
             asked: half,
-            first: None,
+            prints: None,
             ..w
         };
         let rest = Window {
             head: w.head + u32::from(half),
             asked: w.asked - half,
-            first: None,
+            prints: None,
         };
         // Rebuild the queue with the window split in place.
         let mut queue = heapless::Deque::new();
@@ -440,58 +607,88 @@ impl<const N: usize, const Q: usize> ReadBack<N, Q> {
             }
         }
         self.queue = queue;
-        if self.write_query(line, &first).is_ok() {
-            line.accept(first.span());
+        if self.write_query(line, first.head, first.end()).is_ok() {
+            line.accept(span(first.head, first.end()));
         }
-        if let State::Query { delivers, .. } = self.state {
-            // A confirmation of the larger window confirms nothing now.
-            self.state = State::Query {
-                at,
-                delivers: delivers && !self.cfg.confirm,
-            };
+        if let Ask::Deliver { .. } = ask {
+            self.state = State::Query(Ask::Deliver {
+                lo: first.head,
+                hi: first.end(),
+            });
         }
     }
 
-    /// The query of window `at` was answered.
-    fn answered(&mut self, at: usize, delivers: bool) {
-        let Some((hash, _)) = self.answer else {
+    /// The query `ask` was answered.
+    fn answered(&mut self, ask: Ask) {
+        let Some(prints) = self.answer else {
             self.state = State::Plan;
             return;
         };
         self.stats.queries += 1;
-        let Some(w) = self.queue.iter_mut().nth(at) else {
-            self.state = State::Plan;
-            return;
+        let (lo, hi) = match ask {
+            Ask::First { at } => {
+                if let Some(w) = self.queue.iter_mut().nth(at) {
+                    w.prints = Some(prints);
+                }
+                self.windows.grow();
+                self.state = State::Plan;
+                return;
+            }
+            Ask::Deliver { lo, hi } => (lo, hi),
         };
-        if !delivers {
-            w.first = Some(hash);
-            self.windows.grow();
-            self.state = State::Plan;
-            return;
-        }
         if !self.cfg.confirm {
-            self.state = State::Prove { started: false };
+            self.state = State::Prove {
+                started: false,
+                lo,
+                hi,
+            };
             return;
         }
-        if w.first == Some(hash) {
+        // Every half the reply covers must agree with what was read of it.
+        let stream = self.cfg.stream;
+        let mut agree = true;
+        if let Some(frame) = self.replies.reply() {
+            for w in self.queue.iter_mut() {
+                let halves = w.halves();
+                let Some(known) = w.prints.as_mut() else {
+                    continue;
+                };
+                for (print, (a, b)) in known.iter_mut().zip(halves) {
+                    if a < b && lo <= a && b <= hi {
+                        let seen = records_print(stream, &frame, a, b);
+                        if seen != *print {
+                            // This reply is provable: the next must agree.
+                            agree = false;
+                            *print = seen;
+                        }
+                    }
+                }
+            }
+        }
+        if agree {
             self.stats.windows_confirmed += 1;
-            self.state = State::Prove { started: false };
+            self.state = State::Prove {
+                started: false,
+                lo,
+                hi,
+            };
         } else {
-            // This reply is provable: the next must agree with it.
             self.stats.disagreements += 1;
-            w.first = Some(hash);
             self.state = State::Plan;
         }
     }
 
-    /// The proof's echo is back: deliver the front window if nothing
-    /// unplaced came since the last proof; else read again every window
-    /// whose replies were taken since (the line now expects copies).
+    /// The proof's echo is back: deliver the reply if nothing unplaced came
+    /// since the last proof; else read everything not delivered again from
+    /// its first read (the line now expects copies).
     fn proved(&mut self, line: &Line) {
+        let State::Prove { lo, hi, .. } = self.state else {
+            return;
+        };
         let unplaced = line.stats().unplaced;
         if self.proven.is_none_or(|p| p == unplaced) {
             self.proven = Some(unplaced);
-            self.state = State::Deliver;
+            self.state = State::Deliver { lo, hi };
             return;
         }
         self.proven = Some(unplaced);
@@ -501,10 +698,15 @@ impl<const N: usize, const Q: usize> ReadBack<N, Q> {
             self.state = State::Failed(Failure::Unconfirmed { unplaced });
             return;
         }
-        for w in self.queue.iter_mut() {
-            w.first = None;
-        }
-        self.state = State::Plan;
+        let limit = u32::from(self.windows.span(u32::MAX));
+        self.restart_from(self.delivered, limit);
+    }
+
+    /// Whether the reply to the query on the line is the one to deliver (a
+    /// confirmation, or any query of an unconfirmed read-back): it is kept
+    /// until delivered.
+    pub fn delivers(&self) -> bool {
+        matches!(self.state, State::Query(Ask::Deliver { .. }))
     }
 
     /// The query was completely transmitted at `now`.
@@ -527,82 +729,273 @@ impl<const N: usize, const Q: usize> ReadBack<N, Q> {
     /// one); a reply to be delivered stays in the receiver until the next
     /// `poll` delivers it.
     pub fn received(&mut self, line: &mut Line, bytes: &[u8], now: u32) -> Received<Heard> {
-        let (window, delivers) = match self.state {
-            State::Query { at, delivers } => (self.queue.iter().nth(at).copied(), delivers),
-            _ => (None, false),
+        if self.replies.reply().is_some() {
+            return self.overhear(line, bytes, now);
+        }
+        let (asked, first) = match self.state {
+            State::Query(ask) => (
+                self.range(ask),
+                match ask {
+                    Ask::First { at } => self.queue.iter().nth(at).copied(),
+                    Ask::Deliver { .. } => None,
+                },
+            ),
+            _ => (None, None),
         };
         let mut judge = WindowCheck {
             cfg: &self.cfg,
-            window,
-            delivers,
+            asked,
+            first,
             judged: None,
+            held: false,
         };
         let r = self.replies.receive(line, &mut judge, bytes, now);
         let judged = judge.judged;
-        match r.status {
-            Status::Complete(Heard::Answer) => self.answer = judged,
+        if let Status::Complete(Heard::Answer) = r.status {
+            self.answer = judged;
+        }
+        self.count(r.status);
+        r
+    }
+
+    /// Bytes received while a reply is kept for delivery: a reply to a
+    /// query (a copy, a late one) is read as it passes, so that the line
+    /// learns the positions it carries; the line's own decoder hears the
+    /// rest (a fence's echo).
+    fn overhear(&mut self, line: &mut Line, bytes: &[u8], now: u32) -> Received<Heard> {
+        let kind = self.cfg.stream;
+        for (i, b) in bytes.iter().enumerate() {
+            let b = core::slice::from_ref(b);
+            // Both decoders see every byte (neither is left mid-frame); a
+            // reply of the query's kind is the passing decoder's.
+            let passing = self.passing.push(line, kind, b, now);
+            let mut judge = WindowCheck {
+                cfg: &self.cfg,
+                asked: None,
+                first: None,
+                judged: None,
+                held: true,
+            };
+            let other = self.replies.receive(line, &mut judge, b, now).status;
+            let heard = if passing.is_partial() { other } else { passing };
+            if !heard.is_partial() {
+                self.count(heard);
+                return Received {
+                    consumed: i + 1,
+                    status: heard,
+                };
+            }
+        }
+        Received {
+            consumed: bytes.len(),
+            status: Status::Partial,
+        }
+    }
+
+    fn count(&mut self, heard: Status<Heard>) {
+        match heard {
             Status::Complete(Heard::Mismatch | Heard::Stale | Heard::Unplaced) => {
                 self.stats.stale_replies += 1
             }
             Status::Complete(Heard::Foreign | Heard::Broken(_)) => self.stats.ignored += 1,
             _ => {}
         }
-        r
     }
 }
 
-/// A read-back's check of a reply: the records it carries lie in the
-/// window asked, no more than asked.
-struct WindowCheck<'c> {
-    cfg: &'c ReadBackConfig,
-    window: Option<Window>,
-    delivers: bool,
-    /// The fingerprint and record count of the last reply judged to fit.
-    judged: Option<(u32, u16)>,
+/// A query's reply heard while the engine keeps another (a copy, a late
+/// reply), decoded as it streams by without a buffer: its station, the
+/// positions it carries and the fingerprint of its bytes, which the line
+/// hears at its end (as it would from the engine's own receiver).
+#[derive(Debug, Clone)]
+struct Passing {
+    decoder: PositionStreamDecoder,
+    /// Between frames: waiting for a header byte.
+    hunting: bool,
+    /// A reply of the query's kind is under way.
+    started: bool,
+    station: Station,
+    carried: Span,
+    print: u32,
 }
 
-impl Judge for WindowCheck<'_> {
-    fn judge(&mut self, f: &Frame<'_>) -> Verdict {
-        let (check, values) = check_reply(self.cfg, self.window, f);
-        self.judged = check.map(|n| (fingerprint(f.as_bytes()), n));
-        Verdict {
-            fits: check.is_some(),
-            values,
-            keep: self.delivers,
+impl Passing {
+    const fn new() -> Self {
+        Passing {
+            decoder: PositionStreamDecoder::new(BypassPolicy::Reject),
+            hunting: true,
+            started: false,
+            station: Station(0),
+            carried: Span::UNKNOWN,
+            print: FINGERPRINT_START,
+        }
+    }
+
+    /// Byte `b` of the input at `now`; a reply of `kind` that ends is
+    /// offered to the line (whole, or broken by its envelope).
+    fn push(&mut self, line: &mut Line, kind: PositionStream, b: &[u8], now: u32) -> Status<Heard> {
+        let Some(&byte) = b.first() else {
+            return Status::Partial;
+        };
+        if self.hunting {
+            if Header::from_byte(byte).is_none() {
+                return Status::Partial;
+            }
+            self.decoder.reset();
+            self.hunting = false;
+            self.started = false;
+            self.carried = Span::UNKNOWN;
+            self.print = FINGERPRINT_START;
+        }
+        self.print = fingerprint_more(self.print, b);
+        let Status::Complete(event) = self.decoder.push(byte) else {
+            return Status::Partial;
+        };
+        match event {
+            StreamEvent::Start {
+                kind: k, station, ..
+            } => {
+                // Another message is the line's decoder's to hear.
+                self.started = k == kind;
+                self.hunting = !self.started;
+                self.station = station;
+                Status::Partial
+            }
+            StreamEvent::Record(rec) => {
+                self.carried = self.carried.holding(rec.number);
+                Status::Partial
+            }
+            StreamEvent::End { .. } => {
+                self.hunting = true;
+                self.started = false;
+                let verdict = Verdict {
+                    fits: false,
+                    values: self.carried,
+                    keep: false,
+                };
+                let print = self.print;
+                Status::Complete(line.hear(
+                    kind.header,
+                    self.station,
+                    kind.id,
+                    None,
+                    verdict,
+                    print,
+                    now,
+                ))
+            }
+            StreamEvent::Error { error, .. } => {
+                self.hunting = true;
+                let started = core::mem::take(&mut self.started);
+                if Header::from_byte(byte).is_some() {
+                    // The byte that broke the frame starts the next.
+                    self.decoder.reset();
+                    self.hunting = false;
+                    self.carried = Span::UNKNOWN;
+                    self.print = fingerprint_more(FINGERPRINT_START, b);
+                    let _ = self.decoder.push(byte);
+                }
+                if started {
+                    line.broken(Some((kind.header, self.station, kind.id)), now);
+                    return Status::Complete(Heard::Broken(error));
+                }
+                Status::Partial
+            }
+        }
+    }
+
+    /// The kept reply is released at `now` (a query goes out): a reply half
+    /// heard is dropped, and a copy of it may still come.
+    fn stop(&mut self, line: &mut Line, kind: PositionStream, now: u32) {
+        self.hunting = true;
+        if core::mem::take(&mut self.started) {
+            line.broken(Some((kind.header, self.station, kind.id)), now);
         }
     }
 }
 
-/// Checks a frame as the reply to the query of `window`: its number of
-/// records if it is one, and the positions it carries (for the ledger).
-fn check_reply(cfg: &ReadBackConfig, window: Option<Window>, f: &Frame<'_>) -> (Option<u16>, Span) {
+/// The fingerprint of the records `frame` carries with numbers in
+/// `lo..hi`, in the order it carries them (two replies that agree on those
+/// records give the same, whatever else they carry).
+fn records_print(stream: PositionStream, frame: &Frame<'_>, lo: u32, hi: u32) -> u32 {
+    let mut r = frame.reader();
+    let mut print = FINGERPRINT_START;
+    let Ok((_, count)) = stream.read_prefix(&mut r) else {
+        return print;
+    };
+    for _ in 0..count {
+        let before = r.rest();
+        let Ok(rec) = stream.layout.read_record(&mut r) else {
+            break;
+        };
+        if (lo..hi).contains(&u32::from(rec.number)) {
+            let used = before.len().saturating_sub(r.rest().len());
+            print = fingerprint_more(print, before.get(..used).unwrap_or(&[]));
+        }
+    }
+    print
+}
+
+/// A read-back's check of a reply: the records it carries lie in the
+/// positions asked, no more than asked.
+struct WindowCheck<'c> {
+    cfg: &'c ReadBackConfig,
+    /// The positions asked, `lo..hi`.
+    asked: Option<(u32, u32)>,
+    /// The window a first read asks: its halves' fingerprints are taken.
+    first: Option<Window>,
+    /// For the last reply judged to fit: its halves' fingerprints (first
+    /// reads), or nothing to tell.
+    judged: Option<[u32; 2]>,
+    /// A reply is kept: replies to queries stream by ([`Passing`]).
+    held: bool,
+}
+
+impl Judge for WindowCheck<'_> {
+    fn judge(&mut self, f: &Frame<'_>) -> Verdict {
+        let (fits, values) = check_reply(self.cfg, self.asked, f);
+        self.judged = fits.then(|| match self.first {
+            Some(w) => w
+                .halves()
+                .map(|(lo, hi)| records_print(self.cfg.stream, f, lo, hi)),
+            None => [0; 2],
+        });
+        Verdict {
+            fits,
+            values,
+            keep: self.first.is_none(),
+        }
+    }
+
+    fn streams(&self, header: Header, code: u16) -> bool {
+        self.held && header == self.cfg.stream.header && code == self.cfg.stream.id
+    }
+}
+
+/// Checks a frame as the reply to a query of positions `asked` (`lo..hi`):
+/// whether it is one, and the positions it carries (for the ledger).
+fn check_reply(cfg: &ReadBackConfig, asked: Option<(u32, u32)>, f: &Frame<'_>) -> (bool, Span) {
     if f.header() != Header::Response || f.code() != cfg.stream.id {
-        return (None, Span::UNKNOWN);
+        return (false, Span::UNKNOWN);
     }
     let mut r = f.reader();
     let Ok((_, count)) = cfg.stream.read_prefix(&mut r) else {
-        return (None, Span::UNKNOWN);
+        return (false, Span::UNKNOWN);
     };
     let mut carried = Span::UNKNOWN;
     for _ in 0..count {
         let Ok(rec) = cfg.stream.layout.read_record(&mut r) else {
-            return (None, Span::UNKNOWN);
+            return (false, Span::UNKNOWN);
         };
-        let n = rec.number;
-        carried = if carried == Span::UNKNOWN {
-            Span::one(n)
-        } else {
-            Span {
-                lo: carried.lo.min(n),
-                hi: carried.hi.max(n),
-            }
-        };
+        carried = carried.holding(rec.number);
     }
     if r.finish().is_err() {
-        return (None, Span::UNKNOWN);
+        return (false, Span::UNKNOWN);
     }
-    let fits = window.is_some_and(|w| count <= w.asked && carried.within(w.span()));
-    (fits.then_some(count), carried)
+    let fits = asked.is_some_and(|(lo, hi)| {
+        lo < hi && u32::from(count) <= hi - lo && carried.within(span(lo, hi))
+    });
+    (fits, carried)
 }
 
 impl<const N: usize, const Q: usize> ReadBack<N, Q> {

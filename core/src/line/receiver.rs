@@ -140,7 +140,7 @@ pub(crate) fn receive<const N: usize, J: Judge + ?Sized>(
     now: u32,
 ) -> Received<Heard> {
     if *held {
-        return line.receive_held(bytes, now);
+        return line.receive_held(bytes, now, |h, code| judge.streams(h, code));
     }
     let mut used = 0;
     loop {
@@ -186,7 +186,7 @@ impl Line {
     /// that keeps its reply (they answer nothing).
     pub(crate) fn listen(&mut self, mut bytes: &[u8], now: u32) {
         loop {
-            let r = self.receive_held(bytes, now);
+            let r = self.receive_held(bytes, now, |_, _| false);
             bytes = bytes.get(r.consumed..).unwrap_or(&[]);
             if r.status.is_partial() {
                 return;
@@ -196,9 +196,36 @@ impl Line {
 
     /// Bytes received at `now` while an owner keeps its reply: decoded in
     /// the line's small buffer and offered as answering nothing (a fence's
-    /// echo still settles its fence).
-    pub(crate) fn receive_held(&mut self, bytes: &[u8], now: u32) -> Received<Heard> {
-        let (consumed, status) = self.overheard.decode(bytes);
+    /// echo still settles its fence). Frames whose envelope `streams` are
+    /// the owner's to hear (it reads what they carry as they pass).
+    pub(crate) fn receive_held(
+        &mut self,
+        bytes: &[u8],
+        now: u32,
+        streams: impl Fn(Header, u16) -> bool,
+    ) -> Received<Heard> {
+        let mut used = 0;
+        let (consumed, status) = loop {
+            let rest = bytes.get(used..).unwrap_or(&[]);
+            let (consumed, status) = self.overheard.decode(rest);
+            used += consumed;
+            let envelope = match status {
+                Status::Complete(Passed::Whole {
+                    header,
+                    station,
+                    code,
+                    ..
+                }) => Some((header, station, code)),
+                Status::Complete(Passed::Broken(envelope, _)) => envelope,
+                Status::Partial => None,
+            };
+            if !envelope.is_some_and(|(h, _, code)| streams(h, code)) {
+                break (used, status);
+            }
+            if used >= bytes.len() || consumed == 0 {
+                break (used, Status::Partial);
+            }
+        };
         let mut body = [0u8; KEPT];
         let passed = match status {
             Status::Partial => None,

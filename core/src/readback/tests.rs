@@ -48,9 +48,11 @@ fn every_window_is_read_twice_and_delivered_in_order() {
 
 /// Issue "one memory of the line", case 5: a 21FH reply with two digits
 /// swapped (the SC still matches) and its copy 5 ms later from an echoing
-/// converter agree with each other. The confirmation goes out only when
-/// no copy of the first reply can come, so it is answered by the
-/// controller, disagrees, and the window is delivered as it is held.
+/// converter agree with each other. The confirmation never asks a question
+/// the copy could answer: it asks position 1 alone at once (the copy
+/// carries 1 and 2, so it cannot pass for that reply), which the
+/// controller answers, disagreeing; the next agrees with it, and the window
+/// is delivered as the controller holds it.
 #[test]
 fn a_copy_of_a_reply_never_confirms_it() {
     let mut ctl = controller(2);
@@ -71,9 +73,27 @@ fn a_copy_of_a_reply_never_confirms_it() {
     );
     assert_eq!(got, ctl.table.values().cloned().collect::<Vec<_>>());
     assert_eq!(rb.stats().disagreements, 1);
-    // The confirming query went out after the copy's window.
+    let queries: Vec<&[u8]> = ctl
+        .received
+        .iter()
+        .filter(|(_, c)| c.starts_with(b"!9921F"))
+        .map(|(_, c)| &c[6..14])
+        .collect();
+    // 1+2, then 1+1 with no wait (the copy cannot pass for it).
+    assert_eq!(queries[..2], [b"00010002", b"00010001"]);
     let first_reply_at = ctl.received[0].0 + 5;
-    assert!(ctl.received[1].0 > first_reply_at + 5 + 3_000);
+    assert!(ctl.received[1].0 < first_reply_at + 5 + 3_000);
+    // Every question after it could be answered by a copy of one before:
+    // each waited out the copy window.
+    let sent: Vec<u32> = ctl
+        .received
+        .iter()
+        .filter(|(_, c)| c.starts_with(b"!9921F"))
+        .map(|(t, _)| *t)
+        .collect();
+    for pair in sent[1..].windows(2) {
+        assert!(pair[1] > pair[0] + 3_000, "{queries:?} at {sent:?}");
+    }
 }
 
 /// A window's reply comes after its timeout and resend (the resend is
@@ -108,8 +128,10 @@ fn a_late_reply_never_answers_the_next_window() {
     assert_eq!(l.stats().unplaced, 0);
 }
 
-/// Confirmed reads: a confirmation that times out is asked again for half
-/// the window, which then needs two replies of its own (fuzz finding F10).
+/// Confirmed reads: a confirmation that times out is asked again as the
+/// first read of half the window; the rest is read once too, and one
+/// confirmation of all four agrees with both (fuzz finding F10: a
+/// confirmation never rests on a reply of a larger query it replaced).
 #[test]
 fn a_shrunk_window_is_confirmed_by_its_own_replies() {
     let mut ctl = controller(4);
@@ -130,11 +152,25 @@ fn a_shrunk_window_is_confirmed_by_its_own_replies() {
     let mut rb: ReadBack = ReadBack::new(cfg);
     let got = read(&mut rb, &mut l, &mut ctl);
     assert_eq!(got, ctl.table.values().cloned().collect::<Vec<_>>());
-    let queries: Vec<&[u8]> = ctl.received.iter().map(|(_, c)| &c[6..14]).collect();
+    let queries: Vec<&[u8]> = ctl
+        .received
+        .iter()
+        .filter(|(_, c)| c.starts_with(b"!9921F"))
+        .map(|(_, c)| &c[6..14])
+        .collect();
     // 1+4, its confirmation (lost), 1+2 resent in its place (a first read
-    // of the smaller window), then 1+2 confirmed, and 3+2 twice.
-    assert_eq!(queries[..3], [b"00010004", b"00010004", b"00010002"]);
-    assert_eq!(rb.stats().windows_confirmed, 2);
+    // of the smaller window), 3+2 read once, then 1+4 confirming both.
+    assert_eq!(
+        queries[..],
+        [
+            b"00010004",
+            b"00010004",
+            b"00010002",
+            b"00030002",
+            b"00010004"
+        ]
+    );
+    assert_eq!(rb.stats().windows_confirmed, 1);
 }
 
 /// After a window's reply is answered, the engine takes no more bytes until

@@ -17,6 +17,8 @@ use iai_protocol_b::decoder::{Event, FrameDecoder, FrameSkipper, Received, Skipp
 use iai_protocol_b::error::Error;
 use iai_protocol_b::frame::{emit_frame, read_envelope, Frame, Header, Station, ENVELOPE_LEN};
 use iai_protocol_b::line::{Heard, LineConfig};
+use iai_protocol_b::position::PositionStream;
+use iai_protocol_b::table::{PositionStreamDecoder, StreamEvent};
 
 use crate::records::Input;
 
@@ -520,6 +522,10 @@ pub struct Shadow<const N: usize> {
     held_fed: Vec<(usize, usize)>,
     deliveries: Vec<Delivery>,
     held: bool,
+    /// While a reply is kept, replies of this kind stream by the engine's
+    /// own decoder ([`Passing`]) rather than the line's.
+    streams: Option<PositionStream>,
+    passing: Passing,
 }
 
 /// Who made a frame the engine heard.
@@ -562,11 +568,22 @@ impl<const N: usize> Default for Shadow<N> {
             held_fed: Vec::new(),
             deliveries: Vec::new(),
             held: false,
+            streams: None,
+            passing: Passing::default(),
         }
     }
 }
 
 impl<const N: usize> Shadow<N> {
+    /// A shadow of an engine that reads replies of `kind` as they pass
+    /// while it keeps one (a read-back).
+    pub fn streaming(kind: PositionStream) -> Self {
+        Shadow {
+            streams: Some(kind),
+            ..Shadow::default()
+        }
+    }
+
     /// The engine sent afresh: its receiver drops what it half decoded
     /// and the reply it kept. Returns the deliveries whose bytes its
     /// decoder still held (unless it kept a reply): dropped unread.
@@ -587,6 +604,7 @@ impl<const N: usize> Shadow<N> {
         self.fed.clear();
         self.cursor = 0;
         self.held = false;
+        self.passing.stop();
         dropped
     }
 
@@ -666,7 +684,10 @@ impl<const N: usize> Shadow<N> {
     fn decoded_held(&mut self, rest: &[u8], r: &Received<Heard>) -> Option<Seen> {
         let cur = self.current();
         let base = self.held_stream.len();
-        let (used, passed) = self.over.decode(rest, base);
+        let (used, passed) = match self.streams {
+            None => self.over.decode(rest, base),
+            Some(kind) => self.decode_streaming(kind, rest, base),
+        };
         assert_eq!(used, r.consumed, "the line's decoder decodes otherwise");
         if used > 0 && self.held_fed.last().is_none_or(|&(_, d)| d != cur) {
             self.held_fed.push((base, cur));
@@ -674,7 +695,7 @@ impl<const N: usize> Shadow<N> {
         self.held_stream.extend_from_slice(&rest[..used]);
         match (r.status, passed) {
             (Status::Partial, None) => None,
-            (Status::Complete(Heard::Broken(a)), Some(Passed::Broken(b))) => {
+            (Status::Complete(Heard::Broken(a)), Some(Passed::Broken(b, _))) => {
                 assert_eq!(a, b, "the line's decoder decodes otherwise");
                 None
             }
@@ -693,6 +714,32 @@ impl<const N: usize> Shadow<N> {
             }
             (heard, p) => panic!("the line heard {heard:?}, its decoder {p:?}"),
         }
+    }
+
+    /// The held decoding of a read-back: every byte goes to the line's
+    /// decoder and to the engine's passing one; a reply of `kind` is the
+    /// passing decoder's (the line's skips it), anything else the line's.
+    fn decode_streaming(
+        &mut self,
+        kind: PositionStream,
+        rest: &[u8],
+        base: usize,
+    ) -> (usize, Option<Passed>) {
+        let streamed = |env: &(Header, Station, u16)| env.0 == kind.header && env.2 == kind.id;
+        for (i, &b) in rest.iter().enumerate() {
+            let at = base + i;
+            let passing = self.passing.push(kind, b, at);
+            let (_, other) = self.over.decode(&[b], at);
+            let other = match other {
+                Some(Passed::Whole { envelope, .. }) if streamed(&envelope) => None,
+                Some(Passed::Broken(_, Some(envelope))) if streamed(&envelope) => None,
+                other => other,
+            };
+            if let Some(p) = passing.or(other) {
+                return (i + 1, Some(p));
+            }
+        }
+        (rest.len(), None)
     }
 
     /// Who made the bytes `at..end` of a stream fed as `fed` says.
@@ -716,7 +763,82 @@ enum Passed {
         start: usize,
         envelope: (Header, Station, u16),
     },
-    Broken(Error),
+    /// Broken, with its envelope if it was read.
+    Broken(Error, Option<(Header, Station, u16)>),
+}
+
+/// A read-back's decoder of its query's replies heard while it keeps one
+/// (`readback.rs`, `Passing`), rebuilt from its rules: a header byte
+/// starts a `PositionStreamDecoder`; a frame of another kind is left to
+/// the line's; a reply of the kind ends whole or, once its envelope was
+/// read, broken.
+#[derive(Debug, Clone)]
+struct Passing {
+    dec: PositionStreamDecoder,
+    hunting: bool,
+    started: bool,
+    station: Station,
+    start: usize,
+}
+
+impl Default for Passing {
+    fn default() -> Self {
+        Passing {
+            dec: PositionStreamDecoder::new(BypassPolicy::Reject),
+            hunting: true,
+            started: false,
+            station: Station(0),
+            start: 0,
+        }
+    }
+}
+
+impl Passing {
+    fn stop(&mut self) {
+        self.hunting = true;
+        self.started = false;
+    }
+
+    fn push(&mut self, kind: PositionStream, b: u8, at: usize) -> Option<Passed> {
+        if self.hunting {
+            Header::from_byte(b)?;
+            self.dec.reset();
+            self.hunting = false;
+            self.started = false;
+            self.start = at;
+        }
+        match self.dec.push(b) {
+            Status::Partial => None,
+            Status::Complete(StreamEvent::Start {
+                kind: k, station, ..
+            }) => {
+                self.started = k == kind;
+                self.hunting = !self.started;
+                self.station = station;
+                None
+            }
+            Status::Complete(StreamEvent::Record(_)) => None,
+            Status::Complete(StreamEvent::End { .. }) => {
+                self.hunting = true;
+                self.started = false;
+                Some(Passed::Whole {
+                    start: self.start,
+                    envelope: (kind.header, self.station, kind.id),
+                })
+            }
+            Status::Complete(StreamEvent::Error { error, .. }) => {
+                self.hunting = true;
+                let started = std::mem::take(&mut self.started);
+                if Header::from_byte(b).is_some() {
+                    self.dec.reset();
+                    self.hunting = false;
+                    self.start = at;
+                    let _ = self.dec.push(b);
+                }
+                started.then(|| Passed::Broken(error, Some((kind.header, self.station, kind.id))))
+            }
+        }
+    }
 }
 
 /// The line's decoder of frames heard in passing (`line/overheard.rs`),
@@ -754,12 +876,13 @@ impl Overheard {
                 continue;
             }
             let broken = |o: &mut Overheard, e: Error, again: bool| {
+                let envelope = o.envelope;
                 o.restart();
                 if again {
                     o.frame.push(b);
                     o.start = at;
                 }
-                (i + 1, Some(Passed::Broken(e)))
+                (i + 1, Some(Passed::Broken(e, envelope)))
             };
             if let Some(mut skipper) = self.skipper {
                 let status = skipper.push(b);
