@@ -17,6 +17,12 @@ use crate::checksum::ChecksumMode;
 use crate::frame::{emit_frame, Header, Station, ENVELOPE_LEN};
 use crate::hex;
 
+/// Fences sent in a row without an echo before the line takes it that the
+/// controller does not answer 200H and waits out what it owes instead. A
+/// fence lost to the line costs its timeout; the next, with a new text,
+/// settles the first's late echo too (order).
+pub(crate) const FENCE_TRIES: u8 = 2;
+
 /// Bytes of a fence command: header, station, ID, ten characters, SC, CR LF.
 pub(crate) const FENCE_LEN: usize = 20;
 

@@ -54,7 +54,7 @@ pub(crate) use receiver::{
     fingerprint, fingerprint_more, receive, Judge, Receiver, Verdict, FINGERPRINT_START,
 };
 
-use fence::Fence;
+use fence::{Fence, FENCE_TRIES};
 use ledger::Ledger;
 
 use crate::catalogue::{self, MessageInfo, Reply, Resend};
@@ -319,6 +319,8 @@ pub struct Line {
     fence_sent: u32,
     /// A fence failed: wait for owed replies instead until this tick.
     no_fence_until: Option<u32>,
+    /// Fences sent in a row that got no echo.
+    fence_misses: u8,
     ledger: Ledger,
     /// Replies taken lately (the last [`TAKEN`], in no order; a fixed
     /// array rather than a history ring, whose indexing the no-panic proof
@@ -397,6 +399,7 @@ impl Line {
             fence: Fence::new(seed),
             fence_sent: 0,
             no_fence_until: None,
+            fence_misses: 0,
             ledger: Ledger::new(cfg.horizon()),
             taken: [None; TAKEN],
             taken_next: 0,
@@ -659,15 +662,21 @@ impl Line {
                     Due::WaitUntil(deadline)
                 }
                 Phase::FenceAwait { .. } => {
-                    // No echo: the controller may not answer 200H. What it
-                    // owes (and the fence's own reply) is waited out.
+                    // No echo (or an `&`): the fence's own reply is owed, and
+                    // a new fence settles it. After `FENCE_TRIES` in a row
+                    // the controller may not answer 200H: what it owes is
+                    // waited out.
                     self.stats.timeouts += 1;
                     self.stats.fences_failed += 1;
                     self.faulted = true;
-                    self.proof_fence_failed = self.proving;
                     let until = self.late_horizon(self.fence_sent);
                     self.ledger.owe(until, now);
-                    self.no_fence_until = self.ledger.owed(now);
+                    self.fence_misses = self.fence_misses.saturating_add(1);
+                    if self.fence_misses >= FENCE_TRIES {
+                        self.fence_misses = 0;
+                        self.proof_fence_failed = self.proving;
+                        self.no_fence_until = self.ledger.owed(now);
+                    }
                     self.phase = Phase::Ready;
                     continue;
                 }
@@ -787,6 +796,7 @@ impl Line {
                 self.took(print, id, seq, now);
                 self.ledger.settle_owed();
                 self.no_fence_until = None;
+                self.fence_misses = 0;
                 self.not_before = Some(self.turnaround_after(now));
                 if core::mem::take(&mut self.proving) {
                     self.phase = Phase::Finished(Ok(()));
@@ -825,6 +835,9 @@ impl Line {
         if self.busy() {
             self.faulted = true;
         }
+        if self.fence_refused(header) {
+            self.refuse_fence(now);
+        }
         // The command's ID but not its content: the controller's answer to
         // something else, or a copy; the command goes on waiting.
         let heard = if for_command && self.awaiting() {
@@ -850,6 +863,20 @@ impl Line {
     /// echo is matched by its text).
     fn fence_refused(&self, header: Header) -> bool {
         header == Header::Error && matches!(self.phase, Phase::FenceAwait { .. })
+    }
+
+    /// An `&` came while a fence awaits its echo: the controller refused
+    /// it, or an earlier command's `&` came late. Rather than wait out the
+    /// timeout for an echo that may never come, the fence ends at the
+    /// turnaround and a new one follows ([`FENCE_TRIES`]); its echo settles
+    /// the first's too.
+    fn refuse_fence(&mut self, now: u32) {
+        if let Phase::FenceAwait { deadline } = self.phase {
+            let soon = self.turnaround_after(now);
+            if !self.over(now, deadline) && crate::clock::reached(deadline, soon) {
+                self.phase = Phase::FenceAwait { deadline: soon };
+            }
+        }
     }
 
     /// Whether the command was sent and is not awaited now (its timeout
@@ -951,7 +978,8 @@ impl Line {
     /// has passed (an **inference** from the half-duplex rules, 2003 p. 8),
     /// unless it may be an earlier send's late reply on the last send. A
     /// broken frame of the station that nothing explains is unplaced: it
-    /// may have been a copy or a reply out of order.
+    /// may have been a copy or a reply out of order (while a reply is
+    /// awaited, it may be that reply with its ID hit: no evidence).
     pub(crate) fn broken(&mut self, envelope: Option<(Header, Station, u16)>, now: u32) {
         self.stats.line_errors += 1;
         let ours = match envelope {
@@ -962,8 +990,15 @@ impl Line {
                 let fence = (code == catalogue::TEST_CALL.id
                     && matches!(self.phase, Phase::FenceAwait { .. }))
                     || self.fence_refused(h);
+                if self.fence_refused(h) {
+                    self.refuse_fence(now);
+                }
                 let for_command = h == Header::Error || code == self.cmd.id;
+                // While a reply is awaited, a broken frame of the station
+                // may be that reply with its ID hit: its envelope is as
+                // broken as the rest, so it proves nothing out of place.
                 let explained = awaited
+                    || (self.awaiting() && !self.proving)
                     || fence
                     || (for_command && !self.proving && self.between_sends())
                     || self.ledger.owed(now).is_some()

@@ -317,16 +317,63 @@ fn without_fences_the_quarantine_lasts_through_the_last_tick_a_reply_may_end() {
 }
 
 #[test]
-fn a_fence_that_gets_no_echo_falls_back_to_waiting() {
+fn a_fence_that_gets_no_echo_is_sent_again_then_falls_back_to_waiting() {
     let mut l = Line::new(LineConfig::new(S), 1);
     l.start(&catalogue::AXIS_STATUS_QUERY, 0);
     assert_eq!(l.poll(0), Due::Fence);
+    let first = l.fence_bytes().to_vec();
     l.sent(0);
-    // No echo by 3,000: the owed replies (from the unknown past, until
-    // 6,001) and the fence's own (until 6,001) are waited out.
-    assert_eq!(l.poll(3_000), Due::WaitUntil(6_001));
+    // No echo by 3,000: a new fence, with a new text, at once.
+    assert_eq!(l.poll(3_000), Due::Fence);
+    assert_ne!(l.fence_bytes(), &first[..]);
     assert_eq!(l.stats().fences_failed, 1);
-    assert_eq!(l.poll(6_001), Due::Send { fresh: true });
+    l.sent(3_000);
+    // None by 6,000 either: the controller may not answer 200H. The owed
+    // replies and the fences' own (the second's until 9,001) are waited
+    // out.
+    assert_eq!(l.poll(6_000), Due::WaitUntil(9_001));
+    assert_eq!(l.stats().fences_failed, 2);
+    assert_eq!(l.poll(9_001), Due::Send { fresh: true });
+}
+
+/// A fence's echo lost on the line costs its timeout and no more: the
+/// next fence's echo settles everything before it, the first fence's late
+/// echo included.
+#[test]
+fn a_lost_fence_echo_costs_one_timeout() {
+    let mut l = Line::new(LineConfig::new(S), 1);
+    l.start(&catalogue::AXIS_STATUS_QUERY, 0);
+    assert_eq!(l.poll(0), Due::Fence);
+    let first = l.fence_bytes().to_vec();
+    l.sent(0);
+    assert_eq!(l.poll(3_000), Due::Fence);
+    let second = l.fence_bytes().to_vec();
+    l.sent(3_000);
+    // The first echo comes late: stale (owed), it settles nothing.
+    let echo = |f: &[u8]| {
+        let mut e = [0u8; 20];
+        let text = &f[6..16];
+        let n = crate::frame::emit_frame(
+            &mut e,
+            Header::Response,
+            S,
+            0x200,
+            ChecksumMode::Compute,
+            |w| w.put(text),
+        )
+        .unwrap();
+        e[..n].to_vec()
+    };
+    assert_eq!(
+        offer(&mut l, &frame(&echo(&first)), true, 3_100),
+        Heard::Stale
+    );
+    assert_eq!(l.poll(3_101), Due::WaitUntil(6_000));
+    assert_eq!(
+        offer(&mut l, &frame(&echo(&second)), true, 3_200),
+        Heard::Fence
+    );
+    assert_eq!(l.poll(3_202), Due::Send { fresh: true });
 }
 
 #[test]
@@ -466,11 +513,18 @@ fn an_error_reply_to_a_fence_is_the_fences_own_not_unplaced() {
     l.broken(Some((Header::Error, S, 0xC74)), 11);
     assert_eq!(l.stats().unplaced, 0);
     assert!(!l.repeats());
-    // No echo by its timeout: the fence failed, its own late reply is
-    // waited out.
-    assert_eq!(l.poll(3_005), Due::WaitUntil(6_006));
-    assert_eq!(l.poll(6_006), Due::Done(Ok(())));
-    assert_eq!(l.stats().fences_failed, 1);
+    // The `&` ends the fence at the turnaround: a second one goes out at
+    // once; refused too, the proof waits out the fences' own late replies.
+    assert_eq!(l.poll(12), Due::Fence);
+    l.sent(15);
+    assert_eq!(
+        offer(&mut l, &frame(b"&99C7446\r\n"), true, 20),
+        Heard::Stale
+    );
+    assert_eq!(l.poll(22), Due::WaitUntil(6_016));
+    assert_eq!(l.poll(6_016), Due::Done(Ok(())));
+    assert_eq!(l.stats().fences_failed, 2);
+    assert_eq!(l.stats().unplaced, 0);
 }
 
 /// A late reply to the first send that comes while the command is sent
@@ -499,8 +553,12 @@ fn a_proof_whose_fence_gets_no_echo_ends_by_waiting() {
     l.start_proof(0);
     assert_eq!(l.poll(0), Due::Fence);
     l.sent(0);
-    // No echo by 3,000: the fence's own late reply may come until 6,001.
-    assert_eq!(l.poll(3_000), Due::WaitUntil(6_001));
-    assert_eq!(l.poll(6_001), Due::Done(Ok(())));
-    assert_eq!(l.stats().fences, 1);
+    // No echo by 3,000: one more fence (its echo may have been lost on
+    // the line); none by 6,000 either: the second fence's own late reply
+    // may come until 9,001.
+    assert_eq!(l.poll(3_000), Due::Fence);
+    l.sent(3_000);
+    assert_eq!(l.poll(6_000), Due::WaitUntil(9_001));
+    assert_eq!(l.poll(9_001), Due::Done(Ok(())));
+    assert_eq!(l.stats().fences, 2);
 }
