@@ -247,6 +247,17 @@ pub enum Failure<E = core::convert::Infallible> {
         /// How many of the frame's records differ.
         records: u16,
     },
+    /// A written frame's read-back lacked one of its records: the frame
+    /// reached the controller with a corruption its SC cannot show (two
+    /// bit flips that cancel) in a record's number, so that record was
+    /// stored at another position, which no read-back of the transfer
+    /// covers. The transfer rewrote and verified its frames to the end, but
+    /// a position written before (or one outside the table) may hold the
+    /// stray record: read the table back, or write it again.
+    Misplaced {
+        /// The first position whose record was not where it was written.
+        position: u16,
+    },
     /// Record number `index` (0-based, in source order) cannot be encoded.
     InvalidRecord {
         /// Index of the record.
@@ -294,6 +305,7 @@ impl Failure {
                 first_position,
                 records,
             },
+            Failure::Misplaced { position } => Failure::Misplaced { position },
             Failure::InvalidRecord { index, error } => Failure::InvalidRecord { index, error },
             Failure::Unconfirmed { unplaced } => Failure::Unconfirmed { unplaced },
             Failure::Protocol(e) => Failure::Protocol(e),
@@ -330,6 +342,10 @@ impl<E: core::fmt::Debug> core::fmt::Display for Failure<E> {
             } => write!(
                 f,
                 "{records} record(s) read back different, the first at position {first_position}"
+            ),
+            Failure::Misplaced { position } => write!(
+                f,
+                "the record of position {position} was not stored there (a frame corrupted in a way its checksum cannot show): another position may hold it; read the table back or write it again"
             ),
             Failure::InvalidRecord { index, error } => {
                 write!(f, "record {index} cannot be encoded: {error}")

@@ -51,6 +51,10 @@ pub(crate) struct Controller {
     /// Position writes whose n-th (0-based) stores position `.0` with
     /// coordinate 1 set to `.1` instead (a swap the SC does not see).
     pub(crate) alter: BTreeMap<usize, (u16, i32)>,
+    /// Position writes whose n-th (0-based) stores the record of position
+    /// `.0` at position `.1` instead (two flips in its number that the SC
+    /// does not see).
+    pub(crate) misplace: BTreeMap<usize, (u16, u16)>,
     /// Every command received, with its tick.
     pub(crate) received: Vec<(u32, Vec<u8>)>,
     writes: usize,
@@ -67,6 +71,7 @@ impl Controller {
             delay_ms: 5,
             faults: BTreeMap::new(),
             alter: BTreeMap::new(),
+            misplace: BTreeMap::new(),
             received: Vec::new(),
             writes: 0,
             last_due: 0,
@@ -156,6 +161,7 @@ impl Controller {
             let mut input = cmd;
             let mut written = 0;
             let alter = self.alter.get(&self.writes).copied();
+            let misplace = self.misplace.get(&self.writes).copied();
             self.writes += 1;
             loop {
                 let r = dec.decode(input);
@@ -165,6 +171,9 @@ impl Controller {
                         if let Some((n, v)) = alter.filter(|(n, _)| *n == rec.number) {
                             let _ = n;
                             rec.positions[0] = v;
+                        }
+                        if let Some((_, to)) = misplace.filter(|(n, _)| *n == rec.number) {
+                            rec.number = to;
                         }
                         self.table.insert(rec.number, rec);
                         written += 1;

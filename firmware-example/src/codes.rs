@@ -104,7 +104,9 @@ pub const fn meaning(code: u16) -> Option<&'static str> {
         UPSTREAM_OVERRUN => "bytes of the host's 26DH were lost on the way in",
         XON_XOFF_IN_TEXT => "the controller's reply carries XON/XOFF in its text",
         UNKNOWN_QUERY => "the bridge does not answer this message ID",
-        VERIFY_MISMATCH => "a chunk still read back different after two rewrites",
+        VERIFY_MISMATCH => {
+            "a chunk still read back different after two rewrites, or a record was not stored where it was written"
+        }
         HOST_BUSY => "another host is connected to the bridge",
         WRONG_PASSWORD => "the password is wrong (or a wrong one came less than a second ago)",
         NO_PASSWORD => "no password is set yet: set one first",

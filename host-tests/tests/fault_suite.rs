@@ -242,6 +242,7 @@ fn table_writes_under_every_fault_class() {
                         Failure::Timeout { .. }
                             | Failure::Controller { .. }
                             | Failure::Mismatch { .. }
+                            | Failure::Misplaced { .. }
                     ));
                 }
             }

@@ -117,6 +117,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             saved,
             start,
             faulted: core::mem::take(&mut self.pending_fault),
+            provable: false,
         });
         Ok(Built::Ready)
     }

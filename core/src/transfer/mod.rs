@@ -195,6 +195,9 @@ pub struct TransferStats {
     pub verify_bytes_sent: u64,
     /// Frames written again because their read-back differed.
     pub rewrites: u32,
+    /// Records a read-back did not find at all (stored elsewhere:
+    /// [`Failure::Misplaced`]).
+    pub misplaced: u32,
     /// Bytes received from the controller.
     pub bytes_received: u64,
 }
@@ -231,12 +234,10 @@ struct Chunk {
     start: u16,
     /// Something abnormal happened while it was written.
     faulted: bool,
-}
-
-/// A frame or window limit after a success: a quarter more, at least one,
-/// at most `max`.
-fn grow(limit: u16, max: u16) -> u16 {
-    limit.saturating_add((limit / 4).max(1)).min(max)
+    /// When it was last sent, no reply that may still arrive could pass for
+    /// its reply: the reply taken is the controller's to this frame, which
+    /// it took whole (a record its read-back lacks went elsewhere).
+    provable: bool,
 }
 
 /// Writes a position table to a controller in confirmed (and verified)
@@ -310,6 +311,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 verify_queries: 0,
                 verify_bytes_sent: 0,
                 rewrites: 0,
+                misplaced: 0,
                 bytes_received: 0,
             },
         }
@@ -463,6 +465,12 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                             let bytes = if writing {
                                 let end = self.chunk.map_or(0, |c| c.cut + TRAILER_LEN);
                                 if fresh {
+                                    let id = self.cfg.stream.id;
+                                    if let Some(c) = self.chunk.as_mut() {
+                                        let accepts = Span::one(c.records);
+                                        c.provable =
+                                            line.clear_at(id, accepts, Claim::Proof, now) == now;
+                                    }
                                     self.stats.frames_sent += 1;
                                     self.stats.bytes_sent += end as u64;
                                 }
@@ -490,7 +498,14 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                         ),
                     }
                 }
-                State::Complete => return Step::Done(Ok(self.cfg.guarantee())),
+                State::Complete => {
+                    // Verified frame by frame, but a record went elsewhere:
+                    // what it overwrote is not known.
+                    return Step::Done(match self.verifier.misplaced {
+                        Some(position) => Err(Failure::Misplaced { position }),
+                        None => Ok(self.cfg.guarantee()),
+                    });
+                }
                 State::Failed(e, _) => return Step::Done(Err(e)),
             }
         }
@@ -601,7 +616,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         };
         c.faulted |= line.faulted();
         let faulted = c.faulted;
-        self.frame_limit = grow(
+        self.frame_limit = crate::window::grown(
             self.frame_limit,
             self.cfg.max_records.clamp(1, MAX_FRAME_RECORDS),
         );

@@ -437,3 +437,31 @@ fn a_write_a_copy_seemed_to_confirm_reads_back_different_and_is_rewritten() {
     assert_eq!(ctl.table.values().cloned().collect::<Vec<_>>(), recs);
     assert_eq!(t.stats().rewrites, 1, "the frame the copy confirmed");
 }
+
+/// A write whose reply counts every record but whose read-back lacks one:
+/// the controller stored that record at another number (two flips in its
+/// number field that the SC cannot see). The frame is rewritten and
+/// verified, but the stray record may have overwritten a position written
+/// before, which no read-back covers: the transfer ends in a typed
+/// failure naming the record, never `Verified`.
+#[test]
+fn a_record_stored_at_another_number_ends_misplaced_not_verified() {
+    let recs = records(4, 1);
+    let cfg = TransferConfig {
+        max_records: 2,
+        ..TTA
+    };
+    let mut ctl = Controller::new();
+    // The second frame (positions 3-4) stores position 4 at position 1,
+    // over the record the first frame wrote and verified.
+    ctl.misplace.insert(1, (4, 1));
+    let mut l = Line::known(LineConfig::new(ST));
+    let mut t = Transfer::<_>::new(cfg, recs.clone().into_iter());
+    let r = run(&mut t, &mut l, &mut ctl, 0);
+    assert_eq!(r.result, Err(Failure::Misplaced { position: 4 }));
+    assert_eq!(t.stats().misplaced, 1);
+    assert_eq!(t.stats().rewrites, 1);
+    // Positions 3 and 4 are right again; position 1 holds the stray.
+    assert_eq!(ctl.table.get(&4), Some(&recs[3]));
+    assert_ne!(ctl.table.get(&1), Some(&recs[0]));
+}

@@ -38,6 +38,14 @@ pub(super) struct Verifier {
     checked: u128,
     /// Records of the frame found different or missing.
     pub(super) differ: u128,
+    /// Records of the frame a reply of their window lacked altogether.
+    missing: u128,
+    /// The first position whose record a read-back did not find: it went
+    /// elsewhere ([`Failure::Misplaced`]).
+    pub(super) misplaced: Option<u16>,
+    /// For the reply being decoded: records of the frame it carried, equal
+    /// or not.
+    present: u128,
     /// For the reply being decoded: records found equal so far, and the
     /// lowest and highest position it carried.
     seen: u128,
@@ -67,6 +75,9 @@ impl Verifier {
             windows: Windows::new(stream.window(cfg.max_response)),
             checked: 0,
             differ: 0,
+            missing: 0,
+            misplaced: None,
+            present: 0,
             seen: 0,
             carried: Span::UNKNOWN,
             candidate: false,
@@ -159,6 +170,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         }
         self.verifier.checked = superseded;
         self.verifier.differ = 0;
+        self.verifier.missing = 0;
     }
 
     /// Starts the query for the next window of unchecked records, or gives
@@ -220,6 +232,18 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
 
     fn verdict(&mut self, line: &mut Line, now: u32, all: u128) {
         let differ = self.verifier.differ & all;
+        let missing = self.verifier.missing & all;
+        if missing != 0 && self.chunk.is_some_and(|c| c.provable) {
+            // The controller took the whole frame (its own reply said so)
+            // yet a record is not at its number: it was stored at another.
+            // The frame is rewritten, but what the stray record overwrote
+            // is not known.
+            self.stats.misplaced += missing.count_ones();
+            if self.verifier.misplaced.is_none() {
+                let first = self.chunk_numbers().nth(missing.trailing_zeros() as usize);
+                self.verifier.misplaced = first;
+            }
+        }
         if differ == 0 {
             self.stats.frames_verified += 1;
             self.stats.records_verified += u32::from(self.chunk.map_or(0, |c| c.records));
@@ -291,6 +315,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             } => {
                 v.station = station;
                 v.seen = 0;
+                v.present = 0;
                 v.carried = Span::UNKNOWN;
                 // Outside a read-back it answers nothing: it is only heard.
                 v.candidate = kind == v.stream && count <= v.asked && verifying;
@@ -305,8 +330,11 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
                 if n < window.lo || n > window.hi {
                     v.candidate = false;
                 } else if v.candidate {
-                    if let Some(i) = self.matching_record(&rec) {
-                        self.verifier.seen |= bit(i);
+                    if let Some((i, same)) = self.matching_record(&rec) {
+                        self.verifier.present |= bit(i);
+                        if same {
+                            self.verifier.seen |= bit(i);
+                        }
                     }
                 }
                 Status::Partial
@@ -360,17 +388,22 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         }
     }
 
-    /// The index of the chunk record `rec` should equal, if it does.
-    fn matching_record(&self, rec: &PositionRecord) -> Option<usize> {
+    /// The index of the chunk record `rec` should equal, if the chunk has
+    /// its number, and whether it does.
+    fn matching_record(&self, rec: &PositionRecord) -> Option<(usize, bool)> {
         let last = self
             .chunk_numbers()
             .enumerate()
             .filter(|&(_, n)| n == rec.number)
             .map(|(i, _)| i)
             .last()?;
-        let bytes = self.walk().nth(last)?;
+        let Some(bytes) = self.walk().nth(last) else {
+            return Some((last, false));
+        };
         let mut r = Reader::new(bytes, 0);
-        let mut mine = self.cfg.stream.layout.read_record(&mut r).ok()?;
+        let Ok(mut mine) = self.cfg.stream.layout.read_record(&mut r) else {
+            return Some((last, false));
+        };
         mine.number = rec.number;
         let extended_ok = !self.cfg.stream.layout.extended || mine.extended == rec.extended;
         let same = mine.axes == rec.axes
@@ -379,16 +412,17 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             && mine.speed == rec.speed
             && mine.positions == rec.positions
             && extended_ok;
-        same.then_some(last)
+        Some((last, same))
     }
 
     /// The window's reply was taken: its records are checked, those of the
     /// window it did not hold (or held different) differ.
     fn commit_window(&mut self) {
         let window = self.verifier.window();
-        let seen = self.verifier.seen;
+        let (seen, present) = (self.verifier.seen, self.verifier.present);
         let mut checked = self.verifier.checked;
         let mut differ = self.verifier.differ;
+        let mut missing = self.verifier.missing;
         for (i, n) in self.chunk_numbers().enumerate() {
             let m = bit(i);
             if checked & m != 0 || n < window.lo || n > window.hi {
@@ -398,8 +432,12 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
             if seen & m == 0 {
                 differ |= m;
             }
+            if present & m == 0 {
+                missing |= m;
+            }
         }
         self.verifier.checked = checked;
         self.verifier.differ = differ;
+        self.verifier.missing = missing;
     }
 }

@@ -236,7 +236,11 @@ impl Bridge {
                             // The controller's own code goes up as it is:
                             // the host can ask it for the 216H detail.
                             Failure::Controller { code, .. } => code,
-                            Failure::Mismatch { .. } => codes::VERIFY_MISMATCH,
+                            // A record read back different, or not where it
+                            // was written: the host must write again.
+                            Failure::Mismatch { .. } | Failure::Misplaced { .. } => {
+                                codes::VERIFY_MISMATCH
+                            }
                             _ => codes::INTERNAL,
                         }));
                     }

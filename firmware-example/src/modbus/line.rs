@@ -431,7 +431,9 @@ impl Engines {
                         c.set_link(false);
                         Err(codes::CONTROLLER_TIMEOUT)
                     }
-                    Err(Failure::Mismatch { .. }) => Err(codes::VERIFY_MISMATCH),
+                    Err(Failure::Mismatch { .. } | Failure::Misplaced { .. }) => {
+                        Err(codes::VERIFY_MISMATCH)
+                    }
                     Err(_) => Err(codes::INTERNAL),
                 };
                 regs.hs.finish(result);
