@@ -43,9 +43,24 @@ impl Windows {
         half
     }
 
-    /// A window was answered: twice as many next time, up to the full size.
+    /// A window was answered: half as many more next time ([`grown`]).
     pub(crate) fn grow(&mut self) {
-        self.limit = self.limit.saturating_mul(2).min(self.full);
+        self.limit = grown(self.limit, self.full);
+    }
+}
+
+/// A window limit after an answer: half as many more, at least one, at
+/// most `max`. Halved after a timeout and grown back by halves, a size
+/// settles where most replies get through a noisy line (doubling went
+/// straight back to sizes that broke), and comes back in two answers
+/// after a lost reply.
+pub(crate) const fn grown(limit: u16, max: u16) -> u16 {
+    let step = if limit / 2 > 1 { limit / 2 } else { 1 };
+    let next = limit.saturating_add(step);
+    if next < max {
+        next
+    } else {
+        max
     }
 }
 
@@ -71,7 +86,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_window_halves_after_a_timeout_and_doubles_back() {
+    fn a_window_halves_after_a_timeout_and_grows_back_by_halves() {
         let mut w = Windows::new(24);
         assert_eq!(w.span(1_000), 24);
         assert_eq!(w.span(5), 5);
@@ -79,7 +94,7 @@ mod tests {
         assert_eq!(w.shrink(12), 6);
         assert_eq!(w.shrink(1), 1);
         assert_eq!(w.span(1_000), 1);
-        for want in [2, 4, 8, 16, 24, 24] {
+        for want in [2, 3, 4, 6, 9, 13, 19, 24, 24] {
             w.grow();
             assert_eq!(w.span(1_000), want);
         }
