@@ -836,7 +836,7 @@ impl Line {
             self.faulted = true;
         }
         if self.fence_refused(header) {
-            self.refuse_fence(now);
+            self.end_fence(now);
         }
         // The command's ID but not its content: the controller's answer to
         // something else, or a copy; the command goes on waiting.
@@ -865,12 +865,13 @@ impl Line {
         header == Header::Error && matches!(self.phase, Phase::FenceAwait { .. })
     }
 
-    /// An `&` came while a fence awaits its echo: the controller refused
-    /// it, or an earlier command's `&` came late. Rather than wait out the
-    /// timeout for an echo that may never come, the fence ends at the
-    /// turnaround and a new one follows ([`FENCE_TRIES`]); its echo settles
-    /// the first's too.
-    fn refuse_fence(&mut self, now: u32) {
+    /// An `&` or a broken frame came while a fence awaits its echo: the
+    /// controller refused the fence, or its echo broke on the line (or an
+    /// earlier command's reply came late). Rather than wait out the timeout
+    /// for an echo that may never come, the fence ends at the turnaround
+    /// and a new one follows ([`FENCE_TRIES`]); its echo settles the
+    /// first's too.
+    fn end_fence(&mut self, now: u32) {
         if let Phase::FenceAwait { deadline } = self.phase {
             let soon = self.turnaround_after(now);
             if !self.over(now, deadline) && crate::clock::reached(deadline, soon) {
@@ -982,6 +983,10 @@ impl Line {
     /// awaited, it may be that reply with its ID hit: no evidence).
     pub(crate) fn broken(&mut self, envelope: Option<(Header, Station, u16)>, now: u32) {
         self.stats.line_errors += 1;
+        if envelope.is_none_or(|(h, s, _)| s == self.cfg.station && h != Header::Command) {
+            // It may have been the fence's echo, broken.
+            self.end_fence(now);
+        }
         let ours = match envelope {
             Some((h, s, code)) if s == self.cfg.station && h != Header::Command => {
                 let id = if h == Header::Error { ANY_ID } else { code };
@@ -990,9 +995,6 @@ impl Line {
                 let fence = (code == catalogue::TEST_CALL.id
                     && matches!(self.phase, Phase::FenceAwait { .. }))
                     || self.fence_refused(h);
-                if self.fence_refused(h) {
-                    self.refuse_fence(now);
-                }
                 let for_command = h == Header::Error || code == self.cmd.id;
                 // While a reply is awaited, a broken frame of the station
                 // may be that reply with its ID hit: its envelope is as
