@@ -23,7 +23,14 @@
 //! * the bridge never broke the [`Poll`] contract (no stale waits) and no
 //!   upstream byte overran the ring.
 //!
-//! The scenario count and the time taken are printed.
+//! The scenario count and the time taken are printed, and for the 26DHs
+//! and the pass-through under controller faults the virtual wire time
+//! beside its floor: the same run on a clean line, plus the spec's 3 s
+//! timeout (2003 p. 62) for every command the controller left unanswered
+//! (a reply dropped, a command that arrived broken or too long, a reply
+//! later than the timeout) and the delay of every reply that came late
+//! but in time ([`floor_ns`]). A copy, an `&` or a broken reply asks for no
+//! wait.
 
 use std::time::Instant;
 
@@ -34,8 +41,9 @@ use host_tests::bridge::{check_table, command_26dh, reply_26dh};
 use host_tests::table::table;
 use iai_protocol_b::axis::AxisPattern;
 use iai_protocol_b::frame::{Frame, Header};
+use iai_protocol_b::line::TIMEOUT_MS;
 use iai_protocol_b::message::{AxisStatusQuery, Message};
-use iai_simulator::{Faults, Rng, Simulator, INJECTED_ERROR_CODE};
+use iai_simulator::{Faults, Rng, SimStats, Simulator, INJECTED_ERROR_CODE};
 
 /// Seeds per test function (four functions run in parallel).
 const SEEDS: u64 = 600;
@@ -90,20 +98,73 @@ fn config(seed: u64) -> ModelConfig {
     ModelConfig::new(baud, flow)
 }
 
+/// The least virtual time a run on a line with `faults` can take, ns: the
+/// clean run's plus what the faults the simulator counted force any
+/// engine to wait.
+fn floor_ns(clean_ns: u64, faults: &Faults, sim: &SimStats) -> u64 {
+    let timeout = u64::from(TIMEOUT_MS);
+    let late = faults
+        .late_every_nth_reply
+        .map_or(0, |(_, ms)| u64::from(ms).min(timeout));
+    let unanswered = u64::from(sim.dropped_replies + sim.broken_frames + sim.oversize_frames);
+    clean_ns + (unanswered * timeout + u64::from(sim.late_replies) * late) * 1_000_000
+}
+
+/// Virtual wire time and its floor, summed over seeds, and the seed
+/// furthest above its floor.
+#[derive(Default)]
+struct AgainstFloor {
+    wire_ns: u64,
+    floor_ns: u64,
+    worst: (f64, u64),
+}
+
+impl AgainstFloor {
+    fn add(&mut self, seed: u64, wire_ns: u64, floor_ns: u64) {
+        self.wire_ns += wire_ns;
+        self.floor_ns += floor_ns;
+        let ratio = wire_ns as f64 / floor_ns.max(1) as f64;
+        if ratio > self.worst.0 {
+            self.worst = (ratio, seed);
+        }
+    }
+
+    /// `wire time (s) | floor (s) | x floor | worst seed (x floor)`.
+    fn cells(&self) -> String {
+        format!(
+            "{:.1} | {:.1} | {:.2} | {} ({:.2})",
+            self.wire_ns as f64 / 1e9,
+            self.floor_ns as f64 / 1e9,
+            self.wire_ns as f64 / self.floor_ns.max(1) as f64,
+            self.worst.1,
+            self.worst.0
+        )
+    }
+}
+
 /// Whole sends of one 26DH the host makes before a seed fails. Every
 /// chunk costs a write and a read-back, each of which may draw an injected
 /// `&`, so a table needs a few sends now and then.
 const SENDS: u32 = 12;
 
-/// One 26DH under faults, re-sent whole after each `&`.
-fn stream_under_faults(seed: u64) {
+/// One 26DH under faults, re-sent whole after each `&`. Returns its
+/// virtual time and its floor, ns.
+fn stream_under_faults(seed: u64) -> (u64, u64) {
     let cfg = config(seed);
     let station = cfg.bridge.controller_station;
     let n = 20 + (seed % 40) as u32;
     let records: Vec<_> = table(n, 1 + (seed % 8) as u8, seed as u32).collect();
     let cmd = command_26dh(station, &records);
-    let mut sim = Simulator::tta(station).with_faults(faults(seed), seed);
-    sim.response_delay_ms = (seed % 50) as u32;
+    let delay = (seed % 50) as u32;
+    let clean_ns = {
+        let mut sim = Simulator::tta(station);
+        sim.response_delay_ms = delay;
+        let mut bridge = model::bridge(&cfg.bridge);
+        model::run(&cfg, &mut bridge, &mut sim, &[&cmd], 0).end_ns
+    };
+    let faults = faults(seed);
+    let mut sim = Simulator::tta(station).with_faults(faults.clone(), seed);
+    sim.response_delay_ms = delay;
     let mut bridge = model::bridge(&cfg.bridge);
     let want = reply_26dh(station, n as u16);
     let mut clock = 0;
@@ -117,7 +178,7 @@ fn stream_under_faults(seed: u64) {
             .unwrap_or_else(|| panic!("seed {seed}: no reply to send {send}"));
         if reply == want {
             check_table(&sim.table, &records).unwrap_or_else(|e| panic!("seed {seed}: {e}"));
-            return;
+            return (clock, floor_ns(clean_ns, &faults, &sim.stats()));
         }
         let f = Frame::new_checked(&reply, Default::default())
             .unwrap_or_else(|e| panic!("seed {seed}: invalid reply {reply:?}: {e}"));
@@ -204,10 +265,10 @@ fn corrupted_upstream(seed: u64) -> usize {
 }
 
 /// Pass-through under faults: a reply is the controller's, or nothing.
-fn passthrough_under_faults(seed: u64) {
+/// Returns the virtual time and its floor, ns.
+fn passthrough_under_faults(seed: u64) -> (u64, u64) {
     let cfg = config(seed);
     let station = cfg.bridge.controller_station;
-    let mut sim = Simulator::tta(station).with_faults(faults(seed), seed);
     let mut buf = [0u8; 32];
     let n = AxisStatusQuery {
         query_axis_pattern: AxisPattern::first(1 + (seed % 4) as u8),
@@ -215,8 +276,15 @@ fn passthrough_under_faults(seed: u64) {
     .emit(station, &mut buf)
     .expect("212H");
     let cmd = buf[..n].to_vec();
-    let mut bridge = model::bridge(&cfg.bridge);
     let cmds: Vec<&[u8]> = vec![&cmd; 5];
+    let clean_ns = {
+        let mut sim = Simulator::tta(station);
+        let mut bridge = model::bridge(&cfg.bridge);
+        model::run(&cfg, &mut bridge, &mut sim, &cmds, 0).end_ns
+    };
+    let faults = faults(seed);
+    let mut sim = Simulator::tta(station).with_faults(faults.clone(), seed);
+    let mut bridge = model::bridge(&cfg.bridge);
     let r = model::run(&cfg, &mut bridge, &mut sim, &cmds, 0);
     assert_eq!(r.stale_waits, 0, "seed {seed}");
     for reply in r.replies.iter().flatten() {
@@ -229,6 +297,7 @@ fn passthrough_under_faults(seed: u64) {
             Header::Command => panic!("seed {seed}: relayed a command"),
         }
     }
+    (r.end_ns, floor_ns(clean_ns, &faults, &sim.stats()))
 }
 
 /// Issue "one memory of the line": the host gives up on a 26DH after its
@@ -268,14 +337,27 @@ fn resent_while_a_late_reply_is_on_the_line(seed: u64) -> bool {
 fn suite(first: u64) {
     let started = Instant::now();
     let (mut stray_runs, mut strays, mut resent_ok) = (0, 0, 0);
+    let (mut streams, mut passes) = (AgainstFloor::default(), AgainstFloor::default());
     for seed in first..first + SEEDS {
-        stream_under_faults(seed);
+        let (wire, floor) = stream_under_faults(seed);
+        streams.add(seed, wire, floor);
         let n = corrupted_upstream(seed);
         stray_runs += usize::from(n > 0);
         strays += n;
-        passthrough_under_faults(seed);
+        let (wire, floor) = passthrough_under_faults(seed);
+        passes.add(seed, wire, floor);
         resent_ok += usize::from(resent_while_a_late_reply_is_on_the_line(seed));
     }
+    eprintln!(
+        "seeds {first}..{}, against the floor\n\
+         | runs under controller faults | wire time (s) | floor (s) | x floor | worst seed (x floor) |\n\
+         |---|---|---|---|---|\n\
+         | 26DH through the bridge | {} |\n\
+         | 5 x 212H passed through | {} |",
+        first + SEEDS,
+        streams.cells(),
+        passes.cells()
+    );
     eprintln!(
         "seeds {first}..{}: {} scenarios (26DH under controller faults, corrupted host 26DH, \
          pass-through under faults, a 26DH resent while a late reply is on the line) in {:?}; \
