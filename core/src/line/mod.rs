@@ -343,6 +343,9 @@ pub struct Line {
     reply_extra_ms: u32,
     /// Frames heard while the owner holds its reply, or no engine runs.
     overheard: overheard::Overheard,
+    /// Bytes since the last LF that a receiver dropped as noise; `None`
+    /// while the rest of a frame already accounted for is passing.
+    noise: Option<u16>,
     stats: LineStats,
     horizon: u32,
 }
@@ -362,6 +365,10 @@ impl defmt::Format for Line {
 
 /// Replies remembered as taken.
 const TAKEN: usize = 8;
+
+/// Bytes before the LF of the shortest reply with its header byte hit
+/// (`&` or `#`, station, code, SC, CR: 9).
+const NOISE_REPLY: u16 = 9;
 
 /// A reply taken: its bytes' fingerprint, what it carried and when.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -409,6 +416,7 @@ impl Line {
             proof_fence_failed: false,
             reply_extra_ms: 0,
             overheard: overheard::Overheard::new(),
+            noise: Some(0),
             stats: LineStats {
                 commands: 0,
                 sends: 0,
@@ -1014,7 +1022,10 @@ impl Line {
             Some(_) => false,
             None => {
                 self.copy_possible(ANY_ID, Span::UNKNOWN, now);
-                false
+                // It may have been the awaited reply, broken before its ID
+                // (not an error reply to a command without a normal one:
+                // that needs its envelope).
+                self.awaiting() && !self.proving && !matches!(self.cmd.reply, Reply::None { .. })
             }
         };
         if !ours {
@@ -1040,6 +1051,35 @@ impl Line {
         if !self.over(now, deadline) && crate::clock::reached(deadline, soon) {
             self.phase = Phase::Await { deadline: soon };
         }
+    }
+
+    /// `bytes` received at `now` were dropped as noise (no frame began in
+    /// them). A run of them ended by LF that is as long as a short reply
+    /// may have been one whose header byte was hit, which no decoder can
+    /// see as a frame: it is a broken frame of unknown envelope (the
+    /// awaited reply is then sent for again at the turnaround).
+    pub(crate) fn noise(&mut self, bytes: &[u8], now: u32) {
+        for &b in bytes {
+            if b != b'\n' {
+                self.noise = self.noise.map(|n| n.saturating_add(1));
+                continue;
+            }
+            if self.noise.is_some_and(|n| n >= NOISE_REPLY) {
+                self.broken(None, now);
+            }
+            self.noise = Some(0);
+        }
+    }
+
+    /// A frame began (or ended whole): what came before it is no reply.
+    pub(crate) fn framing(&mut self) {
+        self.noise = Some(0);
+    }
+
+    /// The rest of a frame already accounted for (broken, or streamed to
+    /// its owner) passes as noise up to its LF.
+    pub(crate) fn quiet(&mut self) {
+        self.noise = None;
     }
 
     /// Bytes that may have held a reply were dropped unread at `now` (an

@@ -144,18 +144,31 @@ pub(crate) fn receive<const N: usize, J: Judge + ?Sized>(
     }
     let mut used = 0;
     loop {
+        let start = used;
         let d = frames.decode(bytes.get(used..).unwrap_or(&[]));
         used += d.consumed;
         let status = match d.status {
-            Status::Partial => Status::Partial,
-            Status::Complete(Event::Error(e)) => match frames.failed_envelope() {
-                Some((h, _, code)) if judge.streams(h, code) => continue,
-                envelope => {
-                    line.broken(envelope, now);
-                    Status::Complete(Heard::Broken(e))
+            Status::Partial => {
+                match frames.pending() {
+                    // Nothing begun: every byte was dropped as noise.
+                    0 => line.noise(bytes.get(start..used).unwrap_or(&[]), now),
+                    _ => line.framing(),
                 }
-            },
+                Status::Partial
+            }
+            Status::Complete(Event::Error(e)) => {
+                // The rest of the frame, up to its LF, is not noise.
+                line.quiet();
+                match frames.failed_envelope() {
+                    Some((h, _, code)) if judge.streams(h, code) => continue,
+                    envelope => {
+                        line.broken(envelope, now);
+                        Status::Complete(Heard::Broken(e))
+                    }
+                }
+            }
             Status::Complete(Event::Frame(f)) => {
+                line.framing();
                 if judge.streams(f.header(), f.code()) {
                     continue;
                 }

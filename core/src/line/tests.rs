@@ -562,3 +562,26 @@ fn a_proof_whose_fence_gets_no_echo_ends_by_waiting() {
     assert_eq!(l.poll(9_001), Due::Done(Ok(())));
     assert_eq!(l.stats().fences, 2);
 }
+
+/// A reply whose header byte was hit is no frame to any decoder: its bytes
+/// are dropped as noise. A run of noise ended by LF as long as a short
+/// reply, while a reply is awaited, is taken as that reply broken: the
+/// command goes again at the turnaround, not after its 3 s timeout.
+/// Shorter noise, or noise with nothing awaited, changes nothing.
+#[test]
+fn a_reply_with_its_header_hit_is_sent_for_again_at_the_turnaround() {
+    let mut l = spec();
+    l.start(&catalogue::AXIS_STATUS_QUERY, 0);
+    first_send(&mut l, 0);
+    l.sent(2);
+    // Line noise: too short to be a reply.
+    l.noise(b"xyz\r\n", 5);
+    assert_eq!(l.poll(6), Due::WaitUntil(3_002));
+    // `#` hit by a flip (0x23 -> 0x63): the rest of the 212H reply.
+    let mut hit = REPLY_212.to_vec();
+    hit[0] = b'c';
+    l.noise(&hit, 10);
+    assert_eq!(l.stats().line_errors, 1);
+    assert_eq!(l.poll(10), Due::WaitUntil(12));
+    assert_eq!(l.poll(12), Due::Send { fresh: true });
+}
