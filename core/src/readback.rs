@@ -694,12 +694,12 @@ impl<const N: usize, const Q: usize> ReadBack<N, Q> {
         self.proven = Some(unplaced);
         self.reconfirms = self.reconfirms.saturating_add(1);
         self.stats.reconfirmed += 1;
-        if self.reconfirms > MAX_RECONFIRMS {
-            self.state = State::Failed(Failure::Unconfirmed { unplaced });
-            return;
-        }
+        // Nothing read since the last proof is trusted, after a resume too.
         let limit = u32::from(self.windows.span(u32::MAX));
         self.restart_from(self.delivered, limit);
+        if self.reconfirms > MAX_RECONFIRMS {
+            self.state = State::Failed(Failure::Unconfirmed { unplaced });
+        }
     }
 
     /// Whether the reply to the query on the line is the one to deliver (a

@@ -79,7 +79,10 @@
 //!   command, with its sends), `Controller { code }` after an `&` with that
 //!   code, or `Mismatch { first_position, records }` naming a position of
 //!   the frame last written, `records >= 1`; never with every record
-//!   confirmed; `resume` goes on.
+//!   confirmed; `resume` goes on. `Misplaced { position }` only at the end
+//!   (every record confirmed), and only when two read-back lies left that
+//!   record out (this controller stores every record at its number) or
+//!   bytes outside the contract were taken.
 //!
 //! Removed with the redesign: the checks of the engine's guard windows and
 //! holds (the line decides now when a command may go out: the `line`
@@ -93,6 +96,8 @@ mod controller;
 mod link;
 #[path = "common/records.rs"]
 mod records;
+
+use std::collections::BTreeMap;
 
 use controller::Table;
 use iai_protocol_b::catalogue::{self, Resend};
@@ -168,6 +173,9 @@ struct H<'a> {
     /// No table claim: a reply or echo was taken with bytes outside the
     /// contract among its candidates.
     no_claim: bool,
+    /// Read-back lies that left a record out, by its position: two in a
+    /// row make a record read back twice missing (`Misplaced`).
+    left_out: BTreeMap<u16, u32>,
     swapped: bool,
     rejected: Vec<u16>,
     /// The last fence sent (controller command index), if it got there.
@@ -396,7 +404,8 @@ impl H<'_> {
                         recs[i] = r;
                     }
                     1 if !recs.is_empty() => {
-                        recs.remove(usize::from(f.extra / 3) % recs.len());
+                        let gone = recs.remove(usize::from(f.extra / 3) % recs.len());
+                        *self.left_out.entry(gone.number).or_default() += 1;
                     }
                     _ => {
                         let mut swapped = recs.clone();
@@ -529,6 +538,7 @@ fuzz_target!(|data: &[u8]| {
         last_sent: 0,
         broken_since_sent: false,
         no_claim: setup.raw_noise,
+        left_out: BTreeMap::new(),
         swapped: false,
         rejected: Vec::new(),
         last_fence: None,
@@ -788,6 +798,23 @@ fuzz_target!(|data: &[u8]| {
                             "mismatch names {first_position}"
                         );
                         assert!(records <= w.n);
+                    }
+                    Failure::Misplaced { position } => {
+                        // At the end, every frame verified: a record its
+                        // read-back lacked twice after a reply that counted
+                        // it. This controller stores every record at its
+                        // number: only two lies leaving it out (or bytes
+                        // outside the contract) can make it look so.
+                        assert_eq!(
+                            h.t.stats().records_confirmed as usize,
+                            source.len(),
+                            "Misplaced before the end"
+                        );
+                        assert!(
+                            h.no_claim || h.left_out.get(&position).is_some_and(|&n| n >= 2),
+                            "Misplaced {position} without a record stored elsewhere"
+                        );
+                        break;
                     }
                     other => panic!("unexpected failure {other:?}"),
                 }

@@ -40,6 +40,8 @@ pub(super) struct Verifier {
     pub(super) differ: u128,
     /// Records of the frame a reply of their window lacked altogether.
     missing: u128,
+    /// Missing records were read a second time for this write.
+    rechecked: bool,
     /// The first position whose record a read-back did not find: it went
     /// elsewhere ([`Failure::Misplaced`]).
     pub(super) misplaced: Option<u16>,
@@ -76,6 +78,7 @@ impl Verifier {
             checked: 0,
             differ: 0,
             missing: 0,
+            rechecked: false,
             misplaced: None,
             present: 0,
             seen: 0,
@@ -171,6 +174,7 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
         self.verifier.checked = superseded;
         self.verifier.differ = 0;
         self.verifier.missing = 0;
+        self.verifier.rechecked = false;
     }
 
     /// Starts the query for the next window of unchecked records, or gives
@@ -233,11 +237,22 @@ impl<I: RecordSource, const N: usize> Transfer<I, N> {
     fn verdict(&mut self, line: &mut Line, now: u32, all: u128) {
         let differ = self.verifier.differ & all;
         let missing = self.verifier.missing & all;
-        if missing != 0 && self.chunk.is_some_and(|c| c.provable) {
+        let provable = self.chunk.is_some_and(|c| c.provable);
+        if missing != 0 && provable && !self.verifier.rechecked {
+            // Before concluding, those records' windows are read once more:
+            // a query hit on the way (a shorter count) reads fewer.
+            self.verifier.rechecked = true;
+            self.verifier.checked &= !missing;
+            self.verifier.differ &= !missing;
+            self.verifier.missing = 0;
+            self.start_verify(line, now);
+            return;
+        }
+        if missing != 0 && provable {
             // The controller took the whole frame (its own reply said so)
-            // yet a record is not at its number: it was stored at another.
-            // The frame is rewritten, but what the stray record overwrote
-            // is not known.
+            // yet a record is twice not at its number: it was stored at
+            // another. The frame is rewritten, but what the stray record
+            // overwrote is not known.
             self.stats.misplaced += missing.count_ones();
             if self.verifier.misplaced.is_none() {
                 let first = self.chunk_numbers().nth(missing.trailing_zeros() as usize);
