@@ -247,11 +247,14 @@ impl Ledger {
                 }
             }
             Some((i, Some(j), _)) => {
-                let b = self.copies.swap_remove(j);
-                if let Some(a) = self.copies.get_mut(i) {
+                // `j` takes the new copy once `i` holds both.
+                let b = self.copies.get(j).copied();
+                if let (Some(a), Some(b)) = (self.copies.get_mut(i), b) {
                     *a = a.merge(b);
                 }
-                let _ = self.copies.push(new);
+                if let Some(slot) = self.copies.get_mut(j) {
+                    *slot = new;
+                }
             }
             None => {
                 if let Some(last) = self.copies.last_mut() {
