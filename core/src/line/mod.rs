@@ -1041,7 +1041,9 @@ impl Line {
             self.finish(Err(Failure::OutcomeUnknown { sends }), now, 0);
             return;
         }
-        let ambiguous = self.sends > 1 || self.ledger.owed(now).is_some();
+        // Noise (no envelope) may be no reply at all: on the last send, the
+        // reply is still waited for, as for an earlier send's late one.
+        let ambiguous = envelope.is_none() || self.sends > 1 || self.ledger.owed(now).is_some();
         if ambiguous && self.sends >= self.send_limit() {
             return;
         }

@@ -585,3 +585,18 @@ fn a_reply_with_its_header_hit_is_sent_for_again_at_the_turnaround() {
     assert_eq!(l.poll(10), Due::WaitUntil(12));
     assert_eq!(l.poll(12), Due::Send { fresh: true });
 }
+
+/// Noise that may be a reply with its header hit is no reply for sure: a
+/// command that cannot be sent again (an unsafe one, or the last send)
+/// goes on waiting for its own reply rather than end at the turnaround.
+#[test]
+fn noise_on_the_last_send_waits_for_the_reply() {
+    let mut l = spec();
+    l.start(&catalogue::RELATIVE_MOVE, 0);
+    first_send(&mut l, 0);
+    l.sent(2);
+    let mut hit = REPLY_212.to_vec();
+    hit[0] = b'c';
+    l.noise(&hit, 10);
+    assert_eq!(l.poll(12), Due::WaitUntil(3_002));
+}

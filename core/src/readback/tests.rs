@@ -21,6 +21,15 @@ fn controller(n: u16) -> Controller {
     ctl
 }
 
+/// The 21FH queries the controller got: when, and their head and count
+/// fields.
+fn read_queries(ctl: &Controller) -> impl Iterator<Item = (u32, &[u8])> {
+    ctl.received
+        .iter()
+        .filter(|(_, c)| c.starts_with(b"!9921F"))
+        .map(|(t, c)| (*t, &c[6..14]))
+}
+
 /// Runs `rb` on `line` against `ctl` to its end; the records delivered.
 fn read(rb: &mut ReadBack, l: &mut Line, ctl: &mut Controller) -> Vec<PositionRecord> {
     let mut got = Vec::new();
@@ -73,24 +82,14 @@ fn a_copy_of_a_reply_never_confirms_it() {
     );
     assert_eq!(got, ctl.table.values().cloned().collect::<Vec<_>>());
     assert_eq!(rb.stats().disagreements, 1);
-    let queries: Vec<&[u8]> = ctl
-        .received
-        .iter()
-        .filter(|(_, c)| c.starts_with(b"!9921F"))
-        .map(|(_, c)| &c[6..14])
-        .collect();
+    let queries: Vec<&[u8]> = read_queries(&ctl).map(|(_, q)| q).collect();
     // 1+2, then 1+1 with no wait (the copy cannot pass for it).
     assert_eq!(queries[..2], [b"00010002", b"00010001"]);
     let first_reply_at = ctl.received[0].0 + 5;
     assert!(ctl.received[1].0 < first_reply_at + 5 + 3_000);
     // Every question after it could be answered by a copy of one before:
     // each waited out the copy window.
-    let sent: Vec<u32> = ctl
-        .received
-        .iter()
-        .filter(|(_, c)| c.starts_with(b"!9921F"))
-        .map(|(t, _)| *t)
-        .collect();
+    let sent: Vec<u32> = read_queries(&ctl).map(|(t, _)| t).collect();
     for pair in sent[1..].windows(2) {
         assert!(pair[1] > pair[0] + 3_000, "{queries:?} at {sent:?}");
     }
@@ -161,12 +160,7 @@ fn a_shrunk_window_is_confirmed_by_its_own_replies() {
     let mut rb: ReadBack = ReadBack::new(cfg);
     let got = read(&mut rb, &mut l, &mut ctl);
     assert_eq!(got, ctl.table.values().cloned().collect::<Vec<_>>());
-    let queries: Vec<&[u8]> = ctl
-        .received
-        .iter()
-        .filter(|(_, c)| c.starts_with(b"!9921F"))
-        .map(|(_, c)| &c[6..14])
-        .collect();
+    let queries: Vec<&[u8]> = read_queries(&ctl).map(|(_, q)| q).collect();
     // 1+4, its confirmation (lost), 1+2 resent in its place (a first read
     // of the smaller window), 3+2 read once, then 1+4 confirming both.
     assert_eq!(
