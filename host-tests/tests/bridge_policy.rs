@@ -110,6 +110,17 @@ proptest! {
                 now += 1_500;
             }
         }
+        // The controller never answers: let the last exchanges run to
+        // their end (fences tried twice, three sends of 3 s each), so that
+        // a refusal queued behind one is written.
+        for _ in 0..20 {
+            for _ in 0..100_000 {
+                if let Poll::Wait(_) = bridge.poll(&mut up, &mut down, now).unwrap() {
+                    break;
+                }
+            }
+            now += 1_500;
+        }
         for (header, station, id) in frames(&down.output, &host_texts) {
             prop_assert_eq!(header, Header::Command);
             prop_assert_eq!(station, 0x99);
